@@ -1,0 +1,84 @@
+"""Materials: the Blinn-Phong + mirror + glass parameters of the seed article, and its presets."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+RGB = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Material:
+    """Surface response of an object.
+
+    Shading adds ``ambient * color`` plus, per unoccluded point light, ``diffuse * max(0, N.L) *
+    color`` and ``specular * max(0, N.H) ** shininess`` (white highlight). ``reflectivity`` blends
+    a mirror bounce; ``transparency`` > 0 makes the surface glass with index ``ior``: its reflected
+    and refracted weights are split by Schlick's Fresnel term.
+    """
+
+    color: RGB = (0.8, 0.8, 0.8)
+    ambient: float = 0.1
+    diffuse: float = 0.85
+    specular: float = 0.0
+    shininess: float = 32.0
+    reflectivity: float = 0.0
+    transparency: float = 0.0
+    ior: float = 1.0
+
+    def __post_init__(self) -> None:
+        if len(self.color) != 3 or any(not 0.0 <= float(c) for c in self.color):
+            raise ValueError(f"color: expected three non-negative numbers, got {self.color!r}")
+        for name in ("ambient", "diffuse", "specular", "reflectivity", "transparency"):
+            value = float(getattr(self, name))
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"{name}: must lie in [0, 1], got {value}")
+        if not self.shininess > 0.0:
+            raise ValueError(f"shininess: must be > 0, got {self.shininess}")
+        if not self.ior >= 1.0:
+            raise ValueError(f"ior: must be >= 1, got {self.ior}")
+        object.__setattr__(self, "color", tuple(float(c) for c in self.color))
+
+    @property
+    def is_glass(self) -> bool:
+        return self.transparency > 0.0
+
+
+PRESETS: dict[str, Material] = {
+    "matte": Material(diffuse=0.85, specular=0.0, shininess=8.0, reflectivity=0.0),
+    "glossy": Material(diffuse=0.6, specular=0.5, shininess=64.0, reflectivity=0.05),
+    "metal": Material(diffuse=0.3, specular=0.9, shininess=128.0, reflectivity=0.5),
+    "mirror": Material(diffuse=0.05, specular=0.95, shininess=256.0, reflectivity=0.9),
+    "glass": Material(
+        color=(1.0, 1.0, 1.0),
+        ambient=0.0,
+        diffuse=0.05,
+        specular=0.9,
+        shininess=256.0,
+        reflectivity=0.0,
+        transparency=0.97,
+        ior=1.52,
+    ),
+}
+
+
+def preset(name: str, **overrides: object) -> Material:
+    """The preset called ``name`` with some fields replaced, e.g. ``preset("metal", color=(1, 0, 0))``."""
+    try:
+        base = PRESETS[name]
+    except KeyError:
+        raise ValueError(f"unknown material preset {name!r}; known: {', '.join(PRESETS)}") from None
+    return replace(base, **overrides)
+
+
+@dataclass(frozen=True)
+class Checker:
+    """A procedural checkerboard in the xz-plane: squares of side ``size`` alternate two colors."""
+
+    color_a: RGB = (0.9, 0.9, 0.9)
+    color_b: RGB = (0.15, 0.15, 0.15)
+    size: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not self.size > 0.0:
+            raise ValueError(f"size: must be > 0, got {self.size}")

@@ -1,0 +1,182 @@
+"""The scene model: plain dataclasses a user can build in Python, and scene files load into."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+
+from embree_rt.materials import PRESETS, RGB, Checker, Material
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass
+class Camera:
+    """A pinhole camera at ``position`` looking at ``look_at``; ``fov`` is vertical, in degrees."""
+
+    position: Vec3 = (0.0, 1.0, 5.0)
+    look_at: Vec3 = (0.0, 0.0, 0.0)
+    up: Vec3 = (0.0, 1.0, 0.0)
+    fov: float = 45.0
+
+
+@dataclass
+class PointLight:
+    position: Vec3
+    color: RGB = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+
+
+@dataclass
+class Floor:
+    """An infinite horizontal plane ``y = height`` with a checker pattern and a material."""
+
+    height: float = 0.0
+    checker: Checker = field(default_factory=Checker)
+    material: Material = field(
+        default_factory=lambda: Material(diffuse=0.8, specular=0.2, shininess=32.0, reflectivity=0.3)
+    )
+
+
+@dataclass
+class Background:
+    """Sky gradient: ``horizon`` color at direction y = 0 blending to ``zenith`` at y = 1."""
+
+    horizon: RGB = (1.0, 1.0, 1.0)
+    zenith: RGB = (0.5, 0.7, 1.0)
+
+
+@dataclass
+class RenderSettings:
+    width: int = 640
+    height: int = 360
+    spp: int = 8
+    max_depth: int = 6
+    seed: int = 0
+
+
+@dataclass
+class MeshObject:
+    """One placement of a triangle mesh.
+
+    Placements sharing the same ``mesh`` object are built once and instanced.
+    ``transform`` is a (4, 4) float64 affine matrix from mesh space to world space.
+    """
+
+    mesh: trimesh.Trimesh
+    transform: np.ndarray = field(default_factory=lambda: np.eye(4))
+    material: str = "matte"
+    smooth: bool = True
+
+
+@dataclass
+class Scene:
+    """Everything to render.
+
+    ``materials`` maps names to materials (the presets are always there). Spheres are stored in
+    bulk: ``sphere_centers`` (n, 3) float32, ``sphere_radii`` (n,) float32 and
+    ``sphere_materials`` (n,) int32, an index into ``material_names``.
+    """
+
+    camera: Camera = field(default_factory=Camera)
+    lights: list[PointLight] = field(default_factory=list)
+    materials: dict[str, Material] = field(default_factory=lambda: dict(PRESETS))
+    floor: Floor | None = field(default_factory=Floor)
+    background: Background = field(default_factory=Background)
+    render: RenderSettings = field(default_factory=RenderSettings)
+    sphere_centers: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    sphere_radii: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    sphere_materials: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    meshes: list[MeshObject] = field(default_factory=list)
+
+    @property
+    def material_names(self) -> list[str]:
+        return list(self.materials)
+
+    def material_index(self, name: str) -> int:
+        try:
+            return self.material_names.index(name)
+        except ValueError:
+            raise ValueError(f"undefined material {name!r}") from None
+
+    def add_material(self, name: str, material: Material) -> str:
+        self.materials[name] = material
+        return name
+
+    def add_sphere(self, center: Vec3, radius: float, material: str = "matte") -> None:
+        self.add_spheres(np.asarray([center]), np.asarray([radius]), material)
+
+    def add_spheres(
+        self, centers: np.ndarray, radii: np.ndarray, materials: str | np.ndarray | list[str]
+    ) -> None:
+        """Append spheres: ``centers`` (n, 3), ``radii`` (n,), one material name for all, or
+        (n,) names, or (n,) int indices into ``material_names``."""
+        centers = np.asarray(centers, np.float32).reshape(-1, 3)
+        radii = np.asarray(radii, np.float32).reshape(-1)
+        if len(radii) != len(centers):
+            raise ValueError(f"radii: {len(radii)} values for {len(centers)} centers")
+        if isinstance(materials, str):
+            ids = np.full(len(centers), self.material_index(materials), np.int32)
+        else:
+            materials = np.asarray(materials)
+            if materials.dtype.kind in "iu":
+                ids = materials.astype(np.int32)
+                if len(ids) and (ids.min() < 0 or ids.max() >= len(self.materials)):
+                    raise ValueError("materials: index out of range")
+            else:
+                names, inverse = np.unique(materials.astype(str), return_inverse=True)
+                lookup = np.array([self.material_index(n) for n in names], np.int32)
+                ids = lookup[inverse]
+            if len(ids) != len(centers):
+                raise ValueError(f"materials: {len(ids)} values for {len(centers)} centers")
+        self.sphere_centers = np.concatenate([self.sphere_centers, centers])
+        self.sphere_radii = np.concatenate([self.sphere_radii, radii])
+        self.sphere_materials = np.concatenate([self.sphere_materials, ids])
+
+    def add_mesh(
+        self,
+        mesh: trimesh.Trimesh,
+        material: str | None = None,
+        transform: np.ndarray | None = None,
+        smooth: bool = True,
+    ) -> MeshObject:
+        """Place ``mesh``; with no material name, a matte material of the mesh's base color."""
+        if material is None:
+            material = self._base_color_material(mesh)
+        self.material_index(material)
+        obj = MeshObject(
+            mesh=mesh,
+            transform=np.eye(4) if transform is None else np.asarray(transform, np.float64),
+            material=material,
+            smooth=smooth,
+        )
+        self.meshes.append(obj)
+        return obj
+
+    def _base_color_material(self, mesh: trimesh.Trimesh) -> str:
+        color = mesh_base_color(mesh)
+        if color is None:
+            return "matte"
+        name = "base_color_{:02x}{:02x}{:02x}".format(*(int(round(c * 255)) for c in color))
+        if name not in self.materials:
+            self.materials[name] = Material(color=color)
+        return name
+
+
+def mesh_base_color(mesh: trimesh.Trimesh) -> RGB | None:
+    """The mesh's base color as linear-ish RGB in [0, 1], or None when it has only the default."""
+    visual = mesh.visual
+    try:
+        if visual.kind == "texture" and hasattr(visual.material, "main_color"):
+            rgba = np.asarray(visual.material.main_color, np.float64)
+        elif visual.kind in ("face", "vertex"):
+            colors = visual.face_colors if visual.kind == "face" else visual.vertex_colors
+            rgba = np.asarray(colors, np.float64).mean(axis=0)
+        else:
+            return None
+    except Exception:
+        return None
+    rgb = rgba[:3] / 255.0
+    return (float(rgb[0]), float(rgb[1]), float(rgb[2]))
