@@ -27,7 +27,7 @@ class Material:
     ior: float = 1.0
 
     def __post_init__(self) -> None:
-        if len(self.color) != 3 or any(not 0.0 <= float(c) for c in self.color):
+        if len(self.color) != 3 or any(float(c) < 0.0 for c in self.color):
             raise ValueError(f"color: expected three non-negative numbers, got {self.color!r}")
         for name in ("ambient", "diffuse", "specular", "reflectivity", "transparency"):
             value = float(getattr(self, name))
@@ -63,7 +63,7 @@ PRESETS: dict[str, Material] = {
 
 
 def preset(name: str, **overrides: object) -> Material:
-    """The preset called ``name`` with some fields replaced, e.g. ``preset("metal", color=(1, 0, 0))``."""
+    """The preset ``name`` with fields replaced, e.g. ``preset("metal", color=(1, 0, 0))``."""
     try:
         base = PRESETS[name]
     except KeyError:

@@ -36,7 +36,9 @@ class Floor:
     height: float = 0.0
     checker: Checker = field(default_factory=Checker)
     material: Material = field(
-        default_factory=lambda: Material(diffuse=0.8, specular=0.2, shininess=32.0, reflectivity=0.3)
+        default_factory=lambda: Material(
+            diffuse=0.8, specular=0.2, shininess=32.0, reflectivity=0.3
+        )
     )
 
 
@@ -159,7 +161,7 @@ class Scene:
         color = mesh_base_color(mesh)
         if color is None:
             return "matte"
-        name = "base_color_{:02x}{:02x}{:02x}".format(*(int(round(c * 255)) for c in color))
+        name = "base_color_{:02x}{:02x}{:02x}".format(*(round(c * 255) for c in color))
         if name not in self.materials:
             self.materials[name] = Material(color=color)
         return name
