@@ -1,0 +1,265 @@
+"""``BVH``: one Embree scene holding spheres, triangle meshes and instances, queried in batches."""
+
+from __future__ import annotations
+
+import ctypes
+import threading
+import weakref
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from embree_rt.embree import device as device_module
+from embree_rt.embree import kernels, library
+from embree_rt.embree.validation import (
+    as_points,
+    as_positive,
+    as_ray_bounds,
+    as_transform,
+    as_triangle_indices,
+)
+
+
+@dataclass
+class Hits:
+    """Nearest hits of a batch of n rays.
+
+    ``t`` (n,) float32, ``inf`` on a miss; ``geom_id``, ``prim_id``, ``inst_id`` (n,) int32, -1
+    where none (``geom_id`` is the geometry inside the instanced BVH for an instance hit, and
+    ``inst_id`` the instance's geometry id); ``normal`` (n, 3) float32 unnormalised geometric
+    normal in world space; ``u``, ``v`` (n,) float32 hit coordinates (barycentric on triangles).
+    """
+
+    t: np.ndarray
+    geom_id: np.ndarray
+    prim_id: np.ndarray
+    inst_id: np.ndarray
+    normal: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+    @property
+    def hit(self) -> np.ndarray:
+        """(n,) bool: which rays hit something."""
+        return self.geom_id >= 0
+
+
+_kernel_lock = threading.Lock()
+_symbols_registered = False
+
+
+def _prepare_kernels() -> None:
+    global _symbols_registered
+    with _kernel_lock:
+        if not _symbols_registered:
+            kernels.register_symbols()
+            _symbols_registered = True
+
+
+def _release_handles(lib: ctypes.CDLL, scene: int, dev: device_module.Device) -> None:
+    if scene:
+        lib.rtcReleaseScene(scene)
+    device_module.release(dev)
+
+
+class BVH:
+    """One Embree scene: add geometry, ``commit()``, then ``intersect`` / ``occluded`` batches.
+
+    ``threads`` is the number of threads the queries run on (default: all cores). Release the
+    Embree objects with ``close()`` or a ``with`` block; a finalizer does it otherwise.
+    """
+
+    def __init__(self, threads: int | None = None) -> None:
+        if threads is not None and (int(threads) != threads or threads < 1):
+            raise ValueError(f"threads: must be a positive integer, got {threads!r}")
+        self.threads = int(threads) if threads is not None else numba.config.NUMBA_NUM_THREADS
+        self.threads = min(self.threads, numba.config.NUMBA_NUM_THREADS)
+        self._device = device_module.acquire()
+        self._lib = self._device.lib
+        self._scene = self._lib.rtcNewScene(self._device.handle)
+        self._device.check("rtcNewScene")
+        self._finalizer = weakref.finalize(
+            self, _release_handles, self._lib, self._scene, self._device
+        )
+        self._committed = False
+        self._children: list[BVH] = []
+        # World-from-object inverse-transpose of each instance, by geometry id, for normals.
+        self._normal_matrices: dict[int, np.ndarray] = {}
+        self.geometry_count = 0
+        self.primitive_count = 0
+        self.packets = True
+
+    # -- lifetime -----------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Release the Embree scene (and the device, when no other BVH uses it)."""
+        self._finalizer()
+        self._scene = None
+
+    def __enter__(self) -> BVH:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def _live_scene(self) -> int:
+        if not self._scene:
+            raise RuntimeError("this BVH has been closed")
+        return self._scene
+
+    # -- building -----------------------------------------------------------------------------
+
+    def _attach(self, geometry: int, action: str) -> int:
+        lib = self._lib
+        scene = self._live_scene()
+        if self._committed:
+            lib.rtcReleaseGeometry(geometry)
+            raise RuntimeError("cannot add geometry to a committed BVH")
+        lib.rtcCommitGeometry(geometry)
+        geom_id = lib.rtcAttachGeometry(scene, geometry)
+        lib.rtcReleaseGeometry(geometry)
+        self._device.check(action)
+        self.geometry_count += 1
+        return int(geom_id)
+
+    def _new_buffer(self, geometry: int, kind: int, fmt: int, stride: int, count: int) -> int:
+        pointer = self._lib.rtcSetNewGeometryBuffer(geometry, kind, 0, fmt, stride, count)
+        self._device.check("rtcSetNewGeometryBuffer")
+        return pointer
+
+    def add_spheres(self, centers: np.ndarray, radii: np.ndarray) -> int:
+        """Add analytic spheres: ``centers`` (n, 3), ``radii`` (n,) positive. Returns geom id."""
+        centers = as_points(centers, "centers")
+        radii = as_positive(radii, "radii", len(centers))
+        self._live_scene()
+        geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_SPHERE_POINT)
+        self._device.check("rtcNewGeometry(SPHERE_POINT)")
+        count = len(centers)
+        pointer = self._new_buffer(
+            geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT4, 16, count
+        )
+        if count:
+            packed = np.ctypeslib.as_array((ctypes.c_float * (4 * count)).from_address(pointer))
+            packed = packed.reshape(count, 4)
+            packed[:, :3] = centers
+            packed[:, 3] = radii
+        self.primitive_count += count
+        return self._attach(geometry, "adding spheres")
+
+    def add_triangles(self, vertices: np.ndarray, faces: np.ndarray) -> int:
+        """Add a triangle mesh: ``vertices`` (m, 3) float, ``faces`` (k, 3) int in [0, m)."""
+        vertices = as_points(vertices, "vertices")
+        faces = as_triangle_indices(faces, "faces", len(vertices))
+        self._live_scene()
+        geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_TRIANGLE)
+        self._device.check("rtcNewGeometry(TRIANGLE)")
+        vertex_pointer = self._new_buffer(
+            geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT3, 12, len(vertices)
+        )
+        index_pointer = self._new_buffer(
+            geometry, library.BUFFER_TYPE_INDEX, library.FORMAT_UINT3, 12, len(faces)
+        )
+        if len(vertices):
+            target = (ctypes.c_float * vertices.size).from_address(vertex_pointer)
+            np.ctypeslib.as_array(target)[:] = vertices.reshape(-1)
+        if len(faces):
+            target = (ctypes.c_uint32 * faces.size).from_address(index_pointer)
+            np.ctypeslib.as_array(target)[:] = faces.reshape(-1)
+        self.primitive_count += len(faces)
+        return self._attach(geometry, "adding triangles")
+
+    def add_instance(self, other: BVH, transform: np.ndarray) -> int:
+        """Place the committed BVH ``other`` by a (4, 4) affine ``transform`` (object → world)."""
+        if not isinstance(other, BVH):
+            raise TypeError(f"other: expected a BVH, got {type(other).__name__}")
+        if other is self:
+            raise ValueError("other: a BVH cannot instance itself")
+        if not other._committed:
+            raise ValueError("other: commit the instanced BVH before adding an instance of it")
+        matrix = as_transform(transform, "transform")
+        self._live_scene()
+        geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_INSTANCE)
+        self._device.check("rtcNewGeometry(INSTANCE)")
+        self._lib.rtcSetGeometryInstancedScene(geometry, other._live_scene())
+        column_major = np.ascontiguousarray(matrix.T, dtype=np.float32)
+        self._lib.rtcSetGeometryTransform(
+            geometry, 0, library.FORMAT_FLOAT4X4_COLUMN_MAJOR, column_major.ctypes.data
+        )
+        self._device.check("rtcSetGeometryTransform")
+        geom_id = self._attach(geometry, "adding an instance")
+        self._children.append(other)
+        self._normal_matrices[geom_id] = np.linalg.inv(matrix[:3, :3]).T.astype(np.float32)
+        return geom_id
+
+    def commit(self) -> None:
+        """Build the BVH. Geometry cannot be added afterwards."""
+        self._lib.rtcCommitScene(self._live_scene())
+        self._device.check("rtcCommitScene")
+        self._committed = True
+
+    # -- queries ------------------------------------------------------------------------------
+
+    def _query_inputs(self, origins, directions, tnear, tfar):
+        if not self._committed:
+            raise RuntimeError("commit() the BVH before querying it")
+        origins = as_points(origins, "origins")
+        directions = as_points(directions, "directions", len(origins))
+        tnear, tfar = as_ray_bounds(tnear, tfar, len(origins))
+        _prepare_kernels()
+        numba.set_num_threads(self.threads)
+        return origins, directions, tnear, tfar
+
+    def intersect(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        tnear: float | np.ndarray = 0.0,
+        tfar: float | np.ndarray = np.inf,
+    ) -> Hits:
+        """Nearest hit of each ray ``origins + t * directions`` with ``tnear <= t <= tfar``.
+
+        ``origins``, ``directions`` (n, 3); ``tnear``, ``tfar`` scalars or (n,).
+        """
+        origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
+        n = len(origins)
+        hits = Hits(
+            t=np.empty(n, np.float32),
+            geom_id=np.empty(n, np.int32),
+            prim_id=np.empty(n, np.int32),
+            inst_id=np.empty(n, np.int32),
+            normal=np.empty((n, 3), np.float32),
+            u=np.empty(n, np.float32),
+            v=np.empty(n, np.float32),
+        )
+        if n:
+            kernel = kernels.intersect8 if self.packets else kernels.intersect1
+            kernel(
+                self._live_scene(), origins, directions, tnear, tfar, hits.t, hits.normal,
+                hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
+            )  # fmt: skip
+        self._normals_to_world(hits)
+        return hits
+
+    def occluded(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        tnear: float | np.ndarray = 0.0,
+        tfar: float | np.ndarray = np.inf,
+    ) -> np.ndarray:
+        """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``."""
+        origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
+        blocked = np.zeros(len(origins), bool)
+        if len(origins):
+            kernel = kernels.occluded8 if self.packets else kernels.occluded1
+            kernel(self._live_scene(), origins, directions, tnear, tfar, blocked)
+        return blocked
+
+    def _normals_to_world(self, hits: Hits) -> None:
+        if not self._normal_matrices:
+            return
+        for geom_id, matrix in self._normal_matrices.items():
+            rows = np.flatnonzero(hits.inst_id == geom_id)
+            if len(rows):
+                hits.normal[rows] = hits.normal[rows] @ matrix.T

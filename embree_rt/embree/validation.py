@@ -1,0 +1,90 @@
+"""Checks that keep bad arrays from ever reaching Embree: each error names the argument and row."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _first_bad_row(bad: np.ndarray) -> int:
+    return int(np.flatnonzero(bad)[0])
+
+
+def as_points(values: np.ndarray, name: str, count: int | None = None) -> np.ndarray:
+    """``values`` as a C-contiguous (n, 3) float32 array of finite numbers."""
+    array = np.asarray(values)
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"{name}: expected shape (n, 3), got {array.shape}")
+    if count is not None and len(array) != count:
+        raise ValueError(f"{name}: expected {count} rows, got {len(array)}")
+    if array.dtype.kind not in "fiu":
+        raise ValueError(f"{name}: expected numbers, got dtype {array.dtype}")
+    array = np.ascontiguousarray(array, dtype=np.float32)
+    if not np.isfinite(array).all():
+        row = _first_bad_row(~np.isfinite(array).all(axis=1))
+        raise ValueError(f"{name}: row {row} is not finite: {array[row].tolist()}")
+    return array
+
+
+def as_positive(values: np.ndarray, name: str, count: int) -> np.ndarray:
+    """``values`` as a (count,) float32 array of finite positive numbers."""
+    array = np.asarray(values)
+    if array.ndim != 1 or len(array) != count:
+        raise ValueError(f"{name}: expected shape ({count},), got {array.shape}")
+    if array.dtype.kind not in "fiu":
+        raise ValueError(f"{name}: expected numbers, got dtype {array.dtype}")
+    array = np.ascontiguousarray(array, dtype=np.float32)
+    bad = ~(np.isfinite(array) & (array > 0))
+    if bad.any():
+        row = _first_bad_row(bad)
+        raise ValueError(f"{name}: row {row} must be finite and > 0, got {array[row]}")
+    return array
+
+
+def as_triangle_indices(values: np.ndarray, name: str, vertex_count: int) -> np.ndarray:
+    """``values`` as a (k, 3) uint32 array of vertex indices in ``[0, vertex_count)``."""
+    array = np.asarray(values)
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"{name}: expected shape (k, 3), got {array.shape}")
+    if len(array) and array.dtype.kind not in "iu":
+        raise ValueError(f"{name}: expected integer indices, got dtype {array.dtype}")
+    bad = ((array < 0) | (array >= vertex_count)).any(axis=1)
+    if bad.any():
+        row = _first_bad_row(bad)
+        raise ValueError(
+            f"{name}: row {row} indexes a vertex outside [0, {vertex_count}): {array[row].tolist()}"
+        )
+    return np.ascontiguousarray(array, dtype=np.uint32)
+
+
+def as_transform(values: np.ndarray, name: str) -> np.ndarray:
+    """``values`` as a (4, 4) float64 invertible affine matrix (last row 0, 0, 0, 1)."""
+    matrix = np.asarray(values, dtype=np.float64)
+    if matrix.shape != (4, 4):
+        raise ValueError(f"{name}: expected shape (4, 4), got {matrix.shape}")
+    if not np.isfinite(matrix).all():
+        raise ValueError(f"{name}: contains NaN or inf")
+    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"{name}: last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
+    if abs(np.linalg.det(matrix[:3, :3])) < 1e-12:
+        raise ValueError(f"{name}: the linear part is singular")
+    return matrix
+
+
+def as_ray_bounds(
+    tnear: float | np.ndarray, tfar: float | np.ndarray, count: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """``tnear``, ``tfar`` broadcast to (count,) float32 arrays with 0 <= tnear, NaN-free."""
+    arrays = []
+    for name, value in (("tnear", tnear), ("tfar", tfar)):
+        array = np.asarray(value, dtype=np.float32)
+        if array.ndim == 0:
+            array = np.full(count, array, np.float32)
+        elif array.shape != (count,):
+            raise ValueError(f"{name}: expected a scalar or shape ({count},), got {array.shape}")
+        if np.isnan(array).any():  # one reduction on the common, clean path
+            raise ValueError(f"{name}: row {_first_bad_row(np.isnan(array))} is NaN")
+        arrays.append(np.ascontiguousarray(array))
+    near, far = arrays
+    if (near < 0).any():
+        raise ValueError(f"tnear: row {_first_bad_row(near < 0)} is negative")
+    return near, far
