@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 RGB = tuple[float, float, float]
 
 
@@ -82,3 +84,36 @@ class Checker:
     def __post_init__(self) -> None:
         if not self.size > 0.0:
             raise ValueError(f"size: must be > 0, got {self.size}")
+
+
+@dataclass(frozen=True)
+class MaterialTable:
+    """Materials as arrays indexed by material id, so shading gathers per hit with one take.
+
+    ``color`` (m, 3) float32; the scalar fields (m,) float32.
+    """
+
+    color: np.ndarray
+    ambient: np.ndarray
+    diffuse: np.ndarray
+    specular: np.ndarray
+    shininess: np.ndarray
+    reflectivity: np.ndarray
+    transparency: np.ndarray
+    ior: np.ndarray
+
+    @classmethod
+    def from_materials(cls, materials: list[Material]) -> MaterialTable:
+        def column(name: str) -> np.ndarray:
+            return np.array([getattr(m, name) for m in materials], np.float32)
+
+        return cls(
+            color=np.array([m.color for m in materials], np.float32).reshape(-1, 3),
+            ambient=column("ambient"),
+            diffuse=column("diffuse"),
+            specular=column("specular"),
+            shininess=column("shininess"),
+            reflectivity=column("reflectivity"),
+            transparency=column("transparency"),
+            ior=column("ior"),
+        )

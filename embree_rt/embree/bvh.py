@@ -84,8 +84,9 @@ class BVH:
         )
         self._committed = False
         self._children: list[BVH] = []
-        # World-from-object inverse-transpose of each instance, by geometry id, for normals.
+        # Inverse-transpose of each instance's linear part, by geometry id, for world normals.
         self._normal_matrices: dict[int, np.ndarray] = {}
+        self._normal_matrix_array: np.ndarray | None = None
         self.geometry_count = 0
         self.primitive_count = 0
         self.packets = True
@@ -197,6 +198,12 @@ class BVH:
         self._lib.rtcCommitScene(self._live_scene())
         self._device.check("rtcCommitScene")
         self._committed = True
+        if self._normal_matrices:
+            table = np.zeros((self.geometry_count, 3, 3), np.float32)
+            for geom_id, matrix in self._normal_matrices.items():
+                table[geom_id] = matrix
+            self._normal_matrix_array = table
+            self._normal_matrices = {}
 
     # -- queries ------------------------------------------------------------------------------
 
@@ -257,9 +264,10 @@ class BVH:
         return blocked
 
     def _normals_to_world(self, hits: Hits) -> None:
-        if not self._normal_matrices:
+        # Embree reports an instance hit's normal in the instanced object's own space.
+        if self._normal_matrix_array is None:
             return
-        for geom_id, matrix in self._normal_matrices.items():
-            rows = np.flatnonzero(hits.inst_id == geom_id)
-            if len(rows):
-                hits.normal[rows] = hits.normal[rows] @ matrix.T
+        rows = np.flatnonzero(hits.inst_id >= 0)
+        if len(rows):
+            matrices = self._normal_matrix_array[hits.inst_id[rows]]
+            hits.normal[rows] = np.einsum("nij,nj->ni", matrices, hits.normal[rows])

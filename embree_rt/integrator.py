@@ -1,0 +1,316 @@
+"""The Whitted integrator as a wavefront: whole batches of rays per bounce, shaded with NumPy.
+
+Per batch of camera samples, and per depth, it reads like pbrt-v4's wavefront integrator:
+intersect → escaped rays take the sky → surfaces take ambient + Blinn-Phong light through one
+batch of shadow rays for all lights → reflection and refraction children form the next depth.
+The seed article's recursion ``color = local·(1−r) + r·trace(reflected)`` (and for glass,
+``F·trace(reflected) + (1−F)·trace(refracted)``) becomes a throughput weight carried by each ray.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from embree_rt import shading
+from embree_rt.camera import camera_frame, primary_rays
+from embree_rt.film import Film
+from embree_rt.scene.model import Scene
+from embree_rt.shapes import SceneGeometry
+
+DEFAULT_BATCH_SIZE = 1 << 18
+# A child whose every channel weighs less than half an 8-bit step cannot change the picture.
+MIN_WEIGHT = 1.0 / 512.0
+# Secondary rays start this far (relative to the hit's coordinates) off the surface.
+RELATIVE_OFFSET = 2.0**-18
+RAY_KINDS = ("primary", "shadow", "reflection", "refraction")
+
+
+@dataclass
+class RenderStats:
+    """What a render did: ray counts by kind, seconds spent building and rendering."""
+
+    rays: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAY_KINDS, 0))
+    build_s: float = 0.0
+    render_s: float = 0.0
+
+    @property
+    def total_rays(self) -> int:
+        return sum(self.rays.values())
+
+    @property
+    def rays_per_s(self) -> float:
+        return self.total_rays / self.render_s if self.render_s > 0 else 0.0
+
+
+@dataclass
+class RayBatch:
+    """Rays in flight: ``origins``, ``directions`` (n, 3) float32 (unit directions); ``pixel``
+    (n,) int64; ``weight`` (n, 3) float32 throughput; ``kind`` the counter they are counted in."""
+
+    origins: np.ndarray
+    directions: np.ndarray
+    pixel: np.ndarray
+    weight: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.pixel)
+
+    def take(self, rows: np.ndarray) -> RayBatch:
+        return RayBatch(
+            self.origins[rows], self.directions[rows], self.pixel[rows], self.weight[rows]
+        )
+
+
+def surface_offset(points: np.ndarray) -> np.ndarray:
+    """(n,) float32 distance to push a ray origin off a surface at ``points`` (n, 3), scaled
+    with the coordinates as float32 rounding is (as pbrt's OffsetRayOrigin)."""
+    return (RELATIVE_OFFSET * (1.0 + np.abs(points).max(axis=1))).astype(np.float32)
+
+
+class Renderer:
+    """Renders one scene: builds its BVH once, then ``render()`` traces the image in batches."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        *,
+        spheres: str = "analytic",
+        threads: int | None = None,
+        batch_size: int = DEFAULT_BATCH_SIZE,
+    ) -> None:
+        if batch_size < 1:
+            raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
+        self.scene = scene
+        self.batch_size = int(batch_size)
+        self.stats = RenderStats()
+        start = time.perf_counter()
+        self.geometry = SceneGeometry(scene, spheres=spheres, threads=threads)
+        self.stats.build_s = time.perf_counter() - start
+        self.materials = self.geometry.materials
+        lights = scene.lights
+        self.light_positions = np.array([lt.position for lt in lights], np.float32).reshape(-1, 3)
+        self.light_rgb = np.array(
+            [np.asarray(lt.color, np.float32) * lt.intensity for lt in lights], np.float32
+        ).reshape(-1, 3)
+        self.horizon = np.asarray(scene.background.horizon, np.float32)
+        self.zenith = np.asarray(scene.background.zenith, np.float32)
+
+    def close(self) -> None:
+        self.geometry.close()
+
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def render(
+        self,
+        *,
+        width: int,
+        height: int,
+        spp: int,
+        max_depth: int,
+        seed: int,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> np.ndarray:
+        """The (height, width, 3) float32 linear image. ``progress(done, total)`` counts samples."""
+        if spp < 1:
+            raise ValueError(f"spp: must be >= 1, got {spp}")
+        if max_depth < 0:
+            raise ValueError(f"max_depth: must be >= 0, got {max_depth}")
+        frame = camera_frame(self.scene.camera, width, height)
+        film = Film(width, height)
+        total = width * height * spp
+        # Batches hold whole pixels, so each pixel's sum is added in the same order whatever
+        # the batch size: the image is bitwise independent of it.
+        step = max(1, self.batch_size // spp) * spp
+        for start in range(0, total, step):
+            batch_start = time.perf_counter()
+            count = min(step, total - start)
+            origins, directions, pixel = primary_rays(frame, spp, seed, start, count)
+            rays = RayBatch(origins, directions, pixel, np.ones((count, 3), np.float32))
+            self.stats.rays["primary"] += count
+            self._trace(rays, film, max_depth)
+            self.stats.render_s += time.perf_counter() - batch_start
+            if progress is not None:
+                progress(start + count, total)
+        return film.image(spp)
+
+    # -- one batch, all depths ----------------------------------------------------------------
+
+    def _trace(self, rays: RayBatch, film: Film, max_depth: int) -> None:
+        depth = 0
+        while len(rays):
+            surfaces = self.geometry.intersect(rays.origins, rays.directions)
+            escaped = ~surfaces.hit
+            if escaped.any():
+                sky = shading.sky(rays.directions[escaped], self.horizon, self.zenith)
+                film.add(rays.pixel[escaped], rays.weight[escaped] * sky)
+            hit = np.flatnonzero(surfaces.hit)
+            rays = self._shade(rays.take(hit), surfaces, hit, film, spawn=depth < max_depth)
+            depth += 1
+
+    def _shade(self, rays: RayBatch, surfaces, hit: np.ndarray, film: Film, spawn: bool):
+        table = self.materials
+        material = surfaces.material[hit]
+        position = surfaces.position[hit]
+        normal = surfaces.normal[hit]
+        face_normal = surfaces.face_normal[hit]
+        d = rays.directions
+        # Shade the side the ray arrived on; a ray leaving a closed object comes from inside.
+        entering = shading.dot(d, face_normal) < 0
+        side = np.where(entering, 1.0, -1.0).astype(np.float32)[:, None]
+        normal = normal * side
+        face_normal = face_normal * side
+
+        color = table.color[material]
+        on_floor = surfaces.floor[hit]
+        if on_floor.any():
+            color[on_floor] = shading.checker(position[on_floor], self.scene.floor.checker)
+        reflectivity = table.reflectivity[material]
+        transparency = table.transparency[material]
+        local = (1.0 - reflectivity) * (1.0 - transparency)
+
+        offset = surface_offset(position)[:, None]
+        outside = position + face_normal * offset
+        radiance = (table.ambient[material] * local)[:, None] * color
+        radiance += self._direct_light(
+            outside, normal, -d, color, table.diffuse[material] * local, material
+        )
+        film.add(rays.pixel, rays.weight * radiance)
+        if not spawn:
+            return RayBatch(*(np.zeros((0, 3), np.float32),) * 2, np.zeros(0, np.int64),
+                            np.zeros((0, 3), np.float32))  # fmt: skip
+
+        # Glass splits by Fresnel between reflection and refraction; TIR reflects everything.
+        ior = table.ior[material]
+        n1 = np.where(entering, 1.0, ior).astype(np.float32)
+        n2 = np.where(entering, ior, 1.0).astype(np.float32)
+        refracted, total_internal = shading.refract(d, normal, n1 / n2)
+        fresnel = shading.fresnel_schlick(np.clip(-shading.dot(d, normal), 0.0, 1.0), n1, n2)
+        fresnel = np.where(total_internal, 1.0, fresnel).astype(np.float32)
+        reflect_share = reflectivity * (1.0 - transparency) + transparency * fresnel
+        refract_share = transparency * (1.0 - fresnel)
+
+        reflection = RayBatch(
+            outside,
+            shading.reflect(d, normal),
+            rays.pixel,
+            rays.weight * reflect_share[:, None],
+        )
+        # Glass tints what passes through it (the green marble), not what it reflects.
+        refraction = RayBatch(
+            position - face_normal * offset,
+            refracted,
+            rays.pixel,
+            rays.weight * refract_share[:, None] * color,
+        )
+        reflection = reflection.take(np.flatnonzero(reflection.weight.max(axis=1) >= MIN_WEIGHT))
+        refraction = refraction.take(np.flatnonzero(refraction.weight.max(axis=1) >= MIN_WEIGHT))
+        self.stats.rays["reflection"] += len(reflection)
+        self.stats.rays["refraction"] += len(refraction)
+        return RayBatch(
+            np.concatenate([reflection.origins, refraction.origins]),
+            np.concatenate([reflection.directions, refraction.directions]),
+            np.concatenate([reflection.pixel, refraction.pixel]),
+            np.concatenate([reflection.weight, refraction.weight]),
+        )
+
+    def _direct_light(self, origins, normal, to_viewer, color, diffuse, material) -> np.ndarray:
+        """(n, 3) Blinn-Phong light from every point light that the point sees."""
+        n = len(origins)
+        n_lights = len(self.light_positions)
+        result = np.zeros((n, 3), np.float32)
+        if n == 0 or n_lights == 0:
+            return result
+        # All lights in one shadow batch: light-major so each light's rays stay coherent.
+        to_light = self.light_positions[:, None, :] - origins[None, :, :]
+        distance = np.linalg.norm(to_light, axis=2)
+        direction = (to_light / np.maximum(distance, 1e-30)[..., None]).astype(np.float32)
+        facing = np.einsum("lnk,nk->ln", direction, normal) > 0
+        candidates = np.flatnonzero(facing.reshape(-1))
+        lit = np.zeros(n_lights * n, bool)
+        if len(candidates):
+            flat_dir = direction.reshape(-1, 3)[candidates]
+            flat_origin = np.broadcast_to(origins, (n_lights, n, 3)).reshape(-1, 3)[candidates]
+            blocked = self.geometry.occluded(
+                flat_origin, flat_dir, 0.0, distance.reshape(-1)[candidates].astype(np.float32)
+            )
+            lit[candidates] = ~blocked
+            self.stats.rays["shadow"] += len(candidates)
+        table = self.materials
+        specular = table.specular[material]
+        shininess = table.shininess[material]
+        for light in range(n_lights):
+            rows = np.flatnonzero(lit[light * n : (light + 1) * n])
+            if len(rows) == 0:
+                continue
+            result[rows] += shading.blinn_phong(
+                normal[rows],
+                to_viewer[rows],
+                direction[light, rows],
+                color[rows],
+                diffuse[rows],
+                specular[rows],
+                shininess[rows],
+                np.broadcast_to(self.light_rgb[light], (len(rows), 3)),
+            )
+        return result
+
+
+def render(
+    scene: Scene,
+    *,
+    width: int | None = None,
+    height: int | None = None,
+    spp: int | None = None,
+    max_depth: int | None = None,
+    seed: int | None = None,
+    threads: int | None = None,
+    spheres: str = "analytic",
+    batch_size: int = DEFAULT_BATCH_SIZE,
+    quiet: bool = True,
+    stats: RenderStats | None = None,
+) -> np.ndarray:
+    """Render ``scene`` to a (height, width, 3) float32 linear image.
+
+    Arguments left as None come from ``scene.render``. With ``quiet=False`` a progress bar runs
+    on stderr (when it is a terminal). Pass a ``RenderStats`` to receive ray counts and timings.
+    """
+    settings = scene.render
+    width = settings.width if width is None else width
+    height = settings.height if height is None else height
+    spp = settings.spp if spp is None else spp
+    max_depth = settings.max_depth if max_depth is None else max_depth
+    seed = settings.seed if seed is None else seed
+    with Renderer(scene, spheres=spheres, threads=threads, batch_size=batch_size) as renderer:
+        bar = None
+        if not quiet and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            bar = tqdm(total=width * height * spp, unit="sample", unit_scale=True, file=sys.stderr)
+
+        def progress(done: int, total: int) -> None:
+            if bar is not None:
+                bar.update(done - bar.n)
+                bar.set_postfix_str(f"{renderer.stats.rays_per_s / 1e6:.1f} Mrays/s", refresh=False)
+
+        try:
+            image = renderer.render(
+                width=width, height=height, spp=spp, max_depth=max_depth, seed=seed,
+                progress=progress,
+            )  # fmt: skip
+        finally:
+            if bar is not None:
+                bar.close()
+        if stats is not None:
+            stats.rays = dict(renderer.stats.rays)
+            stats.build_s = renderer.stats.build_s
+            stats.render_s = renderer.stats.render_s
+    return image

@@ -1,0 +1,260 @@
+"""Scene geometry: every object of a ``Scene`` in one Embree BVH, and what each hit is.
+
+Spheres go in as analytic Embree spheres, or (``spheres="mesh"``) as one tessellated icosphere
+instanced per sphere. Each distinct triangle mesh is built once and instanced per placement.
+The floor is an analytic plane intersected in NumPy: exact at any distance, where a finite quad
+in the BVH would cut the horizon and lose float32 precision far away.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from embree_rt.embree import BVH
+from embree_rt.materials import MaterialTable
+from embree_rt.scene.model import Scene
+
+SPHERE_MODES = ("analytic", "mesh")
+ICOSPHERE_SUBDIVISIONS = 3
+
+
+@dataclass
+class SurfaceHits:
+    """What n rays hit.
+
+    ``hit`` (n,) bool; ``t`` (n,) float32 (inf on a miss); ``position`` (n, 3) float32;
+    ``normal`` (n, 3) float32 unit shading normal and ``face_normal`` (n, 3) float32 unit
+    geometric normal, both pointing out of the object (+y for the floor), whichever side the ray
+    came from; ``material`` (n,) int32 material id (the floor's is ``floor_material``); ``floor``
+    (n,) bool, the rays that hit the floor.
+    """
+
+    hit: np.ndarray
+    t: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    face_normal: np.ndarray
+    material: np.ndarray
+    floor: np.ndarray
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    length = np.linalg.norm(vectors, axis=1, keepdims=True)
+    return (vectors / np.maximum(length, 1e-30)).astype(np.float32)
+
+
+class SceneGeometry:
+    """The BVH of a scene plus the tables that turn Embree's ids into shading inputs."""
+
+    def __init__(self, scene: Scene, spheres: str = "analytic", threads: int | None = None):
+        if spheres not in SPHERE_MODES:
+            raise ValueError(f"spheres: expected one of {SPHERE_MODES}, got {spheres!r}")
+        self.bvh = BVH(threads=threads)
+        self._children: list[BVH] = []
+        self.sphere_centers = np.asarray(scene.sphere_centers, np.float32)
+        self.sphere_radii = np.asarray(scene.sphere_radii, np.float32)
+        self.sphere_materials = np.asarray(scene.sphere_materials, np.int32)
+        self.sphere_geom_id = -1
+        self.floor = scene.floor
+        self.floor_material = len(scene.materials)
+        self.materials = MaterialTable.from_materials(
+            [*scene.materials.values(), *([scene.floor.material] if scene.floor else [])]
+        )
+        # Per top-level instance geometry id: which child mesh, material, shading mode.
+        self._instance_child: list[int] = []
+        self._instance_material: list[int] = []
+        self._instance_smooth: list[bool] = []
+        self._instance_geom_ids: list[int] = []
+        self._instance_normal_matrix: list[np.ndarray] = []
+        self._mesh_face_offset: list[int] = []
+        self._mesh_vertex_normals: list[np.ndarray] = []
+        self._mesh_faces: list[np.ndarray] = []
+        self._mesh_face_normals: list[np.ndarray] = []
+        self.triangle_count = 0
+        self.instance_count = 0
+        try:
+            if len(self.sphere_radii):
+                if spheres == "analytic":
+                    self.sphere_geom_id = self.bvh.add_spheres(
+                        self.sphere_centers, self.sphere_radii
+                    )
+                else:
+                    self._add_tessellated_spheres()
+            self._add_meshes(scene)
+            self.bvh.commit()
+            self._finish_tables()
+        except BaseException:
+            self.close()
+            raise
+
+    # -- building -----------------------------------------------------------------------------
+
+    def _child(self, mesh: trimesh.Trimesh) -> int:
+        child = BVH(threads=self.bvh.threads)
+        self._children.append(child)
+        child.add_triangles(mesh.vertices, mesh.faces)
+        child.commit()
+        self._mesh_face_offset.append(sum(len(f) for f in self._mesh_faces))
+        self._mesh_faces.append(np.asarray(mesh.faces, np.int64))
+        self._mesh_vertex_normals.append(np.asarray(mesh.vertex_normals, np.float32))
+        self._mesh_face_normals.append(np.asarray(mesh.face_normals, np.float32))
+        return len(self._children) - 1
+
+    def _place(self, child: int, transform: np.ndarray, material: int, smooth: bool) -> None:
+        geom_id = self.bvh.add_instance(self._children[child], transform)
+        self._instance_geom_ids.append(geom_id)
+        self._instance_child.append(child)
+        self._instance_material.append(material)
+        self._instance_smooth.append(smooth)
+        self._instance_normal_matrix.append(np.linalg.inv(transform[:3, :3]).T)
+        self.triangle_count += len(self._mesh_faces[child])
+        self.instance_count += 1
+
+    def _add_tessellated_spheres(self) -> None:
+        unit = trimesh.creation.icosphere(subdivisions=ICOSPHERE_SUBDIVISIONS, radius=1.0)
+        child = self._child(unit)
+        transform = np.eye(4)
+        for center, radius, material in zip(
+            self.sphere_centers, self.sphere_radii, self.sphere_materials, strict=True
+        ):
+            transform[:3, :3] = np.eye(3) * float(radius)
+            transform[:3, 3] = center
+            self._place(child, transform, int(material), smooth=True)
+
+    def _add_meshes(self, scene: Scene) -> None:
+        children: dict[int, int] = {}
+        for placement in scene.meshes:
+            key = id(placement.mesh)
+            if key not in children:
+                children[key] = self._child(placement.mesh)
+            material = scene.material_index(placement.material)
+            self._place(children[key], placement.transform, material, placement.smooth)
+
+    def _finish_tables(self) -> None:
+        size = max(self._instance_geom_ids, default=-1) + 1
+        self.instance_child = np.full(size, -1, np.int32)
+        self.instance_material = np.zeros(size, np.int32)
+        self.instance_smooth = np.zeros(size, bool)
+        self.instance_normal_matrix = np.zeros((size, 3, 3), np.float32)
+        if size:
+            ids = np.asarray(self._instance_geom_ids)
+            self.instance_child[ids] = self._instance_child
+            self.instance_material[ids] = self._instance_material
+            self.instance_smooth[ids] = self._instance_smooth
+            self.instance_normal_matrix[ids] = self._instance_normal_matrix
+        if self._mesh_faces:
+            vertex_offsets = np.cumsum([0] + [len(n) for n in self._mesh_vertex_normals[:-1]])
+            self.mesh_faces = np.concatenate(
+                [f + o for f, o in zip(self._mesh_faces, vertex_offsets, strict=True)]
+            )
+            self.mesh_vertex_normals = np.concatenate(self._mesh_vertex_normals)
+            self.mesh_face_normals = np.concatenate(self._mesh_face_normals)
+            self.mesh_face_offset = np.asarray(self._mesh_face_offset, np.int64)
+
+    def close(self) -> None:
+        self.bvh.close()
+        for child in self._children:
+            child.close()
+
+    def __enter__(self) -> SceneGeometry:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- queries ------------------------------------------------------------------------------
+
+    def _floor_t(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """(n,) float32 distance to the floor plane along each ray, inf where parallel/behind."""
+        t = np.full(len(origins), np.inf, np.float32)
+        if self.floor is None:
+            return t
+        dy = directions[:, 1]
+        moving = dy != 0
+        t[moving] = (self.floor.height - origins[moving, 1]) / dy[moving]
+        t[t < 0] = np.inf
+        return t
+
+    def intersect(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        tnear: float | np.ndarray = 0.0,
+        tfar: float | np.ndarray = np.inf,
+    ) -> SurfaceHits:
+        """Nearest surface on each ray; ``origins``, ``directions`` (n, 3) float32, unit dirs."""
+        hits = self.bvh.intersect(origins, directions, tnear, tfar)
+        t = hits.t
+        floor_t = self._floor_t(origins, directions)
+        floor = (floor_t < t) & (floor_t >= tnear) & (floor_t <= tfar)
+        t = np.where(floor, floor_t, t)
+        hit = np.isfinite(t)
+        n = len(origins)
+        position = origins + directions * np.where(hit, t, 0.0)[:, None]
+        normal = np.zeros((n, 3), np.float32)
+        face_normal = np.zeros((n, 3), np.float32)
+        material = np.zeros(n, np.int32)
+
+        normal[floor, 1] = 1.0
+        face_normal[floor, 1] = 1.0
+        material[floor] = self.floor_material
+
+        on_spheres = ~floor & (hits.geom_id == self.sphere_geom_id) & (hits.inst_id < 0)
+        if on_spheres.any():
+            prim = hits.prim_id[on_spheres]
+            outward = (position[on_spheres] - self.sphere_centers[prim]) / self.sphere_radii[
+                prim, None
+            ]
+            normal[on_spheres] = _unit(outward)
+            face_normal[on_spheres] = normal[on_spheres]
+            # Re-project onto the sphere: removes the rounding error along the ray.
+            position[on_spheres] = (
+                self.sphere_centers[prim] + self.sphere_radii[prim, None] * normal[on_spheres]
+            )
+            material[on_spheres] = self.sphere_materials[prim]
+
+        on_instances = ~floor & (hits.inst_id >= 0)
+        if on_instances.any():
+            self._instance_surfaces(hits, on_instances, normal, face_normal, material)
+        return SurfaceHits(
+            hit=hit,
+            t=t.astype(np.float32),
+            position=position.astype(np.float32),
+            normal=normal,
+            face_normal=face_normal,
+            material=material,
+            floor=floor,
+        )
+
+    def _instance_surfaces(self, hits, rows, normal, face_normal, material) -> None:
+        inst = hits.inst_id[rows]
+        face = self.mesh_face_offset[self.instance_child[inst]] + hits.prim_id[rows]
+        matrices = self.instance_normal_matrix[inst]
+        geometric = self.mesh_face_normals[face]
+        u = hits.u[rows, None]
+        v = hits.v[rows, None]
+        corners = self.mesh_faces[face]
+        vn = self.mesh_vertex_normals
+        # Embree's barycentrics: hit = (1 - u - v) p0 + u p1 + v p2.
+        interpolated = (
+            (1 - u - v) * vn[corners[:, 0]] + u * vn[corners[:, 1]] + v * vn[corners[:, 2]]
+        )
+        shading = np.where(self.instance_smooth[inst, None], interpolated, geometric)
+        face_normal[rows] = _unit(np.einsum("nij,nj->ni", matrices, geometric))
+        normal[rows] = _unit(np.einsum("nij,nj->ni", matrices, shading))
+        material[rows] = self.instance_material[inst]
+
+    def occluded(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        tnear: float | np.ndarray = 0.0,
+        tfar: float | np.ndarray = np.inf,
+    ) -> np.ndarray:
+        """(n,) bool: whether any surface, floor included, lies on each ray within the window."""
+        blocked = self.bvh.occluded(origins, directions, tnear, tfar)
+        floor_t = self._floor_t(origins, directions)
+        return blocked | ((floor_t >= tnear) & (floor_t <= tfar))
