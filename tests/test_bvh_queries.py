@@ -1,0 +1,462 @@
+"""BVH queries across geometry kinds: occlusion, mixed scenes, empty scenes, thread-count and
+batch independence, a million spheres, and input validation."""
+
+from __future__ import annotations
+
+import re
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import trimesh
+from bvh_reference import (
+    ReferenceHits,
+    affine,
+    assert_hits_match,
+    float32_exact,
+    near_triangle_edge,
+    random_soup,
+    rays_toward_box,
+    sphere_hits,
+    transform_points,
+    triangle_hits,
+)
+
+from embree_rt.embree import BVH
+
+KINDS = ("spheres", "triangles", "instances")
+
+
+class Parts:
+    """One random layout of the three kinds of geometry, overlapping in a common box."""
+
+    def __init__(self, seed: int) -> None:
+        rng = np.random.default_rng(seed)
+        self.centers = float32_exact(rng.uniform(-6, 6, size=(150, 3)))
+        self.radii = float32_exact(rng.uniform(0.2, 1.0, size=150))
+        vertices, self.soup_faces = random_soup(rng, 200, extent=6.0)
+        self.soup_vertices = float32_exact(vertices)
+        ico = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+        self.ico_vertices = float32_exact(ico.vertices)
+        self.ico_faces = ico.faces
+        self.transform = affine([1, 2, 0], 0.5, [3.0, 1.5, 2.0], [0.5, -0.5, 1.0])
+        self.baked = transform_points(self.transform, self.ico_vertices)
+
+    def build(self, kinds=KINDS, threads: int | None = None):
+        """A committed BVH holding ``kinds``; returns (bvh, ids) where ids maps kind -> the
+        (geom_id, inst_id) a hit on it reports. The child BVH is kept alive on ``ids``."""
+        bvh = BVH(threads=threads)
+        ids = {}
+        if "spheres" in kinds:
+            ids["spheres"] = (bvh.add_spheres(self.centers, self.radii), -1)
+        if "triangles" in kinds:
+            ids["triangles"] = (bvh.add_triangles(self.soup_vertices, self.soup_faces), -1)
+        if "instances" in kinds:
+            child = BVH(threads=threads)
+            child_gid = child.add_triangles(self.ico_vertices, self.ico_faces)
+            child.commit()
+            ids["instances"] = (child_gid, bvh.add_instance(child, self.transform))
+            ids["child"] = child
+        bvh.commit()
+        return bvh, ids
+
+    def reference(self, kinds, ids, origins, directions, tnear=0.0, tfar=np.inf):
+        """Nearest hit over ``kinds`` as the minimum of the per-kind references.
+
+        Returns (ReferenceHits, expected geom_id (n,), expected inst_id (n,)).
+        """
+        per_kind = []
+        for kind in kinds:
+            if kind == "spheres":
+                ref = sphere_hits(origins, directions, self.centers, self.radii, tnear, tfar)
+            elif kind == "triangles":
+                ref = triangle_hits(
+                    origins, directions, self.soup_vertices, self.soup_faces, tnear, tfar
+                )
+            else:
+                ref = triangle_hits(origins, directions, self.baked, self.ico_faces, tnear, tfar)
+            per_kind.append(ref)
+        n = len(origins)
+        t = np.stack([ref.t for ref in per_kind])
+        winner = t.argmin(axis=0)
+        rows = np.arange(n)
+        ordered = np.sort(t, axis=0)
+        nearest = ordered[0]
+        # two kinds at (nearly) the same distance: either may win
+        tie = np.zeros(n, bool)
+        if len(per_kind) > 1:
+            finite = np.isfinite(nearest)
+            tie[finite] = ordered[1][finite] - nearest[finite] <= 1e-5 * nearest[finite]
+        combined = ReferenceHits(
+            t=nearest,
+            prim_id=np.stack([ref.prim_id for ref in per_kind])[winner, rows],
+            normal=np.stack([ref.normal for ref in per_kind])[winner, rows],
+            u=np.stack([ref.u for ref in per_kind])[winner, rows],
+            v=np.stack([ref.v for ref in per_kind])[winner, rows],
+            ambiguous=np.any([ref.ambiguous for ref in per_kind], axis=0) | tie,
+        )
+        geom = np.array([ids[kind][0] for kind in kinds])[winner]
+        inst = np.array([ids[kind][1] for kind in kinds])[winner]
+        combined.prim_id = np.where(combined.hit, combined.prim_id, -1)
+        return combined, geom, inst, winner
+
+
+def our_triangle_edge_hits(hits, ids) -> np.ndarray:
+    """(n,) bool: rays the BVH says hit a triangle on its edge (trimesh may see a miss there)."""
+    on_triangles = np.isfinite(hits.t) & (hits.geom_id != ids.get("spheres", (-2,))[0])
+    return on_triangles & near_triangle_edge(hits.u, hits.v)
+
+
+@pytest.fixture(scope="module")
+def parts():
+    return Parts(30)
+
+
+def rays(seed: int, count: int):
+    origins, directions = rays_toward_box(np.random.default_rng(seed), count, [-7] * 3, [7] * 3, 25)
+    return float32_exact(origins), float32_exact(directions)
+
+
+KIND_SETS = [("spheres",), ("triangles",), ("instances",), KINDS]
+
+
+@pytest.mark.parametrize("kinds", KIND_SETS, ids=lambda k: "+".join(k))
+def test_nearest_hit_matches_reference(parts, kinds):
+    origins, directions = rays(31, 2500)
+    bvh, ids = parts.build(kinds)
+    with bvh:
+        hits = bvh.intersect(origins, directions)
+    ref, geom, inst, winner = parts.reference(kinds, ids, origins, directions)
+    ref.ambiguous |= our_triangle_edge_hits(hits, ids)
+    sure = assert_hits_match(
+        hits, ref, geom, inst, triangles=kinds != ("spheres",) and len(kinds) == 1,
+        normal_cos=0.9995, min_hit_fraction=0.05, min_miss_fraction=0.02,
+    )  # fmt: skip
+    if len(kinds) > 1:
+        # the mixed scene is a real test only if every kind wins somewhere
+        won = winner[sure & ref.hit]
+        assert all((won == k).sum() >= 20 for k in range(len(kinds))), np.bincount(won)
+        tri = sure & ref.hit & (winner > 0)
+        np.testing.assert_allclose(hits.u[tri], ref.u[tri], atol=1e-4)
+        np.testing.assert_allclose(hits.v[tri], ref.v[tri], atol=1e-4)
+
+
+@pytest.mark.parametrize("kinds", KIND_SETS, ids=lambda k: "+".join(k))
+def test_occluded_agrees_with_reference_and_intersect(parts, kinds):
+    origins, directions = rays(32, 2500)
+    rng = np.random.default_rng(33)
+    bvh, ids = parts.build(kinds)
+    with bvh:
+        first, *_ = parts.reference(kinds, ids, origins, directions)
+        # per-ray windows around the first hit, so about half the rays are blocked
+        reach = np.where(first.hit, first.t, 60.0 / np.linalg.norm(directions, axis=1))
+        tnear = float32_exact(reach * rng.uniform(0.0, 0.4, len(reach)))
+        tfar = float32_exact(reach * rng.uniform(0.5, 1.5, len(reach)))
+        blocked = bvh.occluded(origins, directions, tnear=tnear, tfar=tfar)
+        hits = bvh.intersect(origins, directions, tnear=tnear, tfar=tfar)
+        # origins lie 25 from the centre and directions are 0.2..5 long: tfar = 8 cuts the box
+        scalar_blocked = bvh.occluded(origins, directions, tfar=8.0)
+        scalar_hits = bvh.intersect(origins, directions, tfar=8.0)
+    ref, *_ = parts.reference(kinds, ids, origins, directions, tnear, tfar)
+    sure = ~(ref.ambiguous | our_triangle_edge_hits(hits, ids))
+    assert sure.mean() > 0.99
+    # a real test: about half the rays that meet something are blocked within their window
+    assert 0.3 < blocked[sure & first.hit].mean() < 0.7
+    assert (sure & first.hit).sum() > 100
+    assert blocked.dtype == np.bool_ and blocked.shape == (len(origins),)
+    wrong = sure & (blocked != ref.hit)
+    assert not wrong.any(), f"occluded wrong on rays {np.flatnonzero(wrong)[:5]}"
+    assert np.array_equal(blocked[sure], np.isfinite(hits.t)[sure])
+    scalar_ref, *_ = parts.reference(kinds, ids, origins, directions, 0.0, 8.0)
+    sure = ~(scalar_ref.ambiguous | our_triangle_edge_hits(scalar_hits, ids))
+    assert 0.02 < scalar_ref.hit[sure].mean() < 0.95
+    assert np.array_equal(scalar_blocked[sure], scalar_ref.hit[sure])
+    assert np.array_equal(scalar_blocked[sure], np.isfinite(scalar_hits.t)[sure])
+
+
+def test_empty_scene_misses_everything():
+    origins, directions = rays(34, 100)
+    with BVH() as bvh:
+        bvh.commit()
+        hits = bvh.intersect(origins, directions)
+        blocked = bvh.occluded(origins, directions)
+    assert np.all(np.isinf(hits.t)) and np.all(hits.t > 0)
+    for name in ("geom_id", "prim_id", "inst_id"):
+        assert np.all(getattr(hits, name) == -1), name
+    assert not blocked.any()
+
+
+def test_zero_rays(parts):
+    bvh, _ = parts.build()
+    with bvh:
+        hits = bvh.intersect(np.zeros((0, 3)), np.zeros((0, 3)))
+        blocked = bvh.occluded(np.zeros((0, 3)), np.zeros((0, 3)))
+    assert hits.t.shape == (0,) and hits.prim_id.shape == (0,) and hits.normal.shape == (0, 3)
+    assert blocked.shape == (0,)
+
+
+def test_one_thread_and_two_threads_give_identical_results(parts):
+    origins, directions = rays(35, 20000)
+    tnear = float32_exact(np.random.default_rng(36).uniform(0, 3, len(origins)))
+    results = []
+    for threads in (1, 2):
+        bvh, _ = parts.build(threads=threads)
+        with bvh:
+            hits = bvh.intersect(origins, directions, tnear=tnear)
+            blocked = bvh.occluded(origins, directions, tnear=tnear, tfar=8.0)
+        results.append((hits, blocked))
+    (a, blocked_a), (b, blocked_b) = results
+    hit = np.isfinite(a.t)
+    assert 0.2 < hit.mean() < 0.95
+    for name in ("t", "geom_id", "prim_id", "inst_id"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    for name in ("normal", "u", "v"):
+        assert np.array_equal(getattr(a, name)[hit], getattr(b, name)[hit]), name
+    assert np.array_equal(blocked_a, blocked_b)
+
+
+def test_batch_equals_one_ray_at_a_time(parts):
+    origins, directions = rays(37, 40)
+    tnear = float32_exact(np.random.default_rng(38).uniform(0, 2, 40))
+    bvh, _ = parts.build()
+    with bvh:
+        batch = bvh.intersect(origins, directions, tnear=tnear)
+        batch_blocked = bvh.occluded(origins, directions, tnear=tnear, tfar=30.0)
+        assert 5 < np.isfinite(batch.t).sum() < 38
+        for i in range(len(origins)):
+            one = bvh.intersect(origins[i : i + 1], directions[i : i + 1], tnear=tnear[i])
+            blocked = bvh.occluded(origins[i : i + 1], directions[i : i + 1], tnear[i], 30.0)
+            for name in ("geom_id", "prim_id", "inst_id"):
+                assert getattr(one, name)[0] == getattr(batch, name)[i], (name, i)
+            assert blocked[0] == batch_blocked[i], i
+            # a lone ray may take Embree's single-ray path and a batch its packet path: allow
+            # a float32 rounding difference, nothing more
+            np.testing.assert_allclose(one.t[0], batch.t[i], rtol=1e-6)
+            if np.isfinite(one.t[0]):
+                np.testing.assert_allclose(one.normal[0], batch.normal[i], rtol=1e-5, atol=1e-6)
+                np.testing.assert_allclose(
+                    [one.u[0], one.v[0]], [batch.u[i], batch.v[i]], atol=1e-6
+                )
+
+
+def test_scalar_window_equals_the_same_window_per_ray(parts):
+    origins, directions = rays(39, 3000)
+    bvh, _ = parts.build()
+    with bvh:
+        scalar = bvh.intersect(origins, directions, tnear=1.5, tfar=9.0)
+        per_ray = bvh.intersect(
+            origins, directions, tnear=np.full(3000, 1.5), tfar=np.full(3000, 9.0)
+        )
+        blocked = bvh.occluded(origins, directions, tnear=1.5, tfar=9.0)
+        blocked_per_ray = bvh.occluded(
+            origins, directions, tnear=np.full(3000, 1.5), tfar=np.full(3000, 9.0)
+        )
+    for name in ("t", "geom_id", "prim_id", "inst_id"):
+        assert np.array_equal(getattr(scalar, name), getattr(per_ray, name)), name
+    assert np.array_equal(blocked, blocked_per_ray)
+
+
+def test_context_manager_and_close():
+    with BVH() as bvh:
+        assert isinstance(bvh, BVH)
+        bvh.add_spheres([[0.0, 0.0, 0.0]], [1.0])
+        bvh.commit()
+        assert bvh.intersect([[0.0, 0.0, 5.0]], [[0.0, 0.0, -1.0]]).t[0] == pytest.approx(4.0)
+    other = BVH(threads=1)
+    other.add_spheres([[0.0, 0.0, 0.0]], [1.0])
+    other.commit()
+    assert other.occluded([[0.0, 0.0, 5.0]], [[0.0, 0.0, -1.0]])[0]
+    other.close()
+
+
+# -- a million spheres ----------------------------------------------------------------------------
+
+SIDE = 1000  # SIDE x SIDE spheres, one per unit cell, each inside its cell seen from above
+
+
+@pytest.fixture(scope="module")
+def million():
+    rng = np.random.default_rng(40)
+    radii = float32_exact(rng.uniform(0.15, 0.4, SIDE * SIDE))
+    i, j = np.divmod(np.arange(SIDE * SIDE), SIDE)
+    play = 0.49 - radii  # keep every sphere inside its cell in x and y
+    centers = np.c_[
+        i + 0.5 + rng.uniform(-1, 1, SIDE * SIDE) * play,
+        j + 0.5 + rng.uniform(-1, 1, SIDE * SIDE) * play,
+        rng.uniform(-0.2, 0.2, SIDE * SIDE),
+    ]
+    centers = float32_exact(centers)
+    bvh = BVH()
+    gid = bvh.add_spheres(centers, radii)
+    bvh.commit()
+    yield centers, radii, bvh, gid
+    bvh.close()
+
+
+def test_million_spheres_vertical_rays_closed_form(million):
+    """100k rays straight down: only the sphere of the cell below can be hit, so the answer
+    is closed-form for every ray."""
+    centers, radii, bvh, gid = million
+    rng = np.random.default_rng(41)
+    count = 100_000
+    xy = float32_exact(rng.uniform(0, SIDE, size=(count, 2)))
+    origins = np.c_[xy, np.full(count, 5.0)]
+    directions = np.tile([0.0, 0.0, -1.0], (count, 1))
+    hits = bvh.intersect(origins, directions)
+    blocked = bvh.occluded(origins, directions, tfar=4.0)
+
+    cell = np.floor(xy).astype(np.int64)
+    index = cell[:, 0] * SIDE + cell[:, 1]
+    offset = np.linalg.norm(xy - centers[index, :2], axis=1)
+    r = radii[index]
+    hit = offset < r
+    t = np.where(hit, 5.0 - centers[index, 2] - np.sqrt(np.maximum(r * r - offset**2, 0)), np.inf)
+    sure = np.abs(offset - r) > 1e-4
+    assert sure.mean() > 0.99 and 0.2 < hit.mean() < 0.8
+    assert np.array_equal(np.isfinite(hits.t)[sure], hit[sure])
+    both = sure & hit
+    np.testing.assert_allclose(hits.t[both], t[both], rtol=1e-5)
+    assert np.array_equal(hits.prim_id[both], index[both])
+    assert np.all(hits.geom_id[both] == gid)
+    # every sphere top lies below z = 0.6, i.e. t >= 4.4: nothing is within tfar = 4
+    assert not blocked.any()
+    assert np.array_equal(bvh.occluded(origins, directions, tfar=10.0)[sure], hit[sure])
+
+
+def test_million_spheres_oblique_rays_brute_force(million):
+    """100k steep oblique rays; 200 of them checked against all 1M spheres in float64."""
+    centers, radii, bvh, gid = million
+    rng = np.random.default_rng(42)
+    count = 100_000
+    targets = np.c_[rng.uniform(0, SIDE, size=(count, 2)), np.zeros(count)]
+    origins = float32_exact(
+        targets + np.c_[rng.uniform(-60, 60, size=(count, 2)), np.full(count, 150.0)]
+    )
+    directions = float32_exact((targets - origins) / 150.0)
+    hits = bvh.intersect(origins, directions)
+    assert 0.2 < np.isfinite(hits.t).mean() < 0.95
+    subset = rng.choice(count, 200, replace=False)
+    ref = sphere_hits(origins[subset], directions[subset], centers, radii, ambiguity=1e-6)
+    names = ("t", "geom_id", "prim_id", "inst_id", "normal", "u", "v")
+    picked = SimpleNamespace(**{name: getattr(hits, name)[subset] for name in names})
+    assert_hits_match(
+        picked, ref, gid, max_ambiguous=0.03, min_hit_fraction=0.15, min_miss_fraction=0.05
+    )
+
+
+# -- validation -----------------------------------------------------------------------------------
+
+BAD_ROW = 13  # rows 0..19; no shape or bound in the messages should read "13"
+
+
+def good(count: int = 20) -> np.ndarray:
+    return np.random.default_rng(50).uniform(-1, 1, size=(count, 3))
+
+
+def with_bad_row(values: np.ndarray, bad) -> np.ndarray:
+    values = np.array(values, dtype=np.result_type(values, type(bad)))
+    values[BAD_ROW] = bad
+    return values
+
+
+def expect_error(call, argument: str, row: int | None = BAD_ROW) -> None:
+    with pytest.raises(ValueError) as caught:
+        call()
+    message = str(caught.value)
+    assert argument in message, f"{message!r} does not name {argument!r}"
+    if row is not None:
+        assert re.search(rf"\b{row}\b", message), f"{message!r} does not name row {row}"
+
+
+def spheres_call(centers=None, radii=None):
+    centers = good() if centers is None else centers
+    radii = np.full(20, 0.1) if radii is None else radii
+    return lambda: BVH().add_spheres(centers, radii)
+
+
+GOOD_FACES = np.arange(60).reshape(20, 3) % 30  # 20 faces into 30 vertices
+
+
+def triangles_call(vertices=None, faces=None):
+    vertices = good(30) if vertices is None else vertices
+    faces = GOOD_FACES if faces is None else faces
+    return lambda: BVH().add_triangles(vertices, faces)
+
+
+@pytest.mark.parametrize(
+    "call, argument, row",
+    [
+        (spheres_call(centers=good()[:, :2]), "centers", None),
+        (spheres_call(centers=good()[None]), "centers", None),
+        (spheres_call(radii=np.full(19, 0.1)), "radii", None),
+        (spheres_call(radii=np.full((20, 1), 0.1)), "radii", None),
+        (spheres_call(centers=with_bad_row(good(), np.nan)), "centers", BAD_ROW),
+        (spheres_call(centers=with_bad_row(good(), np.inf)), "centers", BAD_ROW),
+        (spheres_call(radii=with_bad_row(np.full(20, 0.1), -0.5)), "radii", BAD_ROW),
+        (spheres_call(radii=with_bad_row(np.full(20, 0.1), 0.0)), "radii", BAD_ROW),
+        (spheres_call(radii=with_bad_row(np.full(20, 0.1), np.nan)), "radii", BAD_ROW),
+        (triangles_call(vertices=good(30)[:, :2]), "vertices", None),
+        (triangles_call(vertices=with_bad_row(good(30), -np.inf)), "vertices", BAD_ROW),
+        (triangles_call(faces=np.arange(80).reshape(20, 4) % 30), "faces", None),
+        (triangles_call(faces=with_bad_row(GOOD_FACES, 30)), "faces", BAD_ROW),
+        (triangles_call(faces=with_bad_row(GOOD_FACES, -1)), "faces", BAD_ROW),
+    ],
+    ids=lambda value: value if isinstance(value, str) else "",
+)
+def test_geometry_validation(call, argument, row):
+    expect_error(call, argument, row)
+
+
+def instance_call(transform):
+    def call():
+        child = BVH()
+        child.add_spheres([[0.0, 0.0, 0.0]], [1.0])
+        child.commit()
+        BVH().add_instance(child, transform)
+
+    return call
+
+
+def matrix_with(row: int, column: int, value: float) -> np.ndarray:
+    matrix = affine([0, 0, 1], 0.3, [1, 2, 3], [1, 1, 1])
+    matrix[row, column] = value
+    return matrix
+
+
+@pytest.mark.parametrize(
+    "transform",
+    [np.eye(4)[:3], np.eye(3), matrix_with(1, 2, np.nan), matrix_with(0, 3, np.inf),
+     matrix_with(3, 0, 0.5)],
+    ids=["3x4", "3x3", "nan", "inf", "projective"],
+)  # fmt: skip
+def test_transform_validation(transform):
+    expect_error(instance_call(transform), "transform", None)
+
+
+@pytest.fixture(scope="module")
+def small_bvh():
+    bvh = BVH()
+    bvh.add_spheres([[0.0, 0.0, 0.0]], [1.0])
+    bvh.commit()
+    yield bvh
+    bvh.close()
+
+
+@pytest.mark.parametrize("method", ["intersect", "occluded"])
+@pytest.mark.parametrize(
+    "arguments, argument, row",
+    [
+        ({"origins": good()[:, :2]}, "origins", None),
+        ({"origins": with_bad_row(good(), np.nan)}, "origins", BAD_ROW),
+        ({"directions": with_bad_row(good(), np.inf)}, "directions", BAD_ROW),
+        ({"directions": with_bad_row(good(), np.nan)}, "directions", BAD_ROW),
+        ({"directions": good(19)}, "directions", None),
+        ({"tnear": np.zeros(19)}, "tnear", None),
+        ({"tfar": np.ones((20, 1))}, "tfar", None),
+        ({"tnear": with_bad_row(np.zeros(20), np.nan)}, "tnear", BAD_ROW),
+    ],
+    ids=lambda value: value if isinstance(value, str) else "",
+)
+def test_ray_validation(small_bvh, method, arguments, argument, row):
+    call_arguments = {"origins": good() + np.array([0, 0, 5]), "directions": good(), **arguments}
+    expect_error(lambda: getattr(small_bvh, method)(**call_arguments), argument, row)
