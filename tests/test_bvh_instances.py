@@ -131,3 +131,28 @@ def test_child_with_two_geometries_reports_the_inner_geometry_id():
     np.testing.assert_allclose(hits.t[[0, 2]], [9.0, 9.0], rtol=1e-6)
     assert 8.999 < hits.t[1] < 9.3  # the faceted top lies a little inside the unit sphere
     np.testing.assert_allclose(unit(hits.normal[[0, 2]]), [[0, 0, 1], [0, 0, -1]], atol=1e-5)
+
+
+def test_top_level_keeps_its_instanced_bvh_alive():
+    """Dropping the caller's last reference to the child must not free what the top level uses."""
+    import gc
+
+    ico = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+
+    def build_top() -> tuple[BVH, int, int]:
+        child = BVH()
+        mesh_gid = child.add_triangles(ico.vertices, ico.faces)
+        child.commit()
+        top = BVH()
+        gid = top.add_instance(child, TRANSFORMS[0])
+        top.commit()
+        return top, mesh_gid, gid
+
+    top, mesh_gid, inst_gid = build_top()
+    gc.collect()
+    baked = transform_points(TRANSFORMS[0], float32_exact(ico.vertices))
+    origins, directions = world_rays(np.random.default_rng(24), baked, 1000)
+    with top:
+        hits = top.intersect(origins, directions)
+    ref = triangle_hits(origins, directions, baked, ico.faces)
+    assert_hits_match(hits, ref, mesh_gid, inst_gid, triangles=True, normal_cos=0.9995)

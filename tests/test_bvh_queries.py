@@ -460,3 +460,34 @@ def small_bvh():
 def test_ray_validation(small_bvh, method, arguments, argument, row):
     call_arguments = {"origins": good() + np.array([0, 0, 5]), "directions": good(), **arguments}
     expect_error(lambda: getattr(small_bvh, method)(**call_arguments), argument, row)
+
+
+def test_window_with_tnear_beyond_tfar_is_empty(parts):
+    origins, directions = rays(43, 500)
+    bvh, _ = parts.build()
+    with bvh:
+        hits = bvh.intersect(origins, directions, tnear=5.0, tfar=4.0)
+        blocked = bvh.occluded(origins, directions, tnear=5.0, tfar=4.0)
+        assert np.isfinite(bvh.intersect(origins, directions, tnear=4.0, tfar=50.0).t).any()
+    assert np.all(np.isinf(hits.t)) and np.all(hits.geom_id == -1) and not blocked.any()
+
+
+def test_strided_and_fortran_ordered_inputs_give_the_same_answers(parts):
+    origins, directions = rays(44, 3000)
+    tnear = np.random.default_rng(45).uniform(0, 2, 6000)
+    bvh, _ = parts.build()
+    with bvh:
+        expected = bvh.intersect(origins[::2], directions[::2], tnear=tnear[::2][::2].copy())
+        # every other row of a C array, columns of a Fortran array, a strided tnear
+        layouts = bvh.intersect(
+            origins[::2],
+            np.asfortranarray(directions[::2]),
+            tnear=tnear[::2][::2],
+        )
+        assert np.isfinite(expected.t).mean() > 0.1
+        for name in ("t", "geom_id", "prim_id", "inst_id"):
+            assert np.array_equal(getattr(expected, name), getattr(layouts, name)), name
+        blocked = bvh.occluded(origins[::2], np.asfortranarray(directions[::2]), tfar=8.0)
+        assert np.array_equal(
+            blocked, bvh.occluded(origins[::2].copy(), directions[::2].copy(), tfar=8.0)
+        )
