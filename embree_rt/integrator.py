@@ -97,6 +97,9 @@ class Renderer:
         self.light_rgb = np.array(
             [np.asarray(lt.color, np.float32) * lt.intensity for lt in lights], np.float32
         ).reshape(-1, 3)
+        # When a list, every query is appended as (kind, origins, directions, tfar): the
+        # benchmark replays them through the bare BVH to measure pure traversal.
+        self.trace_log: list[tuple[str, np.ndarray, np.ndarray, np.ndarray | None]] | None = None
         self.horizon = np.asarray(scene.background.horizon, np.float32)
         self.zenith = np.asarray(scene.background.zenith, np.float32)
 
@@ -148,6 +151,8 @@ class Renderer:
         depth = 0
         while len(rays):
             surfaces = self.geometry.intersect(rays.origins, rays.directions)
+            if self.trace_log is not None:
+                self.trace_log.append(("intersect", rays.origins, rays.directions, None))
             escaped = ~surfaces.hit
             if escaped.any():
                 sky = shading.sky(rays.directions[escaped], self.horizon, self.zenith)
@@ -239,9 +244,10 @@ class Renderer:
         if len(candidates):
             flat_dir = direction.reshape(-1, 3)[candidates]
             flat_origin = np.broadcast_to(origins, (n_lights, n, 3)).reshape(-1, 3)[candidates]
-            blocked = self.geometry.occluded(
-                flat_origin, flat_dir, 0.0, distance.reshape(-1)[candidates].astype(np.float32)
-            )
+            flat_distance = distance.reshape(-1)[candidates].astype(np.float32)
+            blocked = self.geometry.occluded(flat_origin, flat_dir, 0.0, flat_distance)
+            if self.trace_log is not None:
+                self.trace_log.append(("occluded", flat_origin, flat_dir, flat_distance))
             lit[candidates] = ~blocked
             self.stats.rays["shadow"] += len(candidates)
         table = self.materials

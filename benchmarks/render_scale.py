@@ -1,0 +1,91 @@
+"""End-to-end render throughput on random sphere fields, against bare Embree traversal.
+
+For each sphere count it renders the random field once, recording every ray query, then replays
+the same rays through the bare BVH queries (no shading) in the same process, so
+``efficiency = rays_per_s / raw_rays_per_s`` compares like with like on a noisy shared machine.
+
+    python benchmarks/render_scale.py                       # 1e3..1e6 spheres, 1920x1080, 1 spp
+    python benchmarks/render_scale.py --counts 1000000 --threads 1
+
+Prints one JSON object per count on stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import time
+
+import numpy as np
+
+from embree_rt.integrator import Renderer
+from embree_rt.scene import random_field
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def replay(renderer: Renderer) -> float:
+    """Seconds the bare BVH takes to answer every recorded query again."""
+    bvh = renderer.geometry.bvh
+    elapsed = 0.0
+    for kind, origins, directions, tfar in renderer.trace_log:
+        start = time.perf_counter()
+        if kind == "intersect":
+            bvh.intersect(origins, directions)
+        else:
+            bvh.occluded(origins, directions, 0.0, tfar)
+        elapsed += time.perf_counter() - start
+    return elapsed
+
+
+def run(count: int, args: argparse.Namespace) -> dict:
+    scene = random_field(count, seed=args.seed)
+    with Renderer(scene, threads=args.threads) as renderer:
+        # Compile and warm the kernels on a tiny image so the timed render measures rendering.
+        renderer.render(width=16, height=9, spp=1, max_depth=args.max_depth, seed=args.seed)
+        renderer.stats.rays = dict.fromkeys(renderer.stats.rays, 0)
+        renderer.stats.render_s = 0.0
+        renderer.trace_log = []
+        renderer.render(
+            width=args.width, height=args.height, spp=args.spp,
+            max_depth=args.max_depth, seed=args.seed,
+        )  # fmt: skip
+        stats = renderer.stats
+        raw_s = replay(renderer)
+        rays = stats.total_rays
+        return {
+            "count": count,
+            "width": args.width,
+            "height": args.height,
+            "spp": args.spp,
+            "max_depth": args.max_depth,
+            "threads": renderer.geometry.bvh.threads,
+            "build_s": round(stats.build_s, 4),
+            "render_s": round(stats.render_s, 3),
+            "rays": dict(stats.rays),
+            "rays_per_s": round(rays / stats.render_s),
+            "raw_rays_per_s": round(rays / raw_s),
+            "efficiency": round(raw_s / stats.render_s, 3),
+            "peak_rss_mb": round(peak_rss_mb(), 1),
+        }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--counts", type=int, nargs="+", default=[1000, 10_000, 100_000, 1_000_000])
+    parser.add_argument("--width", type=int, default=1920)
+    parser.add_argument("--height", type=int, default=1080)
+    parser.add_argument("--spp", type=int, default=1)
+    parser.add_argument("--max-depth", type=int, default=6)
+    parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    for count in args.counts:
+        print(json.dumps(run(count, args)), flush=True)
+
+
+if __name__ == "__main__":
+    main()
