@@ -203,7 +203,7 @@ class SceneGeometry:
         material[floor] = self.floor_material
 
         on_spheres = ~floor & (hits.geom_id == self.sphere_geom_id) & (hits.inst_id < 0)
-        if on_spheres.any():
+        if self.sphere_geom_id >= 0 and on_spheres.any():
             prim = hits.prim_id[on_spheres]
             outward = (position[on_spheres] - self.sphere_centers[prim]) / self.sphere_radii[
                 prim, None
