@@ -203,11 +203,12 @@ class Renderer:
         reflect_share = reflectivity * (1.0 - transparency) + transparency * fresnel
         refract_share = transparency * (1.0 - fresnel)
 
+        reflect_tint = np.where(table.metallic[material, None], color, np.float32(1.0))
         reflection = RayBatch(
             outside,
             shading.reflect(d, normal),
             rays.pixel,
-            rays.weight * reflect_share[:, None],
+            rays.weight * reflect_share[:, None] * reflect_tint,
         )
         # Glass tints what passes through it (the green marble), not what it reflects.
         refraction = RayBatch(

@@ -15,8 +15,9 @@ class Material:
 
     Shading adds ``ambient * color`` plus, per unoccluded point light, ``diffuse * max(0, N.L) *
     color`` and ``specular * max(0, N.H) ** shininess`` (white highlight). ``reflectivity`` blends
-    a mirror bounce; ``transparency`` > 0 makes the surface glass with index ``ior``: its reflected
-    and refracted weights are split by Schlick's Fresnel term.
+    a mirror bounce, tinted by ``color`` when ``metallic`` (as metals reflect); ``transparency`` > 0
+    makes the surface glass with index ``ior``: its reflected and refracted weights are split by
+    Schlick's Fresnel term, and what it transmits is tinted by ``color``.
     """
 
     color: RGB = (0.8, 0.8, 0.8)
@@ -27,6 +28,7 @@ class Material:
     reflectivity: float = 0.0
     transparency: float = 0.0
     ior: float = 1.0
+    metallic: bool = False
 
     def __post_init__(self) -> None:
         if len(self.color) != 3 or any(float(c) < 0.0 for c in self.color):
@@ -49,7 +51,7 @@ class Material:
 PRESETS: dict[str, Material] = {
     "matte": Material(diffuse=0.85, specular=0.0, shininess=8.0, reflectivity=0.0),
     "glossy": Material(diffuse=0.6, specular=0.5, shininess=64.0, reflectivity=0.05),
-    "metal": Material(diffuse=0.3, specular=0.9, shininess=128.0, reflectivity=0.5),
+    "metal": Material(diffuse=0.3, specular=0.9, shininess=128.0, reflectivity=0.5, metallic=True),
     "mirror": Material(diffuse=0.05, specular=0.95, shininess=256.0, reflectivity=0.9),
     "glass": Material(
         color=(1.0, 1.0, 1.0),
@@ -101,6 +103,7 @@ class MaterialTable:
     reflectivity: np.ndarray
     transparency: np.ndarray
     ior: np.ndarray
+    metallic: np.ndarray
 
     @classmethod
     def from_materials(cls, materials: list[Material]) -> MaterialTable:
@@ -116,4 +119,5 @@ class MaterialTable:
             reflectivity=column("reflectivity"),
             transparency=column("transparency"),
             ior=column("ior"),
+            metallic=np.array([m.metallic for m in materials], bool),
         )

@@ -46,8 +46,8 @@ class Floor:
 class Background:
     """Sky gradient: ``horizon`` color at direction y = 0 blending to ``zenith`` at y = 1."""
 
-    horizon: RGB = (1.0, 1.0, 1.0)
-    zenith: RGB = (0.5, 0.7, 1.0)
+    horizon: RGB = (0.9, 0.95, 1.0)
+    zenith: RGB = (0.35, 0.55, 0.95)
 
 
 @dataclass
