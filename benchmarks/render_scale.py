@@ -17,8 +17,6 @@ import json
 import resource
 import time
 
-import numpy as np
-
 from embree_rt.integrator import Renderer
 from embree_rt.scene import random_field
 

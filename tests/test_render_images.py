@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from embree_rt import Background, Camera, Material, PointLight, Scene, preset
+from embree_rt import Background, Camera, Floor, Material, PointLight, Scene, preset
 from embree_rt.integrator import render
 
 
@@ -31,7 +31,11 @@ def brightness(image: np.ndarray, row: int, col: int, radius: int = 1) -> float:
 
 
 def test_shadowed_floor_is_darker_than_lit_floor() -> None:
-    scene = Scene(camera=Camera(position=(0, 4, 6), look_at=(0, 0, 0), fov=50))
+    # A matte floor, so only the direct light differs between shadow and light.
+    scene = Scene(
+        camera=Camera(position=(0, 4, 6), look_at=(0, 0, 0), fov=50),
+        floor=Floor(material=Material(ambient=0.1, diffuse=0.8)),
+    )
     scene.lights.append(PointLight(position=(0, 10, 0), intensity=1.0))
     scene.add_sphere((0, 1.5, 0), 1.0, "matte")
     width, height = 96, 72
