@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from embree_rt import Background, Camera, Floor, Material, PointLight, Scene, preset
+from embree_rt import Background, Camera, Checker, Floor, Material, PointLight, Scene, preset
 from embree_rt.integrator import render
 
 
@@ -31,20 +31,24 @@ def brightness(image: np.ndarray, row: int, col: int, radius: int = 1) -> float:
 
 
 def test_shadowed_floor_is_darker_than_lit_floor() -> None:
-    # A matte floor, so only the direct light differs between shadow and light.
+    # A plain matte floor and a red ball: only the direct light differs between the two points,
+    # and a gray pixel proves the camera sees the floor there, not the ball.
+    gray = (0.8, 0.8, 0.8)
     scene = Scene(
         camera=Camera(position=(0, 4, 6), look_at=(0, 0, 0), fov=50),
-        floor=Floor(material=Material(ambient=0.1, diffuse=0.8)),
+        floor=Floor(checker=Checker(gray, gray), material=Material(ambient=0.1, diffuse=0.8)),
     )
-    scene.lights.append(PointLight(position=(0, 10, 0), intensity=1.0))
-    scene.add_sphere((0, 1.5, 0), 1.0, "matte")
+    scene.lights.append(PointLight(position=(-6, 10, 0)))
+    scene.add_material("red", Material(color=(1, 0, 0)))
+    scene.add_sphere((0, 1.5, 0), 1.0, "red")
     width, height = 96, 72
     image = render(scene, width=width, height=height, spp=4, max_depth=2, seed=1)
-    shadow = pixel_of(scene.camera, (0.0, 0.0, 1.2), width, height)  # under the sphere's rim
-    assert image[shadow[0], shadow[1]].sum() > 0  # the point is on screen and sees the floor
-    # Compare floor points at the same distance from the camera, so only the shadow differs.
-    lit = pixel_of(scene.camera, (2.2, 0.0, 1.2), width, height)
-    assert brightness(image, *shadow) < 0.6 * brightness(image, *lit)
+    # The light casts the ball's shadow around (1.06, 0, 0), away from the light.
+    shadow = image[pixel_of(scene.camera, (1.1, 0.0, 0.8), width, height)]
+    lit = image[pixel_of(scene.camera, (-1.1, 0.0, 0.8), width, height)]
+    for color in (shadow, lit):
+        assert color[0] == pytest.approx(color[1], rel=1e-4)  # floor, not ball
+    assert shadow[0] < 0.5 * lit[0]
 
 
 def test_removing_the_light_blocker_removes_the_shadow() -> None:
