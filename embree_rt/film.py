@@ -28,9 +28,31 @@ class Film:
         for channel in range(3):
             self._sum[channel] += np.bincount(pixel, weights=rgb[:, channel], minlength=size)
 
+    def add_block(self, block: FilmBlock) -> None:
+        """Add a finished block's sums into its pixels."""
+        self._sum[:, block.first : block.first + block.count] += block.sums
+
     def image(self, spp: int) -> np.ndarray:
         mean = (self._sum / spp).astype(np.float32)
         return np.ascontiguousarray(mean.T.reshape(self.height, self.width, 3))
+
+
+class FilmBlock:
+    """Sums for the ``count`` consecutive pixels from ``first``: what one batch of camera samples
+    accumulates on its own (no locking, and cheaper than bincounts over the whole film)."""
+
+    def __init__(self, first: int, count: int) -> None:
+        self.first = int(first)
+        self.count = int(count)
+        self.sums = np.zeros((3, self.count), np.float64)
+
+    def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:
+        """Add (n, 3) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block."""
+        if len(pixel) == 0:
+            return
+        local = pixel - self.first
+        for channel in range(3):
+            self.sums[channel] += np.bincount(local, weights=rgb[:, channel], minlength=self.count)
 
 
 def tonemap(image: np.ndarray) -> np.ndarray:

@@ -9,8 +9,10 @@ The seed article's recursion ``color = local·(1−r) + r·trace(reflected)`` (a
 
 from __future__ import annotations
 
+import os
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -18,7 +20,7 @@ import numpy as np
 
 from embree_rt import shading
 from embree_rt.camera import camera_frame, primary_rays
-from embree_rt.film import Film
+from embree_rt.film import Film, FilmBlock
 from embree_rt.scene.model import Scene
 from embree_rt.shapes import SceneGeometry
 
@@ -45,6 +47,21 @@ class RenderStats:
     @property
     def rays_per_s(self) -> float:
         return self.total_rays / self.render_s if self.render_s > 0 else 0.0
+
+
+@dataclass
+class BatchWork:
+    """What one batch of camera samples produced: its film block, ray counts, and (for the
+    benchmark) the queries it made."""
+
+    block: FilmBlock
+    logging: bool = False
+    rays: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAY_KINDS, 0))
+    log: list | None = None
+
+    def __post_init__(self) -> None:
+        if self.logging:
+            self.log = []
 
 
 @dataclass
@@ -87,6 +104,7 @@ class Renderer:
             raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
         self.scene = scene
         self.batch_size = int(batch_size)
+        self.workers = 2 if (threads or os.cpu_count() or 1) > 1 else 1
         self.stats = RenderStats()
         start = time.perf_counter()
         self.geometry = SceneGeometry(scene, spheres=spheres, threads=threads)
@@ -130,38 +148,54 @@ class Renderer:
         frame = camera_frame(self.scene.camera, width, height)
         film = Film(width, height)
         total = width * height * spp
-        # Batches hold whole pixels, so each pixel's sum is added in the same order whatever
-        # the batch size: the image is bitwise independent of it.
+        # Batches hold whole pixels and each batch sums into its own block, in ray order, so
+        # the image is bitwise the same whatever the batch size or the number of workers.
         step = max(1, self.batch_size // spp) * spp
-        for start in range(0, total, step):
-            batch_start = time.perf_counter()
+        starts = range(0, total, step)
+
+        def run(start: int) -> BatchWork:
             count = min(step, total - start)
+            work = BatchWork(FilmBlock(start // spp, count // spp), self.trace_log is not None)
             origins, directions, pixel = primary_rays(frame, spp, seed, start, count)
             rays = RayBatch(origins, directions, pixel, np.ones((count, 3), np.float32))
-            self.stats.rays["primary"] += count
-            self._trace(rays, film, max_depth)
-            self.stats.render_s += time.perf_counter() - batch_start
-            if progress is not None:
-                progress(start + count, total)
+            work.rays["primary"] += count
+            self._trace(rays, work, max_depth)
+            return work
+
+        began = time.perf_counter()
+        # Two batches in flight: while one waits on Embree, the other shades with NumPy, whose
+        # large array operations release the GIL, so both cores stay busy.
+        with ThreadPoolExecutor(max_workers=self.workers) as pool:
+            done = 0
+            for work in pool.map(run, starts):
+                film.add_block(work.block)
+                for kind, n in work.rays.items():
+                    self.stats.rays[kind] += n
+                if self.trace_log is not None:
+                    self.trace_log.extend(work.log)
+                done += work.block.count * spp
+                self.stats.render_s = time.perf_counter() - began
+                if progress is not None:
+                    progress(done, total)
         return film.image(spp)
 
     # -- one batch, all depths ----------------------------------------------------------------
 
-    def _trace(self, rays: RayBatch, film: Film, max_depth: int) -> None:
+    def _trace(self, rays: RayBatch, work: BatchWork, max_depth: int) -> None:
         depth = 0
         while len(rays):
             surfaces = self.geometry.intersect(rays.origins, rays.directions)
-            if self.trace_log is not None:
-                self.trace_log.append(("intersect", rays.origins, rays.directions, None))
+            if work.log is not None:
+                work.log.append(("intersect", rays.origins, rays.directions, None))
             escaped = ~surfaces.hit
             if escaped.any():
                 sky = shading.sky(rays.directions[escaped], self.horizon, self.zenith)
-                film.add(rays.pixel[escaped], rays.weight[escaped] * sky)
+                work.block.add(rays.pixel[escaped], rays.weight[escaped] * sky)
             hit = np.flatnonzero(surfaces.hit)
-            rays = self._shade(rays.take(hit), surfaces, hit, film, spawn=depth < max_depth)
+            rays = self._shade(rays.take(hit), surfaces, hit, work, spawn=depth < max_depth)
             depth += 1
 
-    def _shade(self, rays: RayBatch, surfaces, hit: np.ndarray, film: Film, spawn: bool):
+    def _shade(self, rays: RayBatch, surfaces, hit: np.ndarray, work: BatchWork, spawn: bool):
         table = self.materials
         material = surfaces.material[hit]
         position = surfaces.position[hit]
@@ -186,9 +220,9 @@ class Renderer:
         outside = position + face_normal * offset
         radiance = (table.ambient[material] * local)[:, None] * color
         radiance += self._direct_light(
-            outside, normal, -d, color, table.diffuse[material] * local, material
+            outside, normal, -d, color, table.diffuse[material] * local, material, work
         )
-        film.add(rays.pixel, rays.weight * radiance)
+        work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
             return RayBatch(*(np.zeros((0, 3), np.float32),) * 2, np.zeros(0, np.int64),
                             np.zeros((0, 3), np.float32))  # fmt: skip
@@ -219,8 +253,8 @@ class Renderer:
         )
         reflection = reflection.take(np.flatnonzero(reflection.weight.max(axis=1) >= MIN_WEIGHT))
         refraction = refraction.take(np.flatnonzero(refraction.weight.max(axis=1) >= MIN_WEIGHT))
-        self.stats.rays["reflection"] += len(reflection)
-        self.stats.rays["refraction"] += len(refraction)
+        work.rays["reflection"] += len(reflection)
+        work.rays["refraction"] += len(refraction)
         return RayBatch(
             np.concatenate([reflection.origins, refraction.origins]),
             np.concatenate([reflection.directions, refraction.directions]),
@@ -228,7 +262,9 @@ class Renderer:
             np.concatenate([reflection.weight, refraction.weight]),
         )
 
-    def _direct_light(self, origins, normal, to_viewer, color, diffuse, material) -> np.ndarray:
+    def _direct_light(
+        self, origins, normal, to_viewer, color, diffuse, material, work: BatchWork
+    ) -> np.ndarray:
         """(n, 3) Blinn-Phong light from every point light that the point sees."""
         n = len(origins)
         n_lights = len(self.light_positions)
@@ -247,10 +283,10 @@ class Renderer:
             flat_origin = np.broadcast_to(origins, (n_lights, n, 3)).reshape(-1, 3)[candidates]
             flat_distance = distance.reshape(-1)[candidates].astype(np.float32)
             blocked = self.geometry.occluded(flat_origin, flat_dir, 0.0, flat_distance)
-            if self.trace_log is not None:
-                self.trace_log.append(("occluded", flat_origin, flat_dir, flat_distance))
+            if work.log is not None:
+                work.log.append(("occluded", flat_origin, flat_dir, flat_distance))
             lit[candidates] = ~blocked
-            self.stats.rays["shadow"] += len(candidates)
+            work.rays["shadow"] += len(candidates)
         table = self.materials
         specular = table.specular[material]
         shininess = table.shininess[material]

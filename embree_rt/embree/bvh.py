@@ -47,6 +47,9 @@ class Hits:
 
 _kernel_lock = threading.Lock()
 _symbols_registered = False
+# One query at a time, each on all its threads: numba's fallback threading layer (workqueue)
+# must not be entered from two threads at once, and the queries use every core anyway.
+_query_lock = threading.Lock()
 
 
 def _prepare_kernels() -> None:
@@ -214,7 +217,6 @@ class BVH:
         directions = as_points(directions, "directions", len(origins))
         tnear, tfar = as_ray_bounds(tnear, tfar, len(origins))
         _prepare_kernels()
-        numba.set_num_threads(self.threads)
         return origins, directions, tnear, tfar
 
     def intersect(
@@ -241,10 +243,12 @@ class BVH:
         )
         if n:
             kernel = kernels.intersect8 if self.packets else kernels.intersect1
-            kernel(
-                self._live_scene(), origins, directions, tnear, tfar, hits.t, hits.normal,
-                hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
-            )  # fmt: skip
+            with _query_lock:
+                numba.set_num_threads(self.threads)
+                kernel(
+                    self._live_scene(), origins, directions, tnear, tfar, hits.t, hits.normal,
+                    hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
+                )  # fmt: skip
         self._normals_to_world(hits)
         return hits
 
@@ -260,7 +264,9 @@ class BVH:
         blocked = np.zeros(len(origins), bool)
         if len(origins):
             kernel = kernels.occluded8 if self.packets else kernels.occluded1
-            kernel(self._live_scene(), origins, directions, tnear, tfar, blocked)
+            with _query_lock:
+                numba.set_num_threads(self.threads)
+                kernel(self._live_scene(), origins, directions, tnear, tfar, blocked)
         return blocked
 
     def _normals_to_world(self, hits: Hits) -> None:
