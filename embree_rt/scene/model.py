@@ -46,8 +46,8 @@ class Floor:
 class Background:
     """Sky gradient: ``horizon`` color at direction y = 0 blending to ``zenith`` at y = 1."""
 
-    horizon: RGB = (0.9, 0.95, 1.0)
-    zenith: RGB = (0.35, 0.55, 0.95)
+    horizon: RGB = (0.8, 0.88, 1.0)
+    zenith: RGB = (0.25, 0.45, 0.9)
 
 
 @dataclass
