@@ -1,5 +1,7 @@
 """embree_rt: a Whitted-style ray tracer for scenes of very many objects."""
 
+from embree_rt.film import save_image
+from embree_rt.integrator import RenderStats, render
 from embree_rt.materials import PRESETS, Checker, Material, preset
 from embree_rt.scene import (
     Background,
@@ -9,6 +11,9 @@ from embree_rt.scene import (
     PointLight,
     RenderSettings,
     Scene,
+    SceneError,
+    load_scene,
+    random_field,
 )
 
 __all__ = [
@@ -21,6 +26,12 @@ __all__ = [
     "MeshObject",
     "PointLight",
     "RenderSettings",
+    "RenderStats",
     "Scene",
+    "SceneError",
+    "load_scene",
     "preset",
+    "random_field",
+    "render",
+    "save_image",
 ]

@@ -1,5 +1,7 @@
 """Scene model, scene files and mesh import."""
 
+from embree_rt.scene.errors import SceneError
+from embree_rt.scene.loader import load_scene
 from embree_rt.scene.model import (
     Background,
     Camera,
@@ -9,5 +11,17 @@ from embree_rt.scene.model import (
     RenderSettings,
     Scene,
 )
+from embree_rt.scene.random_field import random_field
 
-__all__ = ["Background", "Camera", "Floor", "MeshObject", "PointLight", "RenderSettings", "Scene"]
+__all__ = [
+    "Background",
+    "Camera",
+    "Floor",
+    "MeshObject",
+    "PointLight",
+    "RenderSettings",
+    "Scene",
+    "SceneError",
+    "load_scene",
+    "random_field",
+]

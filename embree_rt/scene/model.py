@@ -157,6 +157,12 @@ class Scene:
         self.meshes.append(obj)
         return obj
 
+    def save(self, path) -> None:
+        """Write this scene to a ``.toml`` or ``.json`` file (bulk data beside it)."""
+        from embree_rt.scene.writer import save_scene
+
+        save_scene(self, path)
+
     def _base_color_material(self, mesh: trimesh.Trimesh) -> str:
         color = mesh_base_color(mesh)
         if color is None:

@@ -1,0 +1,138 @@
+"""Typed reading of scene-file values: each reader names the key it rejects."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from embree_rt.scene.errors import SceneError, unknown_key_message
+
+
+class Table:
+    """One table of a scene file, read key by key; ``finish()`` rejects keys nobody read."""
+
+    def __init__(self, file: object, path: str, data: object) -> None:
+        if not isinstance(data, Mapping):
+            raise SceneError(file, path or "(top level)", f"expected a table, got {_kind(data)}")
+        self.file = file
+        self.path = path
+        self.data = data
+        self.known: set[str] = set()
+
+    def key(self, name: str) -> str:
+        return f"{self.path}.{name}" if self.path else name
+
+    def error(self, name: str, problem: str) -> SceneError:
+        return SceneError(self.file, self.key(name), problem)
+
+    def has(self, name: str) -> bool:
+        self.known.add(name)
+        return name in self.data
+
+    def raw(self, name: str, default: Any = None) -> Any:
+        self.known.add(name)
+        return self.data.get(name, default)
+
+    def require(self, name: str) -> Any:
+        self.known.add(name)
+        if name not in self.data:
+            raise self.error(name, "is required")
+        return self.data[name]
+
+    def number(
+        self,
+        name: str,
+        default: float | None = None,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+        high_open: bool = False,
+        required: bool = False,
+    ) -> float | None:
+        value = self.require(name) if required else self.raw(name, default)
+        if value is None or value is default:
+            return value
+        return check_number(self, name, value, low, high, low_open, high_open)
+
+    def integer(self, name: str, default: int | None = None, *, low: int | None = None) -> int:
+        value = self.raw(name, default)
+        if value is None or value is default:
+            return value
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(name, f"expected an integer, got {_show(value)}")
+        if low is not None and value < low:
+            raise self.error(name, f"must be >= {low}, got {value}")
+        return value
+
+    def boolean(self, name: str, default: bool) -> bool:
+        value = self.raw(name, default)
+        if not isinstance(value, bool):
+            raise self.error(name, f"expected true or false, got {_show(value)}")
+        return value
+
+    def string(self, name: str, default: str | None = None, *, required: bool = False) -> str:
+        value = self.require(name) if required else self.raw(name, default)
+        if value is None and not required:
+            return value
+        if not isinstance(value, str) or not value:
+            raise self.error(name, f"expected a non-empty string, got {_show(value)}")
+        return value
+
+    def vector(self, name: str, default=None, *, required: bool = False, non_negative=False):
+        value = self.require(name) if required else self.raw(name, default)
+        if value is None or value is default:
+            return value
+        if not isinstance(value, list | tuple) or len(value) != 3:
+            raise self.error(name, f"expected a list of three numbers, got {_show(value)}")
+        numbers = []
+        for item in value:
+            if isinstance(item, bool) or not isinstance(item, int | float):
+                raise self.error(name, f"expected numbers, got {_show(item)}")
+            if not math.isfinite(item):
+                raise self.error(name, f"must be finite, got {item}")
+            if non_negative and item < 0:
+                raise self.error(name, f"must not be negative, got {item}")
+            numbers.append(float(item))
+        return tuple(numbers)
+
+    def color(self, name: str, default=None):
+        return self.vector(name, default, non_negative=True)
+
+    def table(self, name: str) -> Table | None:
+        value = self.raw(name)
+        return None if value is None else Table(self.file, self.key(name), value)
+
+    def tables(self, name: str) -> list[Table]:
+        value = self.raw(name, [])
+        if not isinstance(value, list):
+            raise self.error(name, f"expected a list of tables, got {_kind(value)}")
+        return [Table(self.file, f"{self.key(name)}[{i}]", item) for i, item in enumerate(value)]
+
+    def finish(self) -> None:
+        for name in self.data:
+            if name not in self.known:
+                raise SceneError(self.file, self.key(name), unknown_key_message(name, self.known))
+
+
+def check_number(table, name, value, low, high, low_open, high_open) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise table.error(name, f"expected a number, got {_show(value)}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise table.error(name, f"must be finite, got {value}")
+    if low is not None and (value <= low if low_open else value < low):
+        raise table.error(name, f"must be {'>' if low_open else '>='} {low:g}, got {value:g}")
+    if high is not None and (value >= high if high_open else value > high):
+        raise table.error(name, f"must be {'<' if high_open else '<='} {high:g}, got {value:g}")
+    return value
+
+
+def _kind(value: object) -> str:
+    return {list: "a list", dict: "a table", str: "a string"}.get(type(value), _show(value))
+
+
+def _show(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."

@@ -1,0 +1,43 @@
+"""Mesh import through trimesh: OBJ, PLY, STL, OFF, GLB/glTF, each file loaded once."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from embree_rt.scene.errors import SceneError
+
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+
+def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
+    """The meshes in ``path`` with their (4, 4) float64 node transforms (identity for a plain
+    mesh; a multi-node glTF keeps one part per node). Errors name the scene ``file`` and ``key``."""
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise SceneError(
+            file, key, f"{path}: unsupported mesh format; use one of {', '.join(MESH_SUFFIXES)}"
+        )
+    if not path.is_file():
+        raise SceneError(file, key, f"{path}: no such file")
+    try:
+        loaded = trimesh.load(str(path), process=False)
+    except Exception as error:  # trimesh raises many kinds for a file it cannot parse
+        raise SceneError(file, key, f"{path}: cannot read mesh: {error}") from None
+    parts: list[tuple[trimesh.Trimesh, np.ndarray]] = []
+    if isinstance(loaded, trimesh.Scene):
+        for node in loaded.graph.nodes_geometry:
+            transform, geometry_name = loaded.graph[node]
+            geometry = loaded.geometry[geometry_name]
+            if isinstance(geometry, trimesh.Trimesh):
+                parts.append((geometry, np.asarray(transform, np.float64)))
+    elif isinstance(loaded, trimesh.Trimesh):
+        parts.append((loaded, np.eye(4)))
+    parts = [(mesh, transform) for mesh, transform in parts if len(mesh.faces)]
+    if not parts:
+        raise SceneError(file, key, f"{path}: the mesh has no triangles")
+    for mesh, _ in parts:
+        if not np.isfinite(mesh.vertices).all():
+            raise SceneError(file, key, f"{path}: vertices contain NaN or inf")
+    return parts

@@ -1,0 +1,102 @@
+"""``Scene`` → scene file (TOML or JSON): spheres go to a sibling ``.npz``, meshes to PLY files."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from embree_rt.materials import PRESETS
+from embree_rt.scene.model import Scene
+
+
+def scene_document(scene: Scene, path: Path) -> dict:
+    """The scene as a plain dict in the file schema, writing its bulk data beside ``path``."""
+    document: dict = {
+        "render": asdict(scene.render),
+        "camera": {
+            "position": list(scene.camera.position),
+            "look_at": list(scene.camera.look_at),
+            "up": list(scene.camera.up),
+            "fov": float(scene.camera.fov),
+        },
+        "background": {
+            "horizon": list(scene.background.horizon),
+            "zenith": list(scene.background.zenith),
+        },
+        "lights": [
+            {"position": list(lt.position), "color": list(lt.color), "intensity": lt.intensity}
+            for lt in scene.lights
+        ],
+    }
+    materials = {
+        name: _material_dict(material)
+        for name, material in scene.materials.items()
+        if PRESETS.get(name) != material
+    }
+    if materials:
+        document["materials"] = materials
+    if scene.floor is None:
+        document["floor"] = False
+    else:
+        floor = scene.floor
+        document["floor"] = {
+            "height": floor.height,
+            "color_a": list(floor.checker.color_a),
+            "color_b": list(floor.checker.color_b),
+            "size": floor.checker.size,
+            **_material_dict(floor.material),
+        }
+        document["floor"].pop("preset")
+    if len(scene.sphere_radii):
+        spheres_path = path.with_suffix(".spheres.npz")
+        names = np.asarray(scene.material_names)
+        np.savez_compressed(
+            spheres_path,
+            centers=scene.sphere_centers.astype(np.float32),
+            radii=scene.sphere_radii.astype(np.float32),
+            materials=names[scene.sphere_materials],
+        )
+        document["sphere_arrays"] = [{"file": spheres_path.name}]
+    if scene.meshes:
+        files: dict[int, str] = {}
+        entries = []
+        for placement in scene.meshes:
+            key = id(placement.mesh)
+            if key not in files:
+                mesh_path = path.with_name(f"{path.stem}.mesh{len(files)}.ply")
+                placement.mesh.export(mesh_path)
+                files[key] = mesh_path.name
+            entries.append(
+                {
+                    "file": files[key],
+                    "material": placement.material,
+                    "smooth": placement.smooth,
+                    "transform": np.asarray(placement.transform, float).tolist(),
+                }
+            )
+        document["meshes"] = entries
+    return document
+
+
+def _material_dict(material) -> dict:
+    fields = asdict(material)
+    fields["color"] = list(fields["color"])
+    return {"preset": "matte", **fields}
+
+
+def save_scene(scene: Scene, path: str | Path) -> None:
+    """Write ``scene`` to ``path`` (``.toml`` or ``.json``)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".toml", ".json"):
+        raise ValueError(f"{path}: expected a .toml or .json file name")
+    document = scene_document(scene, path)
+    if suffix == ".json":
+        path.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    else:
+        import tomli_w
+
+        path.write_text(tomli_w.dumps(document), encoding="utf-8")
