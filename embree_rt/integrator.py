@@ -86,7 +86,7 @@ class RayBatch:
 def surface_offset(points: np.ndarray) -> np.ndarray:
     """(n,) float32 distance to push a ray origin off a surface at ``points`` (n, 3), scaled
     with the coordinates as float32 rounding is (as pbrt's OffsetRayOrigin)."""
-    return (RELATIVE_OFFSET * (1.0 + np.abs(points).max(axis=1))).astype(np.float32)
+    return (RELATIVE_OFFSET * (1.0 + row_max(np.abs(points)))).astype(np.float32)
 
 
 class Renderer:
@@ -167,7 +167,7 @@ class Renderer:
         # large array operations release the GIL, so both cores stay busy.
         with ThreadPoolExecutor(max_workers=self.workers) as pool:
             done = 0
-            for work in pool.map(run, starts):
+            for work in (pool.map if self.workers > 1 else map)(run, starts):
                 film.add_block(work.block)
                 for kind, n in work.rays.items():
                     self.stats.rays[kind] += n
@@ -184,33 +184,31 @@ class Renderer:
     def _trace(self, rays: RayBatch, work: BatchWork, max_depth: int) -> None:
         depth = 0
         while len(rays):
-            surfaces = self.geometry.intersect(rays.origins, rays.directions)
+            rows, surfaces = self.geometry.intersect_compact(rays.origins, rays.directions)
             if work.log is not None:
                 work.log.append(("intersect", rays.origins, rays.directions, None))
-            escaped = ~surfaces.hit
-            if escaped.any():
+            if len(rows) < len(rays):
+                escaped = np.ones(len(rays), bool)
+                escaped[rows] = False
                 sky = shading.sky(rays.directions[escaped], self.horizon, self.zenith)
                 work.block.add(rays.pixel[escaped], rays.weight[escaped] * sky)
-            hit = np.flatnonzero(surfaces.hit)
-            rays = self._shade(rays.take(hit), surfaces, hit, work, spawn=depth < max_depth)
+            rays = self._shade(rays.take(rows), surfaces, work, spawn=depth < max_depth)
             depth += 1
 
-    def _shade(self, rays: RayBatch, surfaces, hit: np.ndarray, work: BatchWork, spawn: bool):
+    def _shade(self, rays: RayBatch, surfaces, work: BatchWork, spawn: bool) -> RayBatch:
         table = self.materials
-        material = surfaces.material[hit]
-        position = surfaces.position[hit]
-        normal = surfaces.normal[hit]
-        face_normal = surfaces.face_normal[hit]
+        material = surfaces.material
+        position = surfaces.position
         d = rays.directions
         # Shade the side the ray arrived on; a ray leaving a closed object comes from inside.
-        entering = shading.dot(d, face_normal) < 0
-        side = np.where(entering, 1.0, -1.0).astype(np.float32)[:, None]
-        normal = normal * side
-        face_normal = face_normal * side
+        entering = shading.dot(d, surfaces.face_normal) < 0
+        side = np.where(entering, np.float32(1.0), np.float32(-1.0))[:, None]
+        normal = surfaces.normal * side
+        face_normal = surfaces.face_normal * side
 
         color = table.color[material]
-        on_floor = surfaces.floor[hit]
-        if on_floor.any():
+        on_floor = np.flatnonzero(surfaces.floor)
+        if len(on_floor):
             color[on_floor] = shading.checker(position[on_floor], self.scene.floor.checker)
         reflectivity = table.reflectivity[material]
         transparency = table.transparency[material]
@@ -224,87 +222,104 @@ class Renderer:
         )
         work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
-            return RayBatch(*(np.zeros((0, 3), np.float32),) * 2, np.zeros(0, np.int64),
-                            np.zeros((0, 3), np.float32))  # fmt: skip
+            return rays.take(np.zeros(0, np.int64))
 
+        reflect_share = reflectivity * (1.0 - transparency)
+        children = []
         # Glass splits by Fresnel between reflection and refraction; TIR reflects everything.
-        ior = table.ior[material]
-        n1 = np.where(entering, 1.0, ior).astype(np.float32)
-        n2 = np.where(entering, ior, 1.0).astype(np.float32)
-        refracted, total_internal = shading.refract(d, normal, n1 / n2)
-        fresnel = shading.fresnel_schlick(np.clip(-shading.dot(d, normal), 0.0, 1.0), n1, n2)
-        fresnel = np.where(total_internal, 1.0, fresnel).astype(np.float32)
-        reflect_share = reflectivity * (1.0 - transparency) + transparency * fresnel
-        refract_share = transparency * (1.0 - fresnel)
+        glass = np.flatnonzero(transparency > 0)
+        if len(glass):
+            d_g, normal_g = d[glass], normal[glass]
+            ior = table.ior[material[glass]]
+            n1 = np.where(entering[glass], np.float32(1.0), ior)
+            n2 = np.where(entering[glass], ior, np.float32(1.0))
+            refracted, total_internal = shading.refract(d_g, normal_g, n1 / n2)
+            cos_incident = np.clip(-shading.dot(d_g, normal_g), 0.0, 1.0)
+            fresnel = shading.fresnel_schlick(cos_incident, n1, n2)
+            fresnel[total_internal] = 1.0
+            reflect_share[glass] += transparency[glass] * fresnel
+            # Glass tints what passes through it (the green marble), not what it reflects.
+            weight = rays.weight[glass] * (transparency[glass] * (1.0 - fresnel))[:, None]
+            weight *= color[glass]
+            keep = np.flatnonzero(row_max(weight) >= MIN_WEIGHT)
+            inside = position[glass] - face_normal[glass] * offset[glass]
+            children.append(
+                RayBatch(inside[keep], refracted[keep], rays.pixel[glass][keep], weight[keep])
+            )
+            work.rays["refraction"] += len(keep)
 
-        reflect_tint = np.where(table.metallic[material, None], color, np.float32(1.0))
-        reflection = RayBatch(
-            outside,
-            shading.reflect(d, normal),
-            rays.pixel,
-            rays.weight * reflect_share[:, None] * reflect_tint,
-        )
-        # Glass tints what passes through it (the green marble), not what it reflects.
-        refraction = RayBatch(
-            position - face_normal * offset,
-            refracted,
-            rays.pixel,
-            rays.weight * refract_share[:, None] * color,
-        )
-        reflection = reflection.take(np.flatnonzero(reflection.weight.max(axis=1) >= MIN_WEIGHT))
-        refraction = refraction.take(np.flatnonzero(refraction.weight.max(axis=1) >= MIN_WEIGHT))
-        work.rays["reflection"] += len(reflection)
-        work.rays["refraction"] += len(refraction)
+        mirrors = np.flatnonzero(reflect_share > 0)
+        if len(mirrors):
+            weight = rays.weight[mirrors] * reflect_share[mirrors, None]
+            metallic = table.metallic[material[mirrors]]
+            if metallic.any():
+                weight[metallic] *= color[mirrors][metallic]  # metals tint what they reflect
+            keep = mirrors[row_max(weight) >= MIN_WEIGHT]
+            weight = weight[row_max(weight) >= MIN_WEIGHT]
+            reflected = shading.reflect(d[keep], normal[keep])
+            children.insert(0, RayBatch(outside[keep], reflected, rays.pixel[keep], weight))
+            work.rays["reflection"] += len(keep)
+
+        if not children:
+            return rays.take(np.zeros(0, np.int64))
+        if len(children) == 1:
+            return children[0]
         return RayBatch(
-            np.concatenate([reflection.origins, refraction.origins]),
-            np.concatenate([reflection.directions, refraction.directions]),
-            np.concatenate([reflection.pixel, refraction.pixel]),
-            np.concatenate([reflection.weight, refraction.weight]),
-        )
+            *(np.concatenate([getattr(c, name) for c in children])
+              for name in ("origins", "directions", "pixel", "weight"))
+        )  # fmt: skip
 
     def _direct_light(
         self, origins, normal, to_viewer, color, diffuse, material, work: BatchWork
     ) -> np.ndarray:
         """(n, 3) Blinn-Phong light from every point light that the point sees."""
         n = len(origins)
-        n_lights = len(self.light_positions)
         result = np.zeros((n, 3), np.float32)
-        if n == 0 or n_lights == 0:
+        if n == 0 or len(self.light_positions) == 0:
             return result
-        # All lights in one shadow batch: light-major so each light's rays stay coherent.
-        to_light = self.light_positions[:, None, :] - origins[None, :, :]
-        distance = np.linalg.norm(to_light, axis=2)
-        direction = (to_light / np.maximum(distance, 1e-30)[..., None]).astype(np.float32)
-        facing = np.einsum("lnk,nk->ln", direction, normal) > 0
-        candidates = np.flatnonzero(facing.reshape(-1))
-        lit = np.zeros(n_lights * n, bool)
-        if len(candidates):
-            flat_dir = direction.reshape(-1, 3)[candidates]
-            flat_origin = np.broadcast_to(origins, (n_lights, n, 3)).reshape(-1, 3)[candidates]
-            flat_distance = distance.reshape(-1)[candidates].astype(np.float32)
-            blocked = self.geometry.occluded(flat_origin, flat_dir, 0.0, flat_distance)
-            if work.log is not None:
-                work.log.append(("occluded", flat_origin, flat_dir, flat_distance))
-            lit[candidates] = ~blocked
-            work.rays["shadow"] += len(candidates)
+        # Shadow rays only where the light is in front of the surface; all lights' rays go to
+        # Embree as one batch, light-major so each light's rays stay coherent.
+        per_light = []
+        for position in self.light_positions:
+            to_light = position - origins
+            distance = np.sqrt(shading.dot(to_light, to_light))
+            direction = to_light / np.maximum(distance, 1e-30)[:, None]
+            facing = np.flatnonzero(shading.dot(direction, normal) > 0)
+            per_light.append((facing, direction[facing], distance[facing]))
+        shadow_origins = np.concatenate([origins[rows] for rows, _, _ in per_light])
+        shadow_directions = np.concatenate([dirs for _, dirs, _ in per_light])
+        shadow_distance = np.concatenate([dist for _, _, dist in per_light])
+        blocked = self.geometry.occluded(shadow_origins, shadow_directions, 0.0, shadow_distance)
+        if work.log is not None:
+            work.log.append(("occluded", shadow_origins, shadow_directions, shadow_distance))
+        work.rays["shadow"] += len(blocked)
+
         table = self.materials
         specular = table.specular[material]
         shininess = table.shininess[material]
-        for light in range(n_lights):
-            rows = np.flatnonzero(lit[light * n : (light + 1) * n])
+        first = 0
+        for light, (rows, directions, _) in enumerate(per_light):
+            lit = ~blocked[first : first + len(rows)]
+            first += len(rows)
+            rows, directions = rows[lit], directions[lit]
             if len(rows) == 0:
                 continue
             result[rows] += shading.blinn_phong(
                 normal[rows],
                 to_viewer[rows],
-                direction[light, rows],
+                directions,
                 color[rows],
                 diffuse[rows],
                 specular[rows],
                 shininess[rows],
-                np.broadcast_to(self.light_rgb[light], (len(rows), 3)),
+                self.light_rgb[light],
             )
         return result
+
+
+def row_max(values: np.ndarray) -> np.ndarray:
+    """(n,) largest of each row of an (n, 3) array (column arithmetic: faster than max(axis=1))."""
+    return np.maximum(np.maximum(values[:, 0], values[:, 1]), values[:, 2])
 
 
 def render(

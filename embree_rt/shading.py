@@ -17,8 +17,8 @@ def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def normalize(v: np.ndarray) -> np.ndarray:
     """(n, 3) float32 unit vectors (zero rows stay zero)."""
-    length = np.linalg.norm(v, axis=1, keepdims=True)
-    return (v / np.maximum(length, 1e-30)).astype(np.float32)
+    length = np.sqrt(dot(v, v))
+    return (v / np.maximum(length, 1e-30)[:, None]).astype(np.float32)
 
 
 def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:

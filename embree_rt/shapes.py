@@ -42,8 +42,10 @@ class SurfaceHits:
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
-    length = np.linalg.norm(vectors, axis=1, keepdims=True)
-    return (vectors / np.maximum(length, 1e-30)).astype(np.float32)
+    """(n, 3) float32 unit vectors; column arithmetic, faster than a norm over a length-3 axis."""
+    x, y, z = vectors[:, 0], vectors[:, 1], vectors[:, 2]
+    length = np.sqrt(x * x + y * y + z * z)
+    return (vectors / np.maximum(length, 1e-30)[:, None]).astype(np.float32)
 
 
 class SceneGeometry:
@@ -185,57 +187,92 @@ class SceneGeometry:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
     ) -> SurfaceHits:
-        """Nearest surface on each ray; ``origins``, ``directions`` (n, 3) float32, unit dirs."""
+        """Nearest surface on each ray; ``origins``, ``directions`` (n, 3) float32, unit dirs.
+        Every field has one row per ray (zeros where ``hit`` is False)."""
+        rows, compact = self.intersect_compact(origins, directions, tnear, tfar)
+        n = len(origins)
+        full = SurfaceHits(
+            hit=np.zeros(n, bool),
+            t=np.full(n, np.inf, np.float32),
+            position=np.zeros((n, 3), np.float32),
+            normal=np.zeros((n, 3), np.float32),
+            face_normal=np.zeros((n, 3), np.float32),
+            material=np.zeros(n, np.int32),
+            floor=np.zeros(n, bool),
+        )
+        for name in ("hit", "t", "position", "normal", "face_normal", "material", "floor"):
+            getattr(full, name)[rows] = getattr(compact, name)
+        return full
+
+    def intersect_compact(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        tnear: float | np.ndarray = 0.0,
+        tfar: float | np.ndarray = np.inf,
+    ) -> tuple[np.ndarray, SurfaceHits]:
+        """Like ``intersect``, but only for the rays that hit: returns their (k,) int64 row
+        numbers and a ``SurfaceHits`` of k rows (what the integrator shades)."""
         hits = self.bvh.intersect(origins, directions, tnear, tfar)
         t = hits.t
-        floor_t = self._floor_t(origins, directions)
-        floor = (floor_t < t) & (floor_t >= tnear) & (floor_t <= tfar)
-        t = np.where(floor, floor_t, t)
-        hit = np.isfinite(t)
-        n = len(origins)
-        position = origins + directions * np.where(hit, t, 0.0)[:, None]
-        normal = np.zeros((n, 3), np.float32)
-        face_normal = np.zeros((n, 3), np.float32)
-        material = np.zeros(n, np.int32)
-
+        if self.floor is not None:
+            floor_t = self._floor_t(origins, directions)
+            on_floor = (floor_t < t) & (floor_t >= tnear) & (floor_t <= tfar)
+            t = np.where(on_floor, floor_t, t)
+        else:
+            on_floor = np.zeros(len(t), bool)
+        rows = np.flatnonzero(t != np.inf)
+        t = t[rows]
+        floor = on_floor[rows]
+        geom_id = hits.geom_id[rows]
+        inst_id = hits.inst_id[rows]
+        prim_id = hits.prim_id[rows]
+        k = len(rows)
+        position = origins[rows] + directions[rows] * t[:, None]
+        normal = np.zeros((k, 3), np.float32)
+        material = np.zeros(k, np.int32)
         normal[floor, 1] = 1.0
-        face_normal[floor, 1] = 1.0
         material[floor] = self.floor_material
+        face_normal = normal.copy()
 
-        on_spheres = ~floor & (hits.geom_id == self.sphere_geom_id) & (hits.inst_id < 0)
-        if self.sphere_geom_id >= 0 and on_spheres.any():
-            prim = hits.prim_id[on_spheres]
-            outward = (position[on_spheres] - self.sphere_centers[prim]) / self.sphere_radii[
-                prim, None
-            ]
-            normal[on_spheres] = _unit(outward)
-            face_normal[on_spheres] = normal[on_spheres]
+        if self.sphere_geom_id >= 0:
+            on_spheres = np.flatnonzero(~floor & (geom_id == self.sphere_geom_id) & (inst_id < 0))
+            prim = prim_id[on_spheres]
+            center = self.sphere_centers[prim]
+            radius = self.sphere_radii[prim, None]
+            outward = _unit((position[on_spheres] - center) / radius)
+            normal[on_spheres] = outward
+            face_normal[on_spheres] = outward
             # Re-project onto the sphere: removes the rounding error along the ray.
-            position[on_spheres] = (
-                self.sphere_centers[prim] + self.sphere_radii[prim, None] * normal[on_spheres]
-            )
+            position[on_spheres] = center + radius * outward
             material[on_spheres] = self.sphere_materials[prim]
 
-        on_instances = ~floor & (hits.inst_id >= 0)
-        if on_instances.any():
-            self._instance_surfaces(hits, on_instances, normal, face_normal, material)
-        return SurfaceHits(
-            hit=hit,
-            t=t.astype(np.float32),
-            position=position.astype(np.float32),
+        on_instances = np.flatnonzero(~floor & (inst_id >= 0))
+        if len(on_instances):
+            inst = inst_id[on_instances]
+            surface_normal, geometric = self._instance_normals(
+                inst, prim_id[on_instances], hits.u[rows[on_instances]], hits.v[rows[on_instances]]
+            )
+            normal[on_instances] = surface_normal
+            face_normal[on_instances] = geometric
+            material[on_instances] = self.instance_material[inst]
+        return rows, SurfaceHits(
+            hit=np.ones(k, bool),
+            t=t,
+            position=position,
             normal=normal,
             face_normal=face_normal,
             material=material,
             floor=floor,
         )
 
-    def _instance_surfaces(self, hits, rows, normal, face_normal, material) -> None:
-        inst = hits.inst_id[rows]
-        face = self.mesh_face_offset[self.instance_child[inst]] + hits.prim_id[rows]
+    def _instance_normals(self, inst, prim, u, v) -> tuple[np.ndarray, np.ndarray]:
+        """(k, 3) unit shading and geometric world normals of instance hits."""
+        face = self.mesh_face_offset[self.instance_child[inst]] + prim
         matrices = self.instance_normal_matrix[inst]
         geometric = self.mesh_face_normals[face]
-        u = hits.u[rows, None]
-        v = hits.v[rows, None]
+        u = u[:, None]
+        v = v[:, None]
         corners = self.mesh_faces[face]
         vn = self.mesh_vertex_normals
         # Embree's barycentrics: hit = (1 - u - v) p0 + u p1 + v p2.
@@ -243,9 +280,9 @@ class SceneGeometry:
             (1 - u - v) * vn[corners[:, 0]] + u * vn[corners[:, 1]] + v * vn[corners[:, 2]]
         )
         shading = np.where(self.instance_smooth[inst, None], interpolated, geometric)
-        face_normal[rows] = _unit(np.einsum("nij,nj->ni", matrices, geometric))
-        normal[rows] = _unit(np.einsum("nij,nj->ni", matrices, shading))
-        material[rows] = self.instance_material[inst]
+        world_geometric = _unit(np.einsum("nij,nj->ni", matrices, geometric))
+        world_shading = _unit(np.einsum("nij,nj->ni", matrices, shading))
+        return world_shading, world_geometric
 
     def occluded(
         self,
