@@ -12,8 +12,9 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections import deque
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -165,9 +166,10 @@ class Renderer:
         began = time.perf_counter()
         # Two batches in flight: while one waits on Embree, the other shades with NumPy, whose
         # large array operations release the GIL, so both cores stay busy.
-        with ThreadPoolExecutor(max_workers=self.workers) as pool:
+        pool = ThreadPoolExecutor(max_workers=self.workers)
+        try:
             done = 0
-            for work in (pool.map if self.workers > 1 else map)(run, starts):
+            for work in _ordered_results(pool, run, starts, ahead=self.workers):
                 film.add_block(work.block)
                 for kind, n in work.rays.items():
                     self.stats.rays[kind] += n
@@ -177,6 +179,9 @@ class Renderer:
                 self.stats.render_s = time.perf_counter() - began
                 if progress is not None:
                     progress(done, total)
+        finally:
+            # On Ctrl-C or an error, drop the batches not yet started instead of finishing them.
+            pool.shutdown(wait=True, cancel_futures=True)
         return film.image(spp)
 
     # -- one batch, all depths ----------------------------------------------------------------
@@ -315,6 +320,30 @@ class Renderer:
                 self.light_rgb[light],
             )
         return result
+
+
+def _ordered_results(pool: ThreadPoolExecutor, function, items, ahead: int):
+    """``function(item)`` for each item, in order, with at most ``ahead`` extra items running.
+
+    Waits in short slices: a thread blocked on a future without a timeout would not see the
+    Ctrl-C that Python delivers to the main thread.
+    """
+    pending: deque[Future] = deque()
+    items = iter(items)
+    for item in items:
+        pending.append(pool.submit(function, item))
+        if len(pending) > ahead:
+            yield _wait(pending.popleft())
+    while pending:
+        yield _wait(pending.popleft())
+
+
+def _wait(future: Future):
+    while True:
+        try:
+            return future.result(timeout=0.05)
+        except TimeoutError:
+            continue
 
 
 def row_max(values: np.ndarray) -> np.ndarray:
