@@ -66,6 +66,22 @@ def _aligned_word(row: np.ndarray, alignment: int) -> int:
     return ((alignment - (row.ctypes.data & (alignment - 1))) & (alignment - 1)) >> 2
 
 
+@njit(inline="always")
+def _fill_ray(words, floats, b, i, origins, directions, tnear, tfar):
+    floats[b + RAY_ORG] = origins[i, 0]
+    floats[b + RAY_ORG + 1] = origins[i, 1]
+    floats[b + RAY_ORG + 2] = origins[i, 2]
+    floats[b + RAY_TNEAR] = tnear[i]
+    floats[b + RAY_DIR] = directions[i, 0]
+    floats[b + RAY_DIR + 1] = directions[i, 1]
+    floats[b + RAY_DIR + 2] = directions[i, 2]
+    floats[b + RAY_TIME] = 0.0
+    floats[b + RAY_TFAR] = tfar[i]
+    words[b + RAY_MASK] = 0xFFFFFFFF
+    words[b + RAY_ID] = 0
+    words[b + RAY_FLAGS] = 0
+
+
 @njit(parallel=True, nogil=True, cache=True)
 def intersect1(scene, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst):
     n = origins.shape[0]
@@ -77,18 +93,7 @@ def intersect1(scene, origins, directions, tnear, tfar, t, normal, u, v, prim, g
         b = _aligned_word(words, RAYHIT_ALIGN)
         address = words.ctypes.data + 4 * b
         for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-            floats[b + RAY_ORG] = origins[i, 0]
-            floats[b + RAY_ORG + 1] = origins[i, 1]
-            floats[b + RAY_ORG + 2] = origins[i, 2]
-            floats[b + RAY_TNEAR] = tnear[i]
-            floats[b + RAY_DIR] = directions[i, 0]
-            floats[b + RAY_DIR + 1] = directions[i, 1]
-            floats[b + RAY_DIR + 2] = directions[i, 2]
-            floats[b + RAY_TIME] = 0.0
-            floats[b + RAY_TFAR] = tfar[i]
-            words[b + RAY_MASK] = 0xFFFFFFFF
-            words[b + RAY_ID] = 0
-            words[b + RAY_FLAGS] = 0
+            _fill_ray(words, floats, b, i, origins, directions, tnear, tfar)
             words[b + HIT_GEOM_ID] = INVALID_ID
             words[b + HIT_INST_ID] = INVALID_ID
             rtc_intersect1(scene, address, 0)
@@ -125,18 +130,7 @@ def occluded1(scene, origins, directions, tnear, tfar, blocked):
         b = _aligned_word(words, RAYHIT_ALIGN)
         address = words.ctypes.data + 4 * b
         for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-            floats[b + RAY_ORG] = origins[i, 0]
-            floats[b + RAY_ORG + 1] = origins[i, 1]
-            floats[b + RAY_ORG + 2] = origins[i, 2]
-            floats[b + RAY_TNEAR] = tnear[i]
-            floats[b + RAY_DIR] = directions[i, 0]
-            floats[b + RAY_DIR + 1] = directions[i, 1]
-            floats[b + RAY_DIR + 2] = directions[i, 2]
-            floats[b + RAY_TIME] = 0.0
-            floats[b + RAY_TFAR] = tfar[i]
-            words[b + RAY_MASK] = 0xFFFFFFFF
-            words[b + RAY_ID] = 0
-            words[b + RAY_FLAGS] = 0
+            _fill_ray(words, floats, b, i, origins, directions, tnear, tfar)
             rtc_occluded1(scene, address, 0)
             blocked[i] = floats[b + RAY_TFAR] == -np.inf
 
