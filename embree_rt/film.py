@@ -124,6 +124,10 @@ def save_image(image: np.ndarray, path: str | os.PathLike) -> None:
     try:
         with handle:
             writer(image, handle)
+        # The temp file is private (0600); give the image the mode a plain open() would.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(handle.name, 0o666 & ~umask)
         os.replace(handle.name, target)
     except BaseException:
         Path(handle.name).unlink(missing_ok=True)
