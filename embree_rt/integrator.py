@@ -79,15 +79,19 @@ class RayBatch:
         return len(self.pixel)
 
     def take(self, rows: np.ndarray) -> RayBatch:
+        # np.take gathers rows several times faster than fancy indexing.
         return RayBatch(
-            self.origins[rows], self.directions[rows], self.pixel[rows], self.weight[rows]
+            np.take(self.origins, rows, axis=0),
+            np.take(self.directions, rows, axis=0),
+            np.take(self.pixel, rows),
+            np.take(self.weight, rows, axis=0),
         )
 
 
 def surface_offset(points: np.ndarray) -> np.ndarray:
     """(n,) float32 distance to push a ray origin off a surface at ``points`` (n, 3), scaled
     with the coordinates as float32 rounding is (as pbrt's OffsetRayOrigin)."""
-    return (RELATIVE_OFFSET * (1.0 + row_max(np.abs(points)))).astype(np.float32)
+    return (RELATIVE_OFFSET * (1.0 + row_max(np.abs(points)))).astype(np.float32, copy=False)
 
 
 class Renderer:
@@ -169,7 +173,11 @@ class Renderer:
         pool = ThreadPoolExecutor(max_workers=self.workers)
         try:
             done = 0
-            for work in _ordered_results(pool, run, starts, ahead=self.workers):
+            if self.workers > 1:
+                results = _ordered_results(pool, run, starts, ahead=self.workers)
+            else:
+                results = map(run, starts)
+            for work in results:
                 film.add_block(work.block)
                 for kind, n in work.rays.items():
                     self.stats.rays[kind] += n
@@ -234,7 +242,7 @@ class Renderer:
         # Glass splits by Fresnel between reflection and refraction; TIR reflects everything.
         glass = np.flatnonzero(transparency > 0)
         if len(glass):
-            d_g, normal_g = d[glass], normal[glass]
+            d_g, normal_g = np.take(d, glass, axis=0), np.take(normal, glass, axis=0)
             ior = table.ior[material[glass]]
             n1 = np.where(entering[glass], np.float32(1.0), ior)
             n2 = np.where(entering[glass], ior, np.float32(1.0))
@@ -244,25 +252,33 @@ class Renderer:
             fresnel[total_internal] = 1.0
             reflect_share[glass] += transparency[glass] * fresnel
             # Glass tints what passes through it (the green marble), not what it reflects.
-            weight = rays.weight[glass] * (transparency[glass] * (1.0 - fresnel))[:, None]
-            weight *= color[glass]
+            weight = np.take(rays.weight, glass, axis=0)
+            weight *= (transparency[glass] * (1.0 - fresnel))[:, None] * np.take(
+                color, glass, axis=0
+            )
             keep = np.flatnonzero(row_max(weight) >= MIN_WEIGHT)
-            inside = position[glass] - face_normal[glass] * offset[glass]
+            inside = np.take(position - face_normal * offset, glass, axis=0)
             children.append(
-                RayBatch(inside[keep], refracted[keep], rays.pixel[glass][keep], weight[keep])
+                RayBatch(
+                    np.take(inside, keep, axis=0),
+                    np.take(refracted, keep, axis=0),
+                    rays.pixel[glass[keep]],
+                    np.take(weight, keep, axis=0),
+                )
             )
             work.rays["refraction"] += len(keep)
 
         mirrors = np.flatnonzero(reflect_share > 0)
         if len(mirrors):
-            weight = rays.weight[mirrors] * reflect_share[mirrors, None]
+            weight = np.take(rays.weight, mirrors, axis=0) * reflect_share[mirrors, None]
             metallic = table.metallic[material[mirrors]]
             if metallic.any():
                 weight[metallic] *= color[mirrors][metallic]  # metals tint what they reflect
             keep = mirrors[row_max(weight) >= MIN_WEIGHT]
             weight = weight[row_max(weight) >= MIN_WEIGHT]
-            reflected = shading.reflect(d[keep], normal[keep])
-            children.insert(0, RayBatch(outside[keep], reflected, rays.pixel[keep], weight))
+            reflected = shading.reflect(np.take(d, keep, axis=0), np.take(normal, keep, axis=0))
+            origins = np.take(outside, keep, axis=0)
+            children.insert(0, RayBatch(origins, reflected, rays.pixel[keep], weight))
             work.rays["reflection"] += len(keep)
 
         if not children:
@@ -290,8 +306,10 @@ class Renderer:
             distance = np.sqrt(shading.dot(to_light, to_light))
             direction = to_light / np.maximum(distance, 1e-30)[:, None]
             facing = np.flatnonzero(shading.dot(direction, normal) > 0)
-            per_light.append((facing, direction[facing], distance[facing]))
-        shadow_origins = np.concatenate([origins[rows] for rows, _, _ in per_light])
+            per_light.append((facing, np.take(direction, facing, axis=0), distance[facing]))
+        shadow_origins = np.concatenate(
+            [np.take(origins, rows, axis=0) for rows, _, _ in per_light]
+        )
         shadow_directions = np.concatenate([dirs for _, dirs, _ in per_light])
         shadow_distance = np.concatenate([dist for _, _, dist in per_light])
         blocked = self.geometry.occluded(shadow_origins, shadow_directions, 0.0, shadow_distance)
@@ -306,14 +324,26 @@ class Renderer:
         for light, (rows, directions, _) in enumerate(per_light):
             lit = ~blocked[first : first + len(rows)]
             first += len(rows)
-            rows, directions = rows[lit], directions[lit]
+            rows, directions = rows[lit], np.take(directions, np.flatnonzero(lit), axis=0)
             if len(rows) == 0:
                 continue
+            if len(rows) > n // 2:
+                # Mostly lit: shade every row with the light switched off where it is not seen,
+                # cheaper than gathering five arrays.
+                light_rgb = np.zeros((n, 3), np.float32)
+                light_rgb[rows] = self.light_rgb[light]
+                all_directions = np.zeros((n, 3), np.float32)
+                all_directions[rows] = directions
+                result += shading.blinn_phong(
+                    normal, to_viewer, all_directions, color, diffuse, specular, shininess,
+                    light_rgb,
+                )  # fmt: skip
+                continue
             result[rows] += shading.blinn_phong(
-                normal[rows],
-                to_viewer[rows],
+                np.take(normal, rows, axis=0),
+                np.take(to_viewer, rows, axis=0),
                 directions,
-                color[rows],
+                np.take(color, rows, axis=0),
                 diffuse[rows],
                 specular[rows],
                 shininess[rows],

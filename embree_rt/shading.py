@@ -12,18 +12,18 @@ from embree_rt.materials import Checker
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(n,) float32 row-wise dot product of (n, 3) arrays."""
-    return np.einsum("ij,ij->i", a, b).astype(np.float32)
+    return np.einsum("ij,ij->i", a, b)
 
 
 def normalize(v: np.ndarray) -> np.ndarray:
     """(n, 3) float32 unit vectors (zero rows stay zero)."""
-    length = np.sqrt(dot(v, v))
-    return (v / np.maximum(length, 1e-30)[:, None]).astype(np.float32)
+    inverse_length = np.float32(1.0) / np.maximum(np.sqrt(dot(v, v)), np.float32(1e-30))
+    return (v * inverse_length[:, None]).astype(np.float32, copy=False)
 
 
 def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
     """(n, 3) mirror direction ``d - 2 (d·n) n`` of directions ``d`` about unit normals ``n``."""
-    return (d - 2.0 * dot(d, n)[:, None] * n).astype(np.float32)
+    return (d - 2.0 * dot(d, n)[:, None] * n).astype(np.float32, copy=False)
 
 
 def refract(d: np.ndarray, n: np.ndarray, eta: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -53,7 +53,7 @@ def fresnel_schlick(
     total_internal = sin2_t > 1.0
     cos = np.where(n1 > n2, np.sqrt(np.maximum(0.0, 1.0 - sin2_t)), cos_i)
     reflectance = r0 + (1.0 - r0) * (1.0 - cos) ** 5
-    return np.where(total_internal, 1.0, reflectance).astype(np.float32)
+    return np.where(total_internal, 1.0, reflectance).astype(np.float32, copy=False)
 
 
 def blinn_phong(
@@ -70,12 +70,17 @@ def blinn_phong(
     ``diffuse·max(0, N·L)·color·light + specular·max(0, N·H)^shininess·light``, zero where
     the light is behind the surface. Unit vectors (n, 3); diffuse, specular, shininess (n,)."""
     n_dot_l = dot(normal, to_light)
-    lit = n_dot_l > 0
-    half = normalize(to_light + to_viewer)
-    n_dot_h = np.maximum(dot(normal, half), 0.0)
-    highlight = np.where(lit, specular * n_dot_h**shininess, 0.0)
-    shade = np.where(lit, diffuse * n_dot_l, 0.0)
-    return (shade[:, None] * color * light_rgb + highlight[:, None] * light_rgb).astype(np.float32)
+    shade = diffuse * np.maximum(n_dot_l, 0.0)
+    radiance = shade[:, None] * color * light_rgb
+    # Highlights only where there is a specular term and light: pow is the costly part.
+    glossy = np.flatnonzero((specular > 0) & (n_dot_l > 0))
+    if len(glossy):
+        half = normalize(to_light[glossy] + to_viewer[glossy])
+        n_dot_h = np.maximum(dot(normal[glossy], half), 0.0)
+        highlight = specular[glossy] * n_dot_h ** shininess[glossy]
+        light = np.broadcast_to(light_rgb, radiance.shape)[glossy]
+        radiance[glossy] += highlight[:, None] * light
+    return radiance.astype(np.float32, copy=False)
 
 
 def sky(directions: np.ndarray, horizon, zenith) -> np.ndarray:
@@ -83,7 +88,7 @@ def sky(directions: np.ndarray, horizon, zenith) -> np.ndarray:
     t = np.clip(directions[:, 1], 0.0, 1.0)[:, None]
     horizon = np.asarray(horizon, np.float32)
     zenith = np.asarray(zenith, np.float32)
-    return ((1.0 - t) * horizon + t * zenith).astype(np.float32)
+    return ((1.0 - t) * horizon + t * zenith).astype(np.float32, copy=False)
 
 
 def checker(points: np.ndarray, pattern: Checker) -> np.ndarray:
@@ -92,4 +97,4 @@ def checker(points: np.ndarray, pattern: Checker) -> np.ndarray:
     even = (cells.astype(np.int64) % 2) == 0
     color_a = np.asarray(pattern.color_a, np.float32)
     color_b = np.asarray(pattern.color_b, np.float32)
-    return np.where(even[:, None], color_a, color_b).astype(np.float32)
+    return np.where(even[:, None], color_a, color_b).astype(np.float32, copy=False)

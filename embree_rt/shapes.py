@@ -45,7 +45,7 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
     """(n, 3) float32 unit vectors; column arithmetic, faster than a norm over a length-3 axis."""
     x, y, z = vectors[:, 0], vectors[:, 1], vectors[:, 2]
     length = np.sqrt(x * x + y * y + z * z)
-    return (vectors / np.maximum(length, 1e-30)[:, None]).astype(np.float32)
+    return (vectors / np.maximum(length, 1e-30)[:, None]).astype(np.float32, copy=False)
 
 
 class SceneGeometry:
@@ -228,7 +228,7 @@ class SceneGeometry:
         inst_id = hits.inst_id[rows]
         prim_id = hits.prim_id[rows]
         k = len(rows)
-        position = origins[rows] + directions[rows] * t[:, None]
+        position = np.take(origins, rows, axis=0) + np.take(directions, rows, axis=0) * t[:, None]
         normal = np.zeros((k, 3), np.float32)
         material = np.zeros(k, np.int32)
         normal[floor, 1] = 1.0
@@ -238,9 +238,9 @@ class SceneGeometry:
         if self.sphere_geom_id >= 0:
             on_spheres = np.flatnonzero(~floor & (geom_id == self.sphere_geom_id) & (inst_id < 0))
             prim = prim_id[on_spheres]
-            center = self.sphere_centers[prim]
+            center = np.take(self.sphere_centers, prim, axis=0)
             radius = self.sphere_radii[prim, None]
-            outward = _unit((position[on_spheres] - center) / radius)
+            outward = _unit((np.take(position, on_spheres, axis=0) - center) / radius)
             normal[on_spheres] = outward
             face_normal[on_spheres] = outward
             # Re-project onto the sphere: removes the rounding error along the ray.
