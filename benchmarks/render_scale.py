@@ -28,6 +28,7 @@ def peak_rss_mb() -> float:
 def replay(renderer: Renderer) -> float:
     """Seconds the bare BVH takes to answer every recorded query again."""
     bvh = renderer.geometry.bvh
+    bvh.threads = renderer.workers  # the bare queries get the same cores the render had
     elapsed = 0.0
     for kind, origins, directions, tfar in renderer.trace_log:
         start = time.perf_counter()
@@ -60,7 +61,7 @@ def run(count: int, args: argparse.Namespace) -> dict:
             "height": args.height,
             "spp": args.spp,
             "max_depth": args.max_depth,
-            "threads": renderer.geometry.bvh.threads,
+            "threads": renderer.workers,
             "build_s": round(stats.build_s, 4),
             "render_s": round(stats.render_s, 3),
             "rays": dict(stats.rays),

@@ -109,10 +109,14 @@ class Renderer:
             raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
         self.scene = scene
         self.batch_size = int(batch_size)
-        self.workers = 2 if (threads or os.cpu_count() or 1) > 1 else 1
+        if threads is not None and (int(threads) != threads or threads < 1):
+            raise ValueError(f"threads: must be a positive integer, got {threads!r}")
+        # Parallel over batches: each worker traces and shades its own batch, calling Embree
+        # through single-threaded kernels, so NumPy shading and traversal fill every core.
+        self.workers = int(threads) if threads is not None else (os.cpu_count() or 1)
         self.stats = RenderStats()
         start = time.perf_counter()
-        self.geometry = SceneGeometry(scene, spheres=spheres, threads=threads)
+        self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
         self.stats.build_s = time.perf_counter() - start
         self.materials = self.geometry.materials
         lights = scene.lights
@@ -168,8 +172,8 @@ class Renderer:
             return work
 
         began = time.perf_counter()
-        # Two batches in flight: while one waits on Embree, the other shades with NumPy, whose
-        # large array operations release the GIL, so both cores stay busy.
+        # One batch in flight per worker; NumPy's large array operations and the Embree
+        # kernels release the GIL, so the workers run side by side.
         pool = ThreadPoolExecutor(max_workers=self.workers)
         try:
             done = 0

@@ -47,8 +47,9 @@ class Hits:
 
 _kernel_lock = threading.Lock()
 _symbols_registered = False
-# One query at a time, each on all its threads: numba's fallback threading layer (workqueue)
-# must not be entered from two threads at once, and the queries use every core anyway.
+# Multi-threaded queries go one at a time: numba's fallback threading layer (workqueue) must
+# not be entered from two threads at once. Single-threaded BVHs use serial kernels, which need
+# no threading layer, so many Python threads may query them concurrently.
 _query_lock = threading.Lock()
 
 
@@ -242,13 +243,18 @@ class BVH:
             v=np.empty(n, np.float32),
         )
         if n:
-            kernel = kernels.intersect8 if self.packets else kernels.intersect1
-            with _query_lock:
-                numba.set_num_threads(self.threads)
-                kernel(
-                    self._live_scene(), origins, directions, tnear, tfar, hits.t, hits.normal,
-                    hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
-                )  # fmt: skip
+            arguments = (
+                self._live_scene(), origins, directions, tnear, tfar, hits.t, hits.normal,
+                hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
+            )  # fmt: skip
+            if self.threads == 1:
+                (kernels.intersect8_serial if self.packets else kernels.intersect1_serial)(
+                    *arguments
+                )
+            else:
+                with _query_lock:
+                    numba.set_num_threads(self.threads)
+                    (kernels.intersect8 if self.packets else kernels.intersect1)(*arguments)
         self._normals_to_world(hits)
         return hits
 
@@ -263,10 +269,13 @@ class BVH:
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         blocked = np.zeros(len(origins), bool)
         if len(origins):
-            kernel = kernels.occluded8 if self.packets else kernels.occluded1
-            with _query_lock:
-                numba.set_num_threads(self.threads)
-                kernel(self._live_scene(), origins, directions, tnear, tfar, blocked)
+            arguments = (self._live_scene(), origins, directions, tnear, tfar, blocked)
+            if self.threads == 1:
+                (kernels.occluded8_serial if self.packets else kernels.occluded1_serial)(*arguments)
+            else:
+                with _query_lock:
+                    numba.set_num_threads(self.threads)
+                    (kernels.occluded8 if self.packets else kernels.occluded1)(*arguments)
         return blocked
 
     def _normals_to_world(self, hits: Hits) -> None:

@@ -82,57 +82,53 @@ def _fill_ray(words, floats, b, i, origins, directions, tnear, tfar):
     words[b + RAY_FLAGS] = 0
 
 
-@njit(parallel=True, nogil=True, cache=True)
-def intersect1(scene, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst):
-    n = origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, RAYHIT_WORDS + RAYHIT_ALIGN // 4), np.uint32)
-    for c in prange(n_chunks):
-        words = scratch[c]
-        floats = words.view(np.float32)
-        b = _aligned_word(words, RAYHIT_ALIGN)
-        address = words.ctypes.data + 4 * b
-        for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-            _fill_ray(words, floats, b, i, origins, directions, tnear, tfar)
-            words[b + HIT_GEOM_ID] = INVALID_ID
-            words[b + HIT_INST_ID] = INVALID_ID
-            rtc_intersect1(scene, address, 0)
-            if words[b + HIT_GEOM_ID] == INVALID_ID:
-                t[i] = np.inf
-                prim[i] = -1
-                geom[i] = -1
-                inst[i] = -1
-                normal[i, 0] = 0.0
-                normal[i, 1] = 0.0
-                normal[i, 2] = 0.0
-                u[i] = 0.0
-                v[i] = 0.0
-            else:
-                t[i] = floats[b + RAY_TFAR]
-                prim[i] = np.int32(words[b + HIT_PRIM_ID])
-                geom[i] = np.int32(words[b + HIT_GEOM_ID])
-                inst[i] = np.int32(words[b + HIT_INST_ID])
-                normal[i, 0] = floats[b + HIT_NG]
-                normal[i, 1] = floats[b + HIT_NG + 1]
-                normal[i, 2] = floats[b + HIT_NG + 2]
-                u[i] = floats[b + HIT_U]
-                v[i] = floats[b + HIT_V]
+@njit(inline="always")
+def _intersect1_chunk(scene, words, first, stop, origins, directions, tnear, tfar, t, normal,
+                      u, v, prim, geom, inst):  # fmt: skip
+    floats = words.view(np.float32)
+    b = _aligned_word(words, RAYHIT_ALIGN)
+    address = words.ctypes.data + 4 * b
+    for i in range(first, stop):
+        _fill_ray(words, floats, b, i, origins, directions, tnear, tfar)
+        words[b + HIT_GEOM_ID] = INVALID_ID
+        words[b + HIT_INST_ID] = INVALID_ID
+        rtc_intersect1(scene, address, 0)
+        if words[b + HIT_GEOM_ID] == INVALID_ID:
+            _store_miss(i, t, normal, u, v, prim, geom, inst)
+        else:
+            t[i] = floats[b + RAY_TFAR]
+            prim[i] = np.int32(words[b + HIT_PRIM_ID])
+            geom[i] = np.int32(words[b + HIT_GEOM_ID])
+            inst[i] = np.int32(words[b + HIT_INST_ID])
+            normal[i, 0] = floats[b + HIT_NG]
+            normal[i, 1] = floats[b + HIT_NG + 1]
+            normal[i, 2] = floats[b + HIT_NG + 2]
+            u[i] = floats[b + HIT_U]
+            v[i] = floats[b + HIT_V]
 
 
-@njit(parallel=True, nogil=True, cache=True)
-def occluded1(scene, origins, directions, tnear, tfar, blocked):
-    n = origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, RAYHIT_WORDS + RAYHIT_ALIGN // 4), np.uint32)
-    for c in prange(n_chunks):
-        words = scratch[c]
-        floats = words.view(np.float32)
-        b = _aligned_word(words, RAYHIT_ALIGN)
-        address = words.ctypes.data + 4 * b
-        for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-            _fill_ray(words, floats, b, i, origins, directions, tnear, tfar)
-            rtc_occluded1(scene, address, 0)
-            blocked[i] = floats[b + RAY_TFAR] == -np.inf
+@njit(inline="always")
+def _store_miss(i, t, normal, u, v, prim, geom, inst):
+    t[i] = np.inf
+    prim[i] = -1
+    geom[i] = -1
+    inst[i] = -1
+    normal[i, 0] = 0.0
+    normal[i, 1] = 0.0
+    normal[i, 2] = 0.0
+    u[i] = 0.0
+    v[i] = 0.0
+
+
+@njit(inline="always")
+def _occluded1_chunk(scene, words, first, stop, origins, directions, tnear, tfar, blocked):
+    floats = words.view(np.float32)
+    b = _aligned_word(words, RAYHIT_ALIGN)
+    address = words.ctypes.data + 4 * b
+    for i in range(first, stop):
+        _fill_ray(words, floats, b, i, origins, directions, tnear, tfar)
+        rtc_occluded1(scene, address, 0)
+        blocked[i] = floats[b + RAY_TFAR] == -np.inf
 
 
 @njit(inline="always")
@@ -157,44 +153,102 @@ def _fill_packet(words, floats, b, first, count, origins, directions, tnear, tfa
         words[valid + lane] = 0xFFFFFFFF if lane < count else 0
 
 
+@njit(inline="always")
+def _intersect8_chunk(scene, words, first_ray, stop, origins, directions, tnear, tfar, t, normal,
+                      u, v, prim, geom, inst):  # fmt: skip
+    floats = words.view(np.float32)
+    b = _aligned_word(words, PACKET_ALIGN)
+    address = words.ctypes.data + 4 * b
+    valid_address = address + 4 * PACKET_WORDS
+    for first in range(first_ray, stop, LANES):
+        count = min(LANES, stop - first)
+        _fill_packet(words, floats, b, first, count, origins, directions, tnear, tfar)
+        rtc_intersect8(valid_address, scene, address, 0)
+        for lane in range(count):
+            i = first + lane
+            if words[b + HIT_GEOM_ID * LANES + lane] == INVALID_ID:
+                _store_miss(i, t, normal, u, v, prim, geom, inst)
+            else:
+                t[i] = floats[b + RAY_TFAR * LANES + lane]
+                prim[i] = np.int32(words[b + HIT_PRIM_ID * LANES + lane])
+                geom[i] = np.int32(words[b + HIT_GEOM_ID * LANES + lane])
+                inst[i] = np.int32(words[b + HIT_INST_ID * LANES + lane])
+                normal[i, 0] = floats[b + HIT_NG * LANES + lane]
+                normal[i, 1] = floats[b + (HIT_NG + 1) * LANES + lane]
+                normal[i, 2] = floats[b + (HIT_NG + 2) * LANES + lane]
+                u[i] = floats[b + HIT_U * LANES + lane]
+                v[i] = floats[b + HIT_V * LANES + lane]
+
+
+@njit(inline="always")
+def _occluded8_chunk(scene, words, first_ray, stop, origins, directions, tnear, tfar, blocked):
+    floats = words.view(np.float32)
+    b = _aligned_word(words, PACKET_ALIGN)
+    address = words.ctypes.data + 4 * b
+    valid_address = address + 4 * PACKET_WORDS
+    for first in range(first_ray, stop, LANES):
+        count = min(LANES, stop - first)
+        _fill_packet(words, floats, b, first, count, origins, directions, tnear, tfar)
+        rtc_occluded8(valid_address, scene, address, 0)
+        for lane in range(count):
+            blocked[first + lane] = floats[b + RAY_TFAR * LANES + lane] == -np.inf
+
+
+# Drivers: the parallel ones spread chunks over numba's threads; the serial ones run in the
+# calling thread with no threading layer at all, so several Python threads may call them at once.
+
+SINGLE_WORDS = RAYHIT_WORDS + RAYHIT_ALIGN // 4
+
+
+@njit(parallel=True, nogil=True, cache=True)
+def intersect1(scene, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst):
+    n = origins.shape[0]
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    scratch = np.empty((n_chunks, SINGLE_WORDS), np.uint32)
+    for c in prange(n_chunks):
+        _intersect1_chunk(scene, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), origins,
+                          directions, tnear, tfar, t, normal, u, v, prim, geom, inst)  # fmt: skip
+
+
+@njit(nogil=True, cache=True)
+def intersect1_serial(scene, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst):
+    scratch = np.empty(SINGLE_WORDS, np.uint32)
+    _intersect1_chunk(scene, scratch, 0, origins.shape[0], origins, directions, tnear, tfar, t,
+                      normal, u, v, prim, geom, inst)  # fmt: skip
+
+
+@njit(parallel=True, nogil=True, cache=True)
+def occluded1(scene, origins, directions, tnear, tfar, blocked):
+    n = origins.shape[0]
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    scratch = np.empty((n_chunks, SINGLE_WORDS), np.uint32)
+    for c in prange(n_chunks):
+        _occluded1_chunk(scene, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), origins,
+                         directions, tnear, tfar, blocked)  # fmt: skip
+
+
+@njit(nogil=True, cache=True)
+def occluded1_serial(scene, origins, directions, tnear, tfar, blocked):
+    scratch = np.empty(SINGLE_WORDS, np.uint32)
+    _occluded1_chunk(scene, scratch, 0, origins.shape[0], origins, directions, tnear, tfar,
+                     blocked)  # fmt: skip
+
+
 @njit(parallel=True, nogil=True, cache=True)
 def intersect8(scene, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst):
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        words = scratch[c]
-        floats = words.view(np.float32)
-        b = _aligned_word(words, PACKET_ALIGN)
-        address = words.ctypes.data + 4 * b
-        valid_address = address + 4 * PACKET_WORDS
-        stop = min(n, (c + 1) * CHUNK)
-        for first in range(c * CHUNK, stop, LANES):
-            count = min(LANES, stop - first)
-            _fill_packet(words, floats, b, first, count, origins, directions, tnear, tfar)
-            rtc_intersect8(valid_address, scene, address, 0)
-            for lane in range(count):
-                i = first + lane
-                if words[b + HIT_GEOM_ID * LANES + lane] == INVALID_ID:
-                    t[i] = np.inf
-                    prim[i] = -1
-                    geom[i] = -1
-                    inst[i] = -1
-                    normal[i, 0] = 0.0
-                    normal[i, 1] = 0.0
-                    normal[i, 2] = 0.0
-                    u[i] = 0.0
-                    v[i] = 0.0
-                else:
-                    t[i] = floats[b + RAY_TFAR * LANES + lane]
-                    prim[i] = np.int32(words[b + HIT_PRIM_ID * LANES + lane])
-                    geom[i] = np.int32(words[b + HIT_GEOM_ID * LANES + lane])
-                    inst[i] = np.int32(words[b + HIT_INST_ID * LANES + lane])
-                    normal[i, 0] = floats[b + HIT_NG * LANES + lane]
-                    normal[i, 1] = floats[b + (HIT_NG + 1) * LANES + lane]
-                    normal[i, 2] = floats[b + (HIT_NG + 2) * LANES + lane]
-                    u[i] = floats[b + HIT_U * LANES + lane]
-                    v[i] = floats[b + HIT_V * LANES + lane]
+        _intersect8_chunk(scene, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), origins,
+                          directions, tnear, tfar, t, normal, u, v, prim, geom, inst)  # fmt: skip
+
+
+@njit(nogil=True, cache=True)
+def intersect8_serial(scene, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst):
+    scratch = np.empty(SCRATCH_WORDS, np.uint32)
+    _intersect8_chunk(scene, scratch, 0, origins.shape[0], origins, directions, tnear, tfar, t,
+                      normal, u, v, prim, geom, inst)  # fmt: skip
 
 
 @njit(parallel=True, nogil=True, cache=True)
@@ -203,15 +257,12 @@ def occluded8(scene, origins, directions, tnear, tfar, blocked):
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        words = scratch[c]
-        floats = words.view(np.float32)
-        b = _aligned_word(words, PACKET_ALIGN)
-        address = words.ctypes.data + 4 * b
-        valid_address = address + 4 * PACKET_WORDS
-        stop = min(n, (c + 1) * CHUNK)
-        for first in range(c * CHUNK, stop, LANES):
-            count = min(LANES, stop - first)
-            _fill_packet(words, floats, b, first, count, origins, directions, tnear, tfar)
-            rtc_occluded8(valid_address, scene, address, 0)
-            for lane in range(count):
-                blocked[first + lane] = floats[b + RAY_TFAR * LANES + lane] == -np.inf
+        _occluded8_chunk(scene, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), origins,
+                         directions, tnear, tfar, blocked)  # fmt: skip
+
+
+@njit(nogil=True, cache=True)
+def occluded8_serial(scene, origins, directions, tnear, tfar, blocked):
+    scratch = np.empty(SCRATCH_WORDS, np.uint32)
+    _occluded8_chunk(scene, scratch, 0, origins.shape[0], origins, directions, tnear, tfar,
+                     blocked)  # fmt: skip
