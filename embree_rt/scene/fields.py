@@ -97,6 +97,20 @@ class Table:
             numbers.append(float(item))
         return tuple(numbers)
 
+    def pair(
+        self, name: str, *, low: float | None = None, low_open: bool = False
+    ) -> tuple[float, float]:
+        """A required ``[min, max]`` with ``min <= max``, both checked against ``low``."""
+        value = self.require(name)
+        if not isinstance(value, list | tuple) or len(value) != 2:
+            raise self.error(name, f"expected [min, max], got {_show(value)}")
+        low_value, high_value = (
+            check_number(self, name, item, low, None, low_open, False) for item in value
+        )
+        if low_value > high_value:
+            raise self.error(name, f"expected min <= max, got {_show(value)}")
+        return low_value, high_value
+
     def color(self, name: str, default=None):
         return self.vector(name, default, non_negative=True)
 

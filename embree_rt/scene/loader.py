@@ -1,10 +1,17 @@
-"""Scene files (TOML or JSON, one schema) → ``Scene``. Every problem is a ``SceneError``."""
+"""Scene files (TOML or JSON, one schema) → ``Scene``. Every problem is a ``SceneError``.
+
+Loading runs in three steps so that a mistake anywhere costs nothing: (1) every value in the file
+is read and checked, and every material name resolved, with no file but the scene itself opened;
+(2) the files it names (sphere arrays, meshes) are read and checked, each mesh file once; (3) only
+then is the scene built, the random field (the one heavy generator) included.
+"""
 
 from __future__ import annotations
 
 import json
 import math
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,14 +22,20 @@ from embree_rt.scene.errors import SceneError
 from embree_rt.scene.fields import Table
 from embree_rt.scene.meshes import load_mesh_parts
 from embree_rt.scene.model import Background, Camera, Floor, PointLight, RenderSettings, Scene
-from embree_rt.scene.random_field import random_field
+from embree_rt.scene.random_field import (
+    FieldParameterError,
+    FieldPlan,
+    add_field_spheres,
+    field_scene,
+    plan_field,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-MATERIAL_FIELDS = ("ambient", "diffuse", "specular", "reflectivity", "transparency")
+UNIT_FIELDS = ("ambient", "diffuse", "specular", "reflectivity", "transparency")
 
 
 def read_document(path: Path) -> dict:
@@ -38,7 +51,7 @@ def read_document(path: Path) -> dict:
         raise SceneError(path, "(file)", f"cannot read: {error}") from None
     try:
         if suffix == ".toml":
-            return tomllib.loads(text)
+            return tomllib.loads(text)  # its messages say "(at line L, column C)"
         document = json.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise SceneError(path, "(syntax)", f"malformed TOML: {error}") from None
@@ -52,18 +65,40 @@ def read_document(path: Path) -> dict:
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Load and validate a scene file; relative paths inside it are relative to the file."""
+    """Load and validate a scene file; relative paths inside it are relative to the file.
+
+    Raises ``SceneError`` (``str()`` = ``"FILE: KEY: problem"``) for any bad input.
+    """
     path = Path(path)
-    return SceneReader(path, read_document(path)).scene
+    return SceneReader(path, read_document(path)).build()
+
+
+@dataclass
+class _SphereArrayEntry:
+    key: str  # the ``file`` key, which errors inside the .npz name
+    path: Path
+    material: str
+
+
+@dataclass
+class _MeshEntry:
+    key: str
+    path: Path
+    material: str | None
+    smooth: bool
+    placement: np.ndarray
 
 
 class SceneReader:
+    """Reads and checks a parsed scene document (step 1); ``build()`` does steps 2 and 3."""
+
     def __init__(self, path: Path, document: dict) -> None:
         self.path = path
         self.base = path.parent
         root = Table(path, "", document)
-        generator = root.table("random_field")
-        self.scene = self._random_field(generator) if generator else Scene()
+        self.field: FieldPlan | None = self._field_plan(root.table("random_field"))
+        # Cheap: the field's camera, lights and material palette, without its spheres.
+        self.scene = field_scene(self.field) if self.field else Scene()
         scene = self.scene
         if (table := root.table("render")) is not None:
             scene.render = self._render(table, scene.render)
@@ -78,33 +113,60 @@ class SceneReader:
         lights = root.tables("lights")
         if lights:
             scene.lights = [self._light(t) for t in lights]
-        materials = root.table("materials")
-        if materials is not None:
+        if (materials := root.table("materials")) is not None:
             for name in materials.data:
                 scene.add_material(name, self._material(materials.table(name)))
             materials.finish()
         if root.has("floor"):
             scene.floor = self._floor(root)
-        for table in root.tables("spheres"):
-            self._sphere(table)
-        for table in root.tables("sphere_arrays"):
-            self._sphere_array(table)
-        self._mesh_cache: dict[Path, list] = {}
-        for table in root.tables("meshes"):
-            self._mesh(table)
+        self.spheres = [self._sphere(t) for t in root.tables("spheres")]
+        self.sphere_arrays = [self._sphere_array(t) for t in root.tables("sphere_arrays")]
+        self.meshes = [self._mesh(t) for t in root.tables("meshes")]
         root.finish()
+
+    def build(self) -> Scene:
+        scene = self.scene
+        # Step 2: the files the scene names, each checked before anything is generated.
+        arrays = [self._read_sphere_array(entry) for entry in self.sphere_arrays]
+        parts: dict[Path, list] = {}
+        for entry in self.meshes:
+            if entry.path not in parts:  # one load per file: its placements share the Trimesh
+                parts[entry.path] = load_mesh_parts(entry.path, self.path, entry.key)
+        # Step 3: build.
+        if self.field is not None:
+            add_field_spheres(scene, self.field)
+        if self.spheres:
+            centers, radii, names = zip(*self.spheres, strict=True)
+            scene.add_spheres(np.array(centers), np.array(radii), list(names))
+        for centers, radii, materials in arrays:
+            scene.add_spheres(centers, radii, materials)
+        for entry in self.meshes:
+            for mesh, node_transform in parts[entry.path]:
+                # The node's own transform first, then the user's placement of the whole file.
+                scene.add_mesh(mesh, entry.material, entry.placement @ node_transform, entry.smooth)
+        return scene
 
     # -- sections -----------------------------------------------------------------------------
 
-    def _random_field(self, table: Table) -> Scene:
+    def _field_plan(self, table: Table | None) -> FieldPlan | None:
+        if table is None:
+            return None
         count = table.integer("count", None, low=1)
         if count is None:
             raise table.error("count", "is required")
-        scene = random_field(
-            count, seed=table.integer("seed", 0, low=0), heroes=table.boolean("heroes", True)
-        )
+        seed = table.integer("seed", 0, low=0)
+        extent = table.number("extent", None, low=0, low_open=True)
+        radius = table.pair("radius", low=0, low_open=True) if table.has("radius") else None
+        mix = None
+        if (mix_table := table.table("mix")) is not None:
+            mix = {name: mix_table.number(name, required=True, low=0) for name in mix_table.data}
+            mix_table.finish()
+        heroes = table.boolean("heroes", True)
         table.finish()
-        return scene
+        try:
+            return plan_field(count, seed, extent=extent, radius=radius, mix=mix, heroes=heroes)
+        except FieldParameterError as error:
+            raise table.error(error.name, error.problem) from None
 
     def _render(self, table: Table, current: RenderSettings) -> RenderSettings:
         settings = RenderSettings(
@@ -124,11 +186,11 @@ class SceneReader:
             up=table.vector("up", current.up),
             fov=table.number("fov", current.fov, low=0, high=180, low_open=True, high_open=True),
         )
-        if np.allclose(camera.position, camera.look_at):
+        view = np.subtract(camera.look_at, camera.position)
+        if np.linalg.norm(view) < 1e-9:
             raise table.error("look_at", "must differ from camera.position")
-        view = np.subtract(camera.position, camera.look_at)
         if np.linalg.norm(np.cross(camera.up, view)) < 1e-9 * np.linalg.norm(view):
-            raise table.error("up", "must not be parallel to the viewing direction")
+            raise table.error("up", "must not be zero or parallel to the viewing direction")
         table.finish()
         return camera
 
@@ -141,26 +203,31 @@ class SceneReader:
         table.finish()
         return light
 
+    def _preset(self, table: Table, default: Material) -> Material:
+        if not table.has("preset"):
+            return default
+        name = table.string("preset")
+        if name not in PRESETS:
+            raise table.error("preset", f"unknown preset {name!r}; known: {', '.join(PRESETS)}")
+        return PRESETS[name]
+
     def _material_fields(self, table: Table, base: Material) -> Material:
         fields = {}
         if table.has("color"):
             fields["color"] = table.color("color")
-        for name in MATERIAL_FIELDS:
+        for name in UNIT_FIELDS:
             if table.has(name):
-                fields[name] = table.number(name, None, low=0, high=1)
+                fields[name] = table.number(name, low=0, high=1)
         if table.has("shininess"):
-            fields["shininess"] = table.number("shininess", None, low=0, low_open=True)
+            fields["shininess"] = table.number("shininess", low=0, low_open=True)
         if table.has("ior"):
-            fields["ior"] = table.number("ior", None, low=1)
+            fields["ior"] = table.number("ior", low=1)
         if table.has("metallic"):
             fields["metallic"] = table.boolean("metallic", False)
         return Material(**{**base.__dict__, **fields})
 
     def _material(self, table: Table) -> Material:
-        name = table.string("preset", "matte")
-        if name not in PRESETS:
-            raise table.error("preset", f"unknown preset {name!r}; known: {', '.join(PRESETS)}")
-        material = self._material_fields(table, PRESETS[name])
+        material = self._material_fields(table, self._preset(table, PRESETS["matte"]))
         table.finish()
         return material
 
@@ -168,14 +235,10 @@ class SceneReader:
         value = root.raw("floor")
         if value is False:
             return None
+        if value is True:
+            return Floor()
         table = root.table("floor")
         default = Floor()
-        base = default.material
-        if table.has("preset"):
-            name = table.string("preset")
-            if name not in PRESETS:
-                raise table.error("preset", f"unknown preset {name!r}; known: {', '.join(PRESETS)}")
-            base = PRESETS[name]
         floor = Floor(
             height=table.number("height", default.height),
             checker=Checker(
@@ -183,7 +246,7 @@ class SceneReader:
                 color_b=table.color("color_b", default.checker.color_b),
                 size=table.number("size", default.checker.size, low=0, low_open=True),
             ),
-            material=self._material_fields(table, base),
+            material=self._material_fields(table, self._preset(table, default.material)),
         )
         table.finish()
         return floor
@@ -194,80 +257,40 @@ class SceneReader:
             raise table.error("material", f"undefined material {name!r}")
         return name
 
-    def _sphere(self, table: Table) -> None:
+    def _sphere(self, table: Table) -> tuple[tuple[float, float, float], float, str]:
         center = table.vector("center", required=True)
         radius = table.number("radius", required=True, low=0, low_open=True)
-        self.scene.add_sphere(center, radius, self._material_name(table))
+        material = self._material_name(table)
         table.finish()
+        return center, radius, material
 
-    def _resolve(self, table: Table, name: str) -> Path:
-        relative = table.string(name, required=True)
-        return (self.base / relative).resolve()
+    def _file(self, table: Table) -> Path:
+        return (self.base / table.string("file", required=True)).resolve()
 
-    def _sphere_array(self, table: Table) -> None:
-        path = self._resolve(table, "file")
-        default_material = self._material_name(table)
+    def _sphere_array(self, table: Table) -> _SphereArrayEntry:
+        entry = _SphereArrayEntry(table.key("file"), self._file(table), self._material_name(table))
         table.finish()
-        key = table.key("file")
-        try:
-            with np.load(path, allow_pickle=False) as archive:
-                arrays = {name: archive[name] for name in archive.files}
-        except FileNotFoundError:
-            raise SceneError(self.path, key, f"{path}: no such file") from None
-        except Exception as error:
-            raise SceneError(self.path, key, f"{path}: cannot read .npz: {error}") from None
-        for required in ("centers", "radii"):
-            if required not in arrays:
-                raise SceneError(self.path, key, f"{path}: missing array {required!r}")
-        centers, radii = arrays["centers"], arrays["radii"]
-        if centers.ndim != 2 or centers.shape[1] != 3 or centers.dtype.kind not in "fiu":
-            raise SceneError(self.path, key, f"{path}: centers must be (n, 3) numbers")
-        if radii.shape != (len(centers),) or radii.dtype.kind not in "fiu":
-            raise SceneError(self.path, key, f"{path}: radii must be ({len(centers)},) numbers")
-        if not np.isfinite(centers).all():
-            row = int(np.flatnonzero(~np.isfinite(centers).all(axis=1))[0])
-            raise SceneError(self.path, key, f"{path}: centers row {row} is not finite")
-        bad = ~(np.isfinite(radii) & (radii > 0))
-        if bad.any():
-            row = int(np.flatnonzero(bad)[0])
-            raise SceneError(self.path, key, f"{path}: radii row {row} must be > 0")
-        materials = arrays.get("materials")
-        if materials is None:
-            materials = default_material
-        else:
-            if materials.shape != (len(centers),) or materials.dtype.kind not in "iuU":
-                raise SceneError(
-                    self.path, key, f"{path}: materials must be ({len(centers)},) names or ids"
-                )
-            if materials.dtype.kind == "U":
-                unknown = sorted(set(np.unique(materials)) - set(self.scene.materials))
-                if unknown:
-                    raise SceneError(self.path, key, f"{path}: undefined material {unknown[0]!r}")
-            elif len(materials) and (
-                materials.min() < 0 or materials.max() >= len(self.scene.materials)
-            ):
-                raise SceneError(self.path, key, f"{path}: material id out of range")
-        self.scene.add_spheres(centers, radii, materials)
+        return entry
 
-    def _mesh(self, table: Table) -> None:
-        path = self._resolve(table, "file")
-        material = self._material_name(table, None)
-        smooth = table.boolean("smooth", True)
-        placement = self._placement(table)
+    def _mesh(self, table: Table) -> _MeshEntry:
+        entry = _MeshEntry(
+            key=table.key("file"),
+            path=self._file(table),
+            material=self._material_name(table, None),
+            smooth=table.boolean("smooth", True),
+            placement=self._placement(table),
+        )
         table.finish()
-        if path not in self._mesh_cache:
-            self._mesh_cache[path] = load_mesh_parts(path, self.path, table.key("file"))
-        for mesh, node_transform in self._mesh_cache[path]:
-            self.scene.add_mesh(mesh, material, placement @ node_transform, smooth)
+        return entry
 
     def _placement(self, table: Table) -> np.ndarray:
+        """(4, 4) float64 placement: ``transform``, else scale, rotate X, Y, Z, translate."""
         if table.has("transform"):
             for name in ("translate", "rotate", "scale"):
                 if table.has(name):
                     raise table.error(name, "give either transform or translate/rotate/scale")
-            matrix = np.asarray(table.raw("transform"), dtype=object)
             try:
-                matrix = matrix.astype(np.float64)
+                matrix = np.asarray(table.raw("transform"), dtype=np.float64)
             except (TypeError, ValueError):
                 raise table.error("transform", "expected a 4x4 list of numbers") from None
             if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
@@ -280,14 +303,65 @@ class SceneReader:
             return matrix
         translate = table.vector("translate", (0.0, 0.0, 0.0))
         rotate = table.vector("rotate", (0.0, 0.0, 0.0))
-        scale_value = table.raw("scale", 1.0)
-        if isinstance(scale_value, list):
+        if isinstance(table.raw("scale"), list | tuple):
             scale = table.vector("scale")
+            if min(scale) <= 0:
+                raise table.error("scale", f"must be > 0, got {list(scale)}")
         else:
             scale = (table.number("scale", 1.0, low=0, low_open=True),) * 3
-        if min(scale) <= 0:
-            raise table.error("scale", f"must be > 0, got {list(scale)}")
+        # Static-axes XYZ Euler angles: R = Rz @ Ry @ Rx.
         rotation = trimesh.transformations.euler_matrix(*(math.radians(a) for a in rotate), "sxyz")
         matrix = rotation @ np.diag([*scale, 1.0])
         matrix[:3, 3] = translate
         return matrix
+
+    # -- files --------------------------------------------------------------------------------
+
+    def _read_sphere_array(self, entry: _SphereArrayEntry):
+        """(centers (n, 3), radii (n,), materials: one name or (n,) names or ids) of a .npz."""
+        path = entry.path
+
+        def fail(problem: str) -> SceneError:
+            return SceneError(self.path, entry.key, f"{path}: {problem}")
+
+        try:
+            with np.load(path, allow_pickle=False) as archive:
+                arrays = {name: archive[name] for name in archive.files}
+        except FileNotFoundError:
+            raise fail("no such file") from None
+        except AttributeError:  # np.load gave a plain array: a .npy, not an archive
+            raise fail("expected an .npz archive of arrays") from None
+        except Exception as error:  # a corrupt zip, pickled object arrays, a directory...
+            raise fail(f"cannot read .npz: {error}") from None
+        for required in ("centers", "radii"):
+            if required not in arrays:
+                raise fail(f"missing array {required!r} (has: {', '.join(arrays) or 'none'})")
+        centers, radii = arrays["centers"], arrays["radii"]
+        if centers.ndim != 2 or centers.shape[1] != 3 or centers.dtype.kind not in "fiu":
+            raise fail(f"centers must be (n, 3) numbers, got {centers.shape} {centers.dtype}")
+        n = len(centers)
+        if radii.shape != (n,) or radii.dtype.kind not in "fiu":
+            raise fail(f"radii must be ({n},) numbers, got {radii.shape} {radii.dtype}")
+        if not np.isfinite(centers).all():
+            row = int(np.flatnonzero(~np.isfinite(centers).all(axis=1))[0])
+            raise fail(f"centers row {row} is not finite")
+        bad = ~(np.isfinite(radii) & (radii > 0))
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            raise fail(f"radii row {row} must be a finite number > 0, got {radii[row]}")
+        materials = arrays.get("materials")
+        if materials is None:
+            return centers, radii, entry.material
+        if materials.dtype.kind == "S":
+            materials = materials.astype(str)
+        if materials.shape != (n,) or materials.dtype.kind not in "iuU":
+            raise fail(
+                f"materials must be ({n},) names or ids, got {materials.shape} {materials.dtype}"
+            )
+        if materials.dtype.kind == "U":
+            unknown = sorted(set(np.unique(materials).tolist()) - set(self.scene.materials))
+            if unknown:
+                raise fail(f"materials: undefined material {unknown[0]!r}")
+        elif n and (materials.min() < 0 or materials.max() >= len(self.scene.materials)):
+            raise fail(f"materials: id out of range [0, {len(self.scene.materials)})")
+        return centers, radii, materials
