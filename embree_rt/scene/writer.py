@@ -1,4 +1,8 @@
-"""``Scene`` → scene file (TOML or JSON): spheres go to a sibling ``.npz``, meshes to PLY files."""
+"""``Scene`` → scene file (TOML or JSON): spheres go to a sibling ``.npz``, meshes to PLY files.
+
+Each distinct mesh object is written once (``NAME.meshK.ply``) and every placement of it refers to
+that file, so loading the saved scene shares one Trimesh between the placements again.
+"""
 
 from __future__ import annotations
 
@@ -93,10 +97,26 @@ def save_scene(scene: Scene, path: str | Path) -> None:
     suffix = path.suffix.lower()
     if suffix not in (".toml", ".json"):
         raise ValueError(f"{path}: expected a .toml or .json file name")
-    document = scene_document(scene, path)
+    document = _plain(scene_document(scene, path))
     if suffix == ".json":
         path.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     else:
         import tomli_w
 
         path.write_text(tomli_w.dumps(document), encoding="utf-8")
+
+
+def _plain(value):
+    """``value`` with NumPy scalars and tuples turned into the Python types TOML/JSON writers
+    accept (a scene built in Python may hold ``np.float32`` coordinates)."""
+    if isinstance(value, dict):
+        return {str(key): _plain(item) for key, item in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [_plain(item) for item in value]
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return float(value)
+    return value
