@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,11 +11,20 @@ import numpy as np
 from embree_rt.sampling import uniform
 from embree_rt.scene.model import Camera
 
+# sin of the smallest angle allowed between ``up`` and the viewing direction: below it the
+# camera's roll is decided by rounding error.
+_MIN_UP_SINE = 1e-6
 
-@dataclass(frozen=True)
+
+@dataclass(frozen=True, eq=False)
 class CameraFrame:
-    """Orthonormal camera basis: ``u`` right, ``v`` up, looking along ``-w``; the image plane at
-    distance 1 spans ``half_width`` × ``half_height``."""
+    """A validated camera and image size, as a right-handed orthonormal basis.
+
+    ``origin`` (3,) float64 is the eye; ``u`` (right), ``v`` (up) and ``w`` (backward: the
+    camera looks along ``-w``) are (3,) float64 unit vectors. The image plane at distance 1
+    spans ``[-half_width, half_width] × [-half_height, half_height]``; the image is ``width`` ×
+    ``height`` pixels, row 0 at the top, column 0 at the left.
+    """
 
     origin: np.ndarray
     u: np.ndarray
@@ -26,34 +36,61 @@ class CameraFrame:
     height: int
 
 
-def _vector(value, name: str) -> np.ndarray:
-    array = np.asarray(value, np.float64)
-    if array.shape != (3,) or not np.isfinite(array).all():
+def _vector(value: object, name: str) -> np.ndarray:
+    try:
+        array = np.asarray(value, np.float64)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.shape != (3,) or not np.isfinite(array).all():
         raise ValueError(f"camera.{name}: expected three finite numbers, got {value!r}")
     return array
 
 
+def _positive_integer(value: object, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+        raise ValueError(f"{name}: must be a positive integer, got {value!r}")
+    return int(value)
+
+
 def camera_frame(camera: Camera, width: int, height: int) -> CameraFrame:
-    """Validate ``camera`` and the image size, and build the frame."""
-    for name, size in (("width", width), ("height", height)):
-        if isinstance(size, bool) or int(size) != size or size < 1:
-            raise ValueError(f"{name}: must be a positive integer, got {size!r}")
-    fov = float(camera.fov)
+    """Validate ``camera`` and the image size and build the frame.
+
+    Raises ValueError naming the field when ``width`` or ``height`` is not a positive integer,
+    ``camera.fov`` is not strictly between 0 and 180 degrees, a vector is not three finite
+    numbers, ``camera.look_at`` equals ``camera.position``, or ``camera.up`` is zero or parallel
+    to the viewing direction.
+    """
+    width = _positive_integer(width, "width")
+    height = _positive_integer(height, "height")
+    try:
+        fov = float(camera.fov)
+    except (TypeError, ValueError):
+        raise ValueError(f"camera.fov: expected a number of degrees, got {camera.fov!r}") from None
     if not (math.isfinite(fov) and 0.0 < fov < 180.0):
         raise ValueError(f"camera.fov: must lie strictly between 0 and 180 degrees, got {fov}")
     position = _vector(camera.position, "position")
     look_at = _vector(camera.look_at, "look_at")
     up = _vector(camera.up, "up")
+
     view = position - look_at
-    if np.linalg.norm(view) < 1e-12:
-        raise ValueError("camera.look_at: must differ from camera.position")
-    w = view / np.linalg.norm(view)
-    side = np.cross(up, w)
-    if np.linalg.norm(up) < 1e-12 or np.linalg.norm(side) < 1e-6 * np.linalg.norm(up):
-        raise ValueError("camera.up: must not be parallel to the viewing direction")
+    distance = np.linalg.norm(view)
+    if not distance > 0.0:
+        raise ValueError(f"camera.look_at: must differ from camera.position, both are {look_at}")
+    w = view / distance
+    up_length = np.linalg.norm(up)
+    if not up_length > 0.0:
+        raise ValueError("camera.up: must not be the zero vector")
+    side = np.cross(up / up_length, w)
+    if np.linalg.norm(side) < _MIN_UP_SINE:
+        raise ValueError(
+            f"camera.up: {camera.up} is parallel to the viewing direction "
+            f"(from {camera.position} to {camera.look_at})"
+        )
     u = side / np.linalg.norm(side)
     v = np.cross(w, u)
-    half_height = math.tan(math.radians(fov) / 2)
+    half_height = math.tan(math.radians(fov) / 2.0)
+    for vector in (position, u, v, w):
+        vector.setflags(write=False)
     return CameraFrame(
         origin=position,
         u=u,
@@ -61,35 +98,69 @@ def camera_frame(camera: Camera, width: int, height: int) -> CameraFrame:
         w=w,
         half_width=half_height * width / height,
         half_height=half_height,
-        width=int(width),
-        height=int(height),
+        width=width,
+        height=height,
     )
+
+
+def strata(spp: int) -> tuple[int, int, np.ndarray]:
+    """The jitter grid of a pixel and the cell of each of its ``spp`` samples.
+
+    Returns ``nx`` (columns, ``ceil(sqrt(spp))``), ``ny`` (rows, the fewest with ``nx * ny >=
+    spp``) and ``cells`` (spp,) int64: sample s lies in column ``cells[s] % nx``, row ``cells[s]
+    // nx`` (rows top to bottom). Cells are distinct and spread evenly over the grid; the set is
+    symmetric about the pixel centre whenever that is possible (a grid with a centre cell, or
+    an even number of samples), so the samples' mean position is the pixel centre and the
+    image is not shifted by a fraction of a pixel (spp = 8 leaves out the centre of 3 × 3).
+    """
+    spp = _positive_integer(spp, "spp")
+    nx = math.ceil(math.sqrt(spp))
+    ny = math.ceil(spp / nx)
+    total = nx * ny
+    sample = np.arange(spp, dtype=np.int64)
+    mirror = spp - 1 - sample
+    # The first half of the samples take evenly spaced cells from the start of the grid, the
+    # second half their point reflections (cell c <-> total - 1 - c).
+    first_half = ((2 * np.minimum(sample, mirror) + 1) * total) // (2 * spp)
+    cells = np.where(sample > mirror, total - 1 - first_half, first_half)
+    return nx, ny, cells
 
 
 def primary_rays(
     frame: CameraFrame, spp: int, seed: int, start: int, count: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Camera rays for global sample indices ``start .. start + count``.
+    """Camera rays for the global sample indices ``i`` in ``[start, start + count)``.
 
-    Sample i belongs to pixel ``i // spp`` (row-major, row 0 at the top) and is sample
-    ``i % spp`` of it, placed in its own cell of an nx × ny grid over the pixel and jittered
-    inside it. Returns origins (count, 3) float32, unit directions (count, 3) float32 and
-    pixel (count,) int64.
+    Sample i belongs to pixel ``i // spp`` (row-major, row 0 at the top, column 0 at the left)
+    and is sample ``s = i % spp`` of it, placed in cell ``strata(spp)[2][s]`` of the pixel's
+    jitter grid and jittered inside it by ``sampling.uniform(seed, i, 0 and 1)``, so any split
+    of the indices into batches yields the same rays. Returns origins (count, 3) float32, unit
+    directions (count, 3) float32 and pixel (count,) int64.
     """
+    nx, ny, cells = strata(spp)
+    total = frame.width * frame.height * spp
+    if isinstance(start, bool) or not isinstance(start, numbers.Integral) or start < 0:
+        raise ValueError(f"start: must be a non-negative integer, got {start!r}")
+    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 0:
+        raise ValueError(f"count: must be a non-negative integer, got {count!r}")
+    if start + count > total:
+        raise ValueError(
+            f"samples {start}..{start + count} run past the image's {total} "
+            f"({frame.width}x{frame.height} at {spp} spp)"
+        )
     index = np.arange(start, start + count, dtype=np.int64)
     pixel = index // spp
-    sample = index % spp
-    nx = math.ceil(math.sqrt(spp))
-    ny = math.ceil(spp / nx)
+    cell = cells[index % spp]
     row = pixel // frame.width
     col = pixel % frame.width
-    jx = uniform(seed, index, 0)
-    jy = uniform(seed, index, 1)
-    x = (col + ((sample % nx) + jx) / nx) / frame.width
-    y = (row + ((sample // nx) + jy) / ny) / frame.height
-    sx = (2.0 * x - 1.0) * frame.half_width
-    sy = (1.0 - 2.0 * y) * frame.half_height
-    directions = sx[:, None] * frame.u + sy[:, None] * frame.v - frame.w
+    jitter_x = uniform(seed, index, 0)
+    jitter_y = uniform(seed, index, 1)
+    # Position in [0, 1) across the image, left to right and top to bottom.
+    x = (col + (cell % nx + jitter_x) / nx) / frame.width
+    y = (row + (cell // nx + jitter_y) / ny) / frame.height
+    screen_x = (2.0 * x - 1.0) * frame.half_width
+    screen_y = (1.0 - 2.0 * y) * frame.half_height
+    directions = screen_x[:, None] * frame.u + screen_y[:, None] * frame.v - frame.w
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     origins = np.broadcast_to(frame.origin.astype(np.float32), (count, 3)).copy()
     return origins, directions.astype(np.float32), pixel

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
+from collections.abc import Callable
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -13,18 +15,26 @@ IMAGE_SUFFIXES = (".png", ".npy", ".exr")
 
 
 class Film:
-    """Sums radiance per pixel; ``image(spp)`` is the (height, width, 3) float32 mean."""
+    """Sums radiance per pixel in float64; ``image(spp)`` is the linear mean.
+
+    Pixels are numbered row-major, ``row * width + column``, row 0 at the top.
+    """
 
     def __init__(self, width: int, height: int) -> None:
         self.width = int(width)
         self.height = int(height)
+        if self.width < 1 or self.height < 1:
+            raise ValueError(f"film size must be positive, got {width}x{height}")
+        # One float64 accumulator per channel: float32 sums of millions of samples drift.
         self._sum = np.zeros((3, self.width * self.height), np.float64)
 
     def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:
-        """Add (n, 3) float32 ``rgb`` to the (n,) int64 ``pixel`` indices (row-major)."""
+        """Add (n, 3) float32 ``rgb`` to the (n,) int64 ``pixel`` indices (repeats allowed)."""
         if len(pixel) == 0:
             return
         size = self.width * self.height
+        if pixel.min() < 0 or pixel.max() >= size:
+            raise ValueError(f"pixel: indices must lie in [0, {size}), got {pixel.min()}..")
         for channel in range(3):
             self._sum[channel] += np.bincount(pixel, weights=rgb[:, channel], minlength=size)
 
@@ -33,6 +43,9 @@ class Film:
         self._sum[:, block.first : block.first + block.count] += block.sums
 
     def image(self, spp: int) -> np.ndarray:
+        """(height, width, 3) float32: the sums divided by ``spp`` samples per pixel."""
+        if spp < 1:
+            raise ValueError(f"spp: must be >= 1, got {spp}")
         mean = (self._sum / spp).astype(np.float32)
         return np.ascontiguousarray(mean.T.reshape(self.height, self.width, 3))
 
@@ -56,26 +69,42 @@ class FilmBlock:
 
 
 def tonemap(image: np.ndarray) -> np.ndarray:
-    """(h, w, 3) float32 linear → (h, w, 3) uint8: Reinhard ``c / (1 + c)``, then gamma 1/2.2."""
+    """(h, w, 3) linear radiance → (h, w, 3) uint8 display values.
+
+    Per channel: negatives clamp to 0, Reinhard ``c / (1 + c)`` (+inf maps to 1), gamma
+    ``1/2.2``, then ``round(255 ·)``. NaN is a bug upstream and raises ValueError.
+    """
     image = np.asarray(image, np.float32)
     if np.isnan(image).any():
         raise ValueError("image contains NaN")
-    linear = np.maximum(image, 0.0)
-    mapped = (linear / (1.0 + linear)) ** (1.0 / GAMMA)
-    return np.clip(np.rint(mapped * 255.0), 0, 255).astype(np.uint8)
+    linear = np.maximum(image, np.float32(0.0))
+    with np.errstate(invalid="ignore"):
+        mapped = np.where(np.isinf(linear), np.float32(1.0), linear / (np.float32(1.0) + linear))
+    display = mapped ** np.float32(1.0 / GAMMA)
+    return np.clip(np.rint(display * np.float32(255.0)), 0, 255).astype(np.uint8)
 
 
 def check_output_path(path: str | os.PathLike) -> None:
-    """Raise ValueError, before any rendering, if ``path`` cannot take an image."""
+    """Check, before any rendering, that an image can be written to ``path``.
+
+    Raises ValueError naming the path for an unknown extension, a missing or unwritable
+    directory, or a directory in the way; RuntimeError for ``.exr`` without the OpenEXR package.
+    """
     target = Path(path)
-    if target.suffix.lower() not in IMAGE_SUFFIXES:
+    suffix = target.suffix.lower()
+    if suffix not in IMAGE_SUFFIXES:
         raise ValueError(
             f"{target}: unknown image extension {target.suffix or '(none)'!r}; "
             f"use one of {', '.join(IMAGE_SUFFIXES)}"
         )
-    if not target.parent.resolve().is_dir():
-        raise ValueError(f"{target}: directory {target.parent} does not exist")
-    if target.suffix.lower() == ".exr":
+    directory = target.parent
+    if not directory.is_dir():
+        raise ValueError(f"{target}: directory {directory} does not exist")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise ValueError(f"{target}: directory {directory} is not writable")
+    if target.is_dir():
+        raise ValueError(f"{target}: is a directory")
+    if suffix == ".exr":
         _exr_module()
 
 
@@ -83,52 +112,67 @@ def _exr_module():
     try:
         import OpenEXR
     except ImportError:
-        raise ValueError(
-            "writing .exr needs the OpenEXR package: pip install 'embree-rt[exr]'"
+        raise RuntimeError(
+            "writing .exr images needs the OpenEXR package: pip install openexr "
+            "(or pip install 'embree-rt[exr]')"
         ) from None
     return OpenEXR
 
 
-def _write_png(image: np.ndarray, handle) -> None:
+def _write_png(image: np.ndarray, handle: BinaryIO) -> None:
     from PIL import Image
 
-    Image.fromarray(tonemap(image), "RGB").save(handle, format="PNG")
+    Image.fromarray(tonemap(image)).save(handle, format="PNG")
 
 
-def _write_npy(image: np.ndarray, handle) -> None:
+def _write_npy(image: np.ndarray, handle: BinaryIO) -> None:
     np.save(handle, np.asarray(image, np.float32))
 
 
-def _write_exr(image: np.ndarray, handle) -> None:
+def _write_exr(image: np.ndarray, handle: BinaryIO) -> None:
     OpenEXR = _exr_module()
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     channels = {"RGB": np.ascontiguousarray(image, np.float32)}
-    handle.close()
+    # OpenEXR writes by file name; the open handle only reserved that name.
     with OpenEXR.File(header, channels) as exr:
-        exr.write(handle.name)
+        exr.write(os.fspath(handle.name))
 
 
-WRITERS = {".png": _write_png, ".npy": _write_npy, ".exr": _write_exr}
+# Writers by extension: writer(image, binary file handle opened on the temp file's path).
+WRITERS: dict[str, Callable[[np.ndarray, BinaryIO], None]] = {
+    ".png": _write_png,
+    ".npy": _write_npy,
+    ".exr": _write_exr,
+}
 
 
 def save_image(image: np.ndarray, path: str | os.PathLike) -> None:
-    """Write the (h, w, 3) float32 linear ``image``: ``.png`` tone-mapped 8-bit, ``.npy`` and
-    ``.exr`` linear. Atomic: a temp file in the same directory is renamed over ``path`` only
-    once complete, so a failure or Ctrl-C never leaves a partial or clobbered image."""
+    """Write the (h, w, 3) float32 linear ``image`` to ``path`` by its extension
+    (case-insensitive): ``.png`` tone-mapped 8-bit, ``.npy`` and ``.exr`` linear float32.
+
+    Atomic: the image goes to a temp file in the same directory, renamed over ``path`` only
+    once complete; on any failure, Ctrl-C included, the temp file is removed and an existing
+    file at ``path`` is left as it was.
+    """
     check_output_path(path)
+    image = np.asarray(image)
+    if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
+        raise ValueError(f"{path}: expected an (h, w, 3) image, got shape {image.shape}")
     target = Path(path)
     writer = WRITERS[target.suffix.lower()]
-    handle = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed below, renamed on success)
-        dir=target.parent, prefix=f".{target.name}.", suffix=target.suffix, delete=False
-    )
+    # A plain exclusive open(), not tempfile's: the umask then gives the image the usual mode
+    # (tempfile's files are private, 0600).
+    temp: Path | None = target.with_name(f".{target.name}.{secrets.token_hex(8)}.tmp")
     try:
+        try:
+            handle = open(temp, "xb")  # noqa: SIM115 (closed by the with below)
+        except FileExistsError:
+            temp = None  # someone else's file: never delete it
+            raise
         with handle:
             writer(image, handle)
-        # The temp file is private (0600); give the image the mode a plain open() would.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(handle.name, 0o666 & ~umask)
-        os.replace(handle.name, target)
+        os.replace(temp, target)
     except BaseException:
-        Path(handle.name).unlink(missing_ok=True)
+        if temp is not None:
+            temp.unlink(missing_ok=True)
         raise
