@@ -88,10 +88,15 @@ class RayBatch:
         )
 
 
-def surface_offset(points: np.ndarray) -> np.ndarray:
-    """(n,) float32 distance to push a ray origin off a surface at ``points`` (n, 3), scaled
-    with the coordinates as float32 rounding is (as pbrt's OffsetRayOrigin)."""
-    return (RELATIVE_OFFSET * (1.0 + row_max(np.abs(points)))).astype(np.float32, copy=False)
+def surface_offset(points: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+    """(n,) float32 distance to push a ray origin off a surface at ``points`` (n, 3): relative
+    to the size of the numbers the hit was computed from, as float32 rounding is (pbrt's
+    OffsetRayOrigin bounds the error the same way). ``scale`` (n,) is that size where it exceeds
+    the point's own coordinates (``SurfaceHits.scale``: a big object seen near the origin)."""
+    size = row_max(np.abs(points))
+    if scale is not None:
+        size = np.maximum(size, scale)
+    return (RELATIVE_OFFSET * (1.0 + size)).astype(np.float32, copy=False)
 
 
 class Renderer:
@@ -231,7 +236,7 @@ class Renderer:
         transparency = table.transparency[material]
         local = (1.0 - reflectivity) * (1.0 - transparency)
 
-        offset = surface_offset(position)[:, None]
+        offset = surface_offset(position, surfaces.scale)[:, None]
         outside = position + face_normal * offset
         radiance = (table.ambient[material] * local)[:, None] * color
         radiance += self._direct_light(

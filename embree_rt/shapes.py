@@ -29,7 +29,8 @@ class SurfaceHits:
     ``normal`` (n, 3) float32 unit shading normal and ``face_normal`` (n, 3) float32 unit
     geometric normal, both pointing out of the object (+y for the floor), whichever side the ray
     came from; ``material`` (n,) int32 material id (the floor's is ``floor_material``); ``floor``
-    (n,) bool, the rays that hit the floor.
+    (n,) bool, the rays that hit the floor; ``scale`` (n,) float32, the size of the coordinates
+    the hit was computed from (the object's |centre| + extent): its rounding error scales with it.
     """
 
     hit: np.ndarray
@@ -39,6 +40,7 @@ class SurfaceHits:
     face_normal: np.ndarray
     material: np.ndarray
     floor: np.ndarray
+    scale: np.ndarray
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
@@ -60,6 +62,11 @@ class SceneGeometry:
         self.sphere_radii = np.asarray(scene.sphere_radii, np.float32)
         self.sphere_materials = np.asarray(scene.sphere_materials, np.int32)
         self.sphere_geom_id = -1
+        self.sphere_scale = (
+            np.abs(self.sphere_centers).max(axis=1) + self.sphere_radii
+            if len(self.sphere_radii)
+            else np.zeros(0, np.float32)
+        ).astype(np.float32)
         self.floor = scene.floor
         self.floor_material = len(scene.materials)
         self.materials = MaterialTable.from_materials(
@@ -71,6 +78,8 @@ class SceneGeometry:
         self._instance_smooth: list[bool] = []
         self._instance_geom_ids: list[int] = []
         self._instance_normal_matrix: list[np.ndarray] = []
+        self._instance_scale: list[float] = []
+        self._mesh_bounds: list[np.ndarray] = []
         self._mesh_face_offset: list[int] = []
         self._mesh_vertex_normals: list[np.ndarray] = []
         self._mesh_faces: list[np.ndarray] = []
@@ -103,6 +112,7 @@ class SceneGeometry:
         self._mesh_faces.append(np.asarray(mesh.faces, np.int64))
         self._mesh_vertex_normals.append(np.asarray(mesh.vertex_normals, np.float32))
         self._mesh_face_normals.append(np.asarray(mesh.face_normals, np.float32))
+        self._mesh_bounds.append(np.asarray(mesh.bounds, np.float64))
         return len(self._children) - 1
 
     def _place(self, child: int, transform: np.ndarray, material: int, smooth: bool) -> None:
@@ -112,6 +122,11 @@ class SceneGeometry:
         self._instance_material.append(material)
         self._instance_smooth.append(smooth)
         self._instance_normal_matrix.append(np.linalg.inv(transform[:3, :3]).T)
+        low, high = self._mesh_bounds[child]
+        corners = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1])
+                            for z in (low[2], high[2])])  # fmt: skip
+        world = corners @ transform[:3, :3].T + transform[:3, 3]
+        self._instance_scale.append(float(np.abs(world).max()))
         self.triangle_count += len(self._mesh_faces[child])
         self.instance_count += 1
 
@@ -141,12 +156,14 @@ class SceneGeometry:
         self.instance_material = np.zeros(size, np.int32)
         self.instance_smooth = np.zeros(size, bool)
         self.instance_normal_matrix = np.zeros((size, 3, 3), np.float32)
+        self.instance_scale = np.zeros(size, np.float32)
         if size:
             ids = np.asarray(self._instance_geom_ids)
             self.instance_child[ids] = self._instance_child
             self.instance_material[ids] = self._instance_material
             self.instance_smooth[ids] = self._instance_smooth
             self.instance_normal_matrix[ids] = self._instance_normal_matrix
+            self.instance_scale[ids] = self._instance_scale
         if self._mesh_faces:
             vertex_offsets = np.cumsum([0] + [len(n) for n in self._mesh_vertex_normals[:-1]])
             self.mesh_faces = np.concatenate(
@@ -199,8 +216,10 @@ class SceneGeometry:
             face_normal=np.zeros((n, 3), np.float32),
             material=np.zeros(n, np.int32),
             floor=np.zeros(n, bool),
+            scale=np.zeros(n, np.float32),
         )
-        for name in ("hit", "t", "position", "normal", "face_normal", "material", "floor"):
+        fields = ("hit", "t", "position", "normal", "face_normal", "material", "floor", "scale")
+        for name in fields:
             getattr(full, name)[rows] = getattr(compact, name)
         return full
 
@@ -234,6 +253,7 @@ class SceneGeometry:
         normal[floor, 1] = 1.0
         material[floor] = self.floor_material
         face_normal = normal.copy()
+        scale = np.abs(position).max(axis=1) if k else np.zeros(0, np.float32)
 
         if self.sphere_geom_id >= 0:
             on_spheres = np.flatnonzero(~floor & (geom_id == self.sphere_geom_id) & (inst_id < 0))
@@ -246,6 +266,7 @@ class SceneGeometry:
             # Re-project onto the sphere: removes the rounding error along the ray.
             position[on_spheres] = center + radius * outward
             material[on_spheres] = self.sphere_materials[prim]
+            scale[on_spheres] = np.maximum(scale[on_spheres], self.sphere_scale[prim])
 
         on_instances = np.flatnonzero(~floor & (inst_id >= 0))
         if len(on_instances):
@@ -256,6 +277,7 @@ class SceneGeometry:
             normal[on_instances] = surface_normal
             face_normal[on_instances] = geometric
             material[on_instances] = self.instance_material[inst]
+            scale[on_instances] = np.maximum(scale[on_instances], self.instance_scale[inst])
         return rows, SurfaceHits(
             hit=np.ones(k, bool),
             t=t,
@@ -264,6 +286,7 @@ class SceneGeometry:
             face_normal=face_normal,
             material=material,
             floor=floor,
+            scale=scale.astype(np.float32, copy=False),
         )
 
     def _instance_normals(self, inst, prim, u, v) -> tuple[np.ndarray, np.ndarray]:

@@ -161,7 +161,7 @@ def test_rays_leaving_a_sphere_never_hit_it_again(spheres, radius, distance) -> 
         assert hits.hit.mean() > 0.99
         points = hits.position[hits.hit]
         normals = hits.face_normal[hits.hit]
-        offset = surface_offset(points)[:, None]
+        offset = surface_offset(points, hits.scale[hits.hit])[:, None]
         outward = shading.normalize(rng.normal(size=points.shape).astype(np.float32))
         outward *= np.sign(shading.dot(outward, normals))[:, None]
         again = geometry.intersect(points + normals * offset, outward)
