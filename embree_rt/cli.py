@@ -26,35 +26,36 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_BAD_INPUT)
 
 
-def _int_at_least(flag: str, low: int):
+def _int_at_least(low: int):
+    # argparse prefixes the message with the flag ("argument --width: ..."), so it is not repeated.
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag}: expected an integer, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if value < low:
-            raise argparse.ArgumentTypeError(f"{flag}: must be >= {low}, got {value}")
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
         return value
 
     return parse
 
 
-def _positive_int(flag: str):
-    return _int_at_least(flag, 1)
+def _positive_int():
+    return _int_at_least(1)
 
 
-def _non_negative_int(flag: str):
-    return _int_at_least(flag, 0)
+def _non_negative_int():
+    return _int_at_least(0)
 
 
 def _add_render_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, help="image to write: .png, .npy or .exr")
-    parser.add_argument("--width", type=_positive_int("--width"))
-    parser.add_argument("--height", type=_positive_int("--height"))
-    parser.add_argument("--spp", type=_positive_int("--spp"), help="samples per pixel")
-    parser.add_argument("--max-depth", type=_non_negative_int("--max-depth"))
-    parser.add_argument("--seed", type=_non_negative_int("--seed"))
-    parser.add_argument("--threads", type=_positive_int("--threads"), help="default: all cores")
+    parser.add_argument("--width", type=_positive_int())
+    parser.add_argument("--height", type=_positive_int())
+    parser.add_argument("--spp", type=_positive_int(), help="samples per pixel")
+    parser.add_argument("--max-depth", type=_non_negative_int())
+    parser.add_argument("--seed", type=_non_negative_int())
+    parser.add_argument("--threads", type=_positive_int(), help="default: all cores")
     parser.add_argument(
         "--spheres",
         choices=("analytic", "mesh"),
@@ -74,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("scene", help="scene file")
     _add_render_flags(render)
     random = commands.add_parser("random", help="render a random sphere field of N spheres")
-    random.add_argument("--count", type=_positive_int("--count"), required=True)
+    random.add_argument("--count", type=_positive_int(), required=True)
     random.add_argument("--save-scene", help="also write the generated scene to this file")
     _add_render_flags(random)
     info = commands.add_parser("info", help="describe a scene: objects, bounds, build time")

@@ -40,4 +40,11 @@ def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Tr
     for mesh, _ in parts:
         if not np.isfinite(mesh.vertices).all():
             raise SceneError(file, key, f"{path}: vertices contain NaN or inf")
+        # trimesh loads a face naming a missing vertex without complaint (PLY); catch it here,
+        # where the message can name the scene file and key, not later in the BVH build.
+        faces = np.asarray(mesh.faces)
+        if faces.min() < 0 or faces.max() >= len(mesh.vertices):
+            raise SceneError(
+                file, key, f"{path}: a face indexes a vertex outside [0, {len(mesh.vertices)})"
+            )
     return parts

@@ -1,0 +1,386 @@
+"""The ``embree-rt`` command, run for real in a subprocess.
+
+Bad input: exit code 2, exactly one stderr line ``embree-rt: error: ...`` naming the file and the
+key, no traceback, no output file, an existing image left byte for byte. Good input: PNG and NPY
+images of the asked size (the PNG is the NPY tone-mapped by Reinhard and gamma 2.2, computed here),
+``info`` counts that match the scene file, a million-sphere field, ``--save-scene``, and Ctrl-C
+(exit 130, old image intact, no temp file left).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+
+from embree_rt import load_scene, random_field
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parent.parent
+TINY = ["--width", "16", "--height", "9", "--spp", "1"]
+SPHERE = "[[spheres]]\ncenter = [0.0, 1.0, 0.0]\nradius = 1.0\n"
+SECOND_SPHERE = "[[spheres]]\ncenter = [2.0, 0.5, 0.0]\n"
+
+
+def run_cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "embree_rt", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
+
+
+# -- bad input ------------------------------------------------------------------------------------
+
+
+@dataclass
+class Case:
+    """One bad input: the scene file to write (``text`` None: leave it missing), the output name,
+    extra flags, and the strings the one error line must contain."""
+
+    scene: str
+    text: str | None
+    needles: list[str]
+    output: str = "out.png"
+    flags: list[str] = field(default_factory=list)
+
+
+def _nan_json() -> str:
+    # json.dumps writes the NaN literal that Python's (and many tools') JSON readers accept
+    spheres = [{"center": [0, 1, 0], "radius": 1}, {"center": [2, 1, 0], "radius": float("nan")}]
+    return json.dumps({"spheres": spheres})
+
+
+CASES = {
+    "missing scene file": Case("absent.toml", None, ["absent.toml", "no such file"]),
+    "malformed toml": Case(
+        "scene.toml", "[render\nwidth = 16\n", ["scene.toml", "(syntax)", "line 1"]
+    ),
+    "malformed json": Case(
+        "scene.json", '{"render": {"width": 16,}}', ["scene.json", "(syntax)", "line 1"]
+    ),
+    "json top level not a table": Case("scene.json", "[1, 2]", ["scene.json", "(top level)"]),
+    "unknown key": Case(
+        "scene.toml", "[render]\nwidht = 16\n", ["render.widht", "did you mean 'width'"]
+    ),
+    "unknown section": Case(
+        "scene.toml", "[camra]\nfov = 30\n", ["camra", "did you mean 'camera'"]
+    ),
+    "wrong type": Case(
+        "scene.toml", SPHERE + SECOND_SPHERE + 'radius = "big"\n', ["spheres[1].radius", "'big'"]
+    ),
+    "negative radius": Case(
+        "scene.toml", SPHERE + SECOND_SPHERE + "radius = -0.5\n", ["spheres[1].radius", "> 0"]
+    ),
+    "nan in json": Case("scene.json", _nan_json(), ["scene.json", "spheres[1].radius", "finite"]),
+    "nan in toml": Case(
+        "scene.toml",
+        "[[spheres]]\ncenter = [0, nan, 0]\nradius = 1\n",
+        ["spheres[0].center", "finite"],
+    ),
+    "fov zero": Case("scene.toml", "[camera]\nfov = 0\n", ["camera.fov", "> 0"]),
+    "spp zero": Case("scene.toml", "[render]\nspp = 0\n", ["render.spp", ">= 1"]),
+    "width -1 in file": Case("scene.toml", "[render]\nwidth = -1\n", ["render.width", ">= 1"]),
+    "width -1 flag": Case("scene.toml", SPHERE, ["--width", "-1"], flags=["--width", "-1"]),
+    "undefined material": Case(
+        "scene.toml", SPHERE + 'material = "nope"\n', ["spheres[0].material", "'nope'"]
+    ),
+    "unknown preset": Case(
+        "scene.toml", '[materials.x]\npreset = "velvet"\n', ["materials.x.preset", "velvet"]
+    ),
+    "missing mesh": Case(
+        "scene.toml",
+        '[[meshes]]\nfile = "nowhere.obj"\n',
+        ["meshes[0].file", "nowhere.obj", "no such file"],
+    ),
+    "garbage ply": Case(
+        "scene.toml",
+        SPHERE + '[[meshes]]\nfile = "garbage.ply"\n',
+        ["meshes[0].file", "garbage.ply"],
+    ),
+    "face index out of range": Case(
+        "scene.toml", '[[meshes]]\nfile = "bad_index.ply"\n', ["meshes[0].file", "bad_index.ply"]
+    ),
+    "empty mesh": Case(
+        "scene.toml",
+        '[[meshes]]\nfile = "empty.obj"\n',
+        ["meshes[0].file", "empty.obj", "no triangles"],
+    ),
+    "npz without radii": Case(
+        "scene.toml",
+        '[[sphere_arrays]]\nfile = "no_radii.npz"\n',
+        ["sphere_arrays[0].file", "no_radii.npz", "radii"],
+    ),
+    "output in a missing directory": Case(
+        "scene.toml", SPHERE, ["missing_dir", "does not exist"], output="missing_dir/out.png"
+    ),
+    "unknown output extension": Case("scene.toml", SPHERE, ["out.bmp", ".bmp"], output="out.bmp"),
+}
+
+# Cases that also run with an image already at the output path, one per stage that can fail:
+# flags, output path, syntax, validation, mesh import.
+OVERWRITE_CASES = [
+    "width -1 flag",
+    "unknown output extension",
+    "malformed toml",
+    "negative radius",
+    "garbage ply",
+    "face index out of range",
+]
+
+
+def write_bad_inputs(folder: Path) -> None:
+    """The files the bad scenes point at."""
+    (folder / "garbage.ply").write_bytes(b"ply\nformat ascii 1.0\n\x00\xff\xfe garbage \x01\x02")
+    # a face that names vertex 7 of 3: trimesh loads it without complaint
+    (folder / "bad_index.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n"
+    )
+    (folder / "empty.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    np.savez(folder / "no_radii.npz", centers=np.zeros((4, 3)))
+
+
+@dataclass
+class BadRun:
+    """One bad-input run: the CLI's answer, the files around it before, the output path and
+    (when an image was there first) its bytes."""
+
+    result: subprocess.CompletedProcess
+    folder: Path
+    scene: Path
+    output: Path
+    files_before: set[Path]
+    image_before: bytes | None
+
+
+def bad_run(name: str, folder: Path, existing_image: bool) -> BadRun:
+    case = CASES[name]
+    write_bad_inputs(folder)
+    scene = folder / case.scene
+    if case.text is not None:
+        scene.write_text(case.text, encoding="utf-8")
+    output = folder / case.output
+    image_before = None
+    if existing_image:
+        Image.new("RGB", (5, 3), (10, 20, 30)).save(output, format="PNG")
+        image_before = output.read_bytes()
+    files_before = set(folder.rglob("*"))
+    result = run_cli("render", str(scene), "-o", str(output), *TINY, *case.flags, "--quiet")
+    return BadRun(result, folder, scene, output, files_before, image_before)
+
+
+@pytest.fixture(scope="module")
+def bad_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, bool], BadRun]:
+    """Every bad-input run, two at a time: each is a fresh interpreter that spends most of its
+    second importing trimesh, and two cores can do two of those at once."""
+    jobs = [(name, False) for name in CASES] + [(name, True) for name in OVERWRITE_CASES]
+    folders = [tmp_path_factory.mktemp("bad") for _ in jobs]
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        runs = pool.map(lambda job, folder: bad_run(job[0], folder, job[1]), jobs, folders)
+        return dict(zip(jobs, runs, strict=True))
+
+
+def assert_one_line_error(result: subprocess.CompletedProcess, needles: list[str]) -> None:
+    assert result.returncode == 2, result.stderr
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("embree-rt: error: ")
+    for needle in needles:
+        assert needle in lines[0], f"{needle!r} missing from {lines[0]!r}"
+    assert result.stdout == ""
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(name: str, bad_runs) -> None:
+    run = bad_runs[name, False]
+    assert_one_line_error(run.result, CASES[name].needles)
+    assert not run.output.exists()
+    assert set(run.folder.rglob("*")) == run.files_before  # nothing new: no image, no temp file
+
+
+@pytest.mark.parametrize("name", OVERWRITE_CASES)
+def test_bad_input_leaves_an_existing_image_alone(name: str, bad_runs) -> None:
+    run = bad_runs[name, True]
+    assert_one_line_error(run.result, CASES[name].needles)
+    assert run.output.read_bytes() == run.image_before
+    assert set(run.folder.rglob("*")) == run.files_before
+
+
+def test_usage_errors_are_one_line_too(tmp_path: Path) -> None:
+    assert_one_line_error(run_cli(), ["required"])
+    assert_one_line_error(
+        run_cli("random", "--count", "0", "-o", str(tmp_path / "x.png")), ["--count"]
+    )
+    assert not (tmp_path / "x.png").exists()
+
+
+# -- good input -----------------------------------------------------------------------------------
+
+
+def reinhard_gamma(linear: np.ndarray) -> np.ndarray:
+    """(h, w, 3) linear radiance → uint8 the way the seed article maps it: c / (1 + c), ^(1/2.2)."""
+    mapped = (np.maximum(linear, 0) / (1 + np.maximum(linear, 0))) ** (1 / 2.2)
+    return np.clip(np.rint(mapped * 255), 0, 255).astype(np.uint8)
+
+
+def test_render_writes_png_and_npy_of_the_asked_size(tmp_path: Path) -> None:
+    scene = ROOT / "scenes" / "three_spheres.toml"
+    size = ["--width", "32", "--height", "18", "--spp", "1"]
+    png, npy = tmp_path / "x.png", tmp_path / "x.npy"
+    result = run_cli("render", str(scene), "-o", str(png), *size)
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    with Image.open(png) as image:
+        assert image.format == "PNG" and image.size == (32, 18) and image.mode == "RGB"
+        pixels = np.asarray(image)
+    assert run_cli("render", str(scene), "-o", str(npy), *size, "--quiet").returncode == 0
+    linear = np.load(npy)
+    assert linear.shape == (18, 32, 3) and linear.dtype == np.float32
+    assert np.isfinite(linear).all() and (linear >= 0).all()
+    assert linear.std() > 0.01  # an image, not a blank
+    # same scene and seed: the PNG is exactly the NPY tone-mapped (off by one at most: rounding)
+    difference = np.abs(pixels.astype(int) - reinhard_gamma(linear).astype(int))
+    assert difference.max() <= 1
+    assert not list(tmp_path.glob(".x.*"))  # no temp files left behind
+
+
+def expected_counts(scene_file: Path) -> dict[str, int]:
+    """Spheres, placements, distinct meshes and triangles of a scene file, counted from the
+    file itself with trimesh (a glTF places one mesh per node)."""
+    document = tomllib.loads(scene_file.read_text(encoding="utf-8"))
+    files: dict[Path, list[tuple[str, int]]] = {}
+    placements = placed_triangles = 0
+    for entry in document.get("meshes", []):
+        path = (scene_file.parent / entry["file"]).resolve()
+        if path not in files:
+            loaded = trimesh.load(str(path), process=False)
+            if isinstance(loaded, trimesh.Scene):
+                nodes = loaded.graph.nodes_geometry
+                geometry = [loaded.graph[n][1] for n in nodes]
+                files[path] = [(f"{path}:{g}", len(loaded.geometry[g].faces)) for g in geometry]
+            else:
+                files[path] = [(str(path), len(loaded.faces))]
+        placements += len(files[path])
+        placed_triangles += sum(faces for _, faces in files[path])
+    distinct = dict(item for parts in files.values() for item in parts)
+    return {
+        "spheres": len(document.get("spheres", [])),
+        "placements": placements,
+        "distinct": len(distinct),
+        "stored": sum(distinct.values()),
+        "placed": placed_triangles,
+        "lights": len(document.get("lights", [])),
+    }
+
+
+def test_info_counts_what_the_file_holds() -> None:
+    scene_file = ROOT / "scenes" / "mesh_and_spheres.toml"
+    expected = expected_counts(scene_file)
+    # the file has 16 [[meshes]] entries, one of them the three-node trio.glb
+    assert scene_file.read_text().count("[[meshes]]") + 2 == expected["placements"]
+    console_script = Path(sys.executable).with_name("embree-rt")
+    result = subprocess.run(
+        [str(console_script), "info", str(scene_file)], capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 0, result.stderr
+    lines = dict(line.split(":", 1) for line in result.stdout.splitlines())
+    info = {key.strip(): value.strip() for key, value in lines.items()}
+    assert info["spheres"] == f"{expected['spheres']:,}"
+    assert info["instances"] == f"{expected['placements']:,}"
+    assert info["meshes"] == (
+        f"{expected['placements']:,} placements of {expected['distinct']:,} distinct meshes"
+    )
+    assert info["triangles"] == f"{expected['stored']:,} stored, {expected['placed']:,} placed"
+    assert info["lights"] == str(expected["lights"])
+    assert info["floor"] == "y = 0"
+
+
+def test_a_million_sphere_field_renders(tmp_path: Path) -> None:
+    output = tmp_path / "out.png"
+    result = run_cli(
+        "random", "--count", "1000000", "-o", str(output),
+        "--width", "64", "--height", "36", "--spp", "1", "--quiet",
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == ""
+    with Image.open(output) as image:
+        assert image.size == (64, 36)
+        assert np.asarray(image).std() > 1  # not blank
+
+
+def test_save_scene_writes_the_generated_field(tmp_path: Path) -> None:
+    saved, first, second = tmp_path / "s.toml", tmp_path / "a.npy", tmp_path / "b.npy"
+    result = run_cli(
+        "random", "--count", "500", "--save-scene", str(saved), "-o", str(first), *TINY, "--quiet"
+    )
+    assert result.returncode == 0, result.stderr
+    loaded = load_scene(saved)
+    assert len(loaded.sphere_radii) == 500
+    reference = random_field(500, seed=0)  # the command's default seed
+    np.testing.assert_array_equal(loaded.sphere_centers, reference.sphere_centers)
+    np.testing.assert_array_equal(loaded.sphere_radii, reference.sphere_radii)
+    # rendering the saved file gives the very image the random command rendered
+    assert run_cli("render", str(saved), "-o", str(second), *TINY, "--quiet").returncode == 0
+    np.testing.assert_array_equal(np.load(first), np.load(second))
+
+
+def test_bad_save_scene_target_writes_nothing(tmp_path: Path) -> None:
+    output = tmp_path / "out.png"
+    result = run_cli(
+        "random", "--count", "10", "--save-scene", str(tmp_path / "s.yaml"), "-o", str(output),
+        *TINY, "--quiet",
+    )  # fmt: skip
+    assert_one_line_error(result, ["--save-scene", "s.yaml"])
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- Ctrl-C ---------------------------------------------------------------------------------------
+
+
+def test_ctrl_c_exits_130_and_keeps_the_old_image(tmp_path: Path) -> None:
+    output = tmp_path / "out.png"
+    Image.new("RGB", (4, 4), (200, 100, 50)).save(output, format="PNG")
+    before = output.read_bytes()
+    process = subprocess.Popen(
+        [
+            sys.executable, "-m", "embree_rt", "random", "--count", "200000", "-o", str(output),
+            "--width", "1920", "--height", "1080", "--spp", "16", "--quiet",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        time.sleep(3.0)  # past imports, field generation and BVH build: rendering by now
+        assert process.poll() is None, "the render ended before it could be interrupted"
+        interrupted_at = time.monotonic()
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 130, stderr
+    assert time.monotonic() - interrupted_at < 10  # stops promptly, not after the full render
+    assert "Traceback" not in stderr
+    assert output.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png"]  # no .out.png.* temp file

@@ -1,0 +1,190 @@
+"""The random sphere field: exact counts, three heroes in the middle, small spheres resting on the
+floor without touching each other (checked with a k-d tree), deterministic per seed, and a
+million spheres generated."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from embree_rt import Scene, random_field
+
+
+def materials_of(scene: Scene) -> list:
+    """(n,) list of the Material of each sphere."""
+    table = list(scene.materials.values())
+    return [table[i] for i in scene.sphere_materials]
+
+
+def hero_rows(scene: Scene) -> np.ndarray:
+    """Rows of the spheres that are heroes: the article's big spheres of radius 1."""
+    return np.flatnonzero(scene.sphere_radii >= 0.99)
+
+
+def overlapping_pairs(centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """(k, 2) rows of sphere pairs that intersect, found by a k-d tree over the centers."""
+    centers = np.asarray(centers, np.float64)
+    radii = np.asarray(radii, np.float64)
+    pairs = cKDTree(centers).query_pairs(2 * radii.max(), output_type="ndarray")
+    gap = np.linalg.norm(centers[pairs[:, 0]] - centers[pairs[:, 1]], axis=1)
+    return pairs[gap < radii[pairs[:, 0]] + radii[pairs[:, 1]]]
+
+
+@pytest.mark.parametrize("count", [1, 2, 3, 60, 10_000])
+def test_exact_count(count: int) -> None:
+    scene = random_field(count, seed=1)
+    assert scene.sphere_centers.shape == (count, 3)
+    assert scene.sphere_radii.shape == (count,)
+    assert scene.sphere_materials.shape == (count,)
+    assert np.isfinite(scene.sphere_centers).all()
+    assert (scene.sphere_radii > 0).all()
+    assert scene.sphere_materials.min() >= 0
+    assert scene.sphere_materials.max() < len(scene.materials)
+
+
+@pytest.mark.parametrize("count", [3, 60, 10_000])
+def test_three_heroes_stand_in_the_middle(count: int) -> None:
+    scene = random_field(count, seed=2)
+    heroes = hero_rows(scene)
+    assert len(heroes) == 3
+    centers = scene.sphere_centers[heroes]
+    np.testing.assert_array_equal(centers[:, 1], scene.sphere_radii[heroes])  # on the floor
+    assert (np.hypot(centers[:, 0], centers[:, 2]) <= 5.0).all()
+    kinds = [materials_of(scene)[i] for i in heroes]
+    assert sum(m.transparency > 0 for m in kinds) == 1  # glass
+    assert sum(m.metallic for m in kinds) == 1  # gold metal
+    gold = next(m for m in kinds if m.metallic)
+    assert gold.color[0] > gold.color[1] > gold.color[2]
+    assert sum(m.reflectivity >= 0.9 and not m.metallic for m in kinds) == 1  # mirror
+    # the small spheres are all smaller than the heroes
+    small = np.setdiff1d(np.arange(count), heroes)
+    assert (scene.sphere_radii[small] < 0.5).all()
+
+
+@pytest.mark.parametrize("count", [1, 2])
+def test_fewer_than_three_are_all_heroes(count: int) -> None:
+    """Documented: the first (up to) three spheres are the heroes, the glass one first."""
+    scene = random_field(count)
+    assert len(hero_rows(scene)) == count
+    assert materials_of(scene)[0].transparency > 0
+    np.testing.assert_array_equal(scene.sphere_centers[:, 1], scene.sphere_radii)
+    assert len(overlapping_pairs(scene.sphere_centers, scene.sphere_radii)) == 0
+
+
+def test_heroes_can_be_left_out() -> None:
+    scene = random_field(60, heroes=False)
+    assert len(scene.sphere_radii) == 60
+    assert len(hero_rows(scene)) == 0
+
+
+def test_small_spheres_rest_on_the_floor_without_overlapping() -> None:
+    scene = random_field(2000, seed=3)
+    centers, radii = scene.sphere_centers, scene.sphere_radii
+    small = np.setdiff1d(np.arange(2000), hero_rows(scene))
+    assert len(small) == 1997
+    np.testing.assert_array_equal(centers[small, 1], radii[small])
+    assert scene.floor is not None and scene.floor.height == 0.0
+    assert len(overlapping_pairs(centers, radii)) == 0
+
+
+def test_small_spheres_wear_many_random_materials() -> None:
+    scene = random_field(2000, seed=4)
+    small = np.setdiff1d(np.arange(2000), hero_rows(scene))
+    table = list(scene.materials.values())
+    used = [table[i] for i in np.unique(scene.sphere_materials[small])]
+    assert len(set(used)) > 20
+    assert any(m.transparency > 0 for m in used)
+    assert any(m.metallic for m in used)
+    assert any(m.transparency == 0 and not m.metallic and m.reflectivity == 0 for m in used)
+
+
+def test_overlap_check_catches_an_overlap() -> None:
+    """The k-d tree check above is not vacuous: two touching spheres are found."""
+    centers = np.array([[0.0, 0.2, 0.0], [0.3, 0.2, 0.0], [5.0, 0.2, 0.0]])
+    assert overlapping_pairs(centers, np.array([0.2, 0.2, 0.2])).tolist() == [[0, 1]]
+
+
+def test_same_seed_same_field_other_seed_other_field() -> None:
+    first, again, other = random_field(500, seed=9), random_field(500, seed=9), random_field(500)
+    for name in ("sphere_centers", "sphere_radii", "sphere_materials"):
+        np.testing.assert_array_equal(getattr(first, name), getattr(again, name))
+    assert first.materials == again.materials
+    assert first.camera == again.camera and first.lights == again.lights
+    assert not np.array_equal(first.sphere_centers, other.sphere_centers)
+    assert not np.array_equal(first.sphere_radii, other.sphere_radii)
+
+
+@pytest.mark.parametrize("count", [0, -1, 2.5, True])
+def test_bad_counts_are_rejected(count) -> None:
+    with pytest.raises(ValueError, match="count"):
+        random_field(count)
+
+
+def test_a_million_spheres() -> None:
+    count = 1_000_000
+    scene = random_field(count, seed=0)
+    centers, radii = scene.sphere_centers, scene.sphere_radii
+    assert centers.shape == (count, 3) and centers.dtype == np.float32
+    assert np.isfinite(centers).all()
+    small = np.setdiff1d(np.arange(count), hero_rows(scene))
+    assert len(small) == count - 3
+    np.testing.assert_array_equal(centers[small, 1], radii[small])
+    # constant density: a million spheres fill a disc of about sqrt(n / pi) units, not more
+    reach = np.hypot(centers[:, 0], centers[:, 2]).max()
+    assert reach <= 1.1 * math.sqrt(count / math.pi) + 6
+    # no two small spheres overlap, and none touches a hero
+    assert len(overlapping_pairs(centers[small], radii[small])) == 0
+    tree = cKDTree(centers[small].astype(np.float64))
+    for hero in hero_rows(scene):
+        near = small[tree.query_ball_point(centers[hero], radii[hero] + radii[small].max())]
+        gap = np.linalg.norm(centers[near] - centers[hero], axis=1)
+        assert (gap >= radii[near] + radii[hero]).all()
+
+
+@pytest.mark.parametrize("radius", [(0.05, 0.1), (0.3, 0.9)])
+def test_radius_range_is_kept(radius: tuple[float, float]) -> None:
+    """Small or large (then the grid spreads out), the radii stay in range and apart."""
+    scene = random_field(3000, seed=6, radius=radius)
+    small = np.setdiff1d(np.arange(3000), hero_rows(scene))
+    radii = scene.sphere_radii[small]
+    assert radii.min() >= np.float32(radius[0]) and radii.max() <= np.float32(radius[1])
+    np.testing.assert_array_equal(scene.sphere_centers[small, 1], radii)
+    assert len(overlapping_pairs(scene.sphere_centers, scene.sphere_radii)) == 0
+
+
+@pytest.mark.parametrize("extent", [8.0, 60.0])
+def test_extent_bounds_the_field(extent: float) -> None:
+    """2000 spheres squeezed into (or spread over) a disc of the given radius, still apart."""
+    scene = random_field(2000, seed=7, extent=extent)
+    assert len(scene.sphere_radii) == 2000
+    reach = np.hypot(scene.sphere_centers[:, 0], scene.sphere_centers[:, 2]).max()
+    assert reach <= 1.05 * extent + 1.0
+    assert reach >= 0.8 * extent  # the disc is filled out to the extent, not bunched up
+    assert len(overlapping_pairs(scene.sphere_centers, scene.sphere_radii)) == 0
+
+
+def test_mix_limits_the_kinds() -> None:
+    scene = random_field(500, seed=8, mix={"glass": 1.0})
+    small = np.setdiff1d(np.arange(500), hero_rows(scene))
+    table = list(scene.materials.values())
+    assert all(table[i].transparency > 0 for i in np.unique(scene.sphere_materials[small]))
+
+
+@pytest.mark.parametrize(
+    ("arguments", "name"),
+    [
+        ({"radius": (0.3, 0.1)}, "radius"),
+        ({"radius": (0.1, 0.9), "extent": 5.0}, "radius"),  # 100 of them cannot fit apart
+        ({"extent": -1.0}, "extent"),
+        ({"extent": 1.0}, "extent"),  # too small even for the heroes
+        ({"mix": {"velvet": 1.0}}, "velvet"),
+        ({"mix": {"matte": 0.0}}, "mix"),
+        ({"seed": -1}, "seed"),
+    ],
+)
+def test_bad_parameters_name_the_parameter(arguments: dict, name: str) -> None:
+    with pytest.raises(ValueError, match=name):
+        random_field(100, **arguments)
