@@ -1,12 +1,19 @@
-"""Typed reading of scene-file values: each reader names the key it rejects."""
+"""Typed reading of scene-file values: each reader names the key it rejects.
+
+A key that is absent takes its default (unchecked: defaults are trusted); a key that is present is
+always checked, so a JSON ``null`` is an error, not a silent default.
+"""
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Mapping
 from typing import Any
 
 from embree_rt.scene.errors import SceneError, unknown_key_message
+
+_ABSENT = object()
 
 
 class Table:
@@ -34,11 +41,22 @@ class Table:
         self.known.add(name)
         return self.data.get(name, default)
 
-    def require(self, name: str) -> Any:
+    def _value(self, name: str, required: bool) -> Any:
+        """The value at ``name``, or ``_ABSENT``; a missing required key is an error that points
+        at a misspelling of it when there is one (``radious`` for ``radius``)."""
         self.known.add(name)
-        if name not in self.data:
+        if name in self.data:
+            return self.data[name]
+        if required:
+            strangers = [key for key in self.data if key not in self.known]
+            close = difflib.get_close_matches(name, strangers, n=1, cutoff=0.6)
+            if close:
+                raise self.error(close[0], f"unknown key (did you mean {name!r}?)")
             raise self.error(name, "is required")
-        return self.data[name]
+        return _ABSENT
+
+    def require(self, name: str) -> Any:
+        return self._value(name, required=True)
 
     def number(
         self,
@@ -51,15 +69,15 @@ class Table:
         high_open: bool = False,
         required: bool = False,
     ) -> float | None:
-        value = self.require(name) if required else self.raw(name, default)
-        if value is None or value is default:
-            return value
+        value = self._value(name, required)
+        if value is _ABSENT:
+            return default
         return check_number(self, name, value, low, high, low_open, high_open)
 
     def integer(self, name: str, default: int | None = None, *, low: int | None = None) -> int:
-        value = self.raw(name, default)
-        if value is None or value is default:
-            return value
+        value = self._value(name, required=False)
+        if value is _ABSENT:
+            return default
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, f"expected an integer, got {_show(value)}")
         if low is not None and value < low:
@@ -67,23 +85,26 @@ class Table:
         return value
 
     def boolean(self, name: str, default: bool) -> bool:
-        value = self.raw(name, default)
+        value = self._value(name, required=False)
+        if value is _ABSENT:
+            return default
         if not isinstance(value, bool):
             raise self.error(name, f"expected true or false, got {_show(value)}")
         return value
 
     def string(self, name: str, default: str | None = None, *, required: bool = False) -> str:
-        value = self.require(name) if required else self.raw(name, default)
-        if value is None and not required:
-            return value
+        value = self._value(name, required)
+        if value is _ABSENT:
+            return default
         if not isinstance(value, str) or not value:
             raise self.error(name, f"expected a non-empty string, got {_show(value)}")
         return value
 
     def vector(self, name: str, default=None, *, required: bool = False, non_negative=False):
-        value = self.require(name) if required else self.raw(name, default)
-        if value is None or value is default:
-            return value
+        """Three finite numbers as a tuple of floats."""
+        value = self._value(name, required)
+        if value is _ABSENT:
+            return default
         if not isinstance(value, list | tuple) or len(value) != 3:
             raise self.error(name, f"expected a list of three numbers, got {_show(value)}")
         numbers = []
@@ -115,11 +136,15 @@ class Table:
         return self.vector(name, default, non_negative=True)
 
     def table(self, name: str) -> Table | None:
-        value = self.raw(name)
-        return None if value is None else Table(self.file, self.key(name), value)
+        """The sub-table at ``name``, or None when absent."""
+        value = self._value(name, required=False)
+        return None if value is _ABSENT else Table(self.file, self.key(name), value)
 
     def tables(self, name: str) -> list[Table]:
-        value = self.raw(name, [])
+        """The array of tables at ``name`` (``[[name]]`` in TOML), empty when absent."""
+        value = self._value(name, required=False)
+        if value is _ABSENT:
+            return []
         if not isinstance(value, list):
             raise self.error(name, f"expected a list of tables, got {_kind(value)}")
         return [Table(self.file, f"{self.key(name)}[{i}]", item) for i, item in enumerate(value)]

@@ -18,7 +18,7 @@ import numpy as np
 import trimesh
 
 from embree_rt.materials import PRESETS, Checker, Material
-from embree_rt.scene.errors import SceneError
+from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
 from embree_rt.scene.meshes import load_mesh_parts
 from embree_rt.scene.model import Background, Camera, Floor, PointLight, RenderSettings, Scene
@@ -151,16 +151,17 @@ class SceneReader:
     def _field_plan(self, table: Table | None) -> FieldPlan | None:
         if table is None:
             return None
-        count = table.integer("count", None, low=1)
-        if count is None:
-            raise table.error("count", "is required")
+        table.require("count")
+        count = table.integer("count", low=1)
         seed = table.integer("seed", 0, low=0)
         extent = table.number("extent", None, low=0, low_open=True)
         radius = table.pair("radius", low=0, low_open=True) if table.has("radius") else None
         mix = None
         if (mix_table := table.table("mix")) is not None:
+            for name in mix_table.data:
+                if name not in PRESETS:
+                    raise mix_table.error(name, unknown_key_message(name, PRESETS))
             mix = {name: mix_table.number(name, required=True, low=0) for name in mix_table.data}
-            mix_table.finish()
         heroes = table.boolean("heroes", True)
         table.finish()
         try:
