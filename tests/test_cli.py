@@ -10,6 +10,7 @@ images of the asked size (the PNG is the NPY tone-mapped by Reinhard and gamma 2
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -356,6 +357,25 @@ def test_bad_save_scene_target_writes_nothing(tmp_path: Path) -> None:
 # -- Ctrl-C ---------------------------------------------------------------------------------------
 
 
+def wait_until_busy(pid: int, cpu_seconds: float, timeout: float = 60.0) -> None:
+    """Wait until process ``pid`` has used ``cpu_seconds`` of CPU (all threads), or has ended.
+
+    Imports, generating 200k spheres and the BVH take about 1.5 CPU seconds; a fixed wall-clock
+    wait would be too short on a busy machine and interrupt the imports instead of the render."""
+    ticks = os.sysconf("SC_CLK_TCK")
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except FileNotFoundError:
+            return
+        if fields[0] == "Z":  # ended, not yet reaped
+            return
+        if (int(fields[11]) + int(fields[12])) / ticks >= cpu_seconds:  # utime + stime
+            return
+        time.sleep(0.1)
+
+
 def test_ctrl_c_exits_130_and_keeps_the_old_image(tmp_path: Path) -> None:
     output = tmp_path / "out.png"
     Image.new("RGB", (4, 4), (200, 100, 50)).save(output, format="PNG")
@@ -370,7 +390,7 @@ def test_ctrl_c_exits_130_and_keeps_the_old_image(tmp_path: Path) -> None:
         text=True,
     )  # fmt: skip
     try:
-        time.sleep(3.0)  # past imports, field generation and BVH build: rendering by now
+        wait_until_busy(process.pid, cpu_seconds=3.0)
         assert process.poll() is None, "the render ended before it could be interrupted"
         interrupted_at = time.monotonic()
         process.send_signal(signal.SIGINT)
