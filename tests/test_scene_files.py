@@ -846,3 +846,128 @@ def test_a_bad_file_never_escapes_as_another_exception(tmp_path: Path) -> None:
         path.write_bytes(rng.integers(0, 256, size, dtype=np.uint8).tobytes())
         with contextlib.suppress(SceneError):  # anything else fails the test
             load_scene(path)
+
+
+# -- the random field, from a file and as a picture ----------------------------------------------
+
+
+def test_random_field_block_equals_random_field_in_python(tmp_path: Path) -> None:
+    (tmp_path / "field.toml").write_text(
+        """
+[random_field]
+count = 700
+seed = 5
+extent = 12.5
+radius = [0.1, 0.2]
+mix = { matte = 2, metal = 1 }
+heroes = false
+
+[render]
+width = 100
+
+[materials.metal_03]
+preset = "mirror"
+
+[[spheres]]
+center = [0.0, 3.0, 0.0]
+radius = 3.0
+material = "matte_01"
+"""
+    )
+    expected = random_field(
+        700, seed=5, extent=12.5, radius=(0.1, 0.2), mix={"matte": 2, "metal": 1}, heroes=False
+    )
+    expected.render = replace(expected.render, width=100)
+    expected.add_material("metal_03", preset("mirror"))  # replaces the palette's, in place
+    expected.add_sphere((0, 3, 0), 3.0, "matte_01")
+    assert_same_scene(load_scene(tmp_path / "field.toml"), expected)
+
+
+def _angular_radius(camera: Camera, center, radius: float) -> float:
+    """Half the angle, in degrees, a sphere takes up seen from the camera."""
+    distance = np.linalg.norm(np.subtract(center, camera.position))
+    return float(np.degrees(np.arcsin(min(1.0, radius / distance))))
+
+
+@pytest.mark.parametrize("count", [3, 60, 5000, 1_000_000])
+def test_random_field_camera_shows_the_heroes_big_and_the_field_receding(count: int) -> None:
+    scene = random_field(count, seed=1)
+    camera, aspect = scene.camera, scene.render.width / scene.render.height
+    heroes = np.flatnonzero(scene.sphere_radii >= 0.99)
+    assert len(heroes) == 3
+    assert in_frame(camera, aspect, scene.sphere_centers[heroes]).all()
+    for row in heroes:  # each hero spans at least a tenth of the picture's height
+        size = 2 * _angular_radius(camera, scene.sphere_centers[row], scene.sphere_radii[row])
+        assert size >= 0.1 * camera.fov
+    centers = scene.sphere_centers.astype(np.float64)
+    reach = np.hypot(centers[:, 0], centers[:, 2]).max()
+    seen = in_frame(camera, aspect, centers)
+    distance = np.linalg.norm(centers - camera.position, axis=1)
+    # The field reaches back: something near its far edge is in the picture.
+    assert distance[seen].max() >= 0.5 * reach
+    # Lights: one or two, well above, and every sphere sees one at least 15 degrees up.
+    assert 1 <= len(scene.lights) <= 2
+    lights = np.array([light.position for light in scene.lights])
+    offset = lights[None, :, :] - centers[:, None, :]
+    elevation = np.degrees(np.arctan2(offset[..., 1], np.hypot(offset[..., 0], offset[..., 2])))
+    assert (elevation.max(axis=1) >= 15).all()
+
+
+@pytest.mark.parametrize("count", [1, 12, 400])
+def test_random_field_without_heroes_frames_the_field(count: int) -> None:
+    scene = random_field(count, seed=2, heroes=False)
+    camera, aspect = scene.camera, scene.render.width / scene.render.height
+    centers = scene.sphere_centers.astype(np.float64)
+    nearest = int(np.argmin(np.hypot(centers[:, 0], centers[:, 2])))
+    assert in_frame(camera, aspect, centers[nearest : nearest + 1]).all()
+    size = 2 * _angular_radius(camera, centers[nearest], scene.sphere_radii[nearest])
+    assert size >= 0.03 * camera.fov  # a sphere, not a speck
+    assert in_frame(camera, aspect, centers).mean() >= min(1.0, 40 / count)
+
+
+# -- the assets -----------------------------------------------------------------------------------
+
+
+def _make_assets_module():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_assets", ROOT / "assets" / "make_assets.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_assets_are_what_make_assets_makes_one_per_format(tmp_path: Path) -> None:
+    make = _make_assets_module()
+    expected = {
+        "torus.obj": make.torus(),
+        "gem.ply": make.gem(),
+        "capsule.stl": make.capsule(),
+        "cone.off": make.cone(),
+        "twisted_box.glb": make.twisted_box(),
+        "trio.glb": make.trio(),
+    }
+    on_disk = sorted(p.name for p in (ROOT / "assets").iterdir() if p.suffix != ".py")
+    assert on_disk == sorted(expected)
+    document = {"floor": False, "meshes": [{"file": str(ROOT / "assets" / n)} for n in expected]}
+    (tmp_path / "assets.json").write_text(json.dumps(document))
+    scene = load_scene(tmp_path / "assets.json")
+    assert len(scene.meshes) == 5 + 3  # trio.glb: three nodes
+    for name, made in expected.items():
+        assert (ROOT / "assets" / name).stat().st_size < 200_000
+        if isinstance(made, trimesh.Scene):  # world-space parts, sorted by position
+            made_parts = sorted(made.dump(), key=lambda m: tuple(m.bounds[0]))
+            loaded = list(scene.meshes[5:])
+        else:
+            made_parts = [made]
+            loaded = [scene.meshes[list(expected).index(name)]]
+        loaded_bounds = sorted(
+            (trimesh.transform_points(p.mesh.bounds, p.transform) for p in loaded),
+            key=lambda b: tuple(b[0]),
+        )
+        for want, got, part in zip(made_parts, loaded_bounds, loaded, strict=True):
+            np.testing.assert_allclose(got, want.bounds, atol=1e-6)
+            assert len(part.mesh.faces) == len(want.faces)
+    # trio.glb's balls carry their own colors: three matte base-color materials.
+    trio_materials = {scene.materials[p.material].color for p in scene.meshes[5:]}
+    assert len(trio_materials) == 3
