@@ -212,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("embree-rt: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (UsageError, ValueError, OSError) as error:
+    except (UsageError, ValueError, OSError, RuntimeError) as error:
         print(f"embree-rt: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     return 0
