@@ -6,7 +6,6 @@ same device. The device is reference-counted by the BVHs that use it and release
 
 from __future__ import annotations
 
-import ctypes
 import threading
 
 from embree_rt.embree import library
@@ -69,6 +68,3 @@ def release(device: Device) -> None:
             if _shared is device:
                 _shared = None
 
-
-def address(handle: ctypes.c_void_p | int | None) -> int:
-    return int(handle or 0)
