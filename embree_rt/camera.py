@@ -134,8 +134,8 @@ def primary_rays(
     Sample i belongs to pixel ``i // spp`` (row-major, row 0 at the top, column 0 at the left)
     and is sample ``s = i % spp`` of it, placed in cell ``strata(spp)[2][s]`` of the pixel's
     jitter grid and jittered inside it by ``sampling.uniform(seed, i, 0 and 1)``, so any split
-    of the indices into batches yields the same rays. Returns origins (count, 3) float32, unit
-    directions (count, 3) float32 and pixel (count,) int64.
+    of the indices into batches yields the same rays. Returns origins (3, count) float32, unit
+    directions (3, count) float32 (one ray per column) and pixel (count,) int64.
     """
     nx, ny, cells = strata(spp)
     total = frame.width * frame.height * spp
@@ -160,7 +160,10 @@ def primary_rays(
     y = (row + (cell // nx + jitter_y) / ny) / frame.height
     screen_x = (2.0 * x - 1.0) * frame.half_width
     screen_y = (1.0 - 2.0 * y) * frame.half_height
-    directions = screen_x[:, None] * frame.u + screen_y[:, None] * frame.v - frame.w
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    origins = np.broadcast_to(frame.origin.astype(np.float32), (count, 3)).copy()
+    directions = (
+        frame.u[:, None] * screen_x + frame.v[:, None] * screen_y - frame.w[:, None]
+    )  # (3, count) float64
+    directions /= np.sqrt(directions[0] ** 2 + directions[1] ** 2 + directions[2] ** 2)
+    origins = np.empty((3, count), np.float32)
+    origins[:] = frame.origin.astype(np.float32)[:, None]
     return origins, directions.astype(np.float32), pixel

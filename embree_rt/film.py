@@ -29,14 +29,14 @@ class Film:
         self._sum = np.zeros((3, self.width * self.height), np.float64)
 
     def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:
-        """Add (n, 3) float32 ``rgb`` to the (n,) int64 ``pixel`` indices (repeats allowed)."""
+        """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices (repeats allowed)."""
         if len(pixel) == 0:
             return
         size = self.width * self.height
         if pixel.min() < 0 or pixel.max() >= size:
             raise ValueError(f"pixel: indices must lie in [0, {size}), got {pixel.min()}..")
         for channel in range(3):
-            self._sum[channel] += np.bincount(pixel, weights=rgb[:, channel], minlength=size)
+            self._sum[channel] += np.bincount(pixel, weights=rgb[channel], minlength=size)
 
     def add_block(self, block: FilmBlock) -> None:
         """Add a finished block's sums into its pixels."""
@@ -60,12 +60,12 @@ class FilmBlock:
         self.sums = np.zeros((3, self.count), np.float64)
 
     def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:
-        """Add (n, 3) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block."""
+        """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block."""
         if len(pixel) == 0:
             return
         local = pixel - self.first
         for channel in range(3):
-            self.sums[channel] += np.bincount(local, weights=rgb[:, channel], minlength=self.count)
+            self.sums[channel] += np.bincount(local, weights=rgb[channel], minlength=self.count)
 
 
 def tonemap(image: np.ndarray) -> np.ndarray:

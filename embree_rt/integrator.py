@@ -67,8 +67,8 @@ class BatchWork:
 
 @dataclass
 class RayBatch:
-    """Rays in flight: ``origins``, ``directions`` (n, 3) float32 (unit directions); ``pixel``
-    (n,) int64; ``weight`` (n, 3) float32 throughput; ``kind`` the counter they are counted in."""
+    """Rays in flight, one per column: ``origins``, ``directions`` (3, n) float32 (unit
+    directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput."""
 
     origins: np.ndarray
     directions: np.ndarray
@@ -78,25 +78,38 @@ class RayBatch:
     def __len__(self) -> int:
         return len(self.pixel)
 
-    def take(self, rows: np.ndarray) -> RayBatch:
-        # np.take gathers rows several times faster than fancy indexing.
+    def take(self, rays: np.ndarray) -> RayBatch:
+        """The rays numbered ``rays`` (k,) int64, in that order."""
         return RayBatch(
-            np.take(self.origins, rows, axis=0),
-            np.take(self.directions, rows, axis=0),
-            np.take(self.pixel, rows),
-            np.take(self.weight, rows, axis=0),
+            np.take(self.origins, rays, axis=1),
+            np.take(self.directions, rays, axis=1),
+            np.take(self.pixel, rays),
+            np.take(self.weight, rays, axis=1),
+        )
+
+    @staticmethod
+    def concatenate(batches: list[RayBatch]) -> RayBatch:
+        if len(batches) == 1:
+            return batches[0]
+        return RayBatch(
+            np.concatenate([b.origins for b in batches], axis=1),
+            np.concatenate([b.directions for b in batches], axis=1),
+            np.concatenate([b.pixel for b in batches]),
+            np.concatenate([b.weight for b in batches], axis=1),
         )
 
 
-def surface_offset(points: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
-    """(n,) float32 distance to push a ray origin off a surface at ``points`` (n, 3): relative
-    to the size of the numbers the hit was computed from, as float32 rounding is (pbrt's
-    OffsetRayOrigin bounds the error the same way). ``scale`` (n,) is that size where it exceeds
-    the point's own coordinates (``SurfaceHits.scale``: a big object seen near the origin)."""
-    size = row_max(np.abs(points))
-    if scale is not None:
-        size = np.maximum(size, scale)
-    return (RELATIVE_OFFSET * (1.0 + size)).astype(np.float32, copy=False)
+NO_RAYS = RayBatch(
+    np.zeros((3, 0), np.float32), np.zeros((3, 0), np.float32), np.zeros(0, np.int64),
+    np.zeros((3, 0), np.float32),
+)  # fmt: skip
+
+
+def surface_offset(scale: np.ndarray) -> np.ndarray:
+    """(n,) float32 distance to push a ray origin off a surface whose hit was computed from
+    coordinates no larger than ``scale`` (n,) (``SurfaceHits.scale``): relative to that size,
+    as float32 rounding is (pbrt's OffsetRayOrigin bounds the error the same way)."""
+    return (np.float32(RELATIVE_OFFSET) * (np.float32(1.0) + scale)).astype(np.float32, copy=False)
 
 
 class Renderer:
@@ -123,7 +136,13 @@ class Renderer:
         start = time.perf_counter()
         self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
         self.stats.build_s = time.perf_counter() - start
-        self.materials = self.geometry.materials
+        self.materials = table = self.geometry.materials
+        # Per material: the seed article's blend of local shading, reflection and transmission.
+        local = (1.0 - table.reflectivity) * (1.0 - table.transparency)
+        self.material_color = np.ascontiguousarray(table.color.T)  # (3, m)
+        self.ambient_share = (table.ambient * local).astype(np.float32)
+        self.diffuse_share = (table.diffuse * local).astype(np.float32)
+        self.reflect_share = (table.reflectivity * (1.0 - table.transparency)).astype(np.float32)
         lights = scene.lights
         self.light_positions = np.array([lt.position for lt in lights], np.float32).reshape(-1, 3)
         self.light_rgb = np.array(
@@ -171,7 +190,7 @@ class Renderer:
             count = min(step, total - start)
             work = BatchWork(FilmBlock(start // spp, count // spp), self.trace_log is not None)
             origins, directions, pixel = primary_rays(frame, spp, seed, start, count)
-            rays = RayBatch(origins, directions, pixel, np.ones((count, 3), np.float32))
+            rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
             work.rays["primary"] += count
             self._trace(rays, work, max_depth)
             return work
@@ -212,8 +231,10 @@ class Renderer:
             if len(rows) < len(rays):
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False
-                sky = shading.sky(rays.directions[escaped], self.horizon, self.zenith)
-                work.block.add(rays.pixel[escaped], rays.weight[escaped] * sky)
+                escaped = np.flatnonzero(escaped)
+                sky = shading.sky(np.take(rays.directions, escaped, axis=1), self.horizon,
+                                  self.zenith)  # fmt: skip
+                work.block.add(rays.pixel[escaped], np.take(rays.weight, escaped, axis=1) * sky)
             rays = self._shade(rays.take(rows), surfaces, work, spawn=depth < max_depth)
             depth += 1
 
@@ -224,138 +245,145 @@ class Renderer:
         d = rays.directions
         # Shade the side the ray arrived on; a ray leaving a closed object comes from inside.
         entering = shading.dot(d, surfaces.face_normal) < 0
-        side = np.where(entering, np.float32(1.0), np.float32(-1.0))[:, None]
+        side = np.where(entering, np.float32(1.0), np.float32(-1.0))
         normal = surfaces.normal * side
-        face_normal = surfaces.face_normal * side
+        if surfaces.face_normal is surfaces.normal:
+            face_normal = normal
+        else:
+            face_normal = surfaces.face_normal * side
 
-        color = table.color[material]
-        on_floor = np.flatnonzero(surfaces.floor)
-        if len(on_floor):
-            color[on_floor] = shading.checker(position[on_floor], self.scene.floor.checker)
-        reflectivity = table.reflectivity[material]
-        transparency = table.transparency[material]
-        local = (1.0 - reflectivity) * (1.0 - transparency)
+        color = np.take(self.material_color, material, axis=1)
+        floor_count = np.count_nonzero(surfaces.floor)
+        if floor_count:
+            # intersect_compact puts floor hits first: then a slice, not a gather, finds them.
+            on_floor = (
+                slice(0, floor_count)
+                if surfaces.floor[:floor_count].all()
+                else np.flatnonzero(surfaces.floor)
+            )
+            color[:, on_floor] = shading.checker(position[:, on_floor], self.scene.floor.checker)
 
-        offset = surface_offset(position, surfaces.scale)[:, None]
+        offset = surface_offset(surfaces.scale)
         outside = position + face_normal * offset
-        radiance = (table.ambient[material] * local)[:, None] * color
-        radiance += self._direct_light(
-            outside, normal, -d, color, table.diffuse[material] * local, material, work
-        )
+        radiance = self.ambient_share[material] * color
+        radiance += self._direct_light(outside, normal, -d, color, material, work)
         work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
-            return rays.take(np.zeros(0, np.int64))
+            return NO_RAYS
 
-        reflect_share = reflectivity * (1.0 - transparency)
+        transparency = table.transparency[material]
+        reflect_share = self.reflect_share[material]
         children = []
         # Glass splits by Fresnel between reflection and refraction; TIR reflects everything.
         glass = np.flatnonzero(transparency > 0)
         if len(glass):
-            d_g, normal_g = np.take(d, glass, axis=0), np.take(normal, glass, axis=0)
+            d_glass = np.take(d, glass, axis=1)
+            normal_glass = np.take(normal, glass, axis=1)
             ior = table.ior[material[glass]]
-            n1 = np.where(entering[glass], np.float32(1.0), ior)
-            n2 = np.where(entering[glass], ior, np.float32(1.0))
-            refracted, total_internal = shading.refract(d_g, normal_g, n1 / n2)
-            cos_incident = np.clip(-shading.dot(d_g, normal_g), 0.0, 1.0)
+            entering_glass = entering[glass]
+            n1 = np.where(entering_glass, np.float32(1.0), ior)
+            n2 = np.where(entering_glass, ior, np.float32(1.0))
+            refracted, total_internal = shading.refract(d_glass, normal_glass, n1 / n2)
+            cos_incident = np.clip(-shading.dot(d_glass, normal_glass), 0.0, 1.0)
             fresnel = shading.fresnel_schlick(cos_incident, n1, n2)
             fresnel[total_internal] = 1.0
             reflect_share[glass] += transparency[glass] * fresnel
             # Glass tints what passes through it (the green marble), not what it reflects.
-            weight = np.take(rays.weight, glass, axis=0)
-            weight *= (transparency[glass] * (1.0 - fresnel))[:, None] * np.take(
-                color, glass, axis=0
-            )
-            keep = np.flatnonzero(row_max(weight) >= MIN_WEIGHT)
-            inside = np.take(position - face_normal * offset, glass, axis=0)
+            weight = np.take(rays.weight, glass, axis=1)
+            weight *= transparency[glass] * (1.0 - fresnel)
+            weight *= np.take(color, glass, axis=1)
+            keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
+            through = glass[keep]
+            inside = np.take(position, through, axis=1)
+            inside -= np.take(face_normal, through, axis=1) * offset[through]
             children.append(
                 RayBatch(
-                    np.take(inside, keep, axis=0),
-                    np.take(refracted, keep, axis=0),
-                    rays.pixel[glass[keep]],
-                    np.take(weight, keep, axis=0),
+                    inside,
+                    np.take(refracted, keep, axis=1),
+                    rays.pixel[through],
+                    np.take(weight, keep, axis=1),
                 )
             )
             work.rays["refraction"] += len(keep)
 
         mirrors = np.flatnonzero(reflect_share > 0)
         if len(mirrors):
-            weight = np.take(rays.weight, mirrors, axis=0) * reflect_share[mirrors, None]
-            metallic = table.metallic[material[mirrors]]
-            if metallic.any():
-                weight[metallic] *= color[mirrors][metallic]  # metals tint what they reflect
-            keep = mirrors[row_max(weight) >= MIN_WEIGHT]
-            weight = weight[row_max(weight) >= MIN_WEIGHT]
-            reflected = shading.reflect(np.take(d, keep, axis=0), np.take(normal, keep, axis=0))
-            origins = np.take(outside, keep, axis=0)
-            children.insert(0, RayBatch(origins, reflected, rays.pixel[keep], weight))
+            weight = np.take(rays.weight, mirrors, axis=1) * reflect_share[mirrors]
+            metallic = np.flatnonzero(table.metallic[material[mirrors]])
+            if len(metallic):  # metals tint what they reflect
+                weight[:, metallic] *= np.take(color, mirrors[metallic], axis=1)
+            strong = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
+            keep = mirrors[strong]
+            reflected = shading.reflect(np.take(d, keep, axis=1), np.take(normal, keep, axis=1))
+            children.insert(
+                0,
+                RayBatch(
+                    np.take(outside, keep, axis=1),
+                    reflected,
+                    rays.pixel[keep],
+                    np.take(weight, strong, axis=1),
+                ),
+            )
             work.rays["reflection"] += len(keep)
 
-        if not children:
-            return rays.take(np.zeros(0, np.int64))
-        if len(children) == 1:
-            return children[0]
-        return RayBatch(
-            *(np.concatenate([getattr(c, name) for c in children])
-              for name in ("origins", "directions", "pixel", "weight"))
-        )  # fmt: skip
+        return RayBatch.concatenate(children) if children else NO_RAYS
 
-    def _direct_light(
-        self, origins, normal, to_viewer, color, diffuse, material, work: BatchWork
-    ) -> np.ndarray:
-        """(n, 3) Blinn-Phong light from every point light that the point sees."""
-        n = len(origins)
-        result = np.zeros((n, 3), np.float32)
+    def _direct_light(self, points, normal, to_viewer, color, material, work: BatchWork):
+        """(3, n) Blinn-Phong light from every point light that the ``points`` (3, n) see."""
+        n = points.shape[1]
+        result = np.zeros((3, n), np.float32)
         if n == 0 or len(self.light_positions) == 0:
             return result
-        # Shadow rays only where the light is in front of the surface; all lights' rays go to
-        # Embree as one batch, light-major so each light's rays stay coherent.
+        # Shadow rays only where the light is in front of the surface. Each runs from the point
+        # to the light along the unnormalised offset, so the light sits at t = 1. All lights'
+        # rays go to Embree as one batch, light-major so each light's rays stay coherent.
         per_light = []
         for position in self.light_positions:
-            to_light = position - origins
-            distance = np.sqrt(shading.dot(to_light, to_light))
-            direction = to_light / np.maximum(distance, 1e-30)[:, None]
-            facing = np.flatnonzero(shading.dot(direction, normal) > 0)
-            per_light.append((facing, np.take(direction, facing, axis=0), distance[facing]))
-        shadow_origins = np.concatenate(
-            [np.take(origins, rows, axis=0) for rows, _, _ in per_light]
-        )
-        shadow_directions = np.concatenate([dirs for _, dirs, _ in per_light])
-        shadow_distance = np.concatenate([dist for _, _, dist in per_light])
-        blocked = self.geometry.occluded(shadow_origins, shadow_directions, 0.0, shadow_distance)
-        if work.log is not None:
-            work.log.append(("occluded", shadow_origins, shadow_directions, shadow_distance))
-        work.rays["shadow"] += len(blocked)
-
-        table = self.materials
-        specular = table.specular[material]
-        shininess = table.shininess[material]
+            to_light = position[:, None] - points
+            per_light.append((np.flatnonzero(shading.dot(to_light, normal) > 0), to_light))
+        count = sum(len(facing) for facing, _ in per_light)
+        shadow_origins = np.empty((3, count), np.float32)
+        shadow_directions = np.empty((3, count), np.float32)
         first = 0
-        for light, (rows, directions, _) in enumerate(per_light):
-            lit = ~blocked[first : first + len(rows)]
-            first += len(rows)
-            rows, directions = rows[lit], np.take(directions, np.flatnonzero(lit), axis=0)
-            if len(rows) == 0:
+        for facing, to_light in per_light:
+            stop = first + len(facing)
+            for axis in range(3):
+                np.take(points[axis], facing, out=shadow_origins[axis, first:stop])
+                np.take(to_light[axis], facing, out=shadow_directions[axis, first:stop])
+            first = stop
+        blocked = self.geometry.occluded(shadow_origins, shadow_directions, 0.0, 1.0)
+        if work.log is not None:
+            work.log.append(("occluded", shadow_origins, shadow_directions, 1.0))
+        work.rays["shadow"] += count
+
+        diffuse = self.diffuse_share[material]
+        specular = self.materials.specular[material]
+        shininess = self.materials.shininess[material]
+        first = 0
+        for light, (facing, to_light) in enumerate(per_light):
+            lit = facing[~blocked[first : first + len(facing)]]
+            first += len(facing)
+            if len(lit) == 0:
                 continue
-            if len(rows) > n // 2:
-                # Mostly lit: shade every row with the light switched off where it is not seen,
-                # cheaper than gathering five arrays.
-                light_rgb = np.zeros((n, 3), np.float32)
-                light_rgb[rows] = self.light_rgb[light]
-                all_directions = np.zeros((n, 3), np.float32)
-                all_directions[rows] = directions
+            if len(lit) > n // 2:
+                # Mostly lit: shade every point, with no light where it is not seen (a zero
+                # direction), cheaper than gathering seven arrays and scattering back.
+                seen = np.zeros(n, np.float32)
+                seen[lit] = 1.0
+                direction = shading.normalize(to_light) * seen
                 result += shading.blinn_phong(
-                    normal, to_viewer, all_directions, color, diffuse, specular, shininess,
-                    light_rgb,
+                    normal, to_viewer, direction, color, diffuse, specular, shininess,
+                    self.light_rgb[light],
                 )  # fmt: skip
                 continue
-            result[rows] += shading.blinn_phong(
-                np.take(normal, rows, axis=0),
-                np.take(to_viewer, rows, axis=0),
-                directions,
-                np.take(color, rows, axis=0),
-                diffuse[rows],
-                specular[rows],
-                shininess[rows],
+            result[:, lit] += shading.blinn_phong(
+                np.take(normal, lit, axis=1),
+                np.take(to_viewer, lit, axis=1),
+                shading.normalize(np.take(to_light, lit, axis=1)),
+                np.take(color, lit, axis=1),
+                diffuse[lit],
+                specular[lit],
+                shininess[lit],
                 self.light_rgb[light],
             )
         return result
@@ -385,9 +413,9 @@ def _wait(future: Future):
             continue
 
 
-def row_max(values: np.ndarray) -> np.ndarray:
-    """(n,) largest of each row of an (n, 3) array (column arithmetic: faster than max(axis=1))."""
-    return np.maximum(np.maximum(values[:, 0], values[:, 1]), values[:, 2])
+def column_max(values: np.ndarray) -> np.ndarray:
+    """(n,) largest entry of each column of a (3, n) array."""
+    return np.maximum(np.maximum(values[0], values[1]), values[2])
 
 
 def render(

@@ -1,7 +1,8 @@
 """Shading: Blinn-Phong, mirror reflection, Snell refraction, Schlick Fresnel, sky, checker.
 
-Pure functions on float32 NumPy arrays, one row per ray: vectors are (n, 3), per-ray scalars
-(n,). Directions and normals are unit length unless a function says otherwise.
+Pure functions on float32 NumPy arrays holding one ray per column: vectors are (3, n)
+(component-major, so every pass runs over contiguous rows), per-ray scalars (n,). Directions
+and normals are unit length unless a function says otherwise.
 """
 
 from __future__ import annotations
@@ -12,42 +13,44 @@ from embree_rt.materials import Checker
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(n,) row-wise dot product of two (n, 3) arrays (float32 for float32 input)."""
-    return np.einsum("ij,ij->i", a, b)
+    """(n,) dot products of the columns of two (3, n) arrays (float32 for float32 input)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 def normalize(v: np.ndarray) -> np.ndarray:
-    """(n, 3) float32 unit vectors along the rows of (n, 3) ``v``; zero rows stay zero."""
+    """(3, n) float32 unit vectors along the columns of (3, n) ``v``; zero columns stay zero."""
     v = np.asarray(v, np.float32)
     inverse_length = np.float32(1.0) / np.maximum(np.sqrt(dot(v, v)), np.float32(1e-30))
-    return v * inverse_length[:, None]
+    return v * inverse_length
 
 
 def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """(n, 3) float32 mirror directions ``d - 2 (d·n) n`` of (n, 3) ``d`` about (n, 3) unit
+    """(3, n) float32 mirror directions ``d - 2 (d·n) n`` of (3, n) ``d`` about (3, n) unit
     normals ``n``; the length of ``d`` is kept."""
     d = np.asarray(d, np.float32)
     n = np.asarray(n, np.float32)
-    return d - np.float32(2.0) * dot(d, n)[:, None] * n
+    return d - (np.float32(2.0) * dot(d, n)) * n
 
 
 def refract(d: np.ndarray, n: np.ndarray, eta: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Snell refraction of (n, 3) unit directions ``d`` through (n, 3) unit normals ``n``.
+    """Snell refraction of (3, n) unit directions ``d`` through (3, n) unit normals ``n``.
 
     ``n`` faces the incident side (d·n <= 0) and ``eta`` = n_incident / n_transmitted, a scalar
-    or (n,). Returns ((n, 3) float32 unit directions, (n,) bool total internal reflection);
-    where there is total internal reflection the direction is the mirror one, so every row is
-    a usable unit vector.
+    or (n,). Returns ((3, n) float32 unit directions, (n,) bool total internal reflection);
+    where there is total internal reflection the direction is the mirror one, so every column
+    is a usable unit vector.
     """
     d = np.asarray(d, np.float32)
     n = np.asarray(n, np.float32)
-    eta = np.broadcast_to(np.asarray(eta, np.float32), (len(d),))
+    eta = np.broadcast_to(np.asarray(eta, np.float32), (d.shape[1],))
     cos_i = np.clip(-dot(d, n), np.float32(0.0), np.float32(1.0))
     sin2_t = eta * eta * (np.float32(1.0) - cos_i * cos_i)
     total_internal = sin2_t > 1.0
     cos_t = np.sqrt(np.maximum(np.float32(0.0), np.float32(1.0) - sin2_t))
-    refracted = eta[:, None] * d + (eta * cos_i - cos_t)[:, None] * n
-    directions = np.where(total_internal[:, None], reflect(d, n), refracted)
+    directions = eta * d + (eta * cos_i - cos_t) * n
+    if total_internal.any():
+        mirrored = np.flatnonzero(total_internal)
+        directions[:, mirrored] = reflect(d[:, mirrored], n[:, mirrored])
     return normalize(directions), total_internal
 
 
@@ -76,6 +79,12 @@ def fresnel_schlick(
     return np.where(total_internal, np.float32(1.0), reflectance).astype(np.float32, copy=False)
 
 
+def _as_columns(rgb: np.ndarray) -> np.ndarray:
+    """An RGB given as (3,) or (3, n), as something that broadcasts against (3, n)."""
+    rgb = np.asarray(rgb, np.float32)
+    return rgb[:, None] if rgb.ndim == 1 else rgb
+
+
 def blinn_phong(
     normal: np.ndarray,
     to_viewer: np.ndarray,
@@ -86,48 +95,64 @@ def blinn_phong(
     shininess: np.ndarray,
     light_rgb: np.ndarray,
 ) -> np.ndarray:
-    """(n, 3) float32 light that one point light sends toward the viewer off a surface.
+    """(3, n) float32 light that one point light sends toward the viewer off a surface.
 
     ``diffuse · max(0, N·L) · color · light_rgb + specular · max(0, N·H)^shininess · light_rgb``
     with ``H = normalize(L + V)``, and zero where ``N·L <= 0`` (no highlight on the dark side).
-    ``normal``, ``to_viewer``, ``to_light`` are (n, 3) unit vectors; ``color`` and
-    ``light_rgb`` (n, 3) (or (3,)); ``diffuse``, ``specular``, ``shininess`` (n,). The caller
-    folds shadowing and the light's intensity into ``light_rgb``; there is no distance
-    attenuation, as in the seed article.
+    ``normal``, ``to_viewer``, ``to_light`` are (3, n) unit vectors (a zero ``to_light`` column
+    means no light there); ``color`` and ``light_rgb`` (3, n) or (3,); ``diffuse``,
+    ``specular``, ``shininess`` (n,). The caller folds shadowing and the light's intensity
+    into ``light_rgb`` or ``to_light``; there is no distance attenuation, as in the seed article.
     """
+    light_rgb = _as_columns(light_rgb)
     n_dot_l = dot(normal, to_light)
+    lit = n_dot_l > 0
     shade = diffuse * np.maximum(n_dot_l, np.float32(0.0))
-    radiance = (shade[:, None] * color * light_rgb).astype(np.float32, copy=False)
+    radiance = ((shade * _as_columns(color)) * light_rgb).astype(np.float32, copy=False)
     # Highlights only where there is a specular term and light: the power is the costly part.
-    glossy = np.flatnonzero((specular > 0) & (n_dot_l > 0))
-    if len(glossy):
-        half = normalize(to_light[glossy] + to_viewer[glossy])
-        n_dot_h = np.maximum(dot(normal[glossy], half), np.float32(0.0))
-        highlight = specular[glossy] * n_dot_h ** shininess[glossy]
-        light = np.broadcast_to(light_rgb, radiance.shape)[glossy]
-        radiance[glossy] += highlight[:, None] * light
+    glossy = lit & (specular > 0)
+    glossy_count = np.count_nonzero(glossy)
+    if glossy_count == 0:
+        return radiance
+    if glossy_count > len(glossy) // 2:
+        # Mostly glossy: every column, with the others' highlight masked to zero, costs less
+        # than gathering five arrays and scattering back.
+        n_dot_h = np.maximum(dot(normal, normalize(to_light + to_viewer)), np.float32(0.0))
+        highlight = np.where(glossy, specular, np.float32(0.0)) * n_dot_h ** shininess
+        radiance += highlight * light_rgb
+        return radiance
+    rows = np.flatnonzero(glossy)
+    half = normalize(np.take(to_light, rows, axis=1) + np.take(to_viewer, rows, axis=1))
+    n_dot_h = np.maximum(dot(np.take(normal, rows, axis=1), half), np.float32(0.0))
+    highlight = specular[rows] * n_dot_h ** shininess[rows]
+    light = light_rgb if light_rgb.shape[1] == 1 else np.take(light_rgb, rows, axis=1)
+    radiance[:, rows] += highlight * light
     return radiance
 
 
 def sky(directions: np.ndarray, horizon: np.ndarray, zenith: np.ndarray) -> np.ndarray:
-    """(n, 3) float32 sky gradient seen along (n, 3) unit ``directions``.
+    """(3, n) float32 sky gradient seen along (3, n) unit ``directions``.
 
     With ``t = clip(y, 0, 1)``: ``(1 - t) · horizon + t · zenith``; below the horizon the
-    horizon color. ``horizon`` and ``zenith`` are RGB, (3,) or (n, 3).
+    horizon color. ``horizon`` and ``zenith`` are RGB, (3,) or (3, n).
     """
-    t = np.clip(np.asarray(directions, np.float32)[:, 1], 0.0, 1.0)[:, None]
-    horizon = np.asarray(horizon, np.float32)
-    zenith = np.asarray(zenith, np.float32)
+    t = np.clip(np.asarray(directions, np.float32)[1], np.float32(0.0), np.float32(1.0))
+    horizon = _as_columns(horizon)
+    zenith = _as_columns(zenith)
     return ((np.float32(1.0) - t) * horizon + t * zenith).astype(np.float32, copy=False)
 
 
 def checker(points: np.ndarray, checker: Checker) -> np.ndarray:
-    """(n, 3) float32 checkerboard color at (n, 3) ``points``, by squares of the xz-plane:
+    """(3, n) float32 checkerboard color at (3, n) ``points``, by squares of the xz-plane:
     ``checker.color_a`` where ``floor(x / size) + floor(z / size)`` is even, else ``color_b``."""
     # float64 so the square a point falls in does not depend on float32 rounding of x / size.
-    points = np.asarray(points, np.float64)
-    cells = np.floor(points[:, 0] / checker.size) + np.floor(points[:, 2] / checker.size)
+    x = np.asarray(points[0], np.float64)
+    z = np.asarray(points[2], np.float64)
+    cells = np.floor(x / checker.size) + np.floor(z / checker.size)
     even = np.remainder(cells, 2.0) == 0.0
     color_a = np.asarray(checker.color_a, np.float32)
     color_b = np.asarray(checker.color_b, np.float32)
-    return np.where(even[:, None], color_a, color_b)
+    colors = np.empty((3, len(even)), np.float32)
+    for channel in range(3):
+        colors[channel] = np.where(even, color_a[channel], color_b[channel])
+    return colors

@@ -23,14 +23,16 @@ ICOSPHERE_SUBDIVISIONS = 3
 
 @dataclass
 class SurfaceHits:
-    """What n rays hit.
+    """What n rays hit, one ray per column.
 
-    ``hit`` (n,) bool; ``t`` (n,) float32 (inf on a miss); ``position`` (n, 3) float32;
-    ``normal`` (n, 3) float32 unit shading normal and ``face_normal`` (n, 3) float32 unit
+    ``hit`` (n,) bool; ``t`` (n,) float32 (inf on a miss); ``position`` (3, n) float32;
+    ``normal`` (3, n) float32 unit shading normal and ``face_normal`` (3, n) float32 unit
     geometric normal, both pointing out of the object (+y for the floor), whichever side the ray
-    came from; ``material`` (n,) int32 material id (the floor's is ``floor_material``); ``floor``
-    (n,) bool, the rays that hit the floor; ``scale`` (n,) float32, the size of the coordinates
-    the hit was computed from (the object's |centre| + extent): its rounding error scales with it.
+    came from (the same array when they agree everywhere); ``material`` (n,) int32 material id
+    (the floor's is ``floor_material``); ``floor`` (n,) bool, the rays that hit the floor;
+    ``scale`` (n,) float32, a bound on the size of the coordinates the hit was computed from
+    (at least max |position|, and the object's |centre| + extent): its rounding error scales
+    with it.
     """
 
     hit: np.ndarray
@@ -44,10 +46,25 @@ class SurfaceHits:
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
-    """(n, 3) float32 unit vectors; column arithmetic, faster than a norm over a length-3 axis."""
-    x, y, z = vectors[:, 0], vectors[:, 1], vectors[:, 2]
+    """(3, n) float32 unit vectors along the columns of (3, n) ``vectors``."""
+    x, y, z = vectors
     length = np.sqrt(x * x + y * y + z * z)
-    return (vectors / np.maximum(length, 1e-30)[:, None]).astype(np.float32, copy=False)
+    return (vectors / np.maximum(length, np.float32(1e-30))).astype(np.float32, copy=False)
+
+
+def _no_hits() -> SurfaceHits:
+    vectors = np.zeros((3, 0), np.float32)
+    return SurfaceHits(
+        hit=np.zeros(0, bool), t=np.zeros(0, np.float32), position=vectors, normal=vectors,
+        face_normal=vectors, material=np.zeros(0, np.int32), floor=np.zeros(0, bool),
+        scale=np.zeros(0, np.float32),
+    )  # fmt: skip
+
+
+def _largest_magnitude(vectors: np.ndarray) -> np.ndarray:
+    """(n,) largest |component| of each column of (3, n) ``vectors``."""
+    x, y, z = np.abs(vectors)
+    return np.maximum(np.maximum(x, y), z)
 
 
 class SceneGeometry:
@@ -61,6 +78,7 @@ class SceneGeometry:
         self.sphere_centers = np.asarray(scene.sphere_centers, np.float32)
         self.sphere_radii = np.asarray(scene.sphere_radii, np.float32)
         self.sphere_materials = np.asarray(scene.sphere_materials, np.int32)
+        self.sphere_centers_by_column = np.ascontiguousarray(self.sphere_centers.T)
         self.sphere_geom_id = -1
         self.sphere_scale = (
             np.abs(self.sphere_centers).max(axis=1) + self.sphere_radii
@@ -188,13 +206,11 @@ class SceneGeometry:
 
     def _floor_t(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """(n,) float32 distance to the floor plane along each ray, inf where parallel/behind."""
-        t = np.full(len(origins), np.inf, np.float32)
         if self.floor is None:
-            return t
-        dy = directions[:, 1]
-        moving = dy != 0
-        t[moving] = (self.floor.height - origins[moving, 1]) / dy[moving]
-        t[t < 0] = np.inf
+            return np.full(origins.shape[1], np.inf, np.float32)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (np.float32(self.floor.height) - origins[1]) / directions[1]
+        t[~(t >= 0)] = np.inf  # behind the origin, or parallel (inf or NaN)
         return t
 
     def intersect(
@@ -204,23 +220,24 @@ class SceneGeometry:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
     ) -> SurfaceHits:
-        """Nearest surface on each ray; ``origins``, ``directions`` (n, 3) float32, unit dirs.
-        Every field has one row per ray (zeros where ``hit`` is False)."""
+        """Nearest surface on each ray; ``origins``, ``directions`` (3, n) float32, unit dirs.
+        Every field has one column per ray (zeros where ``hit`` is False)."""
         rows, compact = self.intersect_compact(origins, directions, tnear, tfar)
-        n = len(origins)
+        n = np.shape(origins)[1]
         full = SurfaceHits(
             hit=np.zeros(n, bool),
             t=np.full(n, np.inf, np.float32),
-            position=np.zeros((n, 3), np.float32),
-            normal=np.zeros((n, 3), np.float32),
-            face_normal=np.zeros((n, 3), np.float32),
+            position=np.zeros((3, n), np.float32),
+            normal=np.zeros((3, n), np.float32),
+            face_normal=np.zeros((3, n), np.float32),
             material=np.zeros(n, np.int32),
             floor=np.zeros(n, bool),
             scale=np.zeros(n, np.float32),
         )
-        fields = ("hit", "t", "position", "normal", "face_normal", "material", "floor", "scale")
-        for name in fields:
+        for name in ("hit", "t", "material", "floor", "scale"):
             getattr(full, name)[rows] = getattr(compact, name)
+        for name in ("position", "normal", "face_normal"):
+            getattr(full, name)[:, rows] = getattr(compact, name)
         return full
 
     def intersect_compact(
@@ -230,67 +247,89 @@ class SceneGeometry:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
     ) -> tuple[np.ndarray, SurfaceHits]:
-        """Like ``intersect``, but only for the rays that hit: returns their (k,) int64 row
-        numbers and a ``SurfaceHits`` of k rows (what the integrator shades)."""
-        hits = self.bvh.intersect(origins, directions, tnear, tfar)
+        """Like ``intersect``, but only for the rays that hit: returns their (k,) int64 ray
+        numbers and a ``SurfaceHits`` of k columns (what the integrator shades).
+
+        The hits come grouped by kind, floor first, then spheres, then mesh instances, each
+        group in ray order: every group is computed on contiguous arrays and joined once.
+        """
+        origins = np.asarray(origins, np.float32)
+        directions = np.asarray(directions, np.float32)
+        hits = self.bvh.intersect(origins.T, directions.T, tnear, tfar)
         t = hits.t
+        groups: list[SurfaceHits] = []
+        numbers: list[np.ndarray] = []
         if self.floor is not None:
             floor_t = self._floor_t(origins, directions)
             on_floor = (floor_t < t) & (floor_t >= tnear) & (floor_t <= tfar)
-            t = np.where(on_floor, floor_t, t)
-        else:
-            on_floor = np.zeros(len(t), bool)
-        rows = np.flatnonzero(t != np.inf)
-        t = t[rows]
-        floor = on_floor[rows]
-        geom_id = hits.geom_id[rows]
-        inst_id = hits.inst_id[rows]
-        prim_id = hits.prim_id[rows]
-        k = len(rows)
-        position = np.take(origins, rows, axis=0) + np.take(directions, rows, axis=0) * t[:, None]
-        normal = np.zeros((k, 3), np.float32)
-        material = np.zeros(k, np.int32)
-        normal[floor, 1] = 1.0
-        material[floor] = self.floor_material
-        face_normal = normal.copy()
-        scale = np.abs(position).max(axis=1) if k else np.zeros(0, np.float32)
-
+            t = np.where(on_floor, np.inf, t)  # what is left are hits on objects
+            rays = np.flatnonzero(on_floor)
+            position = self._points(origins, directions, rays, floor_t[rays])
+            normal = np.zeros((3, len(rays)), np.float32)
+            normal[1] = 1.0
+            numbers.append(rays)
+            groups.append(SurfaceHits(
+                hit=np.ones(len(rays), bool), t=floor_t[rays], position=position, normal=normal,
+                face_normal=normal, material=np.full(len(rays), self.floor_material, np.int32),
+                floor=np.ones(len(rays), bool), scale=_largest_magnitude(position),
+            ))  # fmt: skip
+        on_instances = hits.inst_id >= 0
         if self.sphere_geom_id >= 0:
-            on_spheres = np.flatnonzero(~floor & (geom_id == self.sphere_geom_id) & (inst_id < 0))
-            prim = prim_id[on_spheres]
-            center = np.take(self.sphere_centers, prim, axis=0)
-            radius = self.sphere_radii[prim, None]
-            outward = _unit((np.take(position, on_spheres, axis=0) - center) / radius)
-            normal[on_spheres] = outward
-            face_normal[on_spheres] = outward
-            # Re-project onto the sphere: removes the rounding error along the ray.
-            position[on_spheres] = center + radius * outward
-            material[on_spheres] = self.sphere_materials[prim]
-            scale[on_spheres] = np.maximum(scale[on_spheres], self.sphere_scale[prim])
-
-        on_instances = np.flatnonzero(~floor & (inst_id >= 0))
-        if len(on_instances):
-            inst = inst_id[on_instances]
-            surface_normal, geometric = self._instance_normals(
-                inst, prim_id[on_instances], hits.u[rows[on_instances]], hits.v[rows[on_instances]]
+            rays = np.flatnonzero(
+                (t != np.inf) & (hits.geom_id == self.sphere_geom_id) & ~on_instances
             )
-            normal[on_instances] = surface_normal
-            face_normal[on_instances] = geometric
-            material[on_instances] = self.instance_material[inst]
-            scale[on_instances] = np.maximum(scale[on_instances], self.instance_scale[inst])
-        return rows, SurfaceHits(
-            hit=np.ones(k, bool),
-            t=t,
-            position=position,
-            normal=normal,
-            face_normal=face_normal,
-            material=material,
-            floor=floor,
-            scale=scale.astype(np.float32, copy=False),
-        )
+            prim = hits.prim_id[rays]
+            center = np.take(self.sphere_centers_by_column, prim, axis=1)
+            outward = _unit(self._points(origins, directions, rays, t[rays]) - center)
+            numbers.append(rays)
+            groups.append(SurfaceHits(
+                hit=np.ones(len(rays), bool), t=t[rays],
+                # Re-project onto the sphere: removes the rounding error along the ray.
+                position=center + self.sphere_radii[prim] * outward,
+                normal=outward, face_normal=outward, material=self.sphere_materials[prim],
+                floor=np.zeros(len(rays), bool),
+                # |centre| + radius bounds every coordinate of a point on the sphere.
+                scale=self.sphere_scale[prim],
+            ))  # fmt: skip
+        rays = np.flatnonzero(on_instances & (t != np.inf))
+        if len(rays):
+            inst = hits.inst_id[rays]
+            normal, face_normal = self._instance_normals(
+                inst, hits.prim_id[rays], hits.u[rays], hits.v[rays]
+            )
+            numbers.append(rays)
+            groups.append(SurfaceHits(
+                hit=np.ones(len(rays), bool), t=t[rays],
+                position=self._points(origins, directions, rays, t[rays]),
+                normal=normal, face_normal=face_normal, material=self.instance_material[inst],
+                floor=np.zeros(len(rays), bool),
+                # The instance's world bounds bound every coordinate of a point on it.
+                scale=self.instance_scale[inst],
+            ))  # fmt: skip
+        found = [(rays, group) for rays, group in zip(numbers, groups, strict=True) if len(rays)]
+        if not found:
+            return np.zeros(0, np.int64), _no_hits()
+        if len(found) == 1:
+            return found[0]
+        numbers, groups = zip(*found, strict=True)
+        same_normals = all(g.face_normal is g.normal for g in groups)
+        joined = {
+            name: np.concatenate([getattr(g, name) for g in groups], axis=-1)
+            for name in ("hit", "t", "position", "normal", "material", "floor", "scale")
+        }
+        if same_normals:
+            joined["face_normal"] = joined["normal"]
+        else:
+            joined["face_normal"] = np.concatenate([g.face_normal for g in groups], axis=1)
+        return np.concatenate(numbers), SurfaceHits(**joined)
+
+    @staticmethod
+    def _points(origins, directions, rays, t) -> np.ndarray:
+        """(3, k) float32 points ``origins + t * directions`` of the rays numbered ``rays``."""
+        return np.take(origins, rays, axis=1) + np.take(directions, rays, axis=1) * t
 
     def _instance_normals(self, inst, prim, u, v) -> tuple[np.ndarray, np.ndarray]:
-        """(k, 3) unit shading and geometric world normals of instance hits."""
+        """(3, k) unit shading and geometric world normals of instance hits."""
         face = self.mesh_face_offset[self.instance_child[inst]] + prim
         matrices = self.instance_normal_matrix[inst]
         geometric = self.mesh_face_normals[face]
@@ -303,8 +342,8 @@ class SceneGeometry:
             (1 - u - v) * vn[corners[:, 0]] + u * vn[corners[:, 1]] + v * vn[corners[:, 2]]
         )
         shading = np.where(self.instance_smooth[inst, None], interpolated, geometric)
-        world_geometric = _unit(np.einsum("nij,nj->ni", matrices, geometric))
-        world_shading = _unit(np.einsum("nij,nj->ni", matrices, shading))
+        world_geometric = _unit(np.einsum("nij,nj->in", matrices, geometric))
+        world_shading = _unit(np.einsum("nij,nj->in", matrices, shading))
         return world_shading, world_geometric
 
     def occluded(
@@ -314,7 +353,12 @@ class SceneGeometry:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
     ) -> np.ndarray:
-        """(n,) bool: whether any surface, floor included, lies on each ray within the window."""
-        blocked = self.bvh.occluded(origins, directions, tnear, tfar)
+        """(n,) bool: whether any surface, floor included, lies on each ray within the window;
+        ``origins``, ``directions`` (3, n) float32."""
+        origins = np.asarray(origins, np.float32)
+        directions = np.asarray(directions, np.float32)
+        blocked = self.bvh.occluded(origins.T, directions.T, tnear, tfar)
+        if self.floor is None:
+            return blocked
         floor_t = self._floor_t(origins, directions)
         return blocked | ((floor_t >= tnear) & (floor_t <= tfar))

@@ -10,7 +10,8 @@ def _first_bad_row(bad: np.ndarray) -> int:
 
 
 def as_points(values: np.ndarray, name: str, count: int | None = None) -> np.ndarray:
-    """``values`` as a C-contiguous (n, 3) float32 array of finite numbers."""
+    """``values`` as an (n, 3) float32 array of finite numbers (any strides: a transposed view
+    of a (3, n) array passes without a copy)."""
     array = np.asarray(values)
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"{name}: expected shape (n, 3), got {array.shape}")
@@ -18,7 +19,7 @@ def as_points(values: np.ndarray, name: str, count: int | None = None) -> np.nda
         raise ValueError(f"{name}: expected {count} rows, got {len(array)}")
     if array.dtype.kind not in "fiu":
         raise ValueError(f"{name}: expected numbers, got dtype {array.dtype}")
-    array = np.ascontiguousarray(array, dtype=np.float32)
+    array = np.asarray(array, dtype=np.float32)
     if not np.isfinite(array).all():
         row = _first_bad_row(~np.isfinite(array).all(axis=1))
         raise ValueError(f"{name}: row {row} is not finite: {array[row].tolist()}")
