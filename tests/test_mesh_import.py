@@ -174,16 +174,16 @@ scale = {list(scale)}
     aimed = np.arange(len(origins)) < 200
     assert np.isfinite(reference_t[aimed]).all() and np.isinf(reference_t[~aimed]).all()
     with SceneGeometry(scene) as geometry:
-        hits = geometry.intersect(origins, directions)
+        hits = geometry.intersect(origins.T, directions.T)
     np.testing.assert_array_equal(hits.hit, np.isfinite(reference_t))
     np.testing.assert_allclose(hits.t[aimed], reference_t[aimed], rtol=1e-5, atol=1e-5)
     expected_position = origins[aimed] + directions[aimed] * reference_t[aimed, None]
-    np.testing.assert_allclose(hits.position[aimed], expected_position, atol=1e-4)
+    np.testing.assert_allclose(hits.position.T[aimed], expected_position, atol=1e-4)
     assert (hits.material[aimed] == scene.material_index("mirror")).all()
     # flat shading: the normal is the world face normal of the face the reference hit (a ray
     # on a shared edge may report the neighbour, whose normal is still within a few degrees)
     outward = world.face_normals[reference_face[aimed]]
-    cosine = np.einsum("ij,ij->i", hits.normal[aimed], outward)
+    cosine = np.einsum("ij,ij->i", hits.normal.T[aimed], outward)
     assert (cosine > 0.9).all()
     assert np.mean(cosine > 1 - 1e-5) > 0.95
 
@@ -320,8 +320,10 @@ scale = 2.0
         assert geometry.instance_count == 2
         assert len(geometry.mesh_face_offset) == 1  # one BVH child
         assert geometry.triangle_count == 2 * len(first.mesh.faces)
-        hits = geometry.intersect(origins.astype(np.float32), directions.astype(np.float32))
+        hits = geometry.intersect(origins.T.astype(np.float32), directions.T.astype(np.float32))
     expected_t = 10.0 - columns[:, 2]
     np.testing.assert_array_equal(hits.hit, np.isfinite(expected_t))
     np.testing.assert_allclose(hits.t[hits.hit], expected_t[hits.hit], atol=1e-5)
-    np.testing.assert_allclose(hits.normal[hits.hit], [[0, 1, 0]] * int(hits.hit.sum()), atol=1e-5)
+    np.testing.assert_allclose(
+        hits.normal.T[hits.hit], [[0, 1, 0]] * int(hits.hit.sum()), atol=1e-5
+    )

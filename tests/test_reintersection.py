@@ -2,7 +2,7 @@
 
 Surface points come from the renderer's own query (``SceneGeometry.intersect`` of rays from
 outside), and new rays start where the integrator starts them: ``position ± face_normal *
-surface_offset(position, scale)``. For a lone sphere (no floor, nothing else in the scene):
+surface_offset(scale)``. For a lone sphere (no floor, nothing else in the scene):
 
 * a ray leaving into the outward hemisphere must not hit anything: a sphere, and the convex
   icosphere, lie wholly behind the tangent plane at any of their points;
@@ -79,12 +79,17 @@ def surface_points(mode: str, radius: float, distance: float):
     targets = centre + random_unit(rng, RAYS) * radius * rng.uniform(0.0, 0.95, (RAYS, 1))
     directions = targets - origins
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    hits = geometry.intersect(origins.astype(np.float32), directions.astype(np.float32))
+    hits = intersect(geometry, origins, directions)
     # Tiny spheres far out are a few float32 ulps wide, and some aimed rays round past them.
     assert hits.hit.mean() > 0.85
-    position, face_normal = hits.position[hits.hit], hits.face_normal[hits.hit]
+    position, face_normal = hits.position.T[hits.hit], hits.face_normal.T[hits.hit]
     np.testing.assert_allclose(np.linalg.norm(face_normal, axis=1), 1.0, atol=1e-5)
     return geometry, position, face_normal, hits.scale[hits.hit], rng
+
+
+def intersect(geometry: SceneGeometry, origins: np.ndarray, directions: np.ndarray):
+    """``geometry.intersect`` of (n, 3) rays (it takes one ray per column)."""
+    return geometry.intersect(origins.T.astype(np.float32), directions.T.astype(np.float32))
 
 
 def hemisphere(rng: np.random.Generator, normal: np.ndarray) -> np.ndarray:
@@ -101,8 +106,8 @@ def test_rays_leaving_a_sphere_never_hit_it_again(
     geometry, position, face_normal, scale, rng = surface_points(mode, radius, distance)
     with geometry:
         outward = hemisphere(rng, face_normal)
-        offset = surface_offset(position, scale)[:, None]
-        again = geometry.intersect(position + face_normal * offset, outward)
+        offset = surface_offset(scale)[:, None]
+        again = intersect(geometry, position + face_normal * offset, outward)
     assert not again.hit.any(), (
         f"{again.hit.sum()} of {len(again.hit)} rays re-hit the sphere they left"
     )
@@ -115,9 +120,9 @@ def test_refracted_rays_cross_the_sphere_and_leave_through_its_far_side(
     geometry, position, face_normal, scale, rng = surface_points(mode, radius, distance)
     with geometry:
         inward = hemisphere(rng, -face_normal)
-        offset = surface_offset(position, scale)[:, None]
-        through = geometry.intersect(position - face_normal * offset, inward)
-    exits = np.einsum("ij,ij->i", through.face_normal, inward) > 0
+        offset = surface_offset(scale)[:, None]
+        through = intersect(geometry, position - face_normal * offset, inward)
+    exits = np.einsum("ij,ij->i", through.face_normal.T, inward) > 0
     good = through.hit & (through.t > 0) & exits
     assert good.all(), (
         f"{(~through.hit).sum()} of {len(good)} refracted rays missed, "
@@ -126,7 +131,7 @@ def test_refracted_rays_cross_the_sphere_and_leave_through_its_far_side(
     # The exit point is on the sphere: within float32 rounding (and, for the icosphere, its
     # deviation from the round sphere: 1.3% of the radius at 3 subdivisions).
     centre = AXIS * distance
-    exit_radius = np.linalg.norm(through.position.astype(np.float64) - centre, axis=1)
+    exit_radius = np.linalg.norm(through.position.T.astype(np.float64) - centre, axis=1)
     tolerance = 0.02 * radius if mode == "mesh" else 1e-5 * radius
     np.testing.assert_allclose(exit_radius, radius, atol=tolerance + 4e-7 * distance)
 
@@ -148,16 +153,16 @@ def test_a_big_ground_sphere_does_not_shadow_itself(mode: str) -> None:
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     light = np.array([2.0, 5.0, 1.0])
     with SceneGeometry(scene, spheres=mode) as geometry:
-        seen = geometry.intersect(
-            np.tile(eye, (count, 1)).astype(np.float32), directions.astype(np.float32)
-        )
+        seen = intersect(geometry, np.tile(eye, (count, 1)), directions)
         assert seen.hit.all()
-        position, face_normal = seen.position, seen.face_normal
+        position, face_normal = seen.position.T, seen.face_normal.T
         to_light = light - position.astype(np.float64)
         distance_to_light = np.linalg.norm(to_light, axis=1)
         to_light = (to_light / distance_to_light[:, None]).astype(np.float32)
         assert np.all(np.einsum("ij,ij->i", to_light, face_normal) > 0)  # lit side
-        offset = surface_offset(position, seen.scale)[:, None]
+        offset = surface_offset(seen.scale)[:, None]
         origins = position + face_normal * offset
-        shadowed = geometry.occluded(origins, to_light, 0.0, distance_to_light.astype(np.float32))
+        shadowed = geometry.occluded(
+            origins.T, to_light.T, 0.0, distance_to_light.astype(np.float32)
+        )
     assert not shadowed.any(), f"shadow acne: {shadowed.mean():.0%} of visible points self-shadow"
