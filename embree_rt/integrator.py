@@ -21,6 +21,7 @@ import numpy as np
 
 from embree_rt import shading
 from embree_rt.camera import camera_frame, primary_rays
+from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.scene.model import Scene
 from embree_rt.shapes import SceneGeometry
@@ -133,6 +134,7 @@ class Renderer:
         # through single-threaded kernels, so NumPy shading and traversal fill every core.
         self.workers = int(threads) if threads is not None else (os.cpu_count() or 1)
         self.stats = RenderStats()
+        retain_freed_memory()
         start = time.perf_counter()
         self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
         self.stats.build_s = time.perf_counter() - start
