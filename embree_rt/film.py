@@ -52,20 +52,40 @@ class Film:
 
 class FilmBlock:
     """Sums for the ``count`` consecutive pixels from ``first``: what one batch of camera samples
-    accumulates on its own (no locking, and cheaper than bincounts over the whole film)."""
+    accumulates on its own (no locking, and cheaper than bincounts over the whole film).
+
+    Samples are kept as added and summed once, when ``sums`` is read: one bincount per channel
+    for the whole batch instead of one per bounce (each of which would sweep all ``count``
+    pixels however few samples it adds).
+    """
 
     def __init__(self, first: int, count: int) -> None:
         self.first = int(first)
         self.count = int(count)
-        self.sums = np.zeros((3, self.count), np.float64)
+        self._sums = np.zeros((3, self.count), np.float64)
+        self._pixels: list[np.ndarray] = []
+        self._rgb: list[np.ndarray] = []
 
     def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:
-        """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block."""
-        if len(pixel) == 0:
-            return
-        local = pixel - self.first
-        for channel in range(3):
-            self.sums[channel] += np.bincount(local, weights=rgb[channel], minlength=self.count)
+        """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block.
+        The arrays are kept, not copied, until ``sums`` is read: do not modify them."""
+        if len(pixel):
+            self._pixels.append(pixel)
+            self._rgb.append(rgb)
+
+    @property
+    def sums(self) -> np.ndarray:
+        """(3, count) float64 per-pixel sums of everything added so far."""
+        if self._pixels:
+            local = np.concatenate(self._pixels) - self.first
+            rgb = np.concatenate(self._rgb, axis=1)
+            self._pixels.clear()
+            self._rgb.clear()
+            for channel in range(3):
+                self._sums[channel] += np.bincount(
+                    local, weights=rgb[channel], minlength=self.count
+                )
+        return self._sums
 
 
 def tonemap(image: np.ndarray) -> np.ndarray:

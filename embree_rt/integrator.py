@@ -69,24 +69,16 @@ class BatchWork:
 @dataclass
 class RayBatch:
     """Rays in flight, one per column: ``origins``, ``directions`` (3, n) float32 (unit
-    directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput."""
+    directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput. ``origins`` is
+    None for rays that have hit: their surface hits hold the points."""
 
-    origins: np.ndarray
+    origins: np.ndarray | None
     directions: np.ndarray
     pixel: np.ndarray
     weight: np.ndarray
 
     def __len__(self) -> int:
         return len(self.pixel)
-
-    def take(self, rays: np.ndarray) -> RayBatch:
-        """The rays numbered ``rays`` (k,) int64, in that order."""
-        return RayBatch(
-            np.take(self.origins, rays, axis=1),
-            np.take(self.directions, rays, axis=1),
-            np.take(self.pixel, rays),
-            np.take(self.weight, rays, axis=1),
-        )
 
     @staticmethod
     def concatenate(batches: list[RayBatch]) -> RayBatch:
@@ -237,10 +229,19 @@ class Renderer:
                 sky = shading.sky(np.take(rays.directions, escaped, axis=1), self.horizon,
                                   self.zenith)  # fmt: skip
                 work.block.add(rays.pixel[escaped], np.take(rays.weight, escaped, axis=1) * sky)
-            rays = self._shade(rays.take(rows), surfaces, work, spawn=depth < max_depth)
+            # The hits' origins are not needed again: their surfaces say where they are.
+            hit_rays = RayBatch(
+                None,
+                np.take(rays.directions, rows, axis=1),
+                np.take(rays.pixel, rows),
+                np.take(rays.weight, rows, axis=1),
+            )
+            rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
 
     def _shade(self, rays: RayBatch, surfaces, work: BatchWork, spawn: bool) -> RayBatch:
+        """Light the ``surfaces`` that ``rays`` (directions, pixels, weights; no origins) hit,
+        into ``work``; returns their reflection and refraction children."""
         table = self.materials
         material = surfaces.material
         position = surfaces.position

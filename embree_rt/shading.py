@@ -118,7 +118,7 @@ def blinn_phong(
         # Mostly glossy: every column, with the others' highlight masked to zero, costs less
         # than gathering five arrays and scattering back.
         n_dot_h = np.maximum(dot(normal, normalize(to_light + to_viewer)), np.float32(0.0))
-        highlight = np.where(glossy, specular, np.float32(0.0)) * n_dot_h ** shininess
+        highlight = np.where(glossy, specular, np.float32(0.0)) * n_dot_h**shininess
         radiance += highlight * light_rgb
         return radiance
     rows = np.flatnonzero(glossy)

@@ -67,4 +67,3 @@ def release(device: Device) -> None:
             device.release()
             if _shared is device:
                 _shared = None
-
