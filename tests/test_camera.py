@@ -1,6 +1,9 @@
-"""The camera's contract: where rays point, how a pixel's samples are spread, what is refused.
+"""The pinhole camera (embree_rt/camera.py) and the counter-based sampler it jitters with.
 
-Ray directions are checked against a pinhole model written out independently in this file.
+``primary_rays`` returns one ray per column: origins and directions (3, count) float32, pixel
+(count,) int64. Ray directions are checked by projecting them back onto the image plane with a
+basis built here from the Camera's fields (vertical field of view, square pixels, row 0 at the
+top), and by angles measured between rays, which need no basis at all.
 """
 
 from __future__ import annotations
@@ -12,14 +15,78 @@ import numpy as np
 import pytest
 
 from embree_rt.camera import camera_frame, primary_rays
+from embree_rt.sampling import uniform
 from embree_rt.scene.model import Camera
+
+# -- sampling -------------------------------------------------------------------------------------
+
+
+def test_uniform_is_float32_in_the_unit_interval_with_the_right_moments() -> None:
+    n = 1_000_000
+    x = uniform(3, np.arange(n), 0)
+    assert x.dtype == np.float32 and x.shape == (n,)
+    assert x.min() >= 0.0 and x.max() < 1.0
+    x64 = x.astype(np.float64)
+    # Standard errors: mean sqrt(1/12/n) ≈ 2.9e-4, variance sqrt(1/180/n) ≈ 7.5e-5.
+    assert abs(x64.mean() - 0.5) < 5 * math.sqrt(1 / 12 / n)
+    assert abs(x64.var() - 1 / 12) < 5 * math.sqrt(1 / 180 / n)
+    # 100 equal bins: chi-square with 99 degrees of freedom (mean 99, sd 14).
+    counts = np.bincount((x64 * 100).astype(np.int64), minlength=100)
+    chi2 = ((counts - n / 100) ** 2 / (n / 100)).sum()
+    assert chi2 < 99 + 5 * 14
+    # Not stuck on a coarse grid: nearly every sample is distinct at 24-bit resolution.
+    assert len(np.unique(x)) > 0.97 * n
+
+
+def correlation(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.corrcoef(a.astype(np.float64), b.astype(np.float64))[0, 1])
+
+
+def test_dimensions_seeds_and_neighbouring_indices_are_uncorrelated() -> None:
+    n = 200_000
+    index = np.arange(n)
+    limit = 5 / math.sqrt(n)  # five standard errors of a correlation coefficient
+    base = uniform(0, index, 0)
+    assert abs(correlation(base, uniform(0, index, 1))) < limit
+    assert abs(correlation(base, uniform(0, index, 2))) < limit
+    assert abs(correlation(base, uniform(1, index, 0))) < limit
+    assert abs(correlation(base, uniform(12345, index, 1))) < limit
+    assert abs(correlation(base[:-1], base[1:])) < limit
+    # Jointly uniform in 2D (the camera's jitter uses dimensions 0 and 1 together): 10x10 cells,
+    # chi-square with 99 degrees of freedom.
+    y = uniform(0, index, 1)
+    cells = (base * 10).astype(np.int64) * 10 + (y * 10).astype(np.int64)
+    counts = np.bincount(cells, minlength=100)
+    chi2 = ((counts - n / 100) ** 2 / (n / 100)).sum()
+    assert chi2 < 99 + 5 * 14
+    # Different streams are different numbers, not shifted copies at the same index.
+    assert np.mean(base == uniform(1, index, 0)) < 1e-3
+    assert np.mean(base == uniform(0, index, 1)) < 1e-3
+
+
+def test_uniform_does_not_depend_on_how_indices_are_batched() -> None:
+    whole = uniform(7, np.arange(10_000), 1)
+    for k in (1, 37, 4096, 9999):
+        parts = np.concatenate([uniform(7, np.arange(k), 1), uniform(7, np.arange(k, 10_000), 1)])
+        np.testing.assert_array_equal(parts, whole)
+    shuffled = np.random.default_rng(0).permutation(10_000)
+    np.testing.assert_array_equal(uniform(7, shuffled, 1), whole[shuffled])
+    np.testing.assert_array_equal(uniform(7, np.arange(10_000, dtype=np.int32), 1), whole)
+    np.testing.assert_array_equal(uniform(7, np.arange(10_000), 1), whole)  # deterministic
+    # Far indices (a 1e6-sphere 4K render at many spp) still give distinct uniform values.
+    far = uniform(7, np.arange(2**40, 2**40 + 100_000), 1)
+    assert far.min() >= 0.0 and far.max() < 1.0
+    assert abs(far.astype(np.float64).mean() - 0.5) < 5 * math.sqrt(1 / 12 / 100_000)
+
+
+# -- camera: an independent pinhole model ---------------------------------------------------------
 
 
 def reference_basis(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(right, up, forward) unit vectors of a right-handed pinhole camera."""
-    forward = np.subtract(camera.look_at, camera.position).astype(float)
+    forward = np.subtract(camera.look_at, camera.position).astype(np.float64)
     forward /= np.linalg.norm(forward)
-    right = np.cross(forward, camera.up)
+    right = np.cross(forward, np.asarray(camera.up, np.float64))
     right /= np.linalg.norm(right)
     up = np.cross(right, forward)
     return right, up, forward
@@ -28,100 +95,148 @@ def reference_basis(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 def image_position(
     camera: Camera, width: int, height: int, directions: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous (column, row) in pixels where each ray crosses the image (0, 0 = top left)."""
+    """Continuous (column, row) in pixels where each ray (a column of the (3, n) ``directions``)
+    crosses the image plane; pixel (c, r) spans [c, c+1) x [r, r+1), row 0 at the top."""
     right, up, forward = reference_basis(camera)
-    d = directions.astype(float)
-    depth = d @ forward
+    d = directions.astype(np.float64)
+    depth = forward @ d
+    assert np.all(depth > 0), "every ray must point into the scene"
     tan_half = math.tan(math.radians(camera.fov) / 2)
-    x = (d @ right) / depth / (tan_half * width / height)  # -1 at the left edge, +1 right
-    y = (d @ up) / depth / tan_half  # +1 at the top edge
+    x = (right @ d) / depth / (tan_half * width / height)  # -1 at the left edge, +1 right
+    y = (up @ d) / depth / tan_half  # +1 at the top edge, -1 at the bottom
     return (x + 1) / 2 * width, (1 - y) / 2 * height
 
 
-def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
-    b = b / np.linalg.norm(b, axis=-1, keepdims=True)
-    return np.degrees(np.arccos(np.clip((a * b).sum(-1), -1.0, 1.0)))
+def angle(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle in degrees between two (3,) vectors."""
+    a = np.asarray(a, np.float64) / np.linalg.norm(a)
+    b = np.asarray(b, np.float64) / np.linalg.norm(b)
+    return math.degrees(math.atan2(np.linalg.norm(np.cross(a, b)), float(a @ b)))
+
+
+def all_rays(camera: Camera, width: int, height: int, spp: int, seed: int = 0):
+    frame = camera_frame(camera, width, height)
+    return primary_rays(frame, spp, seed, 0, width * height * spp)
 
 
 ODD_CAMERA = Camera(position=(3.0, 2.0, 7.0), look_at=(-1.0, 0.5, 0.0), up=(0, 1, 0), fov=50.0)
 
 
+# -- camera: layout, orientation, extent ----------------------------------------------------------
+
+
 def test_rays_have_the_documented_shapes_dtypes_and_origin() -> None:
     frame = camera_frame(ODD_CAMERA, 6, 4)
     origins, directions, pixel = primary_rays(frame, 3, 0, 5, 40)
-    assert origins.shape == directions.shape == (40, 3)
+    # One ray per column: (3, count) float32 vectors, (count,) int64 pixel indices.
+    assert origins.shape == directions.shape == (3, 40)
     assert origins.dtype == directions.dtype == np.float32
     assert pixel.shape == (40,) and pixel.dtype == np.int64
-    np.testing.assert_array_equal(origins, np.tile(np.float32(ODD_CAMERA.position), (40, 1)))
-    np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0, atol=1e-6)
+    expected_origins = np.tile(np.float32(ODD_CAMERA.position)[:, None], (1, 40))
+    np.testing.assert_array_equal(origins, expected_origins)
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=0), 1.0, atol=1e-6)
     np.testing.assert_array_equal(pixel, np.arange(5, 45) // 3)
+    # An empty batch keeps the layout.
+    origins, directions, pixel = primary_rays(frame, 3, 0, 72, 0)
+    assert origins.shape == directions.shape == (3, 0)
+    assert origins.dtype == directions.dtype == np.float32
+    assert pixel.shape == (0,) and pixel.dtype == np.int64
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
-@pytest.mark.parametrize("width, height", [(9, 7), (1, 1), (21, 5)])
+@pytest.mark.parametrize("width, height", [(9, 7), (1, 1), (21, 5), (41, 31)])
 def test_the_centre_pixel_looks_at_look_at(seed: int, width: int, height: int) -> None:
     frame = camera_frame(ODD_CAMERA, width, height)
     centre = (height // 2) * width + width // 2
     _, directions, pixel = primary_rays(frame, 1, seed, centre, 1)
     assert pixel[0] == centre
     # The jitter stays inside the pixel: within half its diagonal of the view axis.
-    pixel_angle = ODD_CAMERA.fov / height
+    pixel_size = 2 * math.tan(math.radians(ODD_CAMERA.fov) / 2) / height  # at unit distance
+    half_diagonal = math.degrees(math.atan(pixel_size * math.sqrt(2) / 2))
     to_target = np.subtract(ODD_CAMERA.look_at, ODD_CAMERA.position)
-    assert angle_between(directions[0], to_target) <= pixel_angle * math.hypot(0.5, 0.5) + 1e-4
-
-
-def test_vertical_extent_is_the_fov_and_horizontal_follows_the_aspect() -> None:
-    camera = Camera(position=(0, 0, 0), look_at=(0, 0, -1), fov=60.0)
-    width, height = 151, 101
-    frame = camera_frame(camera, width, height)
-    _, directions, _ = primary_rays(frame, 1, 0, 0, width * height)
-    rays = directions.reshape(height, width, 3)
-    pixel_angle = camera.fov / height
-    top, bottom = rays[0, width // 2], rays[-1, width // 2]
-    assert angle_between(top, bottom) == pytest.approx(camera.fov, abs=2 * pixel_angle)
-    horizontal = 2 * math.degrees(math.atan(math.tan(math.radians(30)) * width / height))
-    left, right = rays[height // 2, 0], rays[height // 2, -1]
-    assert angle_between(left, right) == pytest.approx(horizontal, abs=2 * pixel_angle)
-    # No ray leaves the frustum.
-    slope_y = np.abs(directions[:, 1] / directions[:, 2])
-    slope_x = np.abs(directions[:, 0] / directions[:, 2])
-    assert slope_y.max() <= math.tan(math.radians(30)) * (1 + 1e-6)
-    assert slope_x.max() <= math.tan(math.radians(30)) * width / height * (1 + 1e-6)
+    assert angle(directions[:, 0], to_target) <= half_diagonal
 
 
 def test_image_is_right_handed_row_zero_on_top_column_zero_left() -> None:
     camera = Camera(position=(0, 0, 5), look_at=(0, 0, 0), up=(0, 1, 0), fov=40.0)
-    frame = camera_frame(camera, 4, 2)
-    _, directions, _ = primary_rays(frame, 1, 0, 0, 8)
-    top_left, bottom_right = directions[0], directions[7]
+    _, directions, _ = all_rays(camera, 4, 2, spp=1)
+    top_left, bottom_right = directions[:, 0], directions[:, 7]
     assert top_left[0] < 0 and top_left[1] > 0  # world -x is image left, +y is up
     assert bottom_right[0] > 0 and bottom_right[1] < 0
-    assert (directions[:, 2] < 0).all()  # looking down -z
+    assert (directions[2] < 0).all()  # looking down -z
     # Looking along +x with z up: right is -y (right-handed: right = forward × up).
     side = Camera(position=(0, 0, 0), look_at=(1, 0, 0), up=(0, 0, 1), fov=40.0)
-    _, directions, _ = primary_rays(camera_frame(side, 4, 2), 1, 0, 0, 8)
-    assert directions[3][1] < 0 and directions[3][2] > 0  # top right
-    assert directions[4][1] > 0 and directions[4][2] < 0  # bottom left
+    _, directions, _ = all_rays(side, 4, 2, spp=1)
+    assert directions[1, 3] < 0 and directions[2, 3] > 0  # top right
+    assert directions[1, 4] > 0 and directions[2, 4] < 0  # bottom left
+    # An oblique view: row 0 is the top of the image and column 0 its left side.
+    width, height = 41, 31
+    _, directions, _ = all_rays(ODD_CAMERA, width, height, spp=1)
+    centre = (height // 2) * width + width // 2
+    top, bottom = directions[:, width // 2], directions[:, (height - 1) * width + width // 2]
+    assert top[1] > bottom[1]
+    left, right = directions[:, centre - width // 2], directions[:, centre + width // 2]
+    toward = np.subtract(ODD_CAMERA.look_at, ODD_CAMERA.position)
+    right_of_view = np.cross(toward, ODD_CAMERA.up)
+    assert float(left @ right_of_view) < 0 < float(right @ right_of_view)
+
+
+@pytest.mark.parametrize("fov", [10.0, 45.0, 90.0, 150.0])
+def test_top_to_bottom_row_spans_the_vertical_field_of_view(fov: float) -> None:
+    width, height = 3, 401
+    camera = Camera(position=(0.5, -2.0, 1.0), look_at=(4.0, 1.0, -3.0), up=(0, 0, 1), fov=fov)
+    _, directions, _ = all_rays(camera, width, height, spp=1)
+    top, bottom = directions[:, 1], directions[:, (height - 1) * width + 1]
+    # Centres of the outer rows sit half a pixel inside the frame edges; jitter adds up to half
+    # a pixel each way: allow two pixels' worth of angle.
+    pixel_angle = fov / height * 2
+    assert angle(top, bottom) == pytest.approx(fov, abs=pixel_angle)
+
+
+@pytest.mark.parametrize(
+    "fov, width, height", [(30.0, 301, 101), (30.0, 101, 301), (30.0, 200, 200), (60.0, 151, 101)]
+)
+def test_horizontal_extent_follows_the_aspect_ratio_and_no_ray_leaves_the_frustum(
+    fov: float, width: int, height: int
+) -> None:
+    camera = Camera(position=(0, 1, 5), look_at=(0, 1, 0), up=(0, 1, 0), fov=fov)
+    _, directions, _ = all_rays(camera, width, height, spp=1)
+    row = height // 2
+    left, right = directions[:, row * width], directions[:, row * width + width - 1]
+    expected = 2 * math.degrees(math.atan(math.tan(math.radians(fov / 2)) * width / height))
+    pixel_angle = expected / width * 2
+    assert angle(left, right) == pytest.approx(expected, abs=pixel_angle)
+    top, bottom = directions[:, width // 2], directions[:, (height - 1) * width + width // 2]
+    assert angle(top, bottom) == pytest.approx(fov, abs=fov / height * 2)
+    # No ray leaves the frustum (the camera looks down -z with +y up).
+    tan_half = math.tan(math.radians(fov / 2))
+    slope_y = np.abs(directions[1] / directions[2])
+    slope_x = np.abs(directions[0] / directions[2])
+    assert slope_y.max() <= tan_half * (1 + 1e-6)
+    assert slope_x.max() <= tan_half * width / height * (1 + 1e-6)
+
+
+# -- camera: where a pixel's samples go -----------------------------------------------------------
 
 
 @pytest.mark.parametrize("spp", [1, 2, 3, 4, 5, 7, 8, 9, 10, 16])
-def test_samples_land_in_their_pixel_one_per_stratum(spp: int) -> None:
-    width, height = 7, 5
-    frame = camera_frame(ODD_CAMERA, width, height)
-    _, directions, pixel = primary_rays(frame, spp, 12, 0, width * height * spp)
-    column, row = image_position(ODD_CAMERA, width, height, directions)
-    tolerance = 1e-4  # pixels: float32 directions
-    within_x = (column >= pixel % width - tolerance) & (column <= pixel % width + 1 + tolerance)
-    within_y = (row >= pixel // width - tolerance) & (row <= pixel // width + 1 + tolerance)
-    assert within_x.all() and within_y.all()
-
+def test_each_pixels_samples_lie_in_its_footprint_in_distinct_strata(spp: int) -> None:
+    width, height = 12, 9
+    _, directions, pixel = all_rays(ODD_CAMERA, width, height, spp, seed=4)
+    np.testing.assert_array_equal(pixel, np.arange(width * height * spp) // spp)
+    x, y = image_position(ODD_CAMERA, width, height, directions)
+    fx, fy = x - pixel % width, y - pixel // width  # position inside the own pixel
+    eps = 1e-4  # pixels: float32 directions
+    assert np.all((fx >= -eps) & (fx <= 1 + eps)), "sample outside its pixel horizontally"
+    assert np.all((fy >= -eps) & (fy <= 1 + eps)), "sample outside its pixel vertically"
+    # Stratified on an nx x ny grid over the pixel (nx = ceil(sqrt(spp))): no two samples of one
+    # pixel share a cell.
     nx = math.ceil(math.sqrt(spp))
     ny = math.ceil(spp / nx)
     assert nx * ny >= spp
-    cell_x = np.clip(np.floor((column - pixel % width) * nx), 0, nx - 1).astype(int)
-    cell_y = np.clip(np.floor((row - pixel // width) * ny), 0, ny - 1).astype(int)
-    cells = (cell_y * nx + cell_x).reshape(width * height, spp)
+    cx = np.clip(np.floor(fx * nx), 0, nx - 1).astype(np.int64)
+    cy = np.clip(np.floor(fy * ny), 0, ny - 1).astype(np.int64)
+    cells = (cy * nx + cx).reshape(width * height, spp)
     for per_pixel in cells:
         assert len(set(per_pixel.tolist())) == spp
     # Same strata in every pixel (the pattern is per sample number, not per pixel).
@@ -130,31 +245,67 @@ def test_samples_land_in_their_pixel_one_per_stratum(spp: int) -> None:
         # A centrally symmetric choice exists, and was made: the image is not shifted.
         used = set(cells[0].tolist())
         assert used == {nx * ny - 1 - c for c in used}
+    # Jittered inside the cells, not placed at their centres: the offsets fill the cell.
+    ox, oy = fx * nx - cx, fy * ny - cy
+    for offsets in (ox, oy):
+        assert offsets.min() < 0.1 and offsets.max() > 0.9
+        assert abs(offsets.mean() - 0.5) < 0.1
 
 
 def test_jitter_spreads_over_the_whole_pixel() -> None:
-    frame = camera_frame(ODD_CAMERA, 64, 48)
-    _, directions, pixel = primary_rays(frame, 1, 5, 0, 64 * 48)
-    column, row = image_position(ODD_CAMERA, 64, 48, directions)
-    fx, fy = column - pixel % 64, row - pixel // 64
+    width, height = 64, 48
+    _, directions, pixel = all_rays(ODD_CAMERA, width, height, spp=1, seed=5)
+    column, row = image_position(ODD_CAMERA, width, height, directions)
+    fx, fy = column - pixel % width, row - pixel // width
     for f in (fx, fy):
         assert f.mean() == pytest.approx(0.5, abs=0.03)
         assert f.min() < 0.01 and f.max() > 0.99
     assert abs(np.corrcoef(fx, fy)[0, 1]) < 0.06
-    _, other, _ = primary_rays(frame, 1, 6, 0, 64 * 48)
-    assert not np.array_equal(directions, other)  # the seed matters
 
 
-@pytest.mark.parametrize("spp", [1, 3, 8])
+def test_samples_cover_the_image_evenly() -> None:
+    width, height, spp = 8, 6, 64
+    _, directions, _ = all_rays(ODD_CAMERA, width, height, spp, seed=1)
+    column, row = image_position(ODD_CAMERA, width, height, directions)
+    assert column.min() >= -1e-4 and column.max() <= width + 1e-4
+    assert row.min() >= -1e-4 and row.max() <= height + 1e-4
+    # 64 spp stratify each pixel 8 x 8, so every quarter-pixel square holds 4 samples.
+    bin_x = np.floor(column * 4).astype(np.int64)
+    bin_y = np.floor(row * 4).astype(np.int64)
+    counts = np.bincount(bin_y * (4 * width) + bin_x, minlength=16 * width * height)
+    np.testing.assert_array_equal(counts, 4)
+    # Inside its 1/8-pixel cell, each sample's jitter is uniform in 2D: x and y independent.
+    jitter_x = column * 8 - np.floor(column * 8)
+    jitter_y = row * 8 - np.floor(row * 8)
+    n = len(jitter_x)
+    assert abs(np.corrcoef(jitter_x, jitter_y)[0, 1]) < 5 / math.sqrt(n)
+    quadrant = (jitter_x >= 0.5).astype(np.int64) * 2 + (jitter_y >= 0.5)
+    quarter = np.bincount(quadrant, minlength=4) / n
+    np.testing.assert_allclose(quarter, 0.25, atol=5 * math.sqrt(0.25 * 0.75 / n))
+
+
+# -- camera: batches and ranges -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("spp", [1, 3, 4, 8])
 def test_any_split_into_batches_gives_the_same_rays(spp: int) -> None:
-    frame = camera_frame(ODD_CAMERA, 11, 6)
-    total = 11 * 6 * spp
+    width, height = 11, 6
+    frame = camera_frame(ODD_CAMERA, width, height)
+    total = width * height * spp
     whole = primary_rays(frame, spp, 9, 0, total)
-    for cuts in ([1], [spp], [total // 2 + 1], [5, 6, 40, total - 1]):
+    half = total // 2
+    for cuts in ([1], [2], [spp], [half], [half + 1], [total - 1], [13, 14], [5, 6, 40, total - 1]):
         bounds = [0, *cuts, total]
         parts = [primary_rays(frame, spp, 9, a, b - a) for a, b in itertools.pairwise(bounds)]
+        for part, (a, b) in zip(parts, itertools.pairwise(bounds), strict=True):
+            assert part[0].shape == part[1].shape == (3, b - a)
+            assert part[2].shape == (b - a,)
         for k in range(3):
-            np.testing.assert_array_equal(np.concatenate([p[k] for p in parts]), whole[k])
+            np.testing.assert_array_equal(np.concatenate([p[k] for p in parts], axis=-1), whole[k])
+    # The seed changes the jitter, not the pixels.
+    other = primary_rays(frame, spp, 10, 0, total)
+    np.testing.assert_array_equal(other[2], whole[2])
+    assert not np.array_equal(other[1], whole[1])
 
 
 def test_sample_ranges_outside_the_image_are_refused() -> None:
@@ -168,6 +319,8 @@ def test_sample_ranges_outside_the_image_are_refused() -> None:
         primary_rays(frame, 0, 0, 0, 1)
 
 
+# -- camera: degenerate and nearly degenerate cameras ---------------------------------------------
+
 NAN = float("nan")
 INF = float("inf")
 
@@ -178,8 +331,11 @@ INF = float("inf")
         (Camera(), 0, 8, "width"),
         (Camera(), -3, 8, "width"),
         (Camera(), 8.0, 8, "width"),
-        (Camera(), 8, 2.5, "height"),
+        (Camera(), 2.5, 8, "width"),
         (Camera(), True, 8, "width"),
+        (Camera(), 8, -1, "height"),
+        (Camera(), 8, 2.5, "height"),
+        (Camera(), 8, True, "height"),
         (Camera(fov=0.0), 8, 8, "camera.fov"),
         (Camera(fov=180.0), 8, 8, "camera.fov"),
         (Camera(fov=-30.0), 8, 8, "camera.fov"),
@@ -187,7 +343,10 @@ INF = float("inf")
         (Camera(fov=INF), 8, 8, "camera.fov"),
         (Camera(fov="wide"), 8, 8, "camera.fov"),
         (Camera(position=(1, 2, 3), look_at=(1, 2, 3)), 8, 8, "camera.look_at"),
+        # up antiparallel, parallel, and antiparallel off the axes to the viewing direction
         (Camera(position=(0, 5, 0), look_at=(0, 0, 0), up=(0, 1, 0)), 8, 8, "camera.up"),
+        (Camera(position=(0, -5, 0), look_at=(0, 0, 0), up=(0, 1, 0)), 8, 8, "camera.up"),
+        (Camera(position=(1, 2, 3), look_at=(2, 4, 6), up=(-2, -4, -6)), 8, 8, "camera.up"),
         (Camera(position=(0, 0, 0), look_at=(0, -2, 0), up=(0, 3, 0)), 8, 8, "camera.up"),
         (Camera(position=(0, 5, 0), look_at=(0, 0, 0), up=(1e-9, 1, 0)), 8, 8, "camera.up"),
         (Camera(up=(0, 0, 0)), 8, 8, "camera.up"),
@@ -195,6 +354,7 @@ INF = float("inf")
         (Camera(look_at=(0, INF, 0)), 8, 8, "camera.look_at"),
         (Camera(up=(0, NAN, 0)), 8, 8, "camera.up"),
         (Camera(position=(0, 1)), 8, 8, "camera.position"),
+        (Camera(up=(0, 1)), 8, 8, "camera.up"),
     ],
 )
 def test_degenerate_cameras_raise_value_error_naming_the_field(
@@ -204,10 +364,20 @@ def test_degenerate_cameras_raise_value_error_naming_the_field(
         camera_frame(camera, width, height)
 
 
-def test_an_almost_vertical_view_is_still_accepted() -> None:
-    # 0.5 degrees off the up vector: a valid, if unusual, camera.
+def test_nearly_degenerate_but_valid_cameras_still_work() -> None:
+    # Slightly off vertical (0.11 and 0.5 degrees), a tiny and a wide field of view, a 1x1
+    # image: all well defined, and every sample lands in its own pixel.
     tilt = math.tan(math.radians(0.5))
-    camera = Camera(position=(0, 5, 0), look_at=(5 * tilt, 0, 0), up=(0, 1, 0))
-    frame = camera_frame(camera, 3, 3)
-    _, directions, _ = primary_rays(frame, 1, 0, 4, 1)
-    assert angle_between(directions[0], np.subtract(camera.look_at, camera.position)) < 45 / 3
+    for camera, width, height in [
+        (Camera(position=(0.01, 5, 0), look_at=(0, 0, 0), up=(0, 1, 0)), 4, 4),
+        (Camera(position=(0, 5, 0), look_at=(5 * tilt, 0, 0), up=(0, 1, 0)), 3, 3),
+        (Camera(fov=0.5), 5, 3),
+        (Camera(fov=179.0), 5, 3),
+        (Camera(), 1, 1),
+    ]:
+        _, directions, pixel = all_rays(camera, width, height, spp=2)
+        assert np.isfinite(directions).all()
+        column, row = image_position(camera, width, height, directions)
+        fx, fy = column - pixel % width, row - pixel // width
+        assert np.all((fx > -1e-3) & (fx < 1 + 1e-3)), camera
+        assert np.all((fy > -1e-3) & (fy < 1 + 1e-3)), camera
