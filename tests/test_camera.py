@@ -1,4 +1,4 @@
-"""The pinhole camera (embree_rt/camera.py) and the counter-based sampler it jitters with.
+"""The pinhole camera (embree_rt/camera.py): frame, jittered stratified primary rays.
 
 ``primary_rays`` returns one ray per column: origins and directions (3, count) float32, pixel
 (count,) int64. Ray directions are checked by projecting them back onto the image plane with a
@@ -15,69 +15,7 @@ import numpy as np
 import pytest
 
 from embree_rt.camera import camera_frame, primary_rays
-from embree_rt.sampling import uniform
 from embree_rt.scene.model import Camera
-
-# -- sampling -------------------------------------------------------------------------------------
-
-
-def test_uniform_is_float32_in_the_unit_interval_with_the_right_moments() -> None:
-    n = 1_000_000
-    x = uniform(3, np.arange(n), 0)
-    assert x.dtype == np.float32 and x.shape == (n,)
-    assert x.min() >= 0.0 and x.max() < 1.0
-    x64 = x.astype(np.float64)
-    # Standard errors: mean sqrt(1/12/n) ≈ 2.9e-4, variance sqrt(1/180/n) ≈ 7.5e-5.
-    assert abs(x64.mean() - 0.5) < 5 * math.sqrt(1 / 12 / n)
-    assert abs(x64.var() - 1 / 12) < 5 * math.sqrt(1 / 180 / n)
-    # 100 equal bins: chi-square with 99 degrees of freedom (mean 99, sd 14).
-    counts = np.bincount((x64 * 100).astype(np.int64), minlength=100)
-    chi2 = ((counts - n / 100) ** 2 / (n / 100)).sum()
-    assert chi2 < 99 + 5 * 14
-    # Not stuck on a coarse grid: nearly every sample is distinct at 24-bit resolution.
-    assert len(np.unique(x)) > 0.97 * n
-
-
-def correlation(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.corrcoef(a.astype(np.float64), b.astype(np.float64))[0, 1])
-
-
-def test_dimensions_seeds_and_neighbouring_indices_are_uncorrelated() -> None:
-    n = 200_000
-    index = np.arange(n)
-    limit = 5 / math.sqrt(n)  # five standard errors of a correlation coefficient
-    base = uniform(0, index, 0)
-    assert abs(correlation(base, uniform(0, index, 1))) < limit
-    assert abs(correlation(base, uniform(0, index, 2))) < limit
-    assert abs(correlation(base, uniform(1, index, 0))) < limit
-    assert abs(correlation(base, uniform(12345, index, 1))) < limit
-    assert abs(correlation(base[:-1], base[1:])) < limit
-    # Jointly uniform in 2D (the camera's jitter uses dimensions 0 and 1 together): 10x10 cells,
-    # chi-square with 99 degrees of freedom.
-    y = uniform(0, index, 1)
-    cells = (base * 10).astype(np.int64) * 10 + (y * 10).astype(np.int64)
-    counts = np.bincount(cells, minlength=100)
-    chi2 = ((counts - n / 100) ** 2 / (n / 100)).sum()
-    assert chi2 < 99 + 5 * 14
-    # Different streams are different numbers, not shifted copies at the same index.
-    assert np.mean(base == uniform(1, index, 0)) < 1e-3
-    assert np.mean(base == uniform(0, index, 1)) < 1e-3
-
-
-def test_uniform_does_not_depend_on_how_indices_are_batched() -> None:
-    whole = uniform(7, np.arange(10_000), 1)
-    for k in (1, 37, 4096, 9999):
-        parts = np.concatenate([uniform(7, np.arange(k), 1), uniform(7, np.arange(k, 10_000), 1)])
-        np.testing.assert_array_equal(parts, whole)
-    shuffled = np.random.default_rng(0).permutation(10_000)
-    np.testing.assert_array_equal(uniform(7, shuffled, 1), whole[shuffled])
-    np.testing.assert_array_equal(uniform(7, np.arange(10_000, dtype=np.int32), 1), whole)
-    np.testing.assert_array_equal(uniform(7, np.arange(10_000), 1), whole)  # deterministic
-    # Far indices (a 1e6-sphere 4K render at many spp) still give distinct uniform values.
-    far = uniform(7, np.arange(2**40, 2**40 + 100_000), 1)
-    assert far.min() >= 0.0 and far.max() < 1.0
-    assert abs(far.astype(np.float64).mean() - 0.5) < 5 * math.sqrt(1 / 12 / 100_000)
-
 
 # -- camera: an independent pinhole model ---------------------------------------------------------
 
