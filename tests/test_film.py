@@ -1,4 +1,6 @@
-"""The film: accumulation, tone mapping, and image files that are written whole or not at all."""
+"""The film (embree_rt/film.py): accumulation of (3, n) column samples against a Python loop,
+tone mapping against hand values and plain Python, and image files: Pillow / NumPy / OpenEXR
+round trips, early path errors, atomic replacement."""
 
 from __future__ import annotations
 
@@ -13,122 +15,225 @@ from PIL import Image
 from embree_rt import film
 from embree_rt.film import Film, FilmBlock, check_output_path, save_image, tonemap
 
-rng = np.random.default_rng(99)
+WIDTH, HEIGHT = 7, 5
 
 
-def random_image(height: int = 5, width: int = 7) -> np.ndarray:
-    image = rng.exponential(1.0, (height, width, 3)).astype(np.float32)
-    image[0, 0] = 0.0
-    image[-1, -1] = 50.0
+def random_samples(seed: int, count: int, first: int = 0, stop: int = WIDTH * HEIGHT):
+    """(count,) int64 pixels in [first, stop) and their (3, count) float32 colors."""
+    rng = np.random.default_rng(seed)
+    pixel = rng.integers(first, stop, count).astype(np.int64)
+    rgb = rng.uniform(0.0, 4.0, (3, count)).astype(np.float32)
+    return pixel, rgb
+
+
+def loop_sums(pixel: np.ndarray, rgb: np.ndarray, size: int, offset: int = 0) -> np.ndarray:
+    """(size, 3) float64 per-pixel sums of the (3, n) column samples, one sample at a time."""
+    sums = np.zeros((size, 3))
+    for i, p in enumerate(pixel.tolist()):
+        for channel in range(3):
+            sums[p - offset][channel] += float(rgb[channel, i])
+    return sums
+
+
+def as_image(sums: np.ndarray) -> np.ndarray:
+    """Row-major pixel sums (WIDTH * HEIGHT, 3) → (HEIGHT, WIDTH, 3), pixel p at (p // W, p % W)."""
+    image = np.zeros((HEIGHT, WIDTH, 3))
+    for p in range(WIDTH * HEIGHT):
+        image[p // WIDTH, p % WIDTH] = sums[p]
     return image
 
 
-# -- accumulation -----------------------------------------------------------------------------
+NO_SAMPLES = (np.zeros(0, np.int64), np.zeros((3, 0), np.float32))
 
 
-def test_film_sums_equal_a_python_loop() -> None:
-    width, height = 6, 4
-    loop = np.zeros((height, width, 3))
-    target = Film(width, height)
-    for _ in range(3):  # several batches into one film
-        pixel = rng.integers(0, width * height, 500).astype(np.int64)
-        rgb = rng.random((500, 3)).astype(np.float32)
-        target.add(pixel, rgb)
-        for p, value in zip(pixel, rgb, strict=True):
-            loop[p // width, p % width] += value  # row-major: pixel = row * width + column
-    target.add(np.zeros(0, np.int64), np.zeros((0, 3), np.float32))
-    image = target.image(4)
-    assert image.shape == (height, width, 3) and image.dtype == np.float32
-    np.testing.assert_allclose(image, loop / 4, rtol=1e-6)
+# -- accumulation ---------------------------------------------------------------------------------
+
+
+def test_film_add_sums_samples_per_pixel_like_a_loop() -> None:
+    accumulated = Film(WIDTH, HEIGHT)
+    batches = [random_samples(0, 3000), random_samples(1, 500), random_samples(2, 700)]
+    for pixel, rgb in batches:  # several batches into one film
+        accumulated.add(pixel, rgb)
+    accumulated.add(*NO_SAMPLES)  # empty: no-op
+    pixel = np.concatenate([p for p, _ in batches])
+    rgb = np.concatenate([c for _, c in batches], axis=1)
+    expected = as_image(loop_sums(pixel, rgb, WIDTH * HEIGHT))
+    for spp in (1, 4, 8):
+        image = accumulated.image(spp)
+        assert image.dtype == np.float32 and image.shape == (HEIGHT, WIDTH, 3)
+        assert image.flags.c_contiguous
+        np.testing.assert_allclose(image, expected / spp, rtol=1e-6)
+
+
+def test_film_image_puts_pixel_indices_row_major() -> None:
+    marked = Film(WIDTH, HEIGHT)
+    # Column i of np.eye(3, 4) is sample i: red, green, blue, then black.
+    marked.add(np.array([0, WIDTH - 1, WIDTH, WIDTH * HEIGHT - 1]), np.eye(3, 4, dtype=np.float32))
+    image = marked.image(1)
+    assert image[0, 0].tolist() == [1, 0, 0]  # top left
+    assert image[0, WIDTH - 1].tolist() == [0, 1, 0]  # top right
+    assert image[1, 0].tolist() == [0, 0, 1]  # second row
+    assert image.sum() == 3.0  # the fourth sample is black: nothing anywhere else
 
 
 def test_film_accumulates_in_double_precision() -> None:
     # In float32, 1e8 + 1 rounds back to 1e8 and the single 1 would be lost.
     target = Film(1, 1)
     for value in (1e8, 1.0, -1e8):
-        target.add(np.zeros(1, np.int64), np.full((1, 3), value, np.float32))
+        target.add(np.zeros(1, np.int64), np.full((3, 1), value, np.float32))
     np.testing.assert_array_equal(target.image(1), 1.0)
-
-
-def test_film_blocks_add_up_to_the_same_image() -> None:
-    width, height = 5, 3
-    pixel = np.sort(rng.integers(0, width * height, 300)).astype(np.int64)
-    rgb = rng.random((300, 3)).astype(np.float32)
-    direct = Film(width, height)
-    direct.add(pixel, rgb)
-    blocked = Film(width, height)
-    for first, count in ((0, 4), (4, 9), (13, 2)):
-        block = FilmBlock(first, count)
-        inside = (pixel >= first) & (pixel < first + count)
-        block.add(pixel[inside], rgb[inside])
-        blocked.add_block(block)
-    np.testing.assert_allclose(blocked.image(2), direct.image(2), rtol=1e-12)
 
 
 def test_film_refuses_pixels_outside_it() -> None:
     target = Film(2, 2)
-    with pytest.raises(ValueError, match="pixel"):
-        target.add(np.array([4], np.int64), np.ones((1, 3), np.float32))
+    for outside in (4, -1):
+        with pytest.raises(ValueError, match="pixel"):
+            target.add(np.array([outside], np.int64), np.ones((3, 1), np.float32))
     with pytest.raises(ValueError, match="spp"):
         target.image(0)
+
+
+def test_film_block_add_sums_its_own_pixels_like_a_loop() -> None:
+    first, count = 9, 13
+    block = FilmBlock(first, count)
+    pixel, rgb = random_samples(3, 2000, first, first + count)
+    block.add(pixel[:1200], rgb[:, :1200])
+    block.add(pixel[1200:], rgb[:, 1200:])
+    block.add(*NO_SAMPLES)
+    sums = block.sums
+    assert sums.dtype == np.float64 and sums.shape == (3, count)
+    np.testing.assert_allclose(sums, loop_sums(pixel, rgb, count, first).T, rtol=1e-12)
+
+
+def test_film_add_block_equals_adding_the_samples_directly() -> None:
+    # Batches as the integrator makes them: consecutive pixel ranges, the last one short,
+    # and one range rendered in two blocks (two batches sharing a pixel).
+    ranges = [(0, 12), (12, 12), (24, 11), (30, 5)]
+    blocked, direct = Film(WIDTH, HEIGHT), Film(WIDTH, HEIGHT)
+    all_pixels, all_rgb = [], []
+    for seed, (first, count) in enumerate(ranges):
+        pixel, rgb = random_samples(10 + seed, 300, first, first + count)
+        block = FilmBlock(first, count)
+        block.add(pixel, rgb)
+        blocked.add_block(block)
+        direct.add(pixel, rgb)
+        all_pixels.append(pixel)
+        all_rgb.append(rgb)
+    expected = as_image(loop_sums(np.concatenate(all_pixels), np.concatenate(all_rgb, axis=1), 35))
+    np.testing.assert_allclose(blocked.image(4), expected / 4, rtol=1e-6)
+    np.testing.assert_allclose(blocked.image(4), direct.image(4), rtol=1e-12)
+
+
+def test_film_blocks_split_from_one_batch_add_up_to_the_same_image() -> None:
+    pixel, rgb = random_samples(20, 300)
+    pixel = np.sort(pixel)
+    direct = Film(WIDTH, HEIGHT)
+    direct.add(pixel, rgb)
+    blocked = Film(WIDTH, HEIGHT)
+    for first, count in ((0, 4), (4, 19), (23, 12)):
+        block = FilmBlock(first, count)
+        inside = (pixel >= first) & (pixel < first + count)
+        block.add(pixel[inside], rgb[:, inside])
+        blocked.add_block(block)
+    np.testing.assert_allclose(blocked.image(2), direct.image(2), rtol=1e-12)
 
 
 # -- tone mapping ---------------------------------------------------------------------------------
 
 
-def test_tonemap_hand_computed_values() -> None:
-    linear = np.array([[[0.0, 1.0, 1e30], [-2.0, 3.0, np.inf], [0.25, 1e-6, 9.0]]], np.float32)
-    mapped = tonemap(linear)
-    assert mapped.dtype == np.uint8 and mapped.shape == (1, 3, 3)
-    assert mapped[0, 0].tolist() == [0, round(255 * 0.5 ** (1 / 2.2)), 255]
-    assert mapped[0, 0, 1] == 186
-    assert mapped[0, 1, 0] == 0  # negative clamps to black
-    assert mapped[0, 1, 1] == round(255 * 0.75 ** (1 / 2.2))
-    assert mapped[0, 1, 2] == 255
-    for c, value in zip((0.25, 1e-6, 9.0), mapped[0, 2], strict=True):
-        assert value == round(255 * (c / (1 + c)) ** (1 / 2.2))
+def reference_tonemap(c: float) -> int:
+    """Reinhard c / (1 + c), gamma 1/2.2, to 8 bits, in plain Python."""
+    c = max(c, 0.0)
+    return round(255 * (c / (1 + c)) ** (1 / 2.2))
 
 
-def test_tonemap_is_monotone_and_rejects_nan() -> None:
-    ramp = np.geomspace(1e-4, 1e4, 3000, dtype=np.float32)
-    mapped = tonemap(np.repeat(ramp[None, :, None], 3, axis=2))
-    assert (np.diff(mapped[0, :, 0].astype(int)) >= 0).all()
-    broken = np.zeros((2, 2, 3), np.float32)
-    broken[1, 0, 2] = np.nan
+def test_tonemap_hand_values() -> None:
+    image = np.array(
+        [
+            [[0.0, 1.0, 1e9], [-1.0, -1e30, 3.0]],
+            [[1e30, -2.0, np.inf], [0.25, 1e-6, 9.0]],
+        ],
+        np.float32,
+    )
+    mapped = tonemap(image)
+    assert mapped.dtype == np.uint8 and mapped.shape == (2, 2, 3)
+    one = round(255 * 0.5 ** (1 / 2.2))
+    assert one == 186
+    three = round(255 * 0.75 ** (1 / 2.2))
+    quarter, tiny, nine = (round(255 * (c / (1 + c)) ** (1 / 2.2)) for c in (0.25, 1e-6, 9.0))
+    assert mapped.tolist() == [
+        [[0, one, 255], [0, 0, three]],  # negatives clamp to black
+        [[255, 0, 255], [quarter, tiny, nine]],
+    ]
+
+
+def test_tonemap_saturates_at_infinity_and_rejects_nan() -> None:
+    mapped = tonemap(np.array([[[np.inf, -np.inf, 3.4e38]]], np.float32))
+    assert mapped.tolist() == [[[255, 0, 255]]]
+    partly = np.zeros((2, 2, 3), np.float32)
+    partly[1, 0, 2] = np.nan
+    for broken in (np.array([[[0.5, np.nan, 0.5]]], np.float32), partly):
+        with pytest.raises(ValueError, match="image contains NaN"):
+            tonemap(broken)
     with pytest.raises(ValueError, match="image contains NaN"):
-        tonemap(broken)
+        tonemap(np.full((4, 4, 3), np.nan, np.float32))
 
 
-# -- files --------------------------------------------------------------------------------
+def test_tonemap_matches_plain_python_over_the_range() -> None:
+    values = np.concatenate([np.linspace(0.0, 2.0, 3000), np.geomspace(1e-6, 1e6, 3000)])
+    values = values.astype(np.float32)
+    mapped = tonemap(values.reshape(-1, 1, 3)).ravel()
+    exact = np.array([255 * (v / (1 + v)) ** (1 / 2.2) for v in values.astype(np.float64).tolist()])
+    expected = np.array([reference_tonemap(v) for v in values.astype(np.float64).tolist()])
+    # float32 against float64 may round the other way right at a half: only there allow 1.
+    tie = np.abs(exact - np.floor(exact) - 0.5) < 1e-3
+    np.testing.assert_array_equal(mapped[~tie], expected[~tie])
+    assert np.all(np.abs(mapped[tie].astype(int) - expected[tie]) <= 1)
+    # Monotone over both ramps.
+    assert np.all(np.diff(mapped[:3000].astype(int)) >= 0)
+    assert np.all(np.diff(mapped[3000:].astype(int)) >= 0)
 
 
-def test_png_round_trip_through_pillow(tmp_path: Path) -> None:
-    image = random_image()
-    path = tmp_path / "picture.png"
+# -- image files ----------------------------------------------------------------------------------
+
+
+def linear_image(seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return rng.uniform(-0.5, 6.0, (HEIGHT, WIDTH, 3)).astype(np.float32)
+
+
+@pytest.mark.parametrize("suffix", [".png", ".PNG"])
+def test_png_round_trip_is_the_tone_mapped_image(tmp_path: Path, suffix: str) -> None:
+    image = linear_image()
+    path = tmp_path / f"render{suffix}"
     save_image(image, path)
-    with Image.open(path) as loaded:
-        assert loaded.format == "PNG" and loaded.mode == "RGB"
-        assert loaded.size == (7, 5)
-        np.testing.assert_array_equal(np.asarray(loaded), tonemap(image))
+    with Image.open(path) as png:
+        assert png.format == "PNG" and png.mode == "RGB" and png.size == (WIDTH, HEIGHT)
+        pixels = np.asarray(png)
+    np.testing.assert_array_equal(pixels, tonemap(image))
+    expected = np.vectorize(reference_tonemap)(image.astype(np.float64))
+    assert np.abs(pixels.astype(int) - expected).max() <= 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
 
 
-def test_npy_round_trip_is_exact_and_extensions_ignore_case(tmp_path: Path) -> None:
-    image = random_image()
-    for name in ("linear.npy", "LINEAR2.NPY"):
-        save_image(image, tmp_path / name)
-        loaded = np.load(tmp_path / name)
-        assert loaded.dtype == np.float32
-        np.testing.assert_array_equal(loaded, image)
-    save_image(image, tmp_path / "upper.PNG")
-    with Image.open(tmp_path / "upper.PNG") as loaded:
-        assert loaded.format == "PNG"
+@pytest.mark.parametrize("name", ["render.npy", "RENDER.NPY"])
+def test_npy_round_trip_is_exact(tmp_path: Path, name: str) -> None:
+    image = linear_image(1)
+    image[0, 0] = [np.inf, -1e30, 1e-30]  # linear output keeps what PNG cannot
+    path = tmp_path / name
+    save_image(image, str(path))
+    loaded = np.load(path)
+    assert loaded.dtype == np.float32 and loaded.shape == image.shape
+    np.testing.assert_array_equal(loaded, image)
+    assert loaded.tobytes() == image.tobytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
 
 
 def test_exr_round_trip_is_exact(tmp_path: Path) -> None:
     import OpenEXR
 
-    image = random_image()
-    path = tmp_path / "linear.exr"
+    image = linear_image(4)
+    path = tmp_path / "render.exr"
     save_image(image, path)
     with OpenEXR.File(str(path)) as loaded:
         pixels = loaded.channels()["RGB"].pixels
@@ -139,58 +244,79 @@ def test_exr_round_trip_is_exact(tmp_path: Path) -> None:
 def test_exr_without_openexr_is_a_clear_runtime_error(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.setitem(sys.modules, "OpenEXR", None)  # makes `import OpenEXR` fail
     with pytest.raises(RuntimeError, match="pip install openexr"):
-        check_output_path(tmp_path / "linear.exr")
+        check_output_path(tmp_path / "render.exr")
     with pytest.raises(RuntimeError, match="pip install openexr"):
-        save_image(random_image(), tmp_path / "linear.exr")
+        save_image(linear_image(), tmp_path / "render.exr")
     assert list(tmp_path.iterdir()) == []
 
 
-def test_overwriting_gives_the_usual_file_mode(tmp_path: Path) -> None:
-    path = tmp_path / "picture.png"
-    path.write_bytes(b"old")
-    save_image(random_image(), path)
-    with Image.open(path) as loaded:
-        assert loaded.size == (7, 5)
+def test_saving_over_an_old_file_replaces_it_whole_with_the_usual_mode(tmp_path: Path) -> None:
     umask = os.umask(0o022)
-    os.umask(umask)
-    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
-    assert [p.name for p in tmp_path.iterdir()] == ["picture.png"]
+    try:
+        fresh = tmp_path / "fresh.png"
+        save_image(linear_image(), fresh)
+        assert fresh.stat().st_mode & 0o777 == 0o644  # not tempfile's private 0600
+        path = tmp_path / "render.png"
+        path.write_bytes(b"old")
+        save_image(np.zeros((HEIGHT, WIDTH, 3), np.float32), path)
+        save_image(np.ones((HEIGHT, WIDTH, 3), np.float32), path)
+        with Image.open(path) as png:
+            assert png.size == (WIDTH, HEIGHT)
+            assert np.all(np.asarray(png) == reference_tonemap(1.0))
+        assert path.stat().st_mode & 0o777 == 0o644
+    finally:
+        os.umask(umask)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fresh.png", "render.png"]
 
 
-class WriterError(Exception):
+class DiskFullError(Exception):
     pass
 
 
-@pytest.mark.parametrize("failure", [WriterError, KeyboardInterrupt])
+@pytest.mark.parametrize("error", [DiskFullError, KeyboardInterrupt, MemoryError])
 @pytest.mark.parametrize("suffix", [".png", ".npy", ".exr"])
-def test_a_failed_write_leaves_the_old_file_and_no_temp_files(
-    tmp_path: Path, monkeypatch, failure: type[BaseException], suffix: str
+def test_a_writer_failing_midway_leaves_the_old_image_untouched(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, suffix: str, error: type[BaseException]
 ) -> None:
-    path = tmp_path / f"picture{suffix}"
-    save_image(random_image(), path)
+    path = tmp_path / f"render{suffix}"
+    save_image(linear_image(2), path)
     before = path.read_bytes()
+    mode = path.stat().st_mode
+    calls = []
 
-    def broken_writer(image: np.ndarray, handle) -> None:
-        handle.write(b"half an image")
-        raise failure
+    def half_a_writer(image: np.ndarray, handle) -> None:
+        calls.append(handle)
+        handle.write(b"\x89PNG half an image")
+        handle.flush()
+        raise error
 
-    monkeypatch.setitem(film.WRITERS, suffix, broken_writer)
-    with pytest.raises(failure):
-        save_image(random_image(), path)
+    monkeypatch.setitem(film.WRITERS, suffix, half_a_writer)
+    with pytest.raises(error):
+        save_image(linear_image(3), path)
+    assert len(calls) == 1  # the failure really happened inside the writer
     assert path.read_bytes() == before
-    assert [p.name for p in tmp_path.iterdir()] == [path.name]
-    # A first write that fails leaves nothing at all.
-    with pytest.raises(failure):
-        save_image(random_image(), tmp_path / f"new{suffix}")
-    assert [p.name for p in tmp_path.iterdir()] == [path.name]
+    assert path.stat().st_mode == mode
+    # No temp file left behind (hidden ones included).
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+    # With no old image, a failed write leaves nothing at all.
+    fresh = tmp_path / f"fresh{suffix}"
+    with pytest.raises(error):
+        save_image(linear_image(3), fresh)
+    assert len(calls) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
 
 
 @pytest.mark.parametrize(
     "name, message",
     [
-        ("picture.jpg", "unknown image extension"),
-        ("picture", "unknown image extension"),
-        ("missing/picture.png", "does not exist"),
+        ("render.jpg", "unknown image extension"),
+        ("render", "unknown image extension"),
+        ("render.png.bak", "unknown image extension"),
+        ("render.np", "unknown image extension"),
+        ("missing/render.png", "does not exist"),
+        ("missing/render.npy", "does not exist"),
+        ("missing/deeper/render.png", "does not exist"),
         ("a_directory.png", "is a directory"),
     ],
 )
@@ -206,7 +332,7 @@ def test_bad_paths_are_refused_before_anything_is_written(
         check_output_path(path)
     assert str(path) in str(error.value)
     with pytest.raises(ValueError, match=message):
-        save_image(random_image(), path)
+        save_image(linear_image(), path)
     assert calls == []
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_directory.png"]
 
@@ -214,5 +340,5 @@ def test_bad_paths_are_refused_before_anything_is_written(
 def test_images_of_the_wrong_shape_are_refused(tmp_path: Path) -> None:
     for shape in ((4, 4), (4, 4, 4), (0, 4, 3)):
         with pytest.raises(ValueError, match="image"):
-            save_image(np.zeros(shape, np.float32), tmp_path / "picture.npy")
+            save_image(np.zeros(shape, np.float32), tmp_path / "render.npy")
     assert list(tmp_path.iterdir()) == []
