@@ -85,6 +85,7 @@ def run(count: int, args: argparse.Namespace) -> dict:
             "batch_size": renderer.batch_size,
             "build_s": round(renderer.stats.build_s, 4),
             "render_s": round(best_s, 3),
+            "render_s_all": [round(x, 3) for x in render_s],
             "rays": rays_by_kind,
             "rays_per_s": round(rays / best_s),
             "raw_rays_per_s": round(rays / raw_s),

@@ -149,21 +149,27 @@ def primary_rays(
             f"({frame.width}x{frame.height} at {spp} spp)"
         )
     index = np.arange(start, start + count, dtype=np.int64)
+    # Floor division and remainder by a scalar, not np.divmod: NumPy divides by a constant
+    # through libdivide only in these two (13x faster here).
     pixel = index // spp
-    cell = cells[index % spp]
     row = pixel // frame.width
     col = pixel % frame.width
     jitter_x = uniform(seed, index, 0)
     jitter_y = uniform(seed, index, 1)
-    # Position in [0, 1) across the image, left to right and top to bottom.
-    x = (col + (cell % nx + jitter_x) / nx) / frame.width
-    y = (row + (cell // nx + jitter_y) / ny) / frame.height
-    screen_x = (2.0 * x - 1.0) * frame.half_width
-    screen_y = (1.0 - 2.0 * y) * frame.half_height
-    directions = (
-        frame.u[:, None] * screen_x + frame.v[:, None] * screen_y - frame.w[:, None]
-    )  # (3, count) float64
+    if spp > 1:
+        cell = cells[index % spp]
+        cell_y, cell_x = cell // nx, cell % nx
+        jitter_x = (cell_x + jitter_x) / nx
+        jitter_y = (cell_y + jitter_y) / ny
+    # Position in [0, 1) across the image, left to right and top to bottom, in float64: the
+    # jitter must survive being added to a column number in the thousands.
+    x = (col + jitter_x) / frame.width
+    y = (row + jitter_y) / frame.height
+    screen_x = ((2.0 * x - 1.0) * frame.half_width).astype(np.float32)
+    screen_y = ((1.0 - 2.0 * y) * frame.half_height).astype(np.float32)
+    u, v, w = (axis.astype(np.float32)[:, None] for axis in (frame.u, frame.v, frame.w))
+    directions = u * screen_x + v * screen_y - w  # (3, count) float32
     directions /= np.sqrt(directions[0] ** 2 + directions[1] ** 2 + directions[2] ** 2)
     origins = np.empty((3, count), np.float32)
     origins[:] = frame.origin.astype(np.float32)[:, None]
-    return origins, directions.astype(np.float32), pixel
+    return origins, directions, pixel

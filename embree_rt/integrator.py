@@ -16,6 +16,7 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 
@@ -177,11 +178,10 @@ class Renderer:
         total = width * height * spp
         # Batches hold whole pixels and each batch sums into its own block, in ray order, so
         # the image is bitwise the same whatever the batch size or the number of workers.
-        step = max(1, self.batch_size // spp) * spp
-        starts = range(0, total, step)
+        batches = batch_ranges(total, self.batch_size, spp, self.workers)
 
-        def run(start: int) -> BatchWork:
-            count = min(step, total - start)
+        def run(batch: tuple[int, int]) -> BatchWork:
+            start, count = batch
             work = BatchWork(FilmBlock(start // spp, count // spp), self.trace_log is not None)
             origins, directions, pixel = primary_rays(frame, spp, seed, start, count)
             rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
@@ -196,9 +196,9 @@ class Renderer:
         try:
             done = 0
             if self.workers > 1:
-                results = _ordered_results(pool, run, starts, ahead=self.workers)
+                results = _ordered_results(pool, run, batches, ahead=self.workers)
             else:
-                results = map(run, starts)
+                results = map(run, batches)
             for work in results:
                 film.add_block(work.block)
                 for kind, n in work.rays.items():
@@ -348,11 +348,11 @@ class Renderer:
         shadow_origins = np.empty((3, count), np.float32)
         shadow_directions = np.empty((3, count), np.float32)
         first = 0
-        for facing, to_light in per_light:
+        for position, (facing, _) in zip(self.light_positions, per_light, strict=True):
             stop = first + len(facing)
             for axis in range(3):
-                np.take(points[axis], facing, out=shadow_origins[axis, first:stop])
-                np.take(to_light[axis], facing, out=shadow_directions[axis, first:stop])
+                origins = np.take(points[axis], facing, out=shadow_origins[axis, first:stop])
+                np.subtract(position[axis], origins, out=shadow_directions[axis, first:stop])
             first = stop
         blocked = self.geometry.occluded(shadow_origins, shadow_directions, 0.0, 1.0)
         if work.log is not None:
@@ -390,6 +390,22 @@ class Renderer:
                 self.light_rgb[light],
             )
         return result
+
+
+def batch_ranges(total: int, batch_size: int, spp: int, workers: int) -> list[tuple[int, int]]:
+    """(start, count) of each batch of the ``total`` camera samples, in order: whole pixels of
+    ``spp`` samples, at most ``batch_size`` samples (or one pixel). With several workers the
+    last round of batches is cut into twice as many pieces, so that no worker idles for long
+    while another finishes a full batch at the bottom of the image."""
+    step = max(1, batch_size // spp) * spp
+    starts = list(range(0, total, step))
+    if workers > 1 and len(starts) > workers:
+        tail = starts[-workers]
+        pixels = (total - tail) // spp
+        pieces = 2 * workers
+        starts = starts[:-workers] + [tail + pixels * k // pieces * spp for k in range(pieces)]
+    bounds = [*starts, total]
+    return [(a, b - a) for a, b in pairwise(bounds) if b > a]
 
 
 def _ordered_results(pool: ThreadPoolExecutor, function, items, ahead: int):

@@ -148,11 +148,6 @@ def checker(points: np.ndarray, checker: Checker) -> np.ndarray:
     # float64 so the square a point falls in does not depend on float32 rounding of x / size.
     x = np.asarray(points[0], np.float64)
     z = np.asarray(points[2], np.float64)
-    cells = np.floor(x / checker.size) + np.floor(z / checker.size)
-    even = np.remainder(cells, 2.0) == 0.0
-    color_a = np.asarray(checker.color_a, np.float32)
-    color_b = np.asarray(checker.color_b, np.float32)
-    colors = np.empty((3, len(even)), np.float32)
-    for channel in range(3):
-        colors[channel] = np.where(even, color_a[channel], color_b[channel])
-    return colors
+    odd = (np.floor(x / checker.size) + np.floor(z / checker.size)).astype(np.int64) & 1
+    palette = np.array([checker.color_a, checker.color_b], np.float32).T  # (3, 2): even, odd
+    return np.take(palette, odd, axis=1)

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from embree_rt import Background, Camera, Checker, Floor, Material, PointLight, Scene, preset
-from embree_rt.integrator import render
+from embree_rt.integrator import batch_ranges, render
 
 
 def pixel_of(camera: Camera, point, width: int, height: int) -> tuple[int, int]:
@@ -163,3 +163,21 @@ def test_analytic_and_tessellated_spheres_render_nearly_the_same_image() -> None
     analytic = tonemap(render(scene, spheres="analytic", **settings)).astype(float)
     mesh = tonemap(render(scene, spheres="mesh", **settings)).astype(float)
     assert np.abs(analytic - mesh).mean() / 255 < 0.01
+
+
+@pytest.mark.parametrize(
+    "total, batch_size, spp, workers",
+    [(2073600, 262144, 1, 2), (2073600 * 8, 262144, 8, 2), (100 * 4, 30, 4, 3), (10, 262144, 1, 2),
+     (2073600, 262144, 1, 1), (7 * 9, 1, 9, 4)],
+)  # fmt: skip
+def test_batches_tile_the_samples_in_whole_pixels(total, batch_size, spp, workers) -> None:
+    batches = batch_ranges(total, batch_size, spp, workers)
+    starts = [start for start, _ in batches]
+    counts = [count for _, count in batches]
+    assert starts[0] == 0 and sum(counts) == total
+    assert all(a + n == b for a, n, b in zip(starts, counts, starts[1:], strict=False))
+    assert all(start % spp == 0 and count % spp == 0 and count > 0 for start, count in batches)
+    assert max(counts) <= max(spp, batch_size // spp * spp)
+    if workers > 1 and len(range(0, total, max(1, batch_size // spp) * spp)) > workers:
+        # the last round is cut finer: its batches are at most about half a full one
+        assert max(counts[-workers:]) <= max(counts) // 2 + spp
