@@ -232,7 +232,7 @@ class Renderer:
             # The hits' origins are not needed again: their surfaces say where they are.
             hit_rays = RayBatch(
                 None,
-                np.take(rays.directions, rows, axis=1),
+                surfaces.incoming,
                 np.take(rays.pixel, rows),
                 np.take(rays.weight, rows, axis=1),
             )
@@ -373,7 +373,8 @@ class Renderer:
                 # direction), cheaper than gathering seven arrays and scattering back.
                 seen = np.zeros(n, np.float32)
                 seen[lit] = 1.0
-                direction = shading.normalize(to_light) * seen
+                length = np.sqrt(shading.dot(to_light, to_light))
+                direction = to_light * (seen / np.maximum(length, np.float32(1e-30)))
                 result += shading.blinn_phong(
                     normal, to_viewer, direction, color, diffuse, specular, shininess,
                     self.light_rgb[light],

@@ -32,7 +32,7 @@ class SurfaceHits:
     (the floor's is ``floor_material``); ``floor`` (n,) bool, the rays that hit the floor;
     ``scale`` (n,) float32, a bound on the size of the coordinates the hit was computed from
     (at least max |position|, and the object's |centre| + extent): its rounding error scales
-    with it.
+    with it; ``incoming`` (3, n) float32, the direction of the ray that made the hit.
     """
 
     hit: np.ndarray
@@ -43,6 +43,7 @@ class SurfaceHits:
     material: np.ndarray
     floor: np.ndarray
     scale: np.ndarray
+    incoming: np.ndarray
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
@@ -57,7 +58,7 @@ def _no_hits() -> SurfaceHits:
     return SurfaceHits(
         hit=np.zeros(0, bool), t=np.zeros(0, np.float32), position=vectors, normal=vectors,
         face_normal=vectors, material=np.zeros(0, np.int32), floor=np.zeros(0, bool),
-        scale=np.zeros(0, np.float32),
+        scale=np.zeros(0, np.float32), incoming=vectors,
     )  # fmt: skip
 
 
@@ -233,10 +234,11 @@ class SceneGeometry:
             material=np.zeros(n, np.int32),
             floor=np.zeros(n, bool),
             scale=np.zeros(n, np.float32),
+            incoming=np.zeros((3, n), np.float32),
         )
         for name in ("hit", "t", "material", "floor", "scale"):
             getattr(full, name)[rows] = getattr(compact, name)
-        for name in ("position", "normal", "face_normal"):
+        for name in ("position", "normal", "face_normal", "incoming"):
             getattr(full, name)[:, rows] = getattr(compact, name)
         return full
 
@@ -264,7 +266,8 @@ class SceneGeometry:
             on_floor = (floor_t < t) & (floor_t >= tnear) & (floor_t <= tfar)
             t = np.where(on_floor, np.inf, t)  # what is left are hits on objects
             rays = np.flatnonzero(on_floor)
-            position = self._points(origins, directions, rays, floor_t[rays])
+            incoming = np.take(directions, rays, axis=1)
+            position = np.take(origins, rays, axis=1) + incoming * floor_t[rays]
             normal = np.zeros((3, len(rays)), np.float32)
             normal[1] = 1.0
             numbers.append(rays)
@@ -272,6 +275,7 @@ class SceneGeometry:
                 hit=np.ones(len(rays), bool), t=floor_t[rays], position=position, normal=normal,
                 face_normal=normal, material=np.full(len(rays), self.floor_material, np.int32),
                 floor=np.ones(len(rays), bool), scale=_largest_magnitude(position),
+                incoming=incoming,
             ))  # fmt: skip
         on_instances = hits.inst_id >= 0
         if self.sphere_geom_id >= 0:
@@ -280,7 +284,9 @@ class SceneGeometry:
             )
             prim = hits.prim_id[rays]
             center = np.take(self.sphere_centers_by_column, prim, axis=1)
-            outward = _unit(self._points(origins, directions, rays, t[rays]) - center)
+            incoming = np.take(directions, rays, axis=1)
+            hit_points = np.take(origins, rays, axis=1) + incoming * t[rays]
+            outward = _unit(hit_points - center)
             numbers.append(rays)
             groups.append(SurfaceHits(
                 hit=np.ones(len(rays), bool), t=t[rays],
@@ -289,7 +295,7 @@ class SceneGeometry:
                 normal=outward, face_normal=outward, material=self.sphere_materials[prim],
                 floor=np.zeros(len(rays), bool),
                 # |centre| + radius bounds every coordinate of a point on the sphere.
-                scale=self.sphere_scale[prim],
+                scale=self.sphere_scale[prim], incoming=incoming,
             ))  # fmt: skip
         rays = np.flatnonzero(on_instances & (t != np.inf))
         if len(rays):
@@ -297,14 +303,15 @@ class SceneGeometry:
             normal, face_normal = self._instance_normals(
                 inst, hits.prim_id[rays], hits.u[rays], hits.v[rays]
             )
+            incoming = np.take(directions, rays, axis=1)
             numbers.append(rays)
             groups.append(SurfaceHits(
                 hit=np.ones(len(rays), bool), t=t[rays],
-                position=self._points(origins, directions, rays, t[rays]),
+                position=np.take(origins, rays, axis=1) + incoming * t[rays],
                 normal=normal, face_normal=face_normal, material=self.instance_material[inst],
                 floor=np.zeros(len(rays), bool),
                 # The instance's world bounds bound every coordinate of a point on it.
-                scale=self.instance_scale[inst],
+                scale=self.instance_scale[inst], incoming=incoming,
             ))  # fmt: skip
         found = [(rays, group) for rays, group in zip(numbers, groups, strict=True) if len(rays)]
         if not found:
@@ -315,18 +322,13 @@ class SceneGeometry:
         same_normals = all(g.face_normal is g.normal for g in groups)
         joined = {
             name: np.concatenate([getattr(g, name) for g in groups], axis=-1)
-            for name in ("hit", "t", "position", "normal", "material", "floor", "scale")
+            for name in ("hit", "t", "position", "normal", "material", "floor", "scale", "incoming")
         }
         if same_normals:
             joined["face_normal"] = joined["normal"]
         else:
             joined["face_normal"] = np.concatenate([g.face_normal for g in groups], axis=1)
         return np.concatenate(numbers), SurfaceHits(**joined)
-
-    @staticmethod
-    def _points(origins, directions, rays, t) -> np.ndarray:
-        """(3, k) float32 points ``origins + t * directions`` of the rays numbered ``rays``."""
-        return np.take(origins, rays, axis=1) + np.take(directions, rays, axis=1) * t
 
     def _instance_normals(self, inst, prim, u, v) -> tuple[np.ndarray, np.ndarray]:
         """(3, k) unit shading and geometric world normals of instance hits."""
