@@ -190,13 +190,14 @@ class Renderer:
             return work
 
         began = time.perf_counter()
-        # One batch in flight per worker; NumPy's large array operations and the Embree
-        # kernels release the GIL, so the workers run side by side.
+        # Workers run batches side by side (NumPy's large array operations and the Embree kernels
+        # release the GIL); two more batches per worker are queued so that none waits for the
+        # oldest batch to finish before starting the next.
         pool = ThreadPoolExecutor(max_workers=self.workers)
         try:
             done = 0
             if self.workers > 1:
-                results = _ordered_results(pool, run, batches, ahead=self.workers)
+                results = _ordered_results(pool, run, batches, ahead=2 * self.workers)
             else:
                 results = map(run, batches)
             for work in results:
@@ -396,14 +397,14 @@ class Renderer:
 def batch_ranges(total: int, batch_size: int, spp: int, workers: int) -> list[tuple[int, int]]:
     """(start, count) of each batch of the ``total`` camera samples, in order: whole pixels of
     ``spp`` samples, at most ``batch_size`` samples (or one pixel). With several workers the
-    last round of batches is cut into twice as many pieces, so that no worker idles for long
+    last round of batches is cut into three times as many pieces, so that no worker idles long
     while another finishes a full batch at the bottom of the image."""
     step = max(1, batch_size // spp) * spp
     starts = list(range(0, total, step))
     if workers > 1 and len(starts) > workers:
         tail = starts[-workers]
         pixels = (total - tail) // spp
-        pieces = 2 * workers
+        pieces = 3 * workers
         starts = starts[:-workers] + [tail + pixels * k // pieces * spp for k in range(pieces)]
     bounds = [*starts, total]
     return [(a, b - a) for a, b in pairwise(bounds) if b > a]
