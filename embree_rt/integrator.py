@@ -270,7 +270,7 @@ class Renderer:
         offset = surface_offset(surfaces.scale)
         outside = position + face_normal * offset
         radiance = self.ambient_share[material] * color
-        radiance += self._direct_light(outside, normal, -d, color, material, work)
+        self._add_direct_light(radiance, outside, normal, -d, color, material, work)
         work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
             return NO_RAYS
@@ -310,14 +310,14 @@ class Renderer:
             )
             work.rays["refraction"] += len(keep)
 
-        mirrors = np.flatnonzero(reflect_share > 0)
-        if len(mirrors):
-            weight = np.take(rays.weight, mirrors, axis=1) * reflect_share[mirrors]
-            metallic = np.flatnonzero(table.metallic[material[mirrors]])
-            if len(metallic):  # metals tint what they reflect
-                weight[:, metallic] *= np.take(color, mirrors[metallic], axis=1)
-            strong = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
-            keep = mirrors[strong]
+        # Mirrors, metals and glass's Fresnel share reflect. Most hits reflect a little, so the
+        # weights are formed on every row and only the rows kept are gathered.
+        weight = rays.weight * reflect_share
+        tinted = np.flatnonzero(table.metallic[material])
+        if len(tinted):  # metals tint what they reflect
+            weight[:, tinted] *= np.take(color, tinted, axis=1)
+        keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
+        if len(keep):
             reflected = shading.reflect(np.take(d, keep, axis=1), np.take(normal, keep, axis=1))
             children.insert(
                 0,
@@ -325,19 +325,21 @@ class Renderer:
                     np.take(outside, keep, axis=1),
                     reflected,
                     rays.pixel[keep],
-                    np.take(weight, strong, axis=1),
+                    np.take(weight, keep, axis=1),
                 ),
             )
             work.rays["reflection"] += len(keep)
 
         return RayBatch.concatenate(children) if children else NO_RAYS
 
-    def _direct_light(self, points, normal, to_viewer, color, material, work: BatchWork):
-        """(3, n) Blinn-Phong light from every point light that the ``points`` (3, n) see."""
+    def _add_direct_light(
+        self, radiance, points, normal, to_viewer, color, material, work: BatchWork
+    ) -> None:
+        """Add to ``radiance`` (3, n) the Blinn-Phong light from every point light that the
+        ``points`` (3, n) see."""
         n = points.shape[1]
-        result = np.zeros((3, n), np.float32)
         if n == 0 or len(self.light_positions) == 0:
-            return result
+            return
         # Shadow rays only where the light is in front of the surface. Each runs from the point
         # to the light along the unnormalised offset, so the light sits at t = 1. All lights'
         # rays go to Embree as one batch, light-major so each light's rays stay coherent.
@@ -376,12 +378,12 @@ class Renderer:
                 seen[lit] = 1.0
                 length = np.sqrt(shading.dot(to_light, to_light))
                 direction = to_light * (seen / np.maximum(length, np.float32(1e-30)))
-                result += shading.blinn_phong(
+                radiance += shading.blinn_phong(
                     normal, to_viewer, direction, color, diffuse, specular, shininess,
                     self.light_rgb[light],
                 )  # fmt: skip
                 continue
-            result[:, lit] += shading.blinn_phong(
+            radiance[:, lit] += shading.blinn_phong(
                 np.take(normal, lit, axis=1),
                 np.take(to_viewer, lit, axis=1),
                 shading.normalize(np.take(to_light, lit, axis=1)),
@@ -391,7 +393,6 @@ class Renderer:
                 shininess[lit],
                 self.light_rgb[light],
             )
-        return result
 
 
 def batch_ranges(total: int, batch_size: int, spp: int, workers: int) -> list[tuple[int, int]]:
