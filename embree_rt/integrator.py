@@ -22,6 +22,7 @@ import numpy as np
 
 from embree_rt import shading
 from embree_rt.camera import camera_frame, primary_rays
+from embree_rt.columns import column_max, scatter_add
 from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.scene.model import Scene
@@ -138,6 +139,7 @@ class Renderer:
         self.ambient_share = (table.ambient * local).astype(np.float32)
         self.diffuse_share = (table.diffuse * local).astype(np.float32)
         self.reflect_share = (table.reflectivity * (1.0 - table.transparency)).astype(np.float32)
+        self.metal_share = table.metallic.astype(np.float32)
         lights = scene.lights
         self.light_positions = np.array([lt.position for lt in lights], np.float32).reshape(-1, 3)
         self.light_rgb = np.array(
@@ -249,7 +251,7 @@ class Renderer:
         d = rays.directions
         # Shade the side the ray arrived on; a ray leaving a closed object comes from inside.
         entering = shading.dot(d, surfaces.face_normal) < 0
-        side = np.where(entering, np.float32(1.0), np.float32(-1.0))
+        side = entering * np.float32(2.0) - np.float32(1.0)  # +1 or -1
         normal = surfaces.normal * side
         if surfaces.face_normal is surfaces.normal:
             face_normal = normal
@@ -269,14 +271,14 @@ class Renderer:
 
         offset = surface_offset(surfaces.scale)
         outside = position + face_normal * offset
-        radiance = self.ambient_share[material] * color
+        radiance = np.take(self.ambient_share, material) * color
         self._add_direct_light(radiance, outside, normal, -d, color, material, work)
         work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
             return NO_RAYS
 
-        transparency = table.transparency[material]
-        reflect_share = self.reflect_share[material]
+        transparency = np.take(table.transparency, material)
+        reflect_share = np.take(self.reflect_share, material)
         children = []
         # Glass splits by Fresnel between reflection and refraction; TIR reflects everything.
         glass = np.flatnonzero(transparency > 0)
@@ -313,9 +315,10 @@ class Renderer:
         # Mirrors, metals and glass's Fresnel share reflect. Most hits reflect a little, so the
         # weights are formed on every row and only the rows kept are gathered.
         weight = rays.weight * reflect_share
-        tinted = np.flatnonzero(table.metallic[material])
-        if len(tinted):  # metals tint what they reflect
-            weight[:, tinted] *= np.take(color, tinted, axis=1)
+        if table.metallic.any():
+            # Metals tint what they reflect: a factor of color on metals, 1 elsewhere.
+            metal = np.take(self.metal_share, material)
+            weight *= (color - np.float32(1.0)) * metal + np.float32(1.0)
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
         if len(keep):
             reflected = shading.reflect(np.take(d, keep, axis=1), np.take(normal, keep, axis=1))
@@ -362,12 +365,13 @@ class Renderer:
             work.log.append(("occluded", shadow_origins, shadow_directions, 1.0))
         work.rays["shadow"] += count
 
-        diffuse = self.diffuse_share[material]
-        specular = self.materials.specular[material]
-        shininess = self.materials.shininess[material]
+        diffuse = np.take(self.diffuse_share, material)
+        specular = np.take(self.materials.specular, material)
+        shininess = np.take(self.materials.shininess, material)
         first = 0
         for light, (facing, to_light) in enumerate(per_light):
-            lit = facing[~blocked[first : first + len(facing)]]
+            visible = ~blocked[first : first + len(facing)]
+            lit = facing[visible]
             first += len(facing)
             if len(lit) == 0:
                 continue
@@ -375,7 +379,7 @@ class Renderer:
                 # Mostly lit: shade every point, with no light where it is not seen (a zero
                 # direction), cheaper than gathering seven arrays and scattering back.
                 seen = np.zeros(n, np.float32)
-                seen[lit] = 1.0
+                seen[facing] = visible
                 length = np.sqrt(shading.dot(to_light, to_light))
                 direction = to_light * (seen / np.maximum(length, np.float32(1e-30)))
                 radiance += shading.blinn_phong(
@@ -383,15 +387,19 @@ class Renderer:
                     self.light_rgb[light],
                 )  # fmt: skip
                 continue
-            radiance[:, lit] += shading.blinn_phong(
-                np.take(normal, lit, axis=1),
-                np.take(to_viewer, lit, axis=1),
-                shading.normalize(np.take(to_light, lit, axis=1)),
-                np.take(color, lit, axis=1),
-                diffuse[lit],
-                specular[lit],
-                shininess[lit],
-                self.light_rgb[light],
+            scatter_add(
+                radiance,
+                lit,
+                shading.blinn_phong(
+                    np.take(normal, lit, axis=1),
+                    np.take(to_viewer, lit, axis=1),
+                    shading.normalize(np.take(to_light, lit, axis=1)),
+                    np.take(color, lit, axis=1),
+                    diffuse[lit],
+                    specular[lit],
+                    shininess[lit],
+                    self.light_rgb[light],
+                ),
             )
 
 
@@ -433,11 +441,6 @@ def _wait(future: Future):
             return future.result(timeout=0.05)
         except TimeoutError:
             continue
-
-
-def column_max(values: np.ndarray) -> np.ndarray:
-    """(n,) largest entry of each column of a (3, n) array."""
-    return np.maximum(np.maximum(values[0], values[1]), values[2])
 
 
 def render(

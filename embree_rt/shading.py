@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from embree_rt.columns import scatter, scatter_add
 from embree_rt.materials import Checker
 
 
@@ -50,7 +51,11 @@ def refract(d: np.ndarray, n: np.ndarray, eta: float | np.ndarray) -> tuple[np.n
     directions = eta * d + (eta * cos_i - cos_t) * n
     if total_internal.any():
         mirrored = np.flatnonzero(total_internal)
-        directions[:, mirrored] = reflect(d[:, mirrored], n[:, mirrored])
+        scatter(
+            directions,
+            mirrored,
+            reflect(np.take(d, mirrored, axis=1), np.take(n, mirrored, axis=1)),
+        )
     return normalize(directions), total_internal
 
 
@@ -77,6 +82,22 @@ def fresnel_schlick(
     reflectance = r0 + (np.float32(1.0) - r0) * (np.float32(1.0) - cos) ** 5
     reflectance = np.where(n1 == n2, np.float32(0.0), reflectance)
     return np.where(total_internal, np.float32(1.0), reflectance).astype(np.float32, copy=False)
+
+
+def power(base: np.ndarray, exponent: np.ndarray) -> np.ndarray:
+    """(n,) float32 ``max(base, 0) ** exponent`` for (n,) float32 ``base`` and positive
+    ``exponent`` (a scalar or (n,)).
+
+    Computed as ``exp(exponent · ln base)``: NumPy vectorises float32 ``exp`` and ``log`` but
+    not ``pow``, so this is about three times faster. The error grows with ``|exponent · ln
+    base|``: within 3e-6 relative wherever the power exceeds 1e-6, and 2e-7 absolute anywhere
+    (far below what an 8-bit image shows).
+    """
+    result = np.maximum(base, np.float32(0.0))
+    with np.errstate(divide="ignore"):  # log(0) = -inf, and exp(-inf) = 0 as 0 ** s is
+        np.log(result, out=result)
+    result *= exponent
+    return np.exp(result, out=result)
 
 
 def _as_columns(rgb: np.ndarray) -> np.ndarray:
@@ -117,16 +138,16 @@ def blinn_phong(
     if glossy_count > len(glossy) // 2:
         # Mostly glossy: every column, with the others' highlight masked to zero, costs less
         # than gathering five arrays and scattering back.
-        n_dot_h = np.maximum(dot(normal, normalize(to_light + to_viewer)), np.float32(0.0))
-        highlight = np.where(glossy, specular, np.float32(0.0)) * n_dot_h**shininess
+        n_dot_h = dot(normal, normalize(to_light + to_viewer))
+        highlight = (specular * glossy) * power(n_dot_h, shininess)
         radiance += highlight * light_rgb
         return radiance
     rows = np.flatnonzero(glossy)
     half = normalize(np.take(to_light, rows, axis=1) + np.take(to_viewer, rows, axis=1))
-    n_dot_h = np.maximum(dot(np.take(normal, rows, axis=1), half), np.float32(0.0))
-    highlight = specular[rows] * n_dot_h ** shininess[rows]
+    n_dot_h = dot(np.take(normal, rows, axis=1), half)
+    highlight = specular[rows] * power(n_dot_h, shininess[rows])
     light = light_rgb if light_rgb.shape[1] == 1 else np.take(light_rgb, rows, axis=1)
-    radiance[:, rows] += highlight * light
+    scatter_add(radiance, rows, highlight * light)
     return radiance
 
 

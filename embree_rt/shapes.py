@@ -28,7 +28,7 @@ class SurfaceHits:
     ``hit`` (n,) bool; ``t`` (n,) float32 (inf on a miss); ``position`` (3, n) float32;
     ``normal`` (3, n) float32 unit shading normal and ``face_normal`` (3, n) float32 unit
     geometric normal, both pointing out of the object (+y for the floor), whichever side the ray
-    came from (the same array when they agree everywhere); ``material`` (n,) int32 material id
+    came from (the same array when they agree everywhere); ``material`` (n,) intp material id
     (the floor's is ``floor_material``); ``floor`` (n,) bool, the rays that hit the floor;
     ``scale`` (n,) float32, a bound on the size of the coordinates the hit was computed from
     (at least max |position|, and the object's |centre| + extent): its rounding error scales
@@ -57,7 +57,7 @@ def _no_hits() -> SurfaceHits:
     vectors = np.zeros((3, 0), np.float32)
     return SurfaceHits(
         hit=np.zeros(0, bool), t=np.zeros(0, np.float32), position=vectors, normal=vectors,
-        face_normal=vectors, material=np.zeros(0, np.int32), floor=np.zeros(0, bool),
+        face_normal=vectors, material=np.zeros(0, np.intp), floor=np.zeros(0, bool),
         scale=np.zeros(0, np.float32), incoming=vectors,
     )  # fmt: skip
 
@@ -78,7 +78,7 @@ class SceneGeometry:
         self._children: list[BVH] = []
         self.sphere_centers = np.asarray(scene.sphere_centers, np.float32)
         self.sphere_radii = np.asarray(scene.sphere_radii, np.float32)
-        self.sphere_materials = np.asarray(scene.sphere_materials, np.int32)
+        self.sphere_materials = np.asarray(scene.sphere_materials, np.intp)
         self.sphere_centers_by_column = np.ascontiguousarray(self.sphere_centers.T)
         self.sphere_geom_id = -1
         self.sphere_scale = (
@@ -172,7 +172,7 @@ class SceneGeometry:
     def _finish_tables(self) -> None:
         size = max(self._instance_geom_ids, default=-1) + 1
         self.instance_child = np.full(size, -1, np.int32)
-        self.instance_material = np.zeros(size, np.int32)
+        self.instance_material = np.zeros(size, np.intp)
         self.instance_smooth = np.zeros(size, bool)
         self.instance_normal_matrix = np.zeros((size, 3, 3), np.float32)
         self.instance_scale = np.zeros(size, np.float32)
@@ -231,7 +231,7 @@ class SceneGeometry:
             position=np.zeros((3, n), np.float32),
             normal=np.zeros((3, n), np.float32),
             face_normal=np.zeros((3, n), np.float32),
-            material=np.zeros(n, np.int32),
+            material=np.zeros(n, np.intp),
             floor=np.zeros(n, bool),
             scale=np.zeros(n, np.float32),
             incoming=np.zeros((3, n), np.float32),
@@ -253,82 +253,89 @@ class SceneGeometry:
         numbers and a ``SurfaceHits`` of k columns (what the integrator shades).
 
         The hits come grouped by kind, floor first, then spheres, then mesh instances, each
-        group in ray order: every group is computed on contiguous arrays and joined once.
+        group in ray order: each group is computed on contiguous arrays, written straight into
+        its slice of the result. (Gathers into those slices use ``mode="clip"``: NumPy buffers
+        ``out`` in the default mode, and the indices come from ``flatnonzero``.)
         """
         origins = np.asarray(origins, np.float32)
         directions = np.asarray(directions, np.float32)
         hits = self.bvh.intersect(origins.T, directions.T, tnear, tfar)
-        t = hits.t
-        groups: list[SurfaceHits] = []
-        numbers: list[np.ndarray] = []
+        on_object = hits.geom_id >= 0
         if self.floor is not None:
             floor_t = self._floor_t(origins, directions)
-            on_floor = (floor_t < t) & (floor_t >= tnear) & (floor_t <= tfar)
-            t = np.where(on_floor, np.inf, t)  # what is left are hits on objects
-            rays = np.flatnonzero(on_floor)
-            incoming = np.take(directions, rays, axis=1)
-            position = np.take(origins, rays, axis=1) + incoming * floor_t[rays]
-            normal = np.zeros((3, len(rays)), np.float32)
-            normal[1] = 1.0
-            numbers.append(rays)
-            groups.append(SurfaceHits(
-                hit=np.ones(len(rays), bool), t=floor_t[rays], position=position, normal=normal,
-                face_normal=normal, material=np.full(len(rays), self.floor_material, np.int32),
-                floor=np.ones(len(rays), bool), scale=_largest_magnitude(position),
-                incoming=incoming,
-            ))  # fmt: skip
-        on_instances = hits.inst_id >= 0
-        if self.sphere_geom_id >= 0:
-            rays = np.flatnonzero(
-                (t != np.inf) & (hits.geom_id == self.sphere_geom_id) & ~on_instances
-            )
-            prim = hits.prim_id[rays]
-            center = np.take(self.sphere_centers_by_column, prim, axis=1)
-            incoming = np.take(directions, rays, axis=1)
-            hit_points = np.take(origins, rays, axis=1) + incoming * t[rays]
-            outward = _unit(hit_points - center)
-            numbers.append(rays)
-            groups.append(SurfaceHits(
-                hit=np.ones(len(rays), bool), t=t[rays],
-                # Re-project onto the sphere: removes the rounding error along the ray.
-                position=center + self.sphere_radii[prim] * outward,
-                normal=outward, face_normal=outward, material=self.sphere_materials[prim],
-                floor=np.zeros(len(rays), bool),
-                # |centre| + radius bounds every coordinate of a point on the sphere.
-                scale=self.sphere_scale[prim], incoming=incoming,
-            ))  # fmt: skip
-        rays = np.flatnonzero(on_instances & (t != np.inf))
-        if len(rays):
-            inst = hits.inst_id[rays]
-            normal, face_normal = self._instance_normals(
-                inst, hits.prim_id[rays], hits.u[rays], hits.v[rays]
-            )
-            incoming = np.take(directions, rays, axis=1)
-            numbers.append(rays)
-            groups.append(SurfaceHits(
-                hit=np.ones(len(rays), bool), t=t[rays],
-                position=np.take(origins, rays, axis=1) + incoming * t[rays],
-                normal=normal, face_normal=face_normal, material=self.instance_material[inst],
-                floor=np.zeros(len(rays), bool),
-                # The instance's world bounds bound every coordinate of a point on it.
-                scale=self.instance_scale[inst], incoming=incoming,
-            ))  # fmt: skip
-        found = [(rays, group) for rays, group in zip(numbers, groups, strict=True) if len(rays)]
-        if not found:
-            return np.zeros(0, np.int64), _no_hits()
-        if len(found) == 1:
-            return found[0]
-        numbers, groups = zip(*found, strict=True)
-        same_normals = all(g.face_normal is g.normal for g in groups)
-        joined = {
-            name: np.concatenate([getattr(g, name) for g in groups], axis=-1)
-            for name in ("hit", "t", "position", "normal", "material", "floor", "scale", "incoming")
-        }
-        if same_normals:
-            joined["face_normal"] = joined["normal"]
+            on_floor = (floor_t < hits.t) & (floor_t >= tnear) & (floor_t <= tfar)
+            on_object &= ~on_floor
+            floor_rays = np.flatnonzero(on_floor)
         else:
-            joined["face_normal"] = np.concatenate([g.face_normal for g in groups], axis=1)
-        return np.concatenate(numbers), SurfaceHits(**joined)
+            floor_rays = np.zeros(0, np.int64)
+        on_instance = hits.inst_id >= 0
+        sphere_rays = np.flatnonzero(
+            on_object & ~on_instance & (hits.geom_id == self.sphere_geom_id)
+            if self.sphere_geom_id >= 0
+            else np.zeros(0, bool)
+        )
+        instance_rays = np.flatnonzero(on_object & on_instance)
+        groups = (floor_rays, sphere_rays, instance_rays)
+        k = sum(len(rays) for rays in groups)
+        if k == 0:
+            return np.zeros(0, np.int64), _no_hits()
+        out = SurfaceHits(
+            hit=np.ones(k, bool), t=np.empty(k, np.float32), position=np.empty((3, k), np.float32),
+            normal=np.empty((3, k), np.float32), face_normal=None,
+            material=np.empty(k, np.intp), floor=np.zeros(k, bool),
+            scale=np.empty(k, np.float32), incoming=np.empty((3, k), np.float32),
+        )  # fmt: skip
+        out.face_normal = np.empty((3, k), np.float32) if len(instance_rays) else out.normal
+        stops = np.cumsum([len(rays) for rays in groups])
+        floor_part, sphere_part, instance_part = (
+            slice(stop - len(rays), stop) for rays, stop in zip(groups, stops, strict=True)
+        )
+        for rays, part in zip(groups, (floor_part, sphere_part, instance_part), strict=True):
+            if len(rays):
+                np.take(directions, rays, axis=1, out=out.incoming[:, part], mode="clip")
+        if len(floor_rays):
+            t = np.take(floor_t, floor_rays, out=out.t[floor_part], mode="clip")
+            position = out.position[:, floor_part]
+            np.take(origins, floor_rays, axis=1, out=position, mode="clip")
+            position += out.incoming[:, floor_part] * t
+            out.normal[:, floor_part] = np.array([[0.0], [1.0], [0.0]], np.float32)
+            out.material[floor_part] = self.floor_material
+            out.floor[floor_part] = True
+            out.scale[floor_part] = _largest_magnitude(position)
+        if len(sphere_rays):
+            prim = np.take(hits.prim_id, sphere_rays)
+            t = np.take(hits.t, sphere_rays, out=out.t[sphere_part], mode="clip")
+            center = np.take(self.sphere_centers_by_column, prim, axis=1)
+            hit_points = np.take(origins, sphere_rays, axis=1)
+            hit_points += out.incoming[:, sphere_part] * t
+            hit_points -= center
+            outward = out.normal[:, sphere_part]
+            length = np.sqrt(hit_points[0] ** 2 + hit_points[1] ** 2 + hit_points[2] ** 2)
+            np.divide(hit_points, np.maximum(length, np.float32(1e-30)), out=outward)
+            # Re-project onto the sphere: removes the rounding error along the ray.
+            position = out.position[:, sphere_part]
+            np.multiply(np.take(self.sphere_radii, prim), outward, out=position)
+            position += center
+            np.take(self.sphere_materials, prim, out=out.material[sphere_part], mode="clip")
+            # |centre| + radius bounds every coordinate of a point on the sphere.
+            np.take(self.sphere_scale, prim, out=out.scale[sphere_part], mode="clip")
+        if len(instance_rays):
+            inst = np.take(hits.inst_id, instance_rays)
+            t = np.take(hits.t, instance_rays, out=out.t[instance_part], mode="clip")
+            normal, face_normal = self._instance_normals(
+                inst, hits.prim_id[instance_rays], hits.u[instance_rays], hits.v[instance_rays]
+            )
+            out.normal[:, instance_part] = normal
+            out.face_normal[:, instance_part] = face_normal
+            if len(floor_rays) or len(sphere_rays):
+                out.face_normal[:, : instance_part.start] = out.normal[:, : instance_part.start]
+            position = out.position[:, instance_part]
+            np.take(origins, instance_rays, axis=1, out=position, mode="clip")
+            position += out.incoming[:, instance_part] * t
+            np.take(self.instance_material, inst, out=out.material[instance_part], mode="clip")
+            # The instance's world bounds bound every coordinate of a point on it.
+            np.take(self.instance_scale, inst, out=out.scale[instance_part], mode="clip")
+        return np.concatenate(groups), out
 
     def _instance_normals(self, inst, prim, u, v) -> tuple[np.ndarray, np.ndarray]:
         """(3, k) unit shading and geometric world normals of instance hits."""
