@@ -205,14 +205,21 @@ class SceneGeometry:
 
     # -- queries ------------------------------------------------------------------------------
 
-    def _floor_t(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """(n,) float32 distance to the floor plane along each ray, inf where parallel/behind."""
-        if self.floor is None:
-            return np.full(origins.shape[1], np.inf, np.float32)
+    def _floor_crossing(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        tnear: float | np.ndarray,
+        tfar: float | np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Where each ray meets the floor plane: (n,) float32 distance along the ray (any value
+        where it does not), and (n,) bool whether it does, in front of the origin and within
+        [tnear, tfar]. ``origins``, ``directions`` (3, n) float32."""
         with np.errstate(divide="ignore", invalid="ignore"):
             t = (np.float32(self.floor.height) - origins[1]) / directions[1]
-        t[~(t >= 0)] = np.inf  # behind the origin, or parallel (inf or NaN)
-        return t
+        # Behind the origin is negative, parallel is ±inf or NaN: none passes all three tests.
+        meets = (t >= np.maximum(tnear, np.float32(0.0))) & (t <= tfar) & (t != np.inf)
+        return t, meets
 
     def intersect(
         self,
@@ -262,8 +269,8 @@ class SceneGeometry:
         hits = self.bvh.intersect(origins.T, directions.T, tnear, tfar)
         on_object = hits.geom_id >= 0
         if self.floor is not None:
-            floor_t = self._floor_t(origins, directions)
-            on_floor = (floor_t < hits.t) & (floor_t >= tnear) & (floor_t <= tfar)
+            floor_t, meets_floor = self._floor_crossing(origins, directions, tnear, tfar)
+            on_floor = meets_floor & (floor_t < hits.t)
             on_object &= ~on_floor
             floor_rays = np.flatnonzero(on_floor)
         else:
@@ -369,5 +376,5 @@ class SceneGeometry:
         blocked = self.bvh.occluded(origins.T, directions.T, tnear, tfar)
         if self.floor is None:
             return blocked
-        floor_t = self._floor_t(origins, directions)
-        return blocked | ((floor_t >= tnear) & (floor_t <= tfar))
+        _, meets_floor = self._floor_crossing(origins, directions, tnear, tfar)
+        return blocked | meets_floor

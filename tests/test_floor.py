@@ -1,0 +1,73 @@
+"""The analytic floor plane in SceneGeometry's queries, against the closed-form crossing.
+
+A ray o + t d meets the plane y = h at t = (h - o_y) / d_y; it is a hit when that t is finite,
+in front of the origin and inside the query's [tnear, tfar] window. Rays going up, down, and
+parallel to the plane, with finite and infinite windows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from embree_rt import Scene
+from embree_rt.scene.model import Floor
+from embree_rt.shapes import SceneGeometry
+
+HEIGHT = -1.5
+
+
+def random_rays(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(3, count) float32 origins above and below the plane, unit directions; a tenth of the
+    rays run parallel to the plane."""
+    rng = np.random.default_rng(seed)
+    origins = rng.uniform(-20, 20, (3, count)).astype(np.float32)
+    directions = rng.normal(size=(3, count))
+    directions[1, : count // 10] = 0.0
+    directions /= np.linalg.norm(directions, axis=0)
+    return origins, directions.astype(np.float32)
+
+
+def crossing(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """(n,) float64 distance to the plane, inf where the ray never meets it ahead."""
+    o = origins[1].astype(np.float64)
+    d = directions[1].astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (HEIGHT - o) / d
+    return np.where((d != 0) & (t >= 0), t, np.inf)
+
+
+@pytest.fixture(scope="module")
+def floor_only():
+    with SceneGeometry(Scene(floor=Floor(height=HEIGHT))) as geometry:
+        yield geometry
+
+
+@pytest.mark.parametrize("tnear, tfar", [(0.0, np.inf), (0.0, 10.0), (2.0, np.inf), (5.0, 30.0)])
+def test_floor_hits_and_occlusion_match_the_closed_form(floor_only, tnear, tfar) -> None:
+    origins, directions = random_rays(20000, seed=int(tfar if np.isfinite(tfar) else 99) + 7)
+    t = crossing(origins, directions)
+    expected = np.isfinite(t) & (t >= tnear) & (t <= tfar)
+    # Rays within float32 rounding of a window's end may go either way.
+    clear = ~np.isclose(t, tnear, rtol=1e-5)
+    if np.isfinite(tfar):
+        clear &= ~np.isclose(t, tfar, rtol=1e-5)
+    assert expected[clear].any() and (~expected[clear]).any()
+
+    blocked = floor_only.occluded(origins, directions, tnear, tfar)
+    np.testing.assert_array_equal(blocked[clear], expected[clear])
+
+    hits = floor_only.intersect(origins, directions, tnear, tfar)
+    np.testing.assert_array_equal(hits.hit[clear], expected[clear])
+    assert hits.floor[hits.hit].all()
+    np.testing.assert_allclose(hits.t[hits.hit & clear], t[hits.hit & clear], rtol=1e-5)
+    np.testing.assert_allclose(hits.position[1, hits.hit], HEIGHT, atol=1e-4)
+
+
+def test_rays_away_from_or_along_the_floor_are_never_blocked_by_it(floor_only) -> None:
+    # One ray per column: up from above, along the plane in it, down from below the plane.
+    origins = np.array([[0.0, 3.0, -2.0], [2.0, HEIGHT, -3.0], [0.0, -4.0, 1.0]], np.float32).T
+    directions = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]], np.float32).T
+    for tfar in (np.inf, 100.0):
+        assert not floor_only.occluded(origins, directions, 0.0, tfar).any()
+        assert not floor_only.intersect(origins, directions, 0.0, tfar).hit.any()
