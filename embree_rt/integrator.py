@@ -357,7 +357,10 @@ class Renderer:
         for position, (facing, _) in zip(self.light_positions, per_light, strict=True):
             stop = first + len(facing)
             for axis in range(3):
-                origins = np.take(points[axis], facing, out=shadow_origins[axis, first:stop])
+                # (mode="clip": the default mode copies through a buffer when given ``out``.)
+                origins = np.take(
+                    points[axis], facing, out=shadow_origins[axis, first:stop], mode="clip"
+                )
                 np.subtract(position[axis], origins, out=shadow_directions[axis, first:stop])
             first = stop
         blocked = self.geometry.occluded(shadow_origins, shadow_directions, 0.0, 1.0)
