@@ -30,10 +30,11 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def replay(renderer: Renderer, log: list) -> float:
-    """Seconds the bare BVH takes to answer every query of ``log`` again."""
+def replay(renderer: Renderer, log: list, threads: int | None = None) -> float:
+    """Seconds the bare BVH takes to answer every query of ``log`` again, on ``threads``
+    threads (by default as many as the render had)."""
     bvh = renderer.geometry.bvh
-    bvh.threads = renderer.workers  # the bare queries get the same cores the render had
+    bvh.threads = renderer.workers if threads is None else threads
     # Compile and warm the kernels this thread count uses, outside the timing.
     # (numba compiles per memory layout: these are Fortran-ordered (n, 3) views, as logged.)
     _, origins, directions, _ = log[0]

@@ -19,23 +19,11 @@ import argparse
 import json
 import os
 import statistics
-import time
+
+from render_scale import replay  # run as a script: benchmarks/ is on sys.path
 
 from embree_rt.integrator import Renderer
 from embree_rt.scene import random_field
-
-
-def replay_seconds(renderer: Renderer, log: list, threads: int) -> float:
-    """Seconds the bare BVH takes to answer every query of ``log`` on ``threads`` threads."""
-    bvh = renderer.geometry.bvh
-    bvh.threads = threads
-    start = time.perf_counter()
-    for kind, origins, directions, tfar in log:
-        if kind == "intersect":
-            bvh.intersect(origins.T, directions.T)
-        else:
-            bvh.occluded(origins.T, directions.T, 0.0, tfar)
-    return time.perf_counter() - start
 
 
 def main() -> None:
@@ -59,16 +47,14 @@ def main() -> None:
         one.trace_log = log = []
         one.render(**image)
         one.trace_log = None
-        for threads in (1, args.threads):  # compile the parallel kernels outside the timing
-            replay_seconds(one, log[:1], threads)
         render_1, render_n, replay_1, replay_n = [], [], [], []
         for _ in range(args.rounds):
             one.render(**image)
             render_1.append(one.stats.render_s)
             many.render(**image)
             render_n.append(many.stats.render_s)
-            replay_1.append(replay_seconds(one, log, 1))
-            replay_n.append(replay_seconds(one, log, args.threads))
+            replay_1.append(replay(one, log, 1))
+            replay_n.append(replay(one, log, args.threads))
     speedup = [a / b for a, b in zip(render_1, render_n, strict=True)]
     raw_speedup = [a / b for a, b in zip(replay_1, replay_n, strict=True)]
     result = {

@@ -139,7 +139,8 @@ class Renderer:
         self.ambient_share = (table.ambient * local).astype(np.float32)
         self.diffuse_share = (table.diffuse * local).astype(np.float32)
         self.reflect_share = (table.reflectivity * (1.0 - table.transparency)).astype(np.float32)
-        self.metal_share = table.metallic.astype(np.float32)
+        # 1 on metals, 0 elsewhere; None when no material is metallic (nothing to tint).
+        self.metal_share = table.metallic.astype(np.float32) if table.metallic.any() else None
         lights = scene.lights
         self.light_positions = np.array([lt.position for lt in lights], np.float32).reshape(-1, 3)
         self.light_rgb = np.array(
@@ -315,7 +316,7 @@ class Renderer:
         # Mirrors, metals and glass's Fresnel share reflect. Most hits reflect a little, so the
         # weights are formed on every row and only the rows kept are gathered.
         weight = rays.weight * reflect_share
-        if table.metallic.any():
+        if self.metal_share is not None:
             # Metals tint what they reflect: a factor of color on metals, 1 elsewhere.
             metal = np.take(self.metal_share, material)
             weight *= (color - np.float32(1.0)) * metal + np.float32(1.0)
