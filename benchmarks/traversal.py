@@ -44,7 +44,7 @@ import numpy as np
 import trimesh
 
 from embree_rt.embree import BVH
-from embree_rt.shapes import ICOSPHERE_SUBDIVISIONS
+from embree_rt.geometry import ICOSPHERE_SUBDIVISIONS
 
 ALL_THREADS = numba.config.NUMBA_NUM_THREADS
 

@@ -145,8 +145,8 @@ def _command_random(args: argparse.Namespace) -> None:
 
 
 def _command_info(args: argparse.Namespace) -> None:
+    from embree_rt.geometry import SceneGeometry
     from embree_rt.scene import load_scene
-    from embree_rt.shapes import SceneGeometry
 
     scene = load_scene(args.scene)
     started = time.perf_counter()

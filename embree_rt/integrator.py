@@ -25,8 +25,8 @@ from embree_rt.camera import camera_frame, primary_rays
 from embree_rt.columns import column_max, scatter_add
 from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
+from embree_rt.geometry import SceneGeometry
 from embree_rt.scene.model import Scene
-from embree_rt.shapes import SceneGeometry
 
 DEFAULT_BATCH_SIZE = 1 << 18
 # A child whose every channel weighs less than half an 8-bit step cannot change the picture.

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from embree_rt import Scene
+from embree_rt.geometry import SceneGeometry
 from embree_rt.scene.model import Floor
-from embree_rt.shapes import SceneGeometry
 
 HEIGHT = -1.5
 

@@ -17,7 +17,7 @@ import trimesh
 from trimesh.ray.ray_triangle import ray_triangle_id
 
 from embree_rt import load_scene
-from embree_rt.shapes import SceneGeometry
+from embree_rt.geometry import SceneGeometry
 
 FORMATS = ("obj", "ply", "stl", "off", "glb")
 

@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from embree_rt import Scene
+from embree_rt.geometry import SceneGeometry
 from embree_rt.integrator import surface_offset
-from embree_rt.shapes import SceneGeometry
 
 RADII = (1e-3, 1e-2, 1e-1, 1.0, 1e1, 1e2, 1e3)
 DISTANCES = (0.0, 1.0, 1e2, 1e3, 1e4)  # of the centre from the world origin
