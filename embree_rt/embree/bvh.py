@@ -11,7 +11,7 @@ import numba
 import numpy as np
 
 from embree_rt.embree import device as device_module
-from embree_rt.embree import kernels, library
+from embree_rt.embree import kernels, library, user_spheres
 from embree_rt.embree.validation import (
     as_points,
     as_positive,
@@ -44,6 +44,8 @@ class Hits:
         """(n,) bool: which rays hit something."""
         return self.geom_id >= 0
 
+
+SPHERE_KINDS = ("user", "point")
 
 _kernel_lock = threading.Lock()
 _symbols_registered = False
@@ -88,6 +90,7 @@ class BVH:
         )
         self._committed = False
         self._children: list[BVH] = []
+        self._user_buffers: list[np.ndarray] = []
         # Inverse-transpose of each instance's linear part, by geometry id, for world normals.
         self._normal_matrices: dict[int, np.ndarray] = {}
         self._normal_matrix_array: np.ndarray | None = None
@@ -133,22 +136,46 @@ class BVH:
         self._device.check("rtcSetNewGeometryBuffer")
         return pointer
 
-    def add_spheres(self, centers: np.ndarray, radii: np.ndarray) -> int:
-        """Add analytic spheres: ``centers`` (n, 3), ``radii`` (n,) positive. Returns geom id."""
+    def add_spheres(self, centers: np.ndarray, radii: np.ndarray, kind: str = "user") -> int:
+        """Add analytic spheres: ``centers`` (n, 3), ``radii`` (n,) positive. Returns geom id.
+
+        ``kind="user"`` (default) enters them as user geometry with compiled callbacks
+        (``user_spheres``); ``kind="point"`` as Embree's own ``SPHERE_POINT`` primitive, kept
+        for comparison. Both report the nearest crossing in [tnear, tfar] (the exit point for a
+        ray that starts inside) with an outward, unnormalised normal.
+        """
+        if kind not in SPHERE_KINDS:
+            raise ValueError(f"kind: expected one of {SPHERE_KINDS}, got {kind!r}")
         centers = as_points(centers, "centers")
         radii = as_positive(radii, "radii", len(centers))
         self._live_scene()
-        geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_SPHERE_POINT)
-        self._device.check("rtcNewGeometry(SPHERE_POINT)")
         count = len(centers)
-        pointer = self._new_buffer(
-            geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT4, 16, count
-        )
-        if count:
-            packed = np.ctypeslib.as_array((ctypes.c_float * (4 * count)).from_address(pointer))
-            packed = packed.reshape(count, 4)
-            packed[:, :3] = centers
-            packed[:, 3] = radii
+        if kind == "point":
+            geometry = self._lib.rtcNewGeometry(
+                self._device.handle, library.GEOMETRY_TYPE_SPHERE_POINT
+            )
+            self._device.check("rtcNewGeometry(SPHERE_POINT)")
+            pointer = self._new_buffer(
+                geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT4, 16, count
+            )
+            packed = np.ctypeslib.as_array(
+                (ctypes.c_float * (4 * count)).from_address(pointer)
+            ).reshape(count, 4) if count else np.zeros((0, 4), np.float32)
+        else:
+            geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_USER)
+            self._device.check("rtcNewGeometry(USER)")
+            # Embree reads this buffer through the user pointer for as long as the BVH lives.
+            packed = np.empty((max(count, 1), 4), np.float32)[:count]
+            self._user_buffers.append(packed)
+            lib = self._lib
+            lib.rtcSetGeometryUserPrimitiveCount(geometry, count)
+            lib.rtcSetGeometryUserData(geometry, packed.ctypes.data)
+            lib.rtcSetGeometryBoundsFunction(geometry, user_spheres.BOUNDS_CALLBACK, None)
+            lib.rtcSetGeometryIntersectFunction(geometry, user_spheres.INTERSECT_CALLBACK)
+            lib.rtcSetGeometryOccludedFunction(geometry, user_spheres.OCCLUDED_CALLBACK)
+            self._device.check("setting up user-geometry spheres")
+        packed[:, :3] = centers
+        packed[:, 3] = radii
         self.primitive_count += count
         return self._attach(geometry, "adding spheres")
 
