@@ -11,7 +11,8 @@ import numba
 import numpy as np
 
 from embree_rt.embree import device as device_module
-from embree_rt.embree import kernels, library, user_spheres
+from embree_rt.embree import kernels, library, records, user_spheres
+from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
     as_points,
     as_positive,
@@ -46,6 +47,8 @@ class Hits:
 
 
 SPHERE_KINDS = ("user", "point")
+_NO_SPHERES = np.zeros((0, 4), np.float32)
+_NO_LABELS = np.zeros(0, np.int64)
 
 _kernel_lock = threading.Lock()
 _symbols_registered = False
@@ -90,7 +93,9 @@ class BVH:
         )
         self._committed = False
         self._children: list[BVH] = []
-        self._user_buffers: list[np.ndarray] = []
+        # (n, 4) float32 (x, y, z, r) of each sphere set by geometry id; Embree reads the user
+        # geometry's through its user pointer, so they live as long as the BVH.
+        self._sphere_buffers: dict[int, np.ndarray] = {}
         # Inverse-transpose of each instance's linear part, by geometry id, for world normals.
         self._normal_matrices: dict[int, np.ndarray] = {}
         self._normal_matrix_array: np.ndarray | None = None
@@ -166,7 +171,6 @@ class BVH:
             self._device.check("rtcNewGeometry(USER)")
             # Embree reads this buffer through the user pointer for as long as the BVH lives.
             packed = np.empty((max(count, 1), 4), np.float32)[:count]
-            self._user_buffers.append(packed)
             lib = self._lib
             lib.rtcSetGeometryUserPrimitiveCount(geometry, count)
             lib.rtcSetGeometryUserData(geometry, packed.ctypes.data)
@@ -177,7 +181,9 @@ class BVH:
         packed[:, :3] = centers
         packed[:, 3] = radii
         self.primitive_count += count
-        return self._attach(geometry, "adding spheres")
+        geom_id = self._attach(geometry, "adding spheres")
+        self._sphere_buffers[geom_id] = packed
+        return geom_id
 
     def add_triangles(self, vertices: np.ndarray, faces: np.ndarray) -> int:
         """Add a triangle mesh: ``vertices`` (m, 3) float, ``faces`` (k, 3) int in [0, m)."""
@@ -229,12 +235,15 @@ class BVH:
         self._lib.rtcCommitScene(self._live_scene())
         self._device.check("rtcCommitScene")
         self._committed = True
-        if self._normal_matrices:
-            table = np.zeros((self.geometry_count, 3, 3), np.float32)
-            for geom_id, matrix in self._normal_matrices.items():
-                table[geom_id] = matrix
-            self._normal_matrix_array = table
-            self._normal_matrices = {}
+        # Inverse-transpose of each geometry's linear part (identity but for instances): what
+        # turns an object-space normal into a world-space one.
+        table = np.zeros((max(self.geometry_count, 1), 3, 3), np.float32)
+        table[:] = np.eye(3, dtype=np.float32)
+        for geom_id, matrix in self._normal_matrices.items():
+            table[geom_id] = matrix
+        self._normal_matrix_array = table
+        self._has_instances = bool(self._normal_matrices)
+        self._normal_matrices = {}
 
     # -- queries ------------------------------------------------------------------------------
 
@@ -247,18 +256,8 @@ class BVH:
         _prepare_kernels()
         return origins, directions, tnear, tfar
 
-    def intersect(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-    ) -> Hits:
-        """Nearest hit of each ray ``origins + t * directions`` with ``tnear <= t <= tfar``.
-
-        ``origins``, ``directions`` (n, 3); ``tnear``, ``tfar`` scalars or (n,).
-        """
-        origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
+    def _raw_hits(self, origins, directions, tnear, tfar) -> Hits:
+        """Embree's answers as it gives them (normals in object space) for validated rays."""
         n = len(origins)
         hits = Hits(
             t=np.empty(n, np.float32),
@@ -282,8 +281,51 @@ class BVH:
                 with _query_lock:
                     numba.set_num_threads(self.threads)
                     (kernels.intersect8 if self.packets else kernels.intersect1)(*arguments)
+        return hits
+
+    def intersect(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        tnear: float | np.ndarray = 0.0,
+        tfar: float | np.ndarray = np.inf,
+    ) -> Hits:
+        """Nearest hit of each ray ``origins + t * directions`` with ``tnear <= t <= tfar``.
+
+        ``origins``, ``directions`` (n, 3); ``tnear``, ``tfar`` scalars or (n,).
+        """
+        origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
+        hits = self._raw_hits(origins, directions, tnear, tfar)
         self._normals_to_world(hits)
         return hits
+
+    def intersect_records(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        labels: HitLabels,
+        tnear: float | np.ndarray = 0.0,
+        tfar: float | np.ndarray = np.inf,
+    ) -> HitRecords:
+        """The nearest hits of rays given as columns, ``origins``, ``directions`` (3, n), with
+        ``labels``' ground plane, as ``HitRecords``: only the rays that hit, grouped by kind,
+        with world positions, unit normals and labels worked out in one compiled pass."""
+        origins = np.ascontiguousarray(origins, np.float32)
+        directions = np.ascontiguousarray(directions, np.float32)
+        rows, columns, near, far = self._query_inputs(origins.T, directions.T, tnear, tfar)
+        hits = self._raw_hits(rows, columns, near, far)
+        spheres = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
+        sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
+        has_plane = labels.plane_y is not None
+        fields = records.build_records(
+            origins, directions, near, far, hits.t, hits.geom_id, hits.prim_id, hits.inst_id,
+            hits.normal, hits.u, hits.v, has_plane,
+            np.float32(labels.plane_y if has_plane else 0.0), int(labels.plane_label),
+            int(labels.sphere_geom_id) if len(spheres) else -1, spheres,
+            np.asarray(sphere_label, np.int64), np.asarray(labels.geometry_label, np.int64),
+            np.asarray(labels.geometry_scale, np.float32), self._normal_matrix_array,
+        )  # fmt: skip
+        return HitRecords(*fields)
 
     def occluded(
         self,
@@ -291,8 +333,10 @@ class BVH:
         directions: np.ndarray,
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
+        plane_y: float | None = None,
     ) -> np.ndarray:
-        """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``."""
+        """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``; with
+        ``plane_y``, the ground plane y = plane_y too. ``origins``, ``directions`` (n, 3)."""
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         blocked = np.zeros(len(origins), bool)
         if len(origins):
@@ -303,11 +347,14 @@ class BVH:
                 with _query_lock:
                     numba.set_num_threads(self.threads)
                     (kernels.occluded8 if self.packets else kernels.occluded1)(*arguments)
+        if plane_y is not None:
+            records.block_by_plane(origins.T, directions.T, tnear, tfar, np.float32(plane_y),
+                                   blocked)  # fmt: skip
         return blocked
 
     def _normals_to_world(self, hits: Hits) -> None:
         # Embree reports an instance hit's normal in the instanced object's own space.
-        if self._normal_matrix_array is None:
+        if not self._has_instances:
             return
         rows = np.flatnonzero(hits.inst_id >= 0)
         if len(rows):
