@@ -56,17 +56,10 @@ class RenderStats:
 
 @dataclass
 class BatchWork:
-    """What one batch of camera samples produced: its film block, ray counts, and (for the
-    benchmark) the queries it made."""
+    """What one batch of camera samples produced: its film block and ray counts."""
 
     block: FilmBlock
-    logging: bool = False
     rays: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAY_KINDS, 0))
-    log: list | None = None
-
-    def __post_init__(self) -> None:
-        if self.logging:
-            self.log = []
 
 
 @dataclass
@@ -150,9 +143,6 @@ class Renderer:
         self.light_rgb = np.array(
             [np.asarray(lt.color, np.float32) * lt.intensity for lt in lights], np.float32
         ).reshape(-1, 3)
-        # When a list, every query is appended as (kind, origins, directions, tfar): the
-        # benchmark replays them through the bare BVH to measure pure traversal.
-        self.trace_log: list[tuple[str, np.ndarray, np.ndarray, np.ndarray | None]] | None = None
         self.horizon = np.asarray(scene.background.horizon, np.float32)
         self.zenith = np.asarray(scene.background.zenith, np.float32)
 
@@ -189,7 +179,7 @@ class Renderer:
 
         def run(batch: tuple[int, int]) -> BatchWork:
             start, count = batch
-            work = BatchWork(FilmBlock(start // spp, count // spp), self.trace_log is not None)
+            work = BatchWork(FilmBlock(start // spp, count // spp))
             origins, directions, pixel = primary_rays(frame, spp, seed, start, count)
             rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
             work.rays["primary"] += count
@@ -211,8 +201,6 @@ class Renderer:
                 film.add_block(work.block)
                 for kind, n in work.rays.items():
                     self.stats.rays[kind] += n
-                if self.trace_log is not None:
-                    self.trace_log.extend(work.log)
                 done += work.block.count * spp
                 self.stats.render_s = time.perf_counter() - began
                 if progress is not None:
@@ -228,8 +216,6 @@ class Renderer:
         depth = 0
         while len(rays):
             rows, surfaces = self.geometry.intersect_compact(rays.origins, rays.directions)
-            if work.log is not None:
-                work.log.append(("intersect", rays.origins, rays.directions, None))
             if len(rows) < len(rays):
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False
@@ -389,8 +375,6 @@ class Renderer:
                 np.subtract(position[axis], origins, out=shadow_directions[axis, first:stop])
             first = stop
         blocked = self.geometry.occluded(shadow_origins, shadow_directions, 0.0, 1.0)
-        if work.log is not None:
-            work.log.append(("occluded", shadow_origins, shadow_directions, 1.0))
         work.rays["shadow"] += count
 
         diffuse = np.take(self.diffuse_share, material)
