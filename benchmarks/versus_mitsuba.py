@@ -20,20 +20,27 @@ close together keep a ratio fair while the load drifts):
 - ``traversal``: the bare queries on exactly the same rays, generated once in NumPy: primary
   rays through the 1920×1080 pixel centres, in 4×2 pixel tiles (so each 8-wide packet, which
   both sides use on an AVX2 machine, is one tile), and shadow rays from their hits toward the
-  light (``traversal.shadow_rays``). Mitsuba: ``scene.ray_intersect_preliminary(rays,
-  coherent=True)`` (as its integrator calls it for camera rays; t, primitive and shape index
-  evaluated) and ``scene.ray_test(rays)``. embree_rt: ``BVH.intersect`` and ``BVH.occluded`` on
-  a BVH of ``add_spheres`` plus the ground as two triangles, all threads.
+  light (the origins of ``traversal.shadow_rays``, unit directions, tfar the distance).
+  Mitsuba: ``scene.ray_intersect_preliminary(rays, coherent=True)`` (as its integrator calls
+  it for camera rays; t, primitive and shape index evaluated) and ``scene.ray_test(rays)``.
+  embree_rt: ``BVH.intersect`` and ``BVH.occluded`` on a BVH of ``add_spheres`` plus the
+  ground as two triangles, all threads.
 - ``agreement``: fraction of primary rays that hit, the fraction on which both name the same
   object (the same sphere, the ground, or nothing), the shadowed fraction, and whether the hit
-  fractions agree within ``HIT_FRACTION_TOLERANCE``; with ``--images DIR`` both renders are
-  saved at a quarter of the size, to look at.
+  fractions agree within ``HIT_FRACTION_TOLERANCE``. ``primary_vs_float64`` says, on a sample,
+  which side float64 proves wrong where the two name different objects, and both sides'
+  distance errors where they name the same sphere. (Mitsuba's ellipsoid test starts from the
+  point t = -o·d / |d| in the sphere's unit space, where |d| = 1/r: the point nearest the
+  centre is at -o·d / |d|², so its quadratic cancels on the far, small spheres of big fields.)
+  ``mitsuba_render_coverage`` is the mean alpha of Mitsuba's render (pixels whose sample hit).
+  With ``--images DIR`` both renders are saved at a quarter of the size, to look at.
 
-Differences that remain: embree_rt's floor is its analytic infinite checker plane; Mitsuba's is a
-``rectangle`` of half-size ``GROUND_HALF_SIZE``·S (in the bare traversal both have that quad), so
-it ends a few pixels below the horizon. Mitsuba's picture is diffuse only (a checkerboard
-texture on the ground); embree_rt shades Blinn-Phong with ambient light and a sky. Mitsuba's
-ellipsoids cull back faces (a ray starting inside a sphere misses it), ours return the exit hit.
+Differences that remain: embree_rt's floor is its analytic infinite checker plane; Mitsuba's is
+a ``rectangle`` of half-size ``GROUND_HALF_SIZE``·S (in the bare traversal both have that quad),
+so it ends a few pixels below the horizon (Mitsuba's camera ``far_clip`` is raised to reach it).
+Mitsuba's picture is diffuse only (a checkerboard texture on the ground); embree_rt shades
+Blinn-Phong with ambient light and a sky. Mitsuba's ellipsoids cull back faces (a ray starting
+inside a sphere misses it), ours return the exit hit.
 
 Dr.Jit compiles each distinct kernel once per process (and keeps compiled kernels on disk, in
 ~/.drjit, across processes); the discarded first render pays tracing and any compilation, and
@@ -87,6 +94,7 @@ GROUND_HALF_SIZE = 100.0
 # and where the sides' geometry differs (rays starting inside, see the docstring): not more.
 HIT_FRACTION_TOLERANCE = 1e-3
 SPHERE_ALBEDO = (0.7, 0.25, 0.2)
+VERDICT_SAMPLE = 20_000  # rays checked in float64, per kind (see float64_verdict)
 
 
 def log(message: str) -> None:
@@ -149,6 +157,17 @@ def pixel_centre_rays(cam: embree_rt.Camera, width: int, height: int):
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     origins = np.broadcast_to(frame.origin, directions.shape)
     return np.ascontiguousarray(origins, np.float32), directions.astype(np.float32)
+
+
+def unit_shadow_rays(origins, directions, hits, light: np.ndarray):
+    """``traversal.shadow_rays`` (same origins) with unit directions and tfar the distance:
+    origins, directions (h, 3) float32, tfar (h,) float32. Mitsuba's ellipsoid test assumes unit
+    directions (it finds the point nearest the centre as t = -o·d / |d|, not / |d|²) and loses
+    precision without them."""
+    s_origins, to_light, s_tfar = shadow_rays(origins, directions, hits, light)
+    length = np.linalg.norm(to_light.astype(np.float64), axis=1)
+    s_directions = (to_light / length[:, None]).astype(np.float32)
+    return s_origins, s_directions, (s_tfar * length).astype(np.float32)
 
 
 def embree_rt_scene(centers, radii, side: float) -> embree_rt.Scene:
@@ -216,6 +235,8 @@ def mitsuba_scene(mi, centers, radii, side: float):
                 "type": "perspective",
                 "fov": FOV,
                 "fov_axis": "y",
+                # The default far clip (1e4) would cut the ground off short of the horizon.
+                "far_clip": 10.0 * GROUND_HALF_SIZE * side,
                 "to_world": transform.look_at(
                     origin=list(cam.position), target=list(cam.look_at), up=list(cam.up)
                 ),
@@ -334,11 +355,141 @@ def labels(is_hit: np.ndarray, on_spheres: np.ndarray, prim: np.ndarray) -> np.n
     return np.where(is_hit, np.where(on_spheres, prim.astype(np.int64), -1), -2)
 
 
+def exact_t(origins, directions, tfar, label, centers, radii, ground_half_size: float):
+    """(n,) float64 ray parameter t at which each ray (origins, directions (n, 3) float32, taken
+    exactly; ``tfar`` scalar or (n,)) meets the object ``label`` (n,) names (see ``labels``):
+    inf for nothing, nan when the ray misses it within [0, tfar]. Spheres are solved in float64
+    from the perpendicular offset (robust for far, small spheres)."""
+    o, d = origins.astype(np.float64), directions.astype(np.float64)
+    tfar = np.broadcast_to(np.asarray(tfar, np.float64), len(label))
+    t = np.full(len(label), np.inf)
+    ground = np.flatnonzero(label == -1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tg = -o[ground, 1] / d[ground, 1]
+        x, z = (o[ground, k] + tg * d[ground, k] for k in (0, 2))
+    inside = (np.abs(x) <= ground_half_size) & (np.abs(z) <= ground_half_size)
+    t[ground] = np.where(inside & (tg >= 0) & (tg <= tfar[ground]), tg, np.nan)
+    sphere = np.flatnonzero(label >= 0)
+    length = np.linalg.norm(d[sphere], axis=1)
+    unit = d[sphere] / length[:, None]
+    f = o[sphere] - centers[label[sphere]].astype(np.float64)
+    b = np.einsum("ij,ij->i", f, unit)
+    perpendicular = f - b[:, None] * unit
+    r = radii[label[sphere]].astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        half_chord = np.sqrt(r * r - np.einsum("ij,ij->i", perpendicular, perpendicular))
+    near, far = (-b - half_chord) / length, (-b + half_chord) / length
+    ts = np.where(near >= 0, near, far)
+    t[sphere] = np.where((ts >= 0) & (ts <= tfar[sphere]), ts, np.nan)
+    return t
+
+
+def float64_verdict(origins, directions, tfar, ours, theirs, field, nearest: bool) -> dict:
+    """Who float64 proves wrong on (a sample of at most ``VERDICT_SAMPLE`` of) the rays where the
+    labels ``ours`` and ``theirs`` (n,) differ. ``field`` = (centers, radii, ground half-size).
+    A side is wrong when the ray misses the object it names, or names nothing while the other
+    side's object is there; with ``nearest`` (closest-hit queries), also when the other side's
+    object is nearer."""
+    rng = np.random.default_rng(0)
+    differ = np.flatnonzero(ours != theirs)
+    differ = rng.choice(differ, min(VERDICT_SAMPLE, len(differ)), replace=False)
+    o, d = origins[differ], directions[differ]
+    tfar = np.broadcast_to(tfar, len(ours))[differ]
+    t_ours = exact_t(o, d, tfar, ours[differ], *field)
+    t_theirs = exact_t(o, d, tfar, theirs[differ], *field)
+
+    def wrong(mine, other):
+        missed = np.isnan(mine) | (np.isinf(mine) & np.isfinite(other))
+        return int((missed | (other < mine) if nearest else missed).sum())
+
+    return {
+        "disagreements": int((ours != theirs).sum()),
+        "checked": len(differ),
+        "embree_rt_wrong": wrong(t_ours, t_theirs),
+        "mitsuba_wrong": wrong(t_theirs, t_ours),
+    }
+
+
+def distance_errors(origins, directions, ours, theirs, ours_t, theirs_t, field) -> dict:
+    """Relative errors of both sides' t against float64 where both name the same sphere (a
+    sample of at most ``VERDICT_SAMPLE`` rays; grazing rays that float64 says miss are left
+    out): median and 99th percentile per side."""
+    rng = np.random.default_rng(0)
+    same = np.flatnonzero((ours == theirs) & (ours >= 0))
+    same = rng.choice(same, min(VERDICT_SAMPLE, len(same)), replace=False)
+    exact = exact_t(origins[same], directions[same], np.inf, ours[same], *field)
+    keep = np.isfinite(exact)
+    errors = {}
+    for name, t in (("embree_rt", ours_t), ("mitsuba", theirs_t)):
+        error = np.abs(t[same][keep] - exact[keep]) / exact[keep]
+        errors[name] = {"median": float(np.median(error)), "p99": float(np.percentile(error, 99))}
+    return {"checked": int(keep.sum()), **errors}
+
+
+def our_labels(bvh: BVH, sphere_geometry: int, origins, directions, tfar=np.inf):
+    """``labels`` and t (n,) float32 of embree_rt's nearest hits."""
+    hits = bvh.intersect(origins, directions, 0.0, tfar)
+    return labels(hits.hit, hits.geom_id == sphere_geometry, hits.prim_id), hits.t
+
+
+def their_labels(mi, dr, scene, origins, directions, tfar=None, coherent: bool = False):
+    """``labels`` and t (n,) float32 of Mitsuba's nearest hits (``ray_intersect_preliminary``;
+    its answers on the same rays differ with ``coherent``, its Embree query flag)."""
+    rays = mitsuba_rays(mi, dr, origins, directions, tfar)
+    found = scene.ray_intersect_preliminary(rays, coherent=coherent)
+    t = np.array(found.t)
+    spheres_index = [shape.id() for shape in scene.shapes()].index("spheres")
+    on_spheres = np.array(found.shape_index) == spheres_index
+    return labels(np.isfinite(t), on_spheres, np.array(found.prim_index)), t
+
+
 def save_preview(image: np.ndarray, path: Path) -> None:
     """A quarter-size (box-filtered) PNG of a linear (h, w, 3) image."""
     h, w = image.shape[0] // 4 * 4, image.shape[1] // 4 * 4
     small = image[:h, :w, :3].reshape(h // 4, 4, w // 4, 4, 3).mean(axis=(1, 3))
     embree_rt.save_image(np.ascontiguousarray(small, np.float32), path)
+
+
+def check_agreement(
+    field, bvh, sphere_geometry, mi, dr, theirs, primary, shadow, blocked, their_blocked
+) -> dict:
+    """Hit and shadowed fractions of both sides on the same rays, how often they name the same
+    object, and float64's verdict where they do not (``float64_verdict``, ``distance_errors``).
+    ``primary`` = (origins, directions), ``shadow`` = (origins, directions, tfar), ``blocked``
+    and ``their_blocked`` (h,) bool answers of the two occlusion queries (None without
+    Mitsuba)."""
+    ours, ours_t = our_labels(bvh, sphere_geometry, *primary)
+    agreement = {
+        "primary_hit_fraction": {"embree_rt": float((ours > -2).mean())},
+        "shadowed_fraction": {"embree_rt": float(blocked.mean())},
+    }
+    if mi is None:
+        return agreement
+    their, their_t = their_labels(mi, dr, theirs, *primary, coherent=True)  # as timed
+    agreement["primary_hit_fraction"]["mitsuba"] = float((their > -2).mean())
+    agreement["shadowed_fraction"]["mitsuba"] = float(their_blocked.mean())
+    difference = abs((their > -2).mean() - (ours > -2).mean())
+    agreement["hit_fractions_agree"] = bool(difference <= HIT_FRACTION_TOLERANCE)
+    agreement["tolerance"] = HIT_FRACTION_TOLERANCE
+    agreement["same_object_fraction"] = float((their == ours).mean())
+    agreement["same_shadow_fraction"] = float((their_blocked == blocked).mean())
+    agreement["primary_vs_float64"] = float64_verdict(
+        *primary, np.inf, ours, their, field, nearest=True
+    )
+    agreement["primary_t_error_vs_float64"] = distance_errors(
+        *primary, ours, their, ours_t, their_t, field
+    )
+    # Where the shadow answers differ: the blocker each side finds, checked in float64.
+    differ = np.flatnonzero(blocked != their_blocked)
+    if not len(differ):
+        agreement["shadow_vs_float64"] = {"disagreements": 0}
+        return agreement
+    rays = tuple(array[differ] for array in shadow)
+    our_blockers, _ = our_labels(bvh, sphere_geometry, *rays)
+    their_blockers, _ = their_labels(mi, dr, theirs, *rays)
+    verdict = float64_verdict(*rays, our_blockers, their_blockers, field, nearest=False)
+    agreement["shadow_vs_float64"] = {**verdict, "disagreements": len(differ)}
+    return agreement
 
 
 def bench_count(count: int, args, mi, dr) -> dict:
@@ -413,13 +564,8 @@ def bench_count(count: int, args, mi, dr) -> dict:
     light = np.asarray(light_position(side))
     with bvh:
         hits = bvh.intersect(origins, directions)  # also compiles / warms the kernels
-        s_origins, s_directions, s_tfar = shadow_rays(origins, directions, hits, light)
+        s_origins, s_directions, s_tfar = unit_shadow_rays(origins, directions, hits, light)
         blocked = bvh.occluded(s_origins, s_directions, 0.0, s_tfar)
-        ours_label = labels(hits.hit, hits.geom_id == sphere_geometry, hits.prim_id)
-        agreement = {
-            "primary_hit_fraction": {"embree_rt": float(hits.hit.mean())},
-            "shadowed_fraction": {"embree_rt": float(blocked.mean())},
-        }
         intersect_theirs = occluded_theirs = None
         if mi is not None:
             primary = mitsuba_rays(mi, dr, origins, directions)
@@ -437,21 +583,14 @@ def bench_count(count: int, args, mi, dr) -> dict:
                 dr.sync_thread()
                 return found
 
-            found = intersect_theirs()  # compiles the kernels
+            intersect_theirs()  # compiles the kernels
             their_blocked = np.array(occluded_theirs())
-            spheres_index = [s.id() for s in theirs.shapes()].index("spheres")
-            their_hit = np.isfinite(np.array(found.t))
-            their_label = labels(
-                their_hit, np.array(found.shape_index) == spheres_index, np.array(found.prim_index)
-            )
-            agreement["primary_hit_fraction"]["mitsuba"] = float(their_hit.mean())
-            agreement["shadowed_fraction"]["mitsuba"] = float(their_blocked.mean())
-            agreement["same_object_fraction"] = float((their_label == ours_label).mean())
-            agreement["same_shadow_fraction"] = float((their_blocked == blocked).mean())
-            agreement["hit_fractions_agree"] = bool(
-                abs(their_hit.mean() - hits.hit.mean()) <= HIT_FRACTION_TOLERANCE
-            )
-            agreement["tolerance"] = HIT_FRACTION_TOLERANCE
+        agreement = check_agreement(
+            (centers, radii, GROUND_HALF_SIZE * side), bvh, sphere_geometry, mi, dr, theirs,
+            (origins, directions), (s_origins, s_directions, s_tfar),
+            blocked, their_blocked if mi is not None else None,
+        )  # fmt: skip
+        if theirs_image is not None:
             # Mitsuba's own render: pixels whose camera sample hit something (alpha)
             agreement["mitsuba_render_coverage"] = float(theirs_image[..., 3].mean())
         traversal = {}
