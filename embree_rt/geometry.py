@@ -15,6 +15,7 @@ import trimesh
 
 from embree_rt.embree import BVH
 from embree_rt.materials import MaterialTable
+from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_normals
 from embree_rt.scene.model import Scene
 
 SPHERE_MODES = ("analytic", "mesh")
@@ -33,6 +34,8 @@ class SurfaceHits:
     ``scale`` (n,) float32, a bound on the size of the coordinates the hit was computed from
     (at least max |position|, and the object's |centre| + extent): its rounding error scales
     with it; ``incoming`` (3, n) float32, the direction of the ray that made the hit.
+    ``colored`` (j,) int64 columns whose base colour is the surface's own (a mesh's texture or
+    vertex colours), ``color`` (3, j) float32 linear those colours; both None when none is.
     """
 
     hit: np.ndarray
@@ -44,6 +47,8 @@ class SurfaceHits:
     floor: np.ndarray
     scale: np.ndarray
     incoming: np.ndarray
+    colored: np.ndarray | None = None
+    color: np.ndarray | None = None
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
@@ -101,6 +106,7 @@ class SceneGeometry:
         self._mesh_bounds: list[np.ndarray] = []
         self._mesh_face_offset: list[int] = []
         self._mesh_vertex_normals: list[np.ndarray] = []
+        self._mesh_missing_normals: list[np.ndarray] = []
         self._mesh_faces: list[np.ndarray] = []
         self._mesh_face_normals: list[np.ndarray] = []
         self.triangle_count = 0
@@ -129,7 +135,9 @@ class SceneGeometry:
         child.commit()
         self._mesh_face_offset.append(sum(len(f) for f in self._mesh_faces))
         self._mesh_faces.append(np.asarray(mesh.faces, np.int64))
-        self._mesh_vertex_normals.append(np.asarray(mesh.vertex_normals, np.float32))
+        vertex_normals, missing_normals = unit_vertex_normals(mesh.vertex_normals)
+        self._mesh_vertex_normals.append(vertex_normals)
+        self._mesh_missing_normals.append(missing_normals)
         self._mesh_face_normals.append(np.asarray(mesh.face_normals, np.float32))
         self._mesh_bounds.append(np.asarray(mesh.bounds, np.float64))
         return len(self._children) - 1
@@ -168,6 +176,9 @@ class SceneGeometry:
                 children[key] = self._child(placement.mesh)
             material = scene.material_index(placement.material)
             self._place(children[key], placement.transform, material, placement.smooth)
+        # Mesh looks: the placements showing their own texture or vertex colours, by geom id.
+        geom_ids = self._instance_geom_ids[len(self._instance_geom_ids) - len(scene.meshes) :]
+        self.mesh_colors = MeshColors(scene.meshes, geom_ids)
 
     def _finish_tables(self) -> None:
         size = max(self._instance_geom_ids, default=-1) + 1
@@ -189,6 +200,8 @@ class SceneGeometry:
                 [f + o for f, o in zip(self._mesh_faces, vertex_offsets, strict=True)]
             )
             self.mesh_vertex_normals = np.concatenate(self._mesh_vertex_normals)
+            missing = np.concatenate(self._mesh_missing_normals)
+            self.mesh_missing_normals = missing if missing.any() else None
             self.mesh_face_normals = np.concatenate(self._mesh_face_normals)
             self.mesh_face_offset = np.asarray(self._mesh_face_offset, np.int64)
 
@@ -247,6 +260,8 @@ class SceneGeometry:
             getattr(full, name)[rows] = getattr(compact, name)
         for name in ("position", "normal", "face_normal", "incoming"):
             getattr(full, name)[:, rows] = getattr(compact, name)
+        if compact.colored is not None:
+            full.colored, full.color = rows[compact.colored], compact.color
         return full
 
     def intersect_compact(
@@ -329,9 +344,12 @@ class SceneGeometry:
         if len(instance_rays):
             inst = np.take(hits.inst_id, instance_rays)
             t = np.take(hits.t, instance_rays, out=out.t[instance_part], mode="clip")
-            normal, face_normal = self._instance_normals(
-                inst, hits.prim_id[instance_rays], hits.u[instance_rays], hits.v[instance_rays]
-            )
+            prim, u, v = hits.prim_id[instance_rays], hits.u[instance_rays], hits.v[instance_rays]
+            normal, face_normal = self._instance_normals(inst, prim, u, v)
+            if self.mesh_colors:  # textures, vertex colours: the hit's own base colour
+                out.colored, out.color = self.mesh_colors.hit_colors(
+                    inst, prim, u, v, instance_part.start
+                )
             out.normal[:, instance_part] = normal
             out.face_normal[:, instance_part] = face_normal
             if len(floor_rays) or len(sphere_rays):
@@ -349,13 +367,10 @@ class SceneGeometry:
         face = self.mesh_face_offset[self.instance_child[inst]] + prim
         matrices = self.instance_normal_matrix[inst]
         geometric = self.mesh_face_normals[face]
-        u = u[:, None]
-        v = v[:, None]
         corners = self.mesh_faces[face]
-        vn = self.mesh_vertex_normals
-        # Embree's barycentrics: hit = (1 - u - v) p0 + u p1 + v p2.
-        interpolated = (
-            (1 - u - v) * vn[corners[:, 0]] + u * vn[corners[:, 1]] + v * vn[corners[:, 2]]
+        # Never zero: corners without a normal, and blends that cancel, take the face's.
+        interpolated = blend_normals(
+            self.mesh_vertex_normals, self.mesh_missing_normals, corners, u, v, geometric
         )
         shading = np.where(self.instance_smooth[inst, None], interpolated, geometric)
         world_geometric = _unit(np.einsum("nij,nj->in", matrices, geometric))

@@ -22,7 +22,7 @@ import numpy as np
 
 from embree_rt import shading
 from embree_rt.camera import camera_frame, primary_rays
-from embree_rt.columns import column_max, scatter_add
+from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry
@@ -260,6 +260,8 @@ class Renderer:
             face_normal = surfaces.face_normal * side
 
         color = np.take(self.material_color, material, axis=1)
+        if surfaces.colored is not None:  # mesh looks: textures, vertex colours per hit
+            scatter(color, surfaces.colored, surfaces.color)
         floor_count = np.count_nonzero(surfaces.floor)
         if floor_count:
             # intersect_compact puts floor hits first: then a slice, not a gather, finds them.
