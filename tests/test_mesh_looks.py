@@ -223,7 +223,9 @@ def test_sample_bilinear_matches_a_float64_reference() -> None:
     surrounding texels blended linearly, indices wrapping (repeat)."""
     rng = np.random.default_rng(3)
     height, width = 5, 7
-    texels = rng.uniform(0, 1, (height, width, 3)).astype(np.float32)
+    texels = np.zeros((height, width, 4), np.float32)  # RGB, and a channel to ignore
+    texels[..., :3] = rng.uniform(0, 1, (height, width, 3))
+    texels[..., 3] = np.nan  # whatever it holds
     uv = rng.uniform(-3, 3, (2, 400)).astype(np.float32)
     got = sample_bilinear(texels, uv)
     assert got.shape == (3, 400) and got.dtype == np.float32
@@ -236,14 +238,16 @@ def test_sample_bilinear_matches_a_float64_reference() -> None:
         value = 0.0
         for dy, wy in ((0, 1 - fy), (1, fy)):
             for dx, wx in ((0, 1 - fx), (1, fx)):
-                value = value + wy * wx * texels[(y0 + dy) % height, (x0 + dx) % width]
+                value = value + wy * wx * texels[(y0 + dy) % height, (x0 + dx) % width, :3]
         expected[:, i] = value
     np.testing.assert_allclose(got, expected, atol=2e-5)
     # At a texel's centre, that texel alone; v = 1 is the image's top row.
     rows, columns = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
     centres = np.stack([(columns.ravel() + 0.5) / width, 1 - (rows.ravel() + 0.5) / height])
     np.testing.assert_allclose(
-        sample_bilinear(texels, centres.astype(np.float32)), texels.reshape(-1, 3).T, atol=1e-6
+        sample_bilinear(texels, centres.astype(np.float32)),
+        texels.reshape(-1, 4)[:, :3].T,
+        atol=1e-6,
     )
 
 
@@ -254,7 +258,7 @@ def test_srgb_codes_decode_to_the_standards_values() -> None:
     texels = texels_from_image(Image.fromarray(codes, "RGB"))
     # 10/255 is on the linear segment (÷ 12.92); 128 and 188 are the curve's well-known values.
     want = [[[0.0, 10 / 255 / 12.92, 0.2158605], [1.0, 0.5028865, 0.0512695]]]
-    np.testing.assert_allclose(texels, want, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(texels[..., :3], want, rtol=1e-5, atol=1e-7)
 
 
 # -- vertex and face colours ---------------------------------------------------------------------

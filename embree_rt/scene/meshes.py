@@ -73,9 +73,9 @@ class MeshSurface:
 
     A point's base colour is ``factor`` × the texture at its interpolated UV × its interpolated
     vertex colour (or its face's colour), each factor present or not: ``factor`` (3,) float32;
-    ``texels`` (h, w, 3) float32 linear (see ``embree_rt.textures``) with ``uv`` (2, v) float32
-    per vertex; ``vertex_colors`` (3, v) float32; ``face_colors`` (3, f) float32. Arrays are
-    column-major (one vertex per column) so that the hits' gathers come out as shading's (3, n).
+    ``texels`` (h, w, 4) float32, linear RGB and padding (``embree_rt.textures``), with ``uv``
+    (2, v) float32 per vertex; ``vertex_colors`` (3, v) float32; ``face_colors`` (3, f) float32.
+    Per-vertex arrays hold one vertex per column, so that gathers at the hits come out (3, n).
     """
 
     factor: np.ndarray
