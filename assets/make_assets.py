@@ -6,7 +6,7 @@ Writes, beside this script: torus.obj, gem.ply, capsule.stl, cone.off, twisted_b
 trio.glb (a glTF scene of three nodes, each with its own transform), and the meshes that carry
 their own looks:
 
-- quadrants.png, a 16x16 sRGB texture of four solid quadrants (QUADRANT_COLORS), and
+- quadrants.png, a 64x64 sRGB texture of four solid quadrants (QUADRANT_COLORS), and
   quadrant_cube.obj + quadrant_cube.mtl, a unit cube showing it whole on every face (map_Kd);
 - quadrant_cube.glb, the same cube in glTF, its base colour the texture times CUBE_FACTOR
   (metallic 0, roughness 1: no highlight, no reflection);
@@ -28,7 +28,7 @@ HERE = Path(__file__).resolve().parent
 # 8-bit sRGB colours of the quadrants of quadrants.png, as the image shows them: (top left, top
 # right, bottom left, bottom right).
 QUADRANT_COLORS = ((200, 40, 40), (40, 170, 70), (40, 80, 210), (235, 200, 40))
-QUADRANT_TEXELS = 16
+QUADRANT_TEXELS = 64
 # quadrant_cube.glb's baseColorFactor (RGB, linear, each k/255 so that 8 bits hold it exactly).
 CUBE_FACTOR = (1.0, 0.6, 0.2)
 
