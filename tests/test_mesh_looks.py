@@ -352,14 +352,17 @@ def test_vertex_normals_that_cancel_to_rounding_residue_give_no_nan() -> None:
 
 
 def test_corners_without_a_normal_lend_the_face_normal() -> None:
-    """Half the vertices of a ball keep their normals, half have (0, 0, 0): every hit's shading
-    normal is unit length, the face normal on faces with no usable corner, and on the others
-    the blend of the corners' normals with the face normal standing in for the missing ones."""
+    """Half the vertices of a ball keep their normals, half have none to give ((0, 0, 0), NaN
+    or 1e-30 residue, in turn): every hit's shading normal is unit length, the face normal on
+    faces with no usable corner, and on the others the blend of the corners' normals with the
+    face normal standing in for the missing ones."""
     ball = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
     normals = ball.vertex_normals.copy()
     missing = np.random.default_rng(1).uniform(size=len(normals)) < 0.5
-    normals[missing] = 0.0
-    ball.vertex_normals = normals
+    unusable = np.array([[0.0, 0.0, 0.0], [np.nan, 0.0, 1.0], [1e-30, -2e-30, 1e-30]])
+    given = normals.copy()
+    given[missing] = unusable[np.arange(missing.sum()) % 3]
+    ball.vertex_normals = given
     scene = rt.Scene()
     scene.floor = None
     scene.add_mesh(ball, "matte")
