@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import resource
+import threading
 import time
 
 import numpy as np
@@ -30,9 +31,44 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+class RecordingGeometry:
+    """Stands in for a renderer's ``SceneGeometry`` and records every query it forwards, as
+    (kind, origins, directions, tfar) with rays as (3, n) columns."""
+
+    def __init__(self, geometry) -> None:
+        self.geometry = geometry
+        self.log: list = []
+        self._lock = threading.Lock()
+
+    def __getattr__(self, name: str):
+        return getattr(self.geometry, name)
+
+    def intersect_compact(self, origins, directions, tnear=0.0, tfar=np.inf):
+        with self._lock:
+            self.log.append(("intersect", origins, directions, tfar))
+        return self.geometry.intersect_compact(origins, directions, tnear, tfar)
+
+    def occluded(self, origins, directions, tnear=0.0, tfar=np.inf):
+        with self._lock:
+            self.log.append(("occluded", origins, directions, tfar))
+        return self.geometry.occluded(origins, directions, tnear, tfar)
+
+
+def record_queries(renderer: Renderer, image: dict) -> list:
+    """Every ray query one render of ``image`` makes."""
+    geometry = renderer.geometry
+    renderer.geometry = recorder = RecordingGeometry(geometry)
+    try:
+        renderer.render(**image)
+    finally:
+        renderer.geometry = geometry
+    return recorder.log
+
+
 def replay(renderer: Renderer, log: list, threads: int | None = None) -> float:
-    """Seconds the bare BVH takes to answer every query of ``log`` again, on ``threads``
-    threads (by default as many as the render had)."""
+    """Seconds the bare BVH takes to answer every query of ``log`` again (Embree's traversal
+    and nothing else: no hit records, no floor plane), on ``threads`` threads (by default as
+    many as the render had)."""
     bvh = renderer.geometry.bvh
     bvh.threads = renderer.workers if threads is None else threads
     # Compile and warm the kernels this thread count uses, outside the timing.
@@ -69,9 +105,7 @@ def run(count: int, args: argparse.Namespace) -> dict:
         rays_by_kind = dict(renderer.stats.rays)
         render_s = [renderer.stats.render_s]
         # Once more, logging every query (not timed).
-        renderer.trace_log = log = []
-        renderer.render(**image)
-        renderer.trace_log = None
+        log = record_queries(renderer, image)
         # Timed renders, each followed at once by a replay of its rays: the machine's load
         # changes slowly, so each pair's ratio is a fair one even when the load does change.
         raw_s = []

@@ -20,7 +20,7 @@ import json
 import os
 import statistics
 
-from render_scale import replay  # run as a script: benchmarks/ is on sys.path
+from render_scale import record_queries, replay  # run as a script: benchmarks/ is on sys.path
 
 from embree_rt.integrator import Renderer
 from embree_rt.scene import random_field
@@ -44,9 +44,7 @@ def main() -> None:
     with Renderer(scene, threads=1) as one, Renderer(scene, threads=args.threads) as many:
         for renderer in (one, many):  # compile, warm the heap and the kernels
             renderer.render(**image)
-        one.trace_log = log = []
-        one.render(**image)
-        one.trace_log = None
+        log = record_queries(one, image)
         render_1, render_n, replay_1, replay_n = [], [], [], []
         for _ in range(args.rounds):
             one.render(**image)

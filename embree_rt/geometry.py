@@ -1,9 +1,10 @@
 """Scene geometry: every object of a ``Scene`` in one Embree BVH, and what each hit is.
 
-Spheres go in as analytic Embree spheres, or (``spheres="mesh"``) as one tessellated icosphere
+Spheres go in as analytic spheres: by default Embree user geometry with compiled callbacks,
+``spheres="point"`` Embree's own point spheres, ``spheres="mesh"`` one tessellated icosphere
 instanced per sphere. Each distinct triangle mesh is built once and instanced per placement.
-The floor is an analytic plane intersected in NumPy: exact at any distance, where a finite quad
-in the BVH would cut the horizon and lose float32 precision far away.
+The floor is the Embree layer's analytic ground plane: exact at any distance, where a finite
+quad in the BVH would cut the horizon and lose float32 precision far away.
 """
 
 from __future__ import annotations
@@ -13,42 +14,51 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from embree_rt.embree import BVH
-from embree_rt.materials import MaterialTable
+from embree_rt.embree import BVH, HitLabels
 from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_normals
 from embree_rt.scene.model import Scene
 
-SPHERE_MODES = ("analytic", "mesh")
+SPHERE_MODES = ("analytic", "point", "mesh")
 ICOSPHERE_SUBDIVISIONS = 3
 
 
 @dataclass
 class SurfaceHits:
-    """What n rays hit, one ray per column.
+    """What k rays hit, one ray per column, floor hits first.
 
-    ``hit`` (n,) bool; ``t`` (n,) float32 (inf on a miss); ``position`` (3, n) float32;
-    ``normal`` (3, n) float32 unit shading normal and ``face_normal`` (3, n) float32 unit
-    geometric normal, both pointing out of the object (+y for the floor), whichever side the ray
-    came from (the same array when they agree everywhere); ``material`` (n,) intp material id
-    (the floor's is ``floor_material``); ``floor`` (n,) bool, the rays that hit the floor;
-    ``scale`` (n,) float32, a bound on the size of the coordinates the hit was computed from
-    (at least max |position|, and the object's |centre| + extent): its rounding error scales
-    with it; ``incoming`` (3, n) float32, the direction of the ray that made the hit.
+    ``t`` (k,) float32; ``position`` (3, k) float32; ``normal`` (3, k) float32 unit shading
+    normal and ``face_normal`` (3, k) float32 unit geometric normal, both pointing out of the
+    object (+y for the floor) whichever side the ray came from; ``flat`` is True when the two
+    are one array (no smooth mesh was hit); ``material`` (k,) intp material id (the floor's is
+    ``SceneGeometry.floor_material``); ``floor_count``: columns [0, floor_count) hit the floor,
+    the rest objects; ``scale`` (k,) float32, a bound on the size of the coordinates the hit was
+    computed from (at least max |position|, and the object's |centre| + extent): its rounding
+    error scales with it; ``incoming`` (3, k) float32, the direction of the ray that made it.
     ``colored`` (j,) int64 columns whose base colour is the surface's own (a mesh's texture or
     vertex colours), ``color`` (3, j) float32 linear those colours; both None when none is.
     """
 
-    hit: np.ndarray
     t: np.ndarray
     position: np.ndarray
     normal: np.ndarray
     face_normal: np.ndarray
+    flat: bool
     material: np.ndarray
-    floor: np.ndarray
+    floor_count: int
     scale: np.ndarray
     incoming: np.ndarray
     colored: np.ndarray | None = None
     color: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def floor(self) -> np.ndarray:
+        """(k,) bool: which columns hit the floor."""
+        mask = np.zeros(len(self.t), bool)
+        mask[: self.floor_count] = True
+        return mask
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
@@ -56,21 +66,6 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
     x, y, z = vectors
     length = np.sqrt(x * x + y * y + z * z)
     return (vectors / np.maximum(length, np.float32(1e-30))).astype(np.float32, copy=False)
-
-
-def _no_hits() -> SurfaceHits:
-    vectors = np.zeros((3, 0), np.float32)
-    return SurfaceHits(
-        hit=np.zeros(0, bool), t=np.zeros(0, np.float32), position=vectors, normal=vectors,
-        face_normal=vectors, material=np.zeros(0, np.intp), floor=np.zeros(0, bool),
-        scale=np.zeros(0, np.float32), incoming=vectors,
-    )  # fmt: skip
-
-
-def _largest_magnitude(vectors: np.ndarray) -> np.ndarray:
-    """(n,) largest |component| of each column of (3, n) ``vectors``."""
-    x, y, z = np.abs(vectors)
-    return np.maximum(np.maximum(x, y), z)
 
 
 class SceneGeometry:
@@ -84,18 +79,10 @@ class SceneGeometry:
         self.sphere_centers = np.asarray(scene.sphere_centers, np.float32)
         self.sphere_radii = np.asarray(scene.sphere_radii, np.float32)
         self.sphere_materials = np.asarray(scene.sphere_materials, np.intp)
-        self.sphere_centers_by_column = np.ascontiguousarray(self.sphere_centers.T)
         self.sphere_geom_id = -1
-        self.sphere_scale = (
-            np.abs(self.sphere_centers).max(axis=1) + self.sphere_radii
-            if len(self.sphere_radii)
-            else np.zeros(0, np.float32)
-        ).astype(np.float32)
         self.floor = scene.floor
+        # The floor's material comes after the scene's own in the renderer's material table.
         self.floor_material = len(scene.materials)
-        self.materials = MaterialTable.from_materials(
-            [*scene.materials.values(), *([scene.floor.material] if scene.floor else [])]
-        )
         # Per top-level instance geometry id: which child mesh, material, shading mode.
         self._instance_child: list[int] = []
         self._instance_material: list[int] = []
@@ -107,15 +94,17 @@ class SceneGeometry:
         self._mesh_face_offset: list[int] = []
         self._mesh_vertex_normals: list[np.ndarray] = []
         self._mesh_missing_normals: list[np.ndarray] = []
-        self._mesh_faces: list[np.ndarray] = []
         self._mesh_face_normals: list[np.ndarray] = []
+        self._mesh_faces: list[np.ndarray] = []
         self.triangle_count = 0
         self.instance_count = 0
         try:
             if len(self.sphere_radii):
-                if spheres == "analytic":
+                if spheres in ("analytic", "point"):
                     self.sphere_geom_id = self.bvh.add_spheres(
-                        self.sphere_centers, self.sphere_radii
+                        self.sphere_centers,
+                        self.sphere_radii,
+                        kind="user" if spheres == "analytic" else "point",
                     )
                 else:
                     self._add_tessellated_spheres()
@@ -181,13 +170,13 @@ class SceneGeometry:
         self.mesh_colors = MeshColors(scene.meshes, geom_ids)
 
     def _finish_tables(self) -> None:
-        size = max(self._instance_geom_ids, default=-1) + 1
+        size = self.bvh.geometry_count
         self.instance_child = np.full(size, -1, np.int32)
         self.instance_material = np.zeros(size, np.intp)
         self.instance_smooth = np.zeros(size, bool)
         self.instance_normal_matrix = np.zeros((size, 3, 3), np.float32)
         self.instance_scale = np.zeros(size, np.float32)
-        if size:
+        if self._instance_geom_ids:
             ids = np.asarray(self._instance_geom_ids)
             self.instance_child[ids] = self._instance_child
             self.instance_material[ids] = self._instance_material
@@ -204,6 +193,15 @@ class SceneGeometry:
             self.mesh_missing_normals = missing if missing.any() else None
             self.mesh_face_normals = np.concatenate(self._mesh_face_normals)
             self.mesh_face_offset = np.asarray(self._mesh_face_offset, np.int64)
+        self.labels = HitLabels(
+            geometry_label=self.instance_material.astype(np.int64),
+            geometry_scale=self.instance_scale,
+            sphere_geom_id=self.sphere_geom_id,
+            sphere_label=self.sphere_materials.astype(np.int64),
+            plane_y=None if self.floor is None else float(self.floor.height),
+            plane_label=self.floor_material,
+        )
+        self.smooth_meshes = bool(self.instance_smooth.any())
 
     def close(self) -> None:
         self.bvh.close()
@@ -218,34 +216,19 @@ class SceneGeometry:
 
     # -- queries ------------------------------------------------------------------------------
 
-    def _floor_crossing(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray,
-        tfar: float | np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Where each ray meets the floor plane: (n,) float32 distance along the ray (any value
-        where it does not), and (n,) bool whether it does, in front of the origin and within
-        [tnear, tfar]. ``origins``, ``directions`` (3, n) float32."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (np.float32(self.floor.height) - origins[1]) / directions[1]
-        # Behind the origin is negative, parallel is ±inf or NaN: none passes all three tests.
-        meets = (t >= np.maximum(tnear, np.float32(0.0))) & (t <= tfar) & (t != np.inf)
-        return t, meets
-
     def intersect(
         self,
         origins: np.ndarray,
         directions: np.ndarray,
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
-    ) -> SurfaceHits:
-        """Nearest surface on each ray; ``origins``, ``directions`` (3, n) float32, unit dirs.
-        Every field has one column per ray (zeros where ``hit`` is False)."""
+    ) -> RaySurfaces:
+        """Nearest surface on each of n rays; ``origins``, ``directions`` (3, n) float32, unit
+        directions. Returns a ``RaySurfaces``: every field has one column per ray (zeros where
+        ``hit`` is False)."""
         rows, compact = self.intersect_compact(origins, directions, tnear, tfar)
         n = np.shape(origins)[1]
-        full = SurfaceHits(
+        full = RaySurfaces(
             hit=np.zeros(n, bool),
             t=np.full(n, np.inf, np.float32),
             position=np.zeros((3, n), np.float32),
@@ -254,11 +237,11 @@ class SceneGeometry:
             material=np.zeros(n, np.intp),
             floor=np.zeros(n, bool),
             scale=np.zeros(n, np.float32),
-            incoming=np.zeros((3, n), np.float32),
         )
-        for name in ("hit", "t", "material", "floor", "scale"):
+        full.hit[rows] = True
+        for name in ("t", "material", "floor", "scale"):
             getattr(full, name)[rows] = getattr(compact, name)
-        for name in ("position", "normal", "face_normal", "incoming"):
+        for name in ("position", "normal", "face_normal"):
             getattr(full, name)[:, rows] = getattr(compact, name)
         if compact.colored is not None:
             full.colored, full.color = rows[compact.colored], compact.color
@@ -272,110 +255,50 @@ class SceneGeometry:
         tfar: float | np.ndarray = np.inf,
     ) -> tuple[np.ndarray, SurfaceHits]:
         """Like ``intersect``, but only for the rays that hit: returns their (k,) int64 ray
-        numbers and a ``SurfaceHits`` of k columns (what the integrator shades).
-
-        The hits come grouped by kind, floor first, then spheres, then mesh instances, each
-        group in ray order: each group is computed on contiguous arrays, written straight into
-        its slice of the result. (Gathers into those slices use ``mode="clip"``: NumPy buffers
-        ``out`` in the default mode, and the indices come from ``flatnonzero``.)
-        """
-        origins = np.asarray(origins, np.float32)
-        directions = np.asarray(directions, np.float32)
-        hits = self.bvh.intersect(origins.T, directions.T, tnear, tfar)
-        on_object = hits.geom_id >= 0
-        if self.floor is not None:
-            floor_t, meets_floor = self._floor_crossing(origins, directions, tnear, tfar)
-            on_floor = meets_floor & (floor_t < hits.t)
-            on_object &= ~on_floor
-            floor_rays = np.flatnonzero(on_floor)
-        else:
-            floor_rays = np.zeros(0, np.int64)
-        on_instance = hits.inst_id >= 0
-        sphere_rays = np.flatnonzero(
-            on_object & ~on_instance & (hits.geom_id == self.sphere_geom_id)
-            if self.sphere_geom_id >= 0
-            else np.zeros(0, bool)
+        numbers and a ``SurfaceHits`` of k columns (what the integrator shades), floor hits
+        first. The Embree layer's compiled hit records do the bookkeeping; only smooth mesh
+        normals are left to do here."""
+        records = self.bvh.intersect_records(origins, directions, self.labels, tnear, tfar)
+        face_normal = records.normal
+        normal = face_normal
+        meshes = records.group("other")
+        if self.smooth_meshes and meshes.stop > meshes.start:
+            normal = face_normal.copy()
+            normal[:, meshes] = self._smooth_normals(
+                records.inst_id[meshes], records.prim_id[meshes], records.u[meshes],
+                records.v[meshes], face_normal[:, meshes],
+            )  # fmt: skip
+        surfaces = SurfaceHits(
+            t=records.t,
+            position=records.position,
+            normal=normal,
+            face_normal=face_normal,
+            flat=normal is face_normal,
+            material=records.label,
+            floor_count=int(records.counts[0]),
+            scale=records.scale,
+            incoming=records.incoming,
         )
-        instance_rays = np.flatnonzero(on_object & on_instance)
-        groups = (floor_rays, sphere_rays, instance_rays)
-        k = sum(len(rays) for rays in groups)
-        if k == 0:
-            return np.zeros(0, np.int64), _no_hits()
-        out = SurfaceHits(
-            hit=np.ones(k, bool), t=np.empty(k, np.float32), position=np.empty((3, k), np.float32),
-            normal=np.empty((3, k), np.float32), face_normal=None,
-            material=np.empty(k, np.intp), floor=np.zeros(k, bool),
-            scale=np.empty(k, np.float32), incoming=np.empty((3, k), np.float32),
-        )  # fmt: skip
-        out.face_normal = np.empty((3, k), np.float32) if len(instance_rays) else out.normal
-        stops = np.cumsum([len(rays) for rays in groups])
-        floor_part, sphere_part, instance_part = (
-            slice(stop - len(rays), stop) for rays, stop in zip(groups, stops, strict=True)
-        )
-        for rays, part in zip(groups, (floor_part, sphere_part, instance_part), strict=True):
-            if len(rays):
-                np.take(directions, rays, axis=1, out=out.incoming[:, part], mode="clip")
-        if len(floor_rays):
-            t = np.take(floor_t, floor_rays, out=out.t[floor_part], mode="clip")
-            position = out.position[:, floor_part]
-            np.take(origins, floor_rays, axis=1, out=position, mode="clip")
-            position += out.incoming[:, floor_part] * t
-            out.normal[:, floor_part] = np.array([[0.0], [1.0], [0.0]], np.float32)
-            out.material[floor_part] = self.floor_material
-            out.floor[floor_part] = True
-            out.scale[floor_part] = _largest_magnitude(position)
-        if len(sphere_rays):
-            prim = np.take(hits.prim_id, sphere_rays)
-            t = np.take(hits.t, sphere_rays, out=out.t[sphere_part], mode="clip")
-            center = np.take(self.sphere_centers_by_column, prim, axis=1)
-            hit_points = np.take(origins, sphere_rays, axis=1)
-            hit_points += out.incoming[:, sphere_part] * t
-            hit_points -= center
-            outward = out.normal[:, sphere_part]
-            length = np.sqrt(hit_points[0] ** 2 + hit_points[1] ** 2 + hit_points[2] ** 2)
-            np.divide(hit_points, np.maximum(length, np.float32(1e-30)), out=outward)
-            # Re-project onto the sphere: removes the rounding error along the ray.
-            position = out.position[:, sphere_part]
-            np.multiply(np.take(self.sphere_radii, prim), outward, out=position)
-            position += center
-            np.take(self.sphere_materials, prim, out=out.material[sphere_part], mode="clip")
-            # |centre| + radius bounds every coordinate of a point on the sphere.
-            np.take(self.sphere_scale, prim, out=out.scale[sphere_part], mode="clip")
-        if len(instance_rays):
-            inst = np.take(hits.inst_id, instance_rays)
-            t = np.take(hits.t, instance_rays, out=out.t[instance_part], mode="clip")
-            prim, u, v = hits.prim_id[instance_rays], hits.u[instance_rays], hits.v[instance_rays]
-            normal, face_normal = self._instance_normals(inst, prim, u, v)
-            if self.mesh_colors:  # textures, vertex colours: the hit's own base colour
-                out.colored, out.color = self.mesh_colors.hit_colors(
-                    inst, prim, u, v, instance_part.start
-                )
-            out.normal[:, instance_part] = normal
-            out.face_normal[:, instance_part] = face_normal
-            if len(floor_rays) or len(sphere_rays):
-                out.face_normal[:, : instance_part.start] = out.normal[:, : instance_part.start]
-            position = out.position[:, instance_part]
-            np.take(origins, instance_rays, axis=1, out=position, mode="clip")
-            position += out.incoming[:, instance_part] * t
-            np.take(self.instance_material, inst, out=out.material[instance_part], mode="clip")
-            # The instance's world bounds bound every coordinate of a point on it.
-            np.take(self.instance_scale, inst, out=out.scale[instance_part], mode="clip")
-        return np.concatenate(groups), out
+        if self.mesh_colors and meshes.stop > meshes.start:  # mesh looks: textures, colours
+            surfaces.colored, surfaces.color = self.mesh_colors.hit_colors(
+                records.inst_id[meshes], records.prim_id[meshes], records.u[meshes],
+                records.v[meshes], meshes.start,
+            )  # fmt: skip
+        return records.rays, surfaces
 
-    def _instance_normals(self, inst, prim, u, v) -> tuple[np.ndarray, np.ndarray]:
-        """(3, k) unit shading and geometric world normals of instance hits."""
+    def _smooth_normals(self, inst, prim, u, v, face_normal) -> np.ndarray:
+        """(3, k) unit world shading normals of k mesh hits: the vertex normals interpolated at
+        (u, v) where the placement is smooth, ``face_normal`` (3, k) elsewhere."""
+        smooth = self.instance_smooth[inst]
         face = self.mesh_face_offset[self.instance_child[inst]] + prim
-        matrices = self.instance_normal_matrix[inst]
-        geometric = self.mesh_face_normals[face]
         corners = self.mesh_faces[face]
         # Never zero: corners without a normal, and blends that cancel, take the face's.
         interpolated = blend_normals(
-            self.mesh_vertex_normals, self.mesh_missing_normals, corners, u, v, geometric
-        )
-        shading = np.where(self.instance_smooth[inst, None], interpolated, geometric)
-        world_geometric = _unit(np.einsum("nij,nj->in", matrices, geometric))
-        world_shading = _unit(np.einsum("nij,nj->in", matrices, shading))
-        return world_shading, world_geometric
+            self.mesh_vertex_normals, self.mesh_missing_normals, corners, u, v,
+            self.mesh_face_normals, face,
+        )  # fmt: skip
+        world = _unit(np.einsum("nij,nj->in", self.instance_normal_matrix[inst], interpolated))
+        return np.where(smooth, world, face_normal)
 
     def occluded(
         self,
@@ -388,8 +311,24 @@ class SceneGeometry:
         ``origins``, ``directions`` (3, n) float32."""
         origins = np.asarray(origins, np.float32)
         directions = np.asarray(directions, np.float32)
-        blocked = self.bvh.occluded(origins.T, directions.T, tnear, tfar)
-        if self.floor is None:
-            return blocked
-        _, meets_floor = self._floor_crossing(origins, directions, tnear, tfar)
-        return blocked | meets_floor
+        plane_y = None if self.floor is None else float(self.floor.height)
+        return self.bvh.occluded(origins.T, directions.T, tnear, tfar, plane_y=plane_y)
+
+
+@dataclass
+class RaySurfaces:
+    """What each of n rays hit (``SceneGeometry.intersect``), one ray per column: ``hit`` (n,)
+    bool, and the fields of ``SurfaceHits`` (zeros where nothing was hit; ``t`` inf), with
+    ``floor`` (n,) bool marking the floor hits; ``colored`` (j,) ray numbers and ``color``
+    (3, j) as in ``SurfaceHits``."""
+
+    hit: np.ndarray
+    t: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    face_normal: np.ndarray
+    material: np.ndarray
+    floor: np.ndarray
+    scale: np.ndarray
+    colored: np.ndarray | None = None
+    color: np.ndarray | None = None

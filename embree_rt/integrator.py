@@ -25,7 +25,8 @@ from embree_rt.camera import camera_frame, primary_rays
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
-from embree_rt.geometry import SceneGeometry
+from embree_rt.geometry import SceneGeometry, SurfaceHits
+from embree_rt.materials import MaterialTable
 from embree_rt.scene.model import Scene
 
 DEFAULT_BATCH_SIZE = 1 << 18
@@ -55,17 +56,10 @@ class RenderStats:
 
 @dataclass
 class BatchWork:
-    """What one batch of camera samples produced: its film block, ray counts, and (for the
-    benchmark) the queries it made."""
+    """What one batch of camera samples produced: its film block and ray counts."""
 
     block: FilmBlock
-    logging: bool = False
     rays: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAY_KINDS, 0))
-    log: list | None = None
-
-    def __post_init__(self) -> None:
-        if self.logging:
-            self.log = []
 
 
 @dataclass
@@ -132,7 +126,10 @@ class Renderer:
         start = time.perf_counter()
         self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
         self.stats.build_s = time.perf_counter() - start
-        self.materials = table = self.geometry.materials
+        # Material ids are the scene's materials in order, then the floor's.
+        self.materials = table = MaterialTable.from_materials(
+            [*scene.materials.values(), *([scene.floor.material] if scene.floor else [])]
+        )
         # Per material: the seed article's blend of local shading, reflection and transmission.
         local = (1.0 - table.reflectivity) * (1.0 - table.transparency)
         self.material_color = np.ascontiguousarray(table.color.T)  # (3, m)
@@ -146,9 +143,6 @@ class Renderer:
         self.light_rgb = np.array(
             [np.asarray(lt.color, np.float32) * lt.intensity for lt in lights], np.float32
         ).reshape(-1, 3)
-        # When a list, every query is appended as (kind, origins, directions, tfar): the
-        # benchmark replays them through the bare BVH to measure pure traversal.
-        self.trace_log: list[tuple[str, np.ndarray, np.ndarray, np.ndarray | None]] | None = None
         self.horizon = np.asarray(scene.background.horizon, np.float32)
         self.zenith = np.asarray(scene.background.zenith, np.float32)
 
@@ -185,7 +179,7 @@ class Renderer:
 
         def run(batch: tuple[int, int]) -> BatchWork:
             start, count = batch
-            work = BatchWork(FilmBlock(start // spp, count // spp), self.trace_log is not None)
+            work = BatchWork(FilmBlock(start // spp, count // spp))
             origins, directions, pixel = primary_rays(frame, spp, seed, start, count)
             rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
             work.rays["primary"] += count
@@ -207,8 +201,6 @@ class Renderer:
                 film.add_block(work.block)
                 for kind, n in work.rays.items():
                     self.stats.rays[kind] += n
-                if self.trace_log is not None:
-                    self.trace_log.extend(work.log)
                 done += work.block.count * spp
                 self.stats.render_s = time.perf_counter() - began
                 if progress is not None:
@@ -224,8 +216,6 @@ class Renderer:
         depth = 0
         while len(rays):
             rows, surfaces = self.geometry.intersect_compact(rays.origins, rays.directions)
-            if work.log is not None:
-                work.log.append(("intersect", rays.origins, rays.directions, None))
             if len(rows) < len(rays):
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False
@@ -243,100 +233,120 @@ class Renderer:
             rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
 
-    def _shade(self, rays: RayBatch, surfaces, work: BatchWork, spawn: bool) -> RayBatch:
+    def _shade(
+        self, rays: RayBatch, surfaces: SurfaceHits, work: BatchWork, spawn: bool
+    ) -> RayBatch:
         """Light the ``surfaces`` that ``rays`` (directions, pixels, weights; no origins) hit,
         into ``work``; returns their reflection and refraction children."""
-        table = self.materials
-        material = surfaces.material
-        position = surfaces.position
         d = rays.directions
-        # Shade the side the ray arrived on; a ray leaving a closed object comes from inside.
-        entering = shading.dot(d, surfaces.face_normal) < 0
-        side = entering * np.float32(2.0) - np.float32(1.0)  # +1 or -1
-        normal = surfaces.normal * side
-        if surfaces.face_normal is surfaces.normal:
-            face_normal = normal
-        else:
-            face_normal = surfaces.face_normal * side
-
-        color = np.take(self.material_color, material, axis=1)
-        if surfaces.colored is not None:  # mesh looks: textures, vertex colours per hit
-            scatter(color, surfaces.colored, surfaces.color)
-        floor_count = np.count_nonzero(surfaces.floor)
-        if floor_count:
-            # intersect_compact puts floor hits first: then a slice, not a gather, finds them.
-            on_floor = (
-                slice(0, floor_count)
-                if surfaces.floor[:floor_count].all()
-                else np.flatnonzero(surfaces.floor)
-            )
-            color[:, on_floor] = shading.checker(position[:, on_floor], self.scene.floor.checker)
-
+        normal, face_normal, entering = self._facing_the_ray(d, surfaces)
+        color = self._surface_color(surfaces)
         offset = surface_offset(surfaces.scale)
-        outside = position + face_normal * offset
+        outside = surfaces.position + face_normal * offset
+        material = surfaces.material
         radiance = np.take(self.ambient_share, material) * color
         self._add_direct_light(radiance, outside, normal, -d, color, material, work)
         work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
             return NO_RAYS
-
-        transparency = np.take(table.transparency, material)
         reflect_share = np.take(self.reflect_share, material)
-        children = []
-        # Glass splits by Fresnel between reflection and refraction; TIR reflects everything.
-        glass = np.flatnonzero(transparency > 0)
-        if len(glass):
-            d_glass = np.take(d, glass, axis=1)
-            normal_glass = np.take(normal, glass, axis=1)
-            ior = table.ior[material[glass]]
-            entering_glass = entering[glass]
-            n1 = np.where(entering_glass, np.float32(1.0), ior)
-            n2 = np.where(entering_glass, ior, np.float32(1.0))
-            refracted, total_internal = shading.refract(d_glass, normal_glass, n1 / n2)
-            cos_incident = np.clip(-shading.dot(d_glass, normal_glass), 0.0, 1.0)
-            fresnel = shading.fresnel_schlick(cos_incident, n1, n2)
-            fresnel[total_internal] = 1.0
-            reflect_share[glass] += transparency[glass] * fresnel
-            # Glass tints what passes through it (the green marble), not what it reflects.
-            weight = np.take(rays.weight, glass, axis=1)
-            weight *= transparency[glass] * (1.0 - fresnel)
-            weight *= np.take(color, glass, axis=1)
-            keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
-            through = glass[keep]
-            inside = np.take(position, through, axis=1)
-            inside -= np.take(face_normal, through, axis=1) * offset[through]
-            children.append(
-                RayBatch(
-                    inside,
-                    np.take(refracted, keep, axis=1),
-                    rays.pixel[through],
-                    np.take(weight, keep, axis=1),
-                )
-            )
-            work.rays["refraction"] += len(keep)
+        children = self._refraction_children(
+            rays, surfaces, normal, face_normal, entering, color, offset, reflect_share, work
+        )
+        reflected = self._reflection_children(
+            rays, outside, normal, color, reflect_share, material, work
+        )
+        children.insert(0, reflected)
+        children = [batch for batch in children if len(batch)]
+        return RayBatch.concatenate(children) if children else NO_RAYS
 
-        # Mirrors, metals and glass's Fresnel share reflect. Most hits reflect a little, so the
-        # weights are formed on every row and only the rows kept are gathered.
+    # -- the stages of shading --------------------------------------------------------------
+
+    @staticmethod
+    def _facing_the_ray(d: np.ndarray, surfaces: SurfaceHits):
+        """Shading and geometric normals (3, k) turned to the side the ray arrived on, and (k,)
+        bool whether the ray enters the object (a ray leaving a closed object is inside)."""
+        entering = shading.dot(d, surfaces.face_normal) < 0
+        side = entering * np.float32(2.0) - np.float32(1.0)  # +1 or -1
+        normal = surfaces.normal * side
+        face_normal = normal if surfaces.flat else surfaces.face_normal * side
+        return normal, face_normal, entering
+
+    def _surface_color(self, surfaces: SurfaceHits) -> np.ndarray:
+        """(3, k) float32 colour of each hit: its material's, the checker's on the floor."""
+        color = np.take(self.material_color, surfaces.material, axis=1)
+        if surfaces.colored is not None:  # mesh looks: textures, vertex colours per hit
+            scatter(color, surfaces.colored, surfaces.color)
+        floor = slice(0, surfaces.floor_count)
+        if surfaces.floor_count:
+            color[:, floor] = shading.checker(surfaces.position[:, floor], self.scene.floor.checker)
+        return color
+
+    def _refraction_children(
+        self, rays, surfaces, normal, face_normal, entering, color, offset, reflect_share, work
+    ) -> list[RayBatch]:
+        """Glass splits by Fresnel between reflection and refraction (total internal reflection
+        reflects everything): adds the reflected share to ``reflect_share`` (k,) in place and
+        returns the refracted rays, started just inside the surface, tinted by the glass."""
+        table = self.materials
+        material = surfaces.material
+        transparency = np.take(table.transparency, material)
+        glass = np.flatnonzero(transparency > 0)
+        if len(glass) == 0:
+            return []
+        d_glass = np.take(rays.directions, glass, axis=1)
+        normal_glass = np.take(normal, glass, axis=1)
+        ior = table.ior[material[glass]]
+        entering_glass = entering[glass]
+        n1 = np.where(entering_glass, np.float32(1.0), ior)
+        n2 = np.where(entering_glass, ior, np.float32(1.0))
+        refracted, total_internal = shading.refract(d_glass, normal_glass, n1 / n2)
+        cos_incident = np.clip(-shading.dot(d_glass, normal_glass), 0.0, 1.0)
+        fresnel = shading.fresnel_schlick(cos_incident, n1, n2)
+        fresnel[total_internal] = 1.0
+        reflect_share[glass] += transparency[glass] * fresnel
+        # Glass tints what passes through it (the green marble), not what it reflects.
+        weight = np.take(rays.weight, glass, axis=1)
+        weight *= transparency[glass] * (1.0 - fresnel)
+        weight *= np.take(color, glass, axis=1)
+        keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
+        through = glass[keep]
+        inside = np.take(surfaces.position, through, axis=1)
+        inside -= np.take(face_normal, through, axis=1) * offset[through]
+        work.rays["refraction"] += len(keep)
+        return [
+            RayBatch(
+                inside,
+                np.take(refracted, keep, axis=1),
+                rays.pixel[through],
+                np.take(weight, keep, axis=1),
+            )
+        ]
+
+    def _reflection_children(
+        self, rays, outside, normal, color, reflect_share, material, work
+    ) -> RayBatch:
+        """Mirrors, metals and glass's Fresnel share reflect: the mirror rays whose weight can
+        still show, started just outside the surface. Most hits reflect a little, so the
+        weights are formed on every row and only the rows kept are gathered."""
         weight = rays.weight * reflect_share
         if self.metal_share is not None:
             # Metals tint what they reflect: a factor of color on metals, 1 elsewhere.
             metal = np.take(self.metal_share, material)
             weight *= (color - np.float32(1.0)) * metal + np.float32(1.0)
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
-        if len(keep):
-            reflected = shading.reflect(np.take(d, keep, axis=1), np.take(normal, keep, axis=1))
-            children.insert(
-                0,
-                RayBatch(
-                    np.take(outside, keep, axis=1),
-                    reflected,
-                    rays.pixel[keep],
-                    np.take(weight, keep, axis=1),
-                ),
-            )
-            work.rays["reflection"] += len(keep)
-
-        return RayBatch.concatenate(children) if children else NO_RAYS
+        if len(keep) == 0:
+            return NO_RAYS
+        reflected = shading.reflect(
+            np.take(rays.directions, keep, axis=1), np.take(normal, keep, axis=1)
+        )
+        work.rays["reflection"] += len(keep)
+        return RayBatch(
+            np.take(outside, keep, axis=1),
+            reflected,
+            rays.pixel[keep],
+            np.take(weight, keep, axis=1),
+        )
 
     def _add_direct_light(
         self, radiance, points, normal, to_viewer, color, material, work: BatchWork
@@ -367,8 +377,6 @@ class Renderer:
                 np.subtract(position[axis], origins, out=shadow_directions[axis, first:stop])
             first = stop
         blocked = self.geometry.occluded(shadow_origins, shadow_directions, 0.0, 1.0)
-        if work.log is not None:
-            work.log.append(("occluded", shadow_origins, shadow_directions, 1.0))
         work.rays["shadow"] += count
 
         diffuse = np.take(self.diffuse_share, material)

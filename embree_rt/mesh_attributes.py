@@ -41,12 +41,14 @@ def blend_normals(
     u: np.ndarray,
     v: np.ndarray,
     face_normals: np.ndarray,
+    face: np.ndarray,
 ) -> np.ndarray:
     """(k, 3) float32 smooth shading normals (not unit length) of k triangle hits.
 
     ``vertex_normals`` (n, 3) float32 unit or zero and ``missing`` (n,) float32 from
     ``unit_vertex_normals`` (None: no vertex lacks a normal); ``corners`` (k, 3) vertex indices,
-    ``u``, ``v`` (k,) Embree barycentrics, ``face_normals`` (k, 3) float32 unit geometric normals.
+    ``u``, ``v`` (k,) Embree barycentrics; ``face_normals`` (f, 3) float32 unit geometric
+    normals of the faces and ``face`` (k,) the face of each hit, gathered only where needed.
     A corner without a normal lends the face's normal instead, and where the blend cancels the
     face normal is used: the result is never zero, so no NaN can come of normalising it.
     """
@@ -59,12 +61,15 @@ def blend_normals(
         + v * vertex_normals[corners[:, 2]]
     )
     if missing is not None:
-        lent = w * missing[corners[:, 0], None] + u * missing[corners[:, 1], None]
-        lent += v * missing[corners[:, 2], None]
-        blend += lent * face_normals
-    cancelled = np.einsum("ij,ij->i", blend, blend) < np.float32(MIN_BLEND_LENGTH**2)
-    if cancelled.any():
-        blend[cancelled] = face_normals[cancelled]
+        lent = w[:, 0] * missing[corners[:, 0]] + u[:, 0] * missing[corners[:, 1]]
+        lent += v[:, 0] * missing[corners[:, 2]]
+        rows = np.flatnonzero(lent)
+        if len(rows):
+            blend[rows] += lent[rows, None] * face_normals[face[rows]]
+    length2 = np.einsum("ij,ij->i", blend, blend)
+    cancelled = np.flatnonzero(length2 < np.float32(MIN_BLEND_LENGTH**2))
+    if len(cancelled):
+        blend[cancelled] = face_normals[face[cancelled]]
     return blend
 
 

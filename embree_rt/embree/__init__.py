@@ -3,5 +3,8 @@
 from embree_rt.embree.bvh import BVH, Hits
 from embree_rt.embree.heap import retain_freed_memory
 from embree_rt.embree.library import EmbreeError
+from embree_rt.embree.records import GROUPS, HitLabels, HitRecords
 
-__all__ = ["BVH", "EmbreeError", "Hits", "retain_freed_memory"]
+__all__ = [
+    "BVH", "GROUPS", "EmbreeError", "HitLabels", "HitRecords", "Hits", "retain_freed_memory"
+]

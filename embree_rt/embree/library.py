@@ -17,6 +17,7 @@ LIBRARY_ENV = "EMBREE_RT_LIBRARY"
 # Enumerations and formats from Embree 4's public headers (rtcore_*.h).
 GEOMETRY_TYPE_TRIANGLE = 0
 GEOMETRY_TYPE_SPHERE_POINT = 50
+GEOMETRY_TYPE_USER = 120
 GEOMETRY_TYPE_INSTANCE = 121
 BUFFER_TYPE_INDEX = 0
 BUFFER_TYPE_VERTEX = 1
@@ -25,7 +26,9 @@ FORMAT_FLOAT3 = 0x9003
 FORMAT_FLOAT4 = 0x9004
 FORMAT_FLOAT4X4_COLUMN_MAJOR = 0x9244
 DEVICE_PROPERTY_VERSION = 0
+DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED = 32
 DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED = 33
+DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED = 34
 DEVICE_PROPERTY_POINT_GEOMETRY_SUPPORTED = 101
 INVALID_ID = 0xFFFFFFFF
 
@@ -89,6 +92,11 @@ def _declare(lib: ctypes.CDLL) -> None:
         "rtcSetNewGeometryBuffer": (p, [p, i, u, i, z, z]),
         "rtcSetGeometryInstancedScene": (None, [p, p]),
         "rtcSetGeometryTransform": (None, [p, u, i, p]),
+        "rtcSetGeometryUserPrimitiveCount": (None, [p, u]),
+        "rtcSetGeometryUserData": (None, [p, p]),
+        "rtcSetGeometryBoundsFunction": (None, [p, p, p]),
+        "rtcSetGeometryIntersectFunction": (None, [p, p]),
+        "rtcSetGeometryOccludedFunction": (None, [p, p]),
     }
     for name, (restype, argtypes) in signatures.items():
         function = getattr(lib, name)

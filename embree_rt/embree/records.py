@@ -1,0 +1,222 @@
+"""Hit records: the bookkeeping between Embree's raw answers and shading, compiled.
+
+After a batch is traced, one compiled pass turns each ray's raw hit (t, ids, object-space Ng)
+into what shading reads — the hit point, the unit world-space geometric normal, a label (the
+caller's material id) and the size of the coordinates the hit was computed from — and sorts the
+hits into three groups written straight into (3, k) columns: the ground plane, the top-level
+sphere set, and everything else (instances, top-level triangles). Done in NumPy this took a
+dozen array passes and gathers per bounce.
+
+The optional ground plane ``y = plane_y`` is analytic (an infinite plane cannot go into a BVH
+without cutting the horizon and losing float32 precision far away): exact at any distance.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+GROUPS = ("plane", "spheres", "other")
+
+
+@dataclass
+class HitLabels:
+    """What the caller attaches to Embree's ids, for ``BVH.intersect_records``.
+
+    ``geometry_label`` (g,) int64 and ``geometry_scale`` (g,) float32, by top-level geometry
+    id (the instance's id for an instance hit): the label of every hit on that geometry and a
+    bound on its world coordinates; ``sphere_geom_id`` the top-level sphere set whose hits take
+    ``sphere_label`` (m,) int64 by primitive instead (-1: none); ``plane_y`` the ground plane's
+    height (None: no plane) and ``plane_label`` its label.
+    """
+
+    geometry_label: np.ndarray
+    geometry_scale: np.ndarray
+    sphere_geom_id: int = -1
+    sphere_label: np.ndarray | None = None
+    plane_y: float | None = None
+    plane_label: int = -1
+
+
+@dataclass
+class HitRecords:
+    """The k rays of a batch that hit, grouped plane first, then spheres, then the rest, each
+    group in ray order.
+
+    ``rays`` (k,) int64 ray numbers; ``counts`` (3,) the group sizes (``GROUPS``); ``t`` (k,)
+    float32; ``position`` (3, k) float32 (on a sphere, re-projected onto its surface);
+    ``normal`` (3, k) float32 unit geometric normal in world space, as the object faces (+y on
+    the plane, outward on spheres); ``label`` (k,) int64; ``scale`` (k,) float32 bound on the
+    coordinates (max |position| on the plane; |centre| + radius on a sphere; the table's value
+    otherwise); ``incoming`` (3, k) float32 ray directions; ``prim_id``, ``inst_id`` (k,) int32
+    and ``u``, ``v`` (k,) float32 as Embree reported them (``prim_id`` -1 on the plane).
+    """
+
+    rays: np.ndarray
+    counts: np.ndarray
+    t: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    label: np.ndarray
+    scale: np.ndarray
+    incoming: np.ndarray
+    prim_id: np.ndarray
+    inst_id: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+    def group(self, name: str) -> slice:
+        """The columns of group ``name`` (one of ``GROUPS``)."""
+        index = GROUPS.index(name)
+        start = int(self.counts[:index].sum())
+        return slice(start, start + int(self.counts[index]))
+
+
+PLANE, SPHERE, OTHER, MISS = 0, 1, 2, 3
+
+
+@njit(nogil=True, cache=True)
+def plane_crossing(oy, dy, tnear, tfar, plane_y):
+    """t where a ray meets the plane y = plane_y inside [tnear, tfar] and in front of its
+    origin, or NaN (behind, parallel, outside the window)."""
+    if dy == 0.0:
+        return np.nan
+    t = (np.float32(plane_y) - oy) / dy
+    if t >= max(tnear, np.float32(0.0)) and t <= tfar and t != np.inf:
+        return t
+    return np.nan
+
+
+@njit(nogil=True, cache=True)
+def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, ng, u, v,
+                  has_plane, plane_y, plane_label, sphere_geom, spheres, sphere_label,
+                  geometry_label, geometry_scale, normal_matrix):  # fmt: skip
+    """The compiled pass behind ``BVH.intersect_records``: classify, count, then fill.
+
+    Inputs per ray: ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32
+    and the raw hits ``t`` (n,) float32, ``geom``, ``prim``, ``inst`` (n,) int32, ``ng`` (n, 3)
+    float32 object-space normal, ``u``, ``v`` (n,) float32. ``spheres`` (m, 4) float32 is the
+    sphere set's (x, y, z, r) buffer, ``normal_matrix`` (g, 3, 3) float32 the inverse-transpose
+    of each instance's linear part (identity elsewhere).
+    """
+    n = origins.shape[1]
+    kind = np.empty(n, np.uint8)
+    plane_t = np.empty(n, np.float32)
+    counts = np.zeros(4, np.int64)
+    for i in range(n):
+        k = MISS if geom[i] < 0 else (SPHERE if inst[i] < 0 and geom[i] == sphere_geom else OTHER)
+        if has_plane:
+            tp = plane_crossing(origins[1, i], directions[1, i], tnear[i], tfar[i], plane_y)
+            plane_t[i] = tp
+            if tp < t[i]:  # NaN compares false; a miss has t = inf
+                k = PLANE
+        kind[i] = k
+        counts[k] += 1
+    k_total = counts[0] + counts[1] + counts[2]
+    rays = np.empty(k_total, np.int64)
+    out_t = np.empty(k_total, np.float32)
+    position = np.empty((3, k_total), np.float32)
+    normal = np.empty((3, k_total), np.float32)
+    label = np.empty(k_total, np.int64)
+    scale = np.empty(k_total, np.float32)
+    incoming = np.empty((3, k_total), np.float32)
+    out_prim = np.empty(k_total, np.int32)
+    out_inst = np.empty(k_total, np.int32)
+    out_u = np.empty(k_total, np.float32)
+    out_v = np.empty(k_total, np.float32)
+    cursor = np.array([0, counts[0], counts[0] + counts[1]], np.int64)
+    for i in range(n):
+        k = kind[i]
+        if k == MISS:
+            continue
+        j = cursor[k]
+        cursor[k] += 1
+        rays[j] = i
+        dx = directions[0, i]
+        dy = directions[1, i]
+        dz = directions[2, i]
+        incoming[0, j] = dx
+        incoming[1, j] = dy
+        incoming[2, j] = dz
+        out_u[j] = u[i]
+        out_v[j] = v[i]
+        if k == PLANE:
+            tp = plane_t[i]
+            out_t[j] = tp
+            px = origins[0, i] + dx * tp
+            pz = origins[2, i] + dz * tp
+            position[0, j] = px
+            position[1, j] = plane_y
+            position[2, j] = pz
+            normal[0, j] = 0.0
+            normal[1, j] = 1.0
+            normal[2, j] = 0.0
+            label[j] = plane_label
+            scale[j] = max(abs(px), abs(np.float32(plane_y)), abs(pz))
+            out_prim[j] = -1
+            out_inst[j] = -1
+            continue
+        ti = t[i]
+        out_t[j] = ti
+        out_prim[j] = prim[i]
+        out_inst[j] = inst[i]
+        if k == SPHERE:
+            p = prim[i]
+            cx = np.float64(spheres[p, 0])
+            cy = np.float64(spheres[p, 1])
+            cz = np.float64(spheres[p, 2])
+            r = np.float64(spheres[p, 3])
+            # The normal from the hit point; the point re-projected onto the sphere removes the
+            # rounding error along the ray.
+            ox = origins[0, i] + np.float64(ti) * dx - cx
+            oy = origins[1, i] + np.float64(ti) * dy - cy
+            oz = origins[2, i] + np.float64(ti) * dz - cz
+            length = math.sqrt(ox * ox + oy * oy + oz * oz)
+            if length == 0.0:
+                length = 1.0
+            nx = ox / length
+            ny = oy / length
+            nz = oz / length
+            normal[0, j] = nx
+            normal[1, j] = ny
+            normal[2, j] = nz
+            position[0, j] = cx + r * nx
+            position[1, j] = cy + r * ny
+            position[2, j] = cz + r * nz
+            label[j] = sphere_label[p]
+            scale[j] = max(abs(cx), abs(cy), abs(cz)) + r
+            continue
+        top = inst[i] if inst[i] >= 0 else geom[i]
+        position[0, j] = origins[0, i] + dx * ti
+        position[1, j] = origins[1, i] + dy * ti
+        position[2, j] = origins[2, i] + dz * ti
+        m = normal_matrix[top]
+        gx = ng[i, 0]
+        gy = ng[i, 1]
+        gz = ng[i, 2]
+        wx = m[0, 0] * gx + m[0, 1] * gy + m[0, 2] * gz
+        wy = m[1, 0] * gx + m[1, 1] * gy + m[1, 2] * gz
+        wz = m[2, 0] * gx + m[2, 1] * gy + m[2, 2] * gz
+        length = math.sqrt(np.float64(wx) * wx + np.float64(wy) * wy + np.float64(wz) * wz)
+        if length == 0.0:
+            length = 1.0
+        normal[0, j] = wx / length
+        normal[1, j] = wy / length
+        normal[2, j] = wz / length
+        label[j] = geometry_label[top]
+        scale[j] = geometry_scale[top]
+    return (rays, counts[:3].copy(), out_t, position, normal, label, scale, incoming, out_prim,
+            out_inst, out_u, out_v)  # fmt: skip
+
+
+@njit(nogil=True, cache=True)
+def block_by_plane(origins, directions, tnear, tfar, plane_y, blocked):
+    """Mark in ``blocked`` (n,) bool the rays that cross the plane y = plane_y in their window;
+    ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32."""
+    for i in range(origins.shape[1]):
+        if not blocked[i]:
+            t = plane_crossing(origins[1, i], directions[1, i], tnear[i], tfar[i], plane_y)
+            blocked[i] = not math.isnan(t)

@@ -1,0 +1,187 @@
+"""Analytic spheres as Embree user geometry, with bounds / intersect / occluded callbacks that
+numba compiles to machine code (``@cfunc``): Embree calls them with no Python and no GIL.
+
+On this machine they trace 1.5–3× faster than Embree's own ``SPHERE_POINT`` primitive (see
+DESIGN.md), because Embree's point spheres pay for features (ray masks, filters, curves'
+shared code paths) that plain spheres do not need.
+
+The callbacks receive one pointer to an Embree argument struct (Embree 4,
+``rtcore_geometry.h``), read here as 64-bit words:
+
+- ``RTCBoundsFunctionArguments``: {geometryUserPtr, primID | timeStep << 32, RTCBounds*};
+  ``RTCBounds`` is 8 floats: lower x, y, z, pad, upper x, y, z, pad.
+- ``RTCIntersectFunctionNArguments``: {int* valid, geometryUserPtr, primID (low 32 bits),
+  RTCRayQueryContext*, RTCRayHitN*, N | geomID << 32}; ``RTCOccludedFunctionNArguments`` is the
+  same with an ``RTCRayN*``.
+- ``RTCRayHitN`` is structure-of-arrays: field k of lane i is the 4-byte word ``k * N + i``
+  (ray fields ``kernels.RAY_*`` 0–11, hit fields ``kernels.HIT_*`` 12–20).
+- ``RTCRayQueryContext`` starts with instID[0], then instPrimID[0] (this Embree is built with
+  one instance level and instance arrays).
+
+The user pointer is the address of the BVH's (n, 4) float32 buffer of (x, y, z, radius).
+
+The quadratic is the numerically robust form of Ray Tracing Gems, chapter 7, evaluated in
+float64: the discriminant comes from the ray's perpendicular offset from the centre (no
+cancellation of |o − c|² against r² far from small spheres), the near root is c/q and the far
+root q/a with q = b + sign(b)·√disc. Hits obey Embree's own rule ``tnear <= t <= tfar``; a ray
+that starts inside a sphere gets the exit point. The normal written is o + t·d − c, outward
+(unnormalised), and u = v = 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import carray, cfunc, njit, types
+from numba.extending import intrinsic
+
+from embree_rt.embree.kernels import (
+    HIT_GEOM_ID,
+    HIT_INST_ID,
+    HIT_INST_PRIM_ID,
+    HIT_NG,
+    HIT_PRIM_ID,
+    HIT_U,
+    HIT_V,
+    RAY_DIR,
+    RAY_ORG,
+    RAY_TFAR,
+    RAY_TNEAR,
+)
+
+_CALLBACK = types.void(types.uintp)
+
+
+def _pointer_intrinsic(element):
+    pointer_type = types.CPointer(element)
+
+    @intrinsic
+    def as_pointer(typingctx, address):
+        def codegen(context, builder, signature, args):
+            return builder.inttoptr(args[0], context.get_value_type(pointer_type))
+
+        return pointer_type(types.uintp), codegen
+
+    return as_pointer
+
+
+_words64 = _pointer_intrinsic(types.uint64)
+_words32 = _pointer_intrinsic(types.uint32)
+_floats = _pointer_intrinsic(types.float32)
+_ints = _pointer_intrinsic(types.int32)
+
+
+@cfunc(_CALLBACK, nopython=True, cache=True)
+def _bounds(address):
+    args = carray(_words64(address), 3)
+    prim = args[1] & 0xFFFFFFFF
+    sphere = carray(_floats(args[0] + 16 * prim), 4)
+    box = carray(_floats(args[2]), 8)
+    r = sphere[3]
+    box[0] = sphere[0] - r
+    box[1] = sphere[1] - r
+    box[2] = sphere[2] - r
+    box[4] = sphere[0] + r
+    box[5] = sphere[1] + r
+    box[6] = sphere[2] + r
+
+
+@njit(inline="always")
+def _nearest_root(floats, n, lane, cx, cy, cz, r):
+    """t of the first crossing of lane ``lane``'s ray with the sphere inside [tnear, tfar], or
+    NaN."""
+    ox = np.float64(floats[RAY_ORG * n + lane]) - cx
+    oy = np.float64(floats[(RAY_ORG + 1) * n + lane]) - cy
+    oz = np.float64(floats[(RAY_ORG + 2) * n + lane]) - cz
+    dx = np.float64(floats[RAY_DIR * n + lane])
+    dy = np.float64(floats[(RAY_DIR + 1) * n + lane])
+    dz = np.float64(floats[(RAY_DIR + 2) * n + lane])
+    a = dx * dx + dy * dy + dz * dz
+    b = -(ox * dx + oy * dy + oz * dz)
+    # l: the offset from the centre to the ray's point of closest approach.
+    s = b / a
+    lx = ox + s * dx
+    ly = oy + s * dy
+    lz = oz + s * dz
+    disc = a * (r * r - (lx * lx + ly * ly + lz * lz))
+    if not disc >= 0.0:
+        return np.nan
+    q = b + math.copysign(math.sqrt(disc), b)
+    c = ox * ox + oy * oy + oz * oz - r * r
+    if q == 0.0:  # b = 0 and a tangent ray: one root at the origin's foot
+        t0 = t1 = 0.0
+    else:
+        t0 = c / q
+        t1 = q / a
+    if t0 > t1:
+        t0, t1 = t1, t0
+    tnear = floats[RAY_TNEAR * n + lane]
+    tfar = floats[RAY_TFAR * n + lane]
+    if tnear <= t0 and t0 <= tfar:
+        return t0
+    if tnear <= t1 and t1 <= tfar:
+        return t1
+    return np.nan
+
+
+@cfunc(_CALLBACK, nopython=True, cache=True)
+def _intersect(address):
+    args = carray(_words64(address), 6)
+    n = args[5] & 0xFFFFFFFF
+    geom_id = args[5] >> 32
+    prim = args[2] & 0xFFFFFFFF
+    valid = carray(_ints(args[0]), n)
+    sphere = carray(_floats(args[1] + 16 * prim), 4)
+    context = carray(_words32(args[3]), 2)
+    floats = carray(_floats(args[4]), 21 * n)
+    words = carray(_words32(args[4]), 21 * n)
+    cx = np.float64(sphere[0])
+    cy = np.float64(sphere[1])
+    cz = np.float64(sphere[2])
+    r = np.float64(sphere[3])
+    for lane in range(n):
+        if valid[lane] == 0:
+            continue
+        t = _nearest_root(floats, n, lane, cx, cy, cz, r)
+        if math.isnan(t):
+            continue
+        floats[RAY_TFAR * n + lane] = t
+        floats[HIT_NG * n + lane] = floats[RAY_ORG * n + lane] + t * floats[RAY_DIR * n + lane] - cx
+        floats[(HIT_NG + 1) * n + lane] = (
+            floats[(RAY_ORG + 1) * n + lane] + t * floats[(RAY_DIR + 1) * n + lane] - cy
+        )
+        floats[(HIT_NG + 2) * n + lane] = (
+            floats[(RAY_ORG + 2) * n + lane] + t * floats[(RAY_DIR + 2) * n + lane] - cz
+        )
+        floats[HIT_U * n + lane] = 0.0
+        floats[HIT_V * n + lane] = 0.0
+        words[HIT_PRIM_ID * n + lane] = prim
+        words[HIT_GEOM_ID * n + lane] = geom_id
+        words[HIT_INST_ID * n + lane] = context[0]
+        words[HIT_INST_PRIM_ID * n + lane] = context[1]
+
+
+@cfunc(_CALLBACK, nopython=True, cache=True)
+def _occluded(address):
+    args = carray(_words64(address), 6)
+    n = args[5] & 0xFFFFFFFF
+    prim = args[2] & 0xFFFFFFFF
+    valid = carray(_ints(args[0]), n)
+    sphere = carray(_floats(args[1] + 16 * prim), 4)
+    floats = carray(_floats(args[4]), 12 * n)
+    cx = np.float64(sphere[0])
+    cy = np.float64(sphere[1])
+    cz = np.float64(sphere[2])
+    r = np.float64(sphere[3])
+    for lane in range(n):
+        if valid[lane] == 0:
+            continue
+        t = _nearest_root(floats, n, lane, cx, cy, cz, r)
+        if not math.isnan(t):
+            floats[RAY_TFAR * n + lane] = -np.inf
+
+
+BOUNDS_CALLBACK = _bounds.address
+INTERSECT_CALLBACK = _intersect.address
+OCCLUDED_CALLBACK = _occluded.address
