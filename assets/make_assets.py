@@ -2,8 +2,17 @@
 
     python assets/make_assets.py
 
-Writes, beside this script: torus.obj, gem.ply, capsule.stl, cone.off, twisted_box.glb, and
-trio.glb (a glTF scene of three nodes, each with its own transform).
+Writes, beside this script: torus.obj, gem.ply, capsule.stl, cone.off, twisted_box.glb,
+trio.glb (a glTF scene of three nodes, each with its own transform), and the meshes that carry
+their own looks:
+
+- quadrants.png, a 64x64 sRGB texture of four solid quadrants (QUADRANT_COLORS), and
+  quadrant_cube.obj + quadrant_cube.mtl, a unit cube showing it whole on every face (map_Kd);
+- quadrant_cube.glb, the same cube in glTF, its base colour the texture times CUBE_FACTOR
+  (metallic 0, roughness 1: no highlight, no reflection);
+- painted_ball.ply, an icosphere with a colour per vertex;
+- zero_normals.obj, an icosphere whose file gives every vertex the normal (0, 0, 0);
+- node_scaled.glb, a 100-unit box whose glTF node scales it by 0.01 (as Duck.glb's does).
 """
 
 from __future__ import annotations
@@ -12,8 +21,16 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+from PIL import Image
 
 HERE = Path(__file__).resolve().parent
+
+# 8-bit sRGB colours of the quadrants of quadrants.png, as the image shows them: (top left, top
+# right, bottom left, bottom right).
+QUADRANT_COLORS = ((200, 40, 40), (40, 170, 70), (40, 80, 210), (235, 200, 40))
+QUADRANT_TEXELS = 64
+# quadrant_cube.glb's baseColorFactor (RGB, linear, each k/255 so that 8 bits hold it exactly).
+CUBE_FACTOR = (1.0, 0.6, 0.2)
 
 
 def torus() -> trimesh.Trimesh:
@@ -59,13 +76,112 @@ def trio() -> trimesh.Scene:
     return scene
 
 
-def main() -> None:
-    torus().export(HERE / "torus.obj")
-    gem().export(HERE / "gem.ply")
-    capsule().export(HERE / "capsule.stl")
-    cone().export(HERE / "cone.off")
-    twisted_box().export(HERE / "twisted_box.glb")
-    trio().export(HERE / "trio.glb")
+def quadrants() -> Image.Image:
+    """QUADRANT_TEXELS square, one solid colour per quadrant (row 0 is the image's top)."""
+    half = QUADRANT_TEXELS // 2
+    pixels = np.zeros((QUADRANT_TEXELS, QUADRANT_TEXELS, 3), np.uint8)
+    top_left, top_right, bottom_left, bottom_right = QUADRANT_COLORS
+    pixels[:half, :half] = top_left
+    pixels[:half, half:] = top_right
+    pixels[half:, :half] = bottom_left
+    pixels[half:, half:] = bottom_right
+    return Image.fromarray(pixels, "RGB")
+
+
+def textured_cube() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A unit cube centred at the origin with the whole texture on each face, seen upright from
+    outside (the +y and -y faces have their top towards -z and +z): (24, 3) float64 vertices,
+    (12, 3) int64 counter-clockwise faces, (24, 2) float64 UVs (v up, as OBJ and trimesh)."""
+    # Per face: outward normal, then the directions of u and v across it.
+    frames = [
+        ((0, 0, 1), (1, 0, 0), (0, 1, 0)),
+        ((0, 0, -1), (-1, 0, 0), (0, 1, 0)),
+        ((1, 0, 0), (0, 0, -1), (0, 1, 0)),
+        ((-1, 0, 0), (0, 0, 1), (0, 1, 0)),
+        ((0, 1, 0), (1, 0, 0), (0, 0, -1)),
+        ((0, -1, 0), (1, 0, 0), (0, 0, 1)),
+    ]
+    corners_uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    vertices, faces, uv = [], [], []
+    for normal, along_u, along_v in frames:
+        normal, along_u, along_v = (np.asarray(a, float) for a in (normal, along_u, along_v))
+        first = len(vertices)
+        for cu, cv in corners_uv:
+            vertices.append(0.5 * normal + (cu - 0.5) * along_u + (cv - 0.5) * along_v)
+            uv.append((cu, cv))
+        faces += [(first, first + 1, first + 2), (first, first + 2, first + 3)]
+    return np.array(vertices), np.array(faces, np.int64), np.array(uv)
+
+
+def write_textured_obj(obj: Path, texture_name: str) -> None:
+    """quadrant_cube as OBJ text with UVs and an MTL beside it naming the texture (map_Kd)."""
+    vertices, faces, uv = textured_cube()
+    mtl = obj.with_suffix(".mtl")
+    lines = [f"mtllib {mtl.name}", "usemtl quadrants"]
+    lines += [f"v {x:g} {y:g} {z:g}" for x, y, z in vertices]
+    lines += [f"vt {u:g} {v:g}" for u, v in uv]
+    lines += ["f " + " ".join(f"{i + 1}/{i + 1}" for i in face) for face in faces]
+    obj.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    mtl.write_text(
+        f"newmtl quadrants\nKd 1 1 1\nKs 0 0 0\nmap_Kd {texture_name}\n", encoding="utf-8"
+    )
+
+
+def textured_gltf_cube(texture: Image.Image) -> trimesh.Trimesh:
+    vertices, faces, uv = textured_cube()
+    material = trimesh.visual.material.PBRMaterial(
+        baseColorTexture=texture,
+        baseColorFactor=[*CUBE_FACTOR, 1.0],
+        metallicFactor=0.0,
+        roughnessFactor=1.0,
+    )
+    visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
+    return trimesh.Trimesh(vertices, faces, visual=visual, process=False)
+
+
+def painted_ball() -> trimesh.Trimesh:
+    """An icosphere whose vertex colours run through the hues around y, paler towards +y."""
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=0.5)
+    x, y, z = ball.vertices.T / 0.5
+    hue = (np.arctan2(z, x) / (2 * np.pi)) % 1.0
+    rgb = np.clip(np.abs(((hue[:, None] * 6 + [0, 4, 2]) % 6) - 3) - 1, 0, 1)
+    rgb = rgb + (1 - rgb) * (0.5 * (y[:, None] + 1)) ** 3  # towards white at the top
+    ball.visual.vertex_colors = np.c_[np.round(rgb * 255), np.full(len(rgb), 255)].astype(np.uint8)
+    return ball
+
+
+def write_zero_normals_obj(obj: Path) -> None:
+    """An icosphere as OBJ text whose every vertex normal is (0, 0, 0) (``vn 0 0 0``)."""
+    ball = trimesh.creation.icosphere(subdivisions=1, radius=0.5)
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in ball.vertices]
+    lines += ["vn 0 0 0"] * len(ball.vertices)
+    lines += ["f " + " ".join(f"{i + 1}//{i + 1}" for i in face) for face in ball.faces]
+    obj.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def node_scaled() -> trimesh.Scene:
+    """A box 100 units on a side under a glTF node that scales it by 0.01."""
+    scene = trimesh.Scene()
+    box = trimesh.creation.box(extents=(100.0, 100.0, 100.0))
+    scene.add_geometry(box, node_name="scaled", transform=np.diag([0.01, 0.01, 0.01, 1.0]))
+    return scene
+
+
+def main(directory: Path = HERE) -> None:
+    """Write every asset into ``directory`` (this script's own by default)."""
+    torus().export(directory / "torus.obj")
+    gem().export(directory / "gem.ply")
+    capsule().export(directory / "capsule.stl")
+    cone().export(directory / "cone.off")
+    twisted_box().export(directory / "twisted_box.glb")
+    trio().export(directory / "trio.glb")
+    texture = quadrants()
+    texture.save(directory / "quadrants.png", optimize=True)
+    write_textured_obj(directory / "quadrant_cube.obj", "quadrants.png")
+    textured_gltf_cube(texture).export(directory / "quadrant_cube.glb")
+    painted_ball().export(directory / "painted_ball.ply")
+    write_zero_normals_obj(directory / "zero_normals.obj")
+    node_scaled().export(directory / "node_scaled.glb")
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ import numpy as np
 import trimesh
 
 from embree_rt.embree import BVH, HitLabels
+from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_normals
 from embree_rt.scene.model import Scene
 
 SPHERE_MODES = ("analytic", "point", "mesh")
@@ -33,6 +34,8 @@ class SurfaceHits:
     the rest objects; ``scale`` (k,) float32, a bound on the size of the coordinates the hit was
     computed from (at least max |position|, and the object's |centre| + extent): its rounding
     error scales with it; ``incoming`` (3, k) float32, the direction of the ray that made it.
+    ``colored`` (j,) int64 columns whose base colour is the surface's own (a mesh's texture or
+    vertex colours), ``color`` (3, j) float32 linear those colours; both None when none is.
     """
 
     t: np.ndarray
@@ -44,6 +47,8 @@ class SurfaceHits:
     floor_count: int
     scale: np.ndarray
     incoming: np.ndarray
+    colored: np.ndarray | None = None
+    color: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -88,6 +93,8 @@ class SceneGeometry:
         self._mesh_bounds: list[np.ndarray] = []
         self._mesh_face_offset: list[int] = []
         self._mesh_vertex_normals: list[np.ndarray] = []
+        self._mesh_missing_normals: list[np.ndarray] = []
+        self._mesh_face_normals: list[np.ndarray] = []
         self._mesh_faces: list[np.ndarray] = []
         self.triangle_count = 0
         self.instance_count = 0
@@ -117,7 +124,10 @@ class SceneGeometry:
         child.commit()
         self._mesh_face_offset.append(sum(len(f) for f in self._mesh_faces))
         self._mesh_faces.append(np.asarray(mesh.faces, np.int64))
-        self._mesh_vertex_normals.append(np.asarray(mesh.vertex_normals, np.float32))
+        vertex_normals, missing_normals = unit_vertex_normals(mesh.vertex_normals)
+        self._mesh_vertex_normals.append(vertex_normals)
+        self._mesh_missing_normals.append(missing_normals)
+        self._mesh_face_normals.append(np.asarray(mesh.face_normals, np.float32))
         self._mesh_bounds.append(np.asarray(mesh.bounds, np.float64))
         return len(self._children) - 1
 
@@ -155,6 +165,9 @@ class SceneGeometry:
                 children[key] = self._child(placement.mesh)
             material = scene.material_index(placement.material)
             self._place(children[key], placement.transform, material, placement.smooth)
+        # Mesh looks: the placements showing their own texture or vertex colours, by geom id.
+        geom_ids = self._instance_geom_ids[len(self._instance_geom_ids) - len(scene.meshes) :]
+        self.mesh_colors = MeshColors(scene.meshes, geom_ids)
 
     def _finish_tables(self) -> None:
         size = self.bvh.geometry_count
@@ -176,6 +189,9 @@ class SceneGeometry:
                 [f + o for f, o in zip(self._mesh_faces, vertex_offsets, strict=True)]
             )
             self.mesh_vertex_normals = np.concatenate(self._mesh_vertex_normals)
+            missing = np.concatenate(self._mesh_missing_normals)
+            self.mesh_missing_normals = missing if missing.any() else None
+            self.mesh_face_normals = np.concatenate(self._mesh_face_normals)
             self.mesh_face_offset = np.asarray(self._mesh_face_offset, np.int64)
         self.labels = HitLabels(
             geometry_label=self.instance_material.astype(np.int64),
@@ -227,6 +243,8 @@ class SceneGeometry:
             getattr(full, name)[rows] = getattr(compact, name)
         for name in ("position", "normal", "face_normal"):
             getattr(full, name)[:, rows] = getattr(compact, name)
+        if compact.colored is not None:
+            full.colored, full.color = rows[compact.colored], compact.color
         return full
 
     def intersect_compact(
@@ -261,6 +279,11 @@ class SceneGeometry:
             scale=records.scale,
             incoming=records.incoming,
         )
+        if self.mesh_colors and meshes.stop > meshes.start:  # mesh looks: textures, colours
+            surfaces.colored, surfaces.color = self.mesh_colors.hit_colors(
+                records.inst_id[meshes], records.prim_id[meshes], records.u[meshes],
+                records.v[meshes], meshes.start,
+            )  # fmt: skip
         return records.rays, surfaces
 
     def _smooth_normals(self, inst, prim, u, v, face_normal) -> np.ndarray:
@@ -269,13 +292,11 @@ class SceneGeometry:
         smooth = self.instance_smooth[inst]
         face = self.mesh_face_offset[self.instance_child[inst]] + prim
         corners = self.mesh_faces[face]
-        vn = self.mesh_vertex_normals
-        # Embree's barycentrics: hit = (1 - u - v) p0 + u p1 + v p2.
-        u = u[:, None]
-        v = v[:, None]
-        interpolated = (
-            (1 - u - v) * vn[corners[:, 0]] + u * vn[corners[:, 1]] + v * vn[corners[:, 2]]
-        )
+        # Never zero: corners without a normal, and blends that cancel, take the face's.
+        interpolated = blend_normals(
+            self.mesh_vertex_normals, self.mesh_missing_normals, corners, u, v,
+            self.mesh_face_normals, face,
+        )  # fmt: skip
         world = _unit(np.einsum("nij,nj->in", self.instance_normal_matrix[inst], interpolated))
         return np.where(smooth, world, face_normal)
 
@@ -298,7 +319,8 @@ class SceneGeometry:
 class RaySurfaces:
     """What each of n rays hit (``SceneGeometry.intersect``), one ray per column: ``hit`` (n,)
     bool, and the fields of ``SurfaceHits`` (zeros where nothing was hit; ``t`` inf), with
-    ``floor`` (n,) bool marking the floor hits."""
+    ``floor`` (n,) bool marking the floor hits; ``colored`` (j,) ray numbers and ``color``
+    (3, j) as in ``SurfaceHits``."""
 
     hit: np.ndarray
     t: np.ndarray
@@ -308,3 +330,5 @@ class RaySurfaces:
     material: np.ndarray
     floor: np.ndarray
     scale: np.ndarray
+    colored: np.ndarray | None = None
+    color: np.ndarray | None = None

@@ -22,7 +22,7 @@ import numpy as np
 
 from embree_rt import shading
 from embree_rt.camera import camera_frame, primary_rays
-from embree_rt.columns import column_max, scatter_add
+from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
@@ -275,6 +275,8 @@ class Renderer:
     def _surface_color(self, surfaces: SurfaceHits) -> np.ndarray:
         """(3, k) float32 colour of each hit: its material's, the checker's on the floor."""
         color = np.take(self.material_color, surfaces.material, axis=1)
+        if surfaces.colored is not None:  # mesh looks: textures, vertex colours per hit
+            scatter(color, surfaces.colored, surfaces.color)
         floor = slice(0, surfaces.floor_count)
         if surfaces.floor_count:
             color[:, floor] = shading.checker(surfaces.position[:, floor], self.scene.floor.checker)

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import hashlib
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import trimesh
 
 from embree_rt.materials import PRESETS, RGB, Checker, Material
+from embree_rt.scene.meshes import mesh_material
 
 Vec3 = tuple[float, float, float]
 
@@ -64,13 +66,17 @@ class MeshObject:
     """One placement of a triangle mesh.
 
     Placements sharing the same ``mesh`` object are built once and instanced.
-    ``transform`` is a (4, 4) float64 affine matrix from mesh space to world space.
+    ``transform`` is a (4, 4) float64 affine matrix from mesh space to world space. With
+    ``mesh_colors`` the hits take the colours the mesh carries per point (its base-colour
+    texture, vertex or face colours, see ``embree_rt.scene.meshes.mesh_surface``) in place of
+    ``material``'s colour; ``Scene.add_mesh`` sets it when no material is named.
     """
 
     mesh: trimesh.Trimesh
     transform: np.ndarray = field(default_factory=lambda: np.eye(4))
     material: str = "matte"
     smooth: bool = True
+    mesh_colors: bool = False
 
 
 @dataclass
@@ -144,15 +150,19 @@ class Scene:
         transform: np.ndarray | None = None,
         smooth: bool = True,
     ) -> MeshObject:
-        """Place ``mesh``; with no material name, a matte material of the mesh's base color."""
+        """Place ``mesh``. With no material name it looks as its file says: the material the
+        file gives it (see ``embree_rt.scene.meshes.mesh_material``) and, per point, its
+        base-colour texture and vertex or face colours. A material name overrides all of that."""
+        mesh_colors = material is None
         if material is None:
-            material = self._base_color_material(mesh)
+            material = self._mesh_material(mesh)
         self.material_index(material)
         obj = MeshObject(
             mesh=mesh,
             transform=np.eye(4) if transform is None else np.asarray(transform, np.float64),
             material=material,
             smooth=smooth,
+            mesh_colors=mesh_colors,
         )
         self.meshes.append(obj)
         return obj
@@ -163,28 +173,16 @@ class Scene:
 
         save_scene(self, path)
 
-    def _base_color_material(self, mesh: trimesh.Trimesh) -> str:
-        color = mesh_base_color(mesh)
-        if color is None:
+    def _mesh_material(self, mesh: trimesh.Trimesh) -> str:
+        """The name of the material the mesh's own file gives it (added to ``materials`` under a
+        name made of its values), or "matte" when the file gives none."""
+        material = mesh_material(mesh)
+        if material is None:
             return "matte"
-        name = "base_color_{:02x}{:02x}{:02x}".format(*(round(c * 255) for c in color))
+        name = "base_color_{:02x}{:02x}{:02x}".format(*(round(c * 255) for c in material.color))
+        if replace(material, color=Material().color) != Material():
+            # More than a colour (glTF's metallic and roughness): a digest of all the values.
+            name += "_" + hashlib.sha1(repr(material).encode()).hexdigest()[:6]
         if name not in self.materials:
-            self.materials[name] = Material(color=color)
+            self.materials[name] = material
         return name
-
-
-def mesh_base_color(mesh: trimesh.Trimesh) -> RGB | None:
-    """The mesh's base color as linear-ish RGB in [0, 1], or None when it has only the default."""
-    visual = mesh.visual
-    try:
-        if visual.kind == "texture" and hasattr(visual.material, "main_color"):
-            rgba = np.asarray(visual.material.main_color, np.float64)
-        elif visual.kind in ("face", "vertex"):
-            colors = visual.face_colors if visual.kind == "face" else visual.vertex_colors
-            rgba = np.asarray(colors, np.float64).mean(axis=0)
-        else:
-            return None
-    except Exception:
-        return None
-    rgb = rgba[:3] / 255.0
-    return (float(rgb[0]), float(rgb[1]), float(rgb[2]))

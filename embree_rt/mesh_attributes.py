@@ -1,0 +1,162 @@
+"""What a mesh hit's barycentrics give besides its position: the shading normal and the colour.
+
+Embree reports a triangle hit as (face, u, v), the point ``(1 − u − v) p0 + u p1 + v p2``. Smooth
+shading blends the corners' vertex normals with those weights; a textured or vertex-coloured
+mesh blends its corners' UVs (then samples the texture) and vertex colours the same way.
+Everything here works on whole batches of hits, in the mesh's own space.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from embree_rt.columns import scatter
+from embree_rt.scene.meshes import MeshSurface, mesh_surface
+from embree_rt.scene.model import MeshObject
+from embree_rt.textures import sample_bilinear
+
+# A vertex normal shorter than this has no direction to give: trimesh's average of the faces
+# around a vertex cancels to zero (or to rounding residue, 1e-30) where back-to-back faces meet.
+MIN_NORMAL_LENGTH = 1e-6
+# A blend of unit normals shorter than this has cancelled (opposite normals across a crease).
+MIN_BLEND_LENGTH = 1e-3
+
+
+def unit_vertex_normals(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) float32 unit vertex normals of (n, 3) ``normals`` and (n,) float32 1 where a
+    vertex has no usable normal (shorter than ``MIN_NORMAL_LENGTH``, or not finite), 0 elsewhere;
+    the normals of those vertices are zero."""
+    normals = np.asarray(normals, np.float64).reshape(-1, 3)
+    length = np.sqrt(np.einsum("ij,ij->i", normals, normals))
+    usable = np.isfinite(length) & (length >= MIN_NORMAL_LENGTH)
+    unit = np.zeros_like(normals)
+    unit[usable] = normals[usable] / length[usable, None]
+    return unit.astype(np.float32), (~usable).astype(np.float32)
+
+
+def blend_normals(
+    vertex_normals: np.ndarray,
+    missing: np.ndarray | None,
+    corners: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    face_normals: np.ndarray,
+    face: np.ndarray,
+) -> np.ndarray:
+    """(k, 3) float32 smooth shading normals (not unit length) of k triangle hits.
+
+    ``vertex_normals`` (n, 3) float32 unit or zero and ``missing`` (n,) float32 from
+    ``unit_vertex_normals`` (None: no vertex lacks a normal); ``corners`` (k, 3) vertex indices,
+    ``u``, ``v`` (k,) Embree barycentrics; ``face_normals`` (f, 3) float32 unit geometric
+    normals of the faces and ``face`` (k,) the face of each hit, gathered only where needed.
+    A corner without a normal lends the face's normal instead, and where the blend cancels the
+    face normal is used: the result is never zero, so no NaN can come of normalising it.
+    """
+    u = u[:, None]
+    v = v[:, None]
+    w = 1 - u - v
+    blend = (
+        w * vertex_normals[corners[:, 0]]
+        + u * vertex_normals[corners[:, 1]]
+        + v * vertex_normals[corners[:, 2]]
+    )
+    if missing is not None:
+        lent = w[:, 0] * missing[corners[:, 0]] + u[:, 0] * missing[corners[:, 1]]
+        lent += v[:, 0] * missing[corners[:, 2]]
+        rows = np.flatnonzero(lent)
+        if len(rows):
+            blend[rows] += lent[rows, None] * face_normals[face[rows]]
+    length2 = np.einsum("ij,ij->i", blend, blend)
+    cancelled = np.flatnonzero(length2 < np.float32(MIN_BLEND_LENGTH**2))
+    if len(cancelled):
+        blend[cancelled] = face_normals[face[cancelled]]
+    return blend
+
+
+def surface_colors(
+    surface: MeshSurface, faces: np.ndarray, face: np.ndarray, u: np.ndarray, v: np.ndarray
+) -> np.ndarray:
+    """(3, k) float32 linear base colours of k hits on a mesh with per-point colours.
+
+    ``faces`` (f, 3) int64 the mesh's triangles; ``face`` (k,) the triangle each hit is on and
+    ``u``, ``v`` (k,) float32 its Embree barycentrics.
+    """
+    corners = np.take(faces, face, axis=0)
+    w = np.float32(1.0) - u - v
+
+    def blend(columns: np.ndarray) -> np.ndarray:
+        """(c, k) per-vertex ``columns`` (c, n) blended at the hits."""
+        out = np.take(columns, corners[:, 0], axis=1) * w
+        out += np.take(columns, corners[:, 1], axis=1) * u
+        out += np.take(columns, corners[:, 2], axis=1) * v
+        return out
+
+    color = np.empty((3, len(face)), np.float32)
+    color[:] = surface.factor[:, None]
+    if surface.texels is not None:
+        color *= sample_bilinear(surface.texels, blend(surface.uv))
+    if surface.vertex_colors is not None:
+        color *= blend(surface.vertex_colors)
+    if surface.face_colors is not None:
+        color *= np.take(surface.face_colors, face, axis=1)
+    return color
+
+
+class MeshColors:
+    """The per-hit colours of the mesh placements that show their own (``mesh_colors``):
+    each distinct mesh's surface decoded once, looked up by top-level instance geometry id.
+
+    False (``bool()``) when no placement has per-point colours: then nothing is done per hit.
+    """
+
+    def __init__(self, placements: list[MeshObject], geom_ids: list[int]) -> None:
+        """``placements`` and the instance geometry id each was given, in the same order."""
+        self._surfaces: list[tuple[MeshSurface, np.ndarray]] = []
+        index_of_mesh: dict[int, int] = {}
+        instance_surface: dict[int, int] = {}
+        for placement, geom_id in zip(placements, geom_ids, strict=True):
+            if not placement.mesh_colors:
+                continue
+            key = id(placement.mesh)
+            if key not in index_of_mesh:
+                surface = mesh_surface(placement.mesh)
+                index_of_mesh[key] = len(self._surfaces) if surface is not None else -1
+                if surface is not None:
+                    faces = np.asarray(placement.mesh.faces, np.int64)
+                    self._surfaces.append((surface, faces))
+            if index_of_mesh[key] >= 0:
+                instance_surface[geom_id] = index_of_mesh[key]
+        # Per instance geometry id: index into _surfaces, -1 for a placement without colours.
+        size = max(instance_surface, default=-1) + 1
+        self._instance_surface = np.full(size, -1, np.int64)
+        for geom_id, index in instance_surface.items():
+            self._instance_surface[geom_id] = index
+
+    def __bool__(self) -> bool:
+        return len(self._instance_surface) > 0
+
+    def hit_colors(
+        self, inst: np.ndarray, prim: np.ndarray, u: np.ndarray, v: np.ndarray, first_row: int
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """For k instance hits (``inst`` (k,) instance geometry ids, ``prim`` (k,) triangles,
+        ``u``, ``v`` (k,) float32 barycentrics): the (j,) int64 rows ``first_row + i`` of the
+        hits that have their own colour, and their (3, j) float32 linear colours; (None, None)
+        when no hit has."""
+        table = self._instance_surface
+        known = inst < len(table)
+        which = np.where(known, np.take(table, np.minimum(inst, len(table) - 1)), -1)
+        painted = np.flatnonzero(which >= 0)
+        if len(painted) == 0:
+            return None, None
+        colors = np.empty((3, len(painted)), np.float32)
+        surface_of_hit = which[painted]
+        for index in np.unique(surface_of_hit):
+            surface, faces = self._surfaces[index]
+            mine = np.flatnonzero(surface_of_hit == index) if len(self._surfaces) > 1 else None
+            rows = painted if mine is None else painted[mine]
+            part = surface_colors(surface, faces, prim[rows], u[rows], v[rows])
+            if mine is None:
+                colors = part
+            else:
+                scatter(colors, mine, part)
+        return painted + first_row, colors
