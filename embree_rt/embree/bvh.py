@@ -68,8 +68,8 @@ def _prepare_kernels() -> None:
 
 def native_lanes(device: device_module.Device) -> int:
     """The widest packet Embree runs natively on this CPU (16 with AVX-512, 8 with AVX2, else
-    4): measured here (AVX2), 8-wide packets trace user-geometry spheres 1.2–1.8x faster than
-    single rays, and 16-wide ones, emulated, no faster than 8."""
+    4). On this project's AVX2 machine 8-wide packets traced user-geometry spheres 1.2–1.8x
+    faster than 4-wide ones, and 16-wide ones (emulated there) no faster than 8 (DESIGN.md)."""
     for lanes, prop in ((16, library.DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED),
                         (8, library.DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED),
                         (4, library.DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED)):  # fmt: skip
