@@ -15,7 +15,10 @@ For each count it builds the spheres twice beside the same ground triangles, as 
 rays. Shadow rays are made once, from the native spheres' primary hits, and given to both. Each
 row reports the median Mrays/s; user rows carry ``vs_point_primary`` / ``vs_point_shadow``, the
 median over turns of the per-turn speed ratio user / point (a turn's two runs sit side by side
-in time, so the ratio survives a noisy machine). ``build_s`` is add + commit.
+in time, so the ratio survives a noisy machine), and ``vs_point_primary_cpu_time`` /
+``vs_point_shadow_cpu_time``, the same from the process's CPU time: on a machine shared with
+other work, time spent descheduled adds the same seconds to both kinds and pulls the wall-clock
+ratio toward 1; CPU time leaves it out. ``build_s`` is add + commit.
 
 Accuracy: on ``--sample`` random pixels, a float64 brute force over every sphere and the ground
 (candidates from a grid over the sphere centres, swept along each ray's path through the slab
@@ -309,17 +312,22 @@ def object_ids(hits, ids: dict) -> np.ndarray:
 def time_in_turns(bvhs: dict, primary: tuple, shadow: tuple, repeat: int) -> dict:
     """Times each BVH's ``intersect`` on the ``primary`` (origins, directions) and ``occluded``
     on the ``shadow`` (origins, directions, tfar) rays, the kinds taking turns ``repeat`` times.
-    Returns per kind: seconds of every turn (lists) and the last answers."""
-    runs = {kind: {"primary_s": [], "shadow_s": []} for kind in bvhs}
+    Returns per kind: wall seconds of every turn (``primary_s``, ``shadow_s``), the process's
+    CPU seconds (``primary_cpu_s``, ``shadow_cpu_s``: all threads; time spent descheduled on a
+    busy machine does not count) and the last answers (``hits``, ``blocked``)."""
+    queries = {
+        "primary": lambda bvh: bvh.intersect(*primary),
+        "shadow": lambda bvh: bvh.occluded(shadow[0], shadow[1], 0.0, shadow[2]),
+    }
+    runs = {kind: {f"{q}{unit}": [] for q in queries for unit in ("_s", "_cpu_s")} for kind in bvhs}
     for _ in range(repeat):
-        for kind, bvh in bvhs.items():
-            seconds, runs[kind]["hits"] = seconds_of(lambda b=bvh: b.intersect(*primary))
-            runs[kind]["primary_s"].append(seconds)
-        for kind, bvh in bvhs.items():
-            seconds, runs[kind]["blocked"] = seconds_of(
-                lambda b=bvh: b.occluded(shadow[0], shadow[1], 0.0, shadow[2])
-            )
-            runs[kind]["shadow_s"].append(seconds)
+        for query, call in queries.items():
+            for kind, bvh in bvhs.items():
+                cpu = time.process_time()
+                wall = time.perf_counter()
+                runs[kind]["hits" if query == "primary" else "blocked"] = call(bvh)
+                runs[kind][f"{query}_s"].append(time.perf_counter() - wall)
+                runs[kind][f"{query}_cpu_s"].append(time.process_time() - cpu)
     return runs
 
 
@@ -361,13 +369,13 @@ def bench_count(count: int, args: argparse.Namespace, rows: list[dict]) -> None:
         bvhs, builds = {}, {}
         for kind in KINDS:
             bvhs[kind], builds[kind] = build(kind, threads, centers, radii, ground_mesh)
-        for bvh in bvhs.values():  # compile and warm outside the clock
-            bvh.intersect(origins[:64], directions[:64])
-            bvh.occluded(origins[:64], directions[:64])
         # one set of shadow rays for both kinds: from the native spheres' primary hits
         rows_hit, *shadow = shadow_rays(
             origins, directions, bvhs["point"].intersect(origins, directions), light
         )
+        for bvh in bvhs.values():  # load the kernels for these array layouts outside the clock
+            bvh.intersect(origins[:64], directions[:64])
+            bvh.occluded(shadow[0][:64], shadow[1][:64], 0.0, shadow[2][:64])
         runs = time_in_turns(bvhs, (origins, directions), shadow, args.repeat)
         for kind in KINDS:
             run = runs[kind]
@@ -380,15 +388,12 @@ def bench_count(count: int, args: argparse.Namespace, rows: list[dict]) -> None:
                 "shadow_mrays_s": len(rows_hit) / statistics.median(run["shadow_s"]) / 1e6,
                 "hit_fraction": float(np.isfinite(run["hits"].t).mean()),
                 "shadowed_fraction": float(run["blocked"].mean()),
-                "primary_s": run["primary_s"], "shadow_s": run["shadow_s"],
+                **{key: run[key] for key in run if key.endswith("_s")},
             }  # fmt: skip
             if kind == "user":
-                row["vs_point_primary"] = per_turn_speedup(
-                    runs["point"]["primary_s"], run["primary_s"]
-                )
-                row["vs_point_shadow"] = per_turn_speedup(
-                    runs["point"]["shadow_s"], run["shadow_s"]
-                )
+                for key in ("primary_s", "shadow_s", "primary_cpu_s", "shadow_cpu_s"):
+                    ratio = "vs_point_" + key.removesuffix("_s").replace("_cpu", "_cpu_time")
+                    row[ratio] = per_turn_speedup(runs["point"][key], run[key])
             count_rows.append(row)
             log(
                 f"{kind:5} threads={threads}: build {row['build_s']:.2f} s, primary "
@@ -553,8 +558,9 @@ def number(value, digits: int = 2) -> str:
 def markdown(rows: list[dict]) -> str:
     lines = [
         "| spheres | threads | kind | build s | primary Mrays/s | shadow Mrays/s "
-        "| x point primary | x point shadow | wrong primary | wrong shadow |",
-        "|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| x point primary | x point shadow | x point, CPU time: primary | shadow "
+        "| wrong primary | wrong shadow |",
+        "|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for row in rows:
         if row["kind"] not in KINDS:
@@ -563,6 +569,8 @@ def markdown(rows: list[dict]) -> str:
             f"| {row['count']:,} | {row['threads']} | {row['kind']} | {number(row['build_s'], 3)} "
             f"| {number(row['primary_mrays_s'], 1)} | {number(row['shadow_mrays_s'], 1)} "
             f"| {number(row.get('vs_point_primary'))} | {number(row.get('vs_point_shadow'))} "
+            f"| {number(row.get('vs_point_primary_cpu_time'))} "
+            f"| {number(row.get('vs_point_shadow_cpu_time'))} "
             f"| {row['wrong_primary']} / {row['sample']} "
             f"| {row['wrong_shadow']} / {row['shadow_sample']} |"
         )
