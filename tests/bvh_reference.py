@@ -120,12 +120,15 @@ def sphere_hits(
     tnear: float | np.ndarray = 0.0,
     tfar: float | np.ndarray = np.inf,
     ambiguity: float = AMBIGUITY,
+    absolute: float = 0.0,
 ) -> ReferenceHits:
     """Nearest hit of each ray on a set of solid-surface spheres, by the float64 quadratic.
 
     ``origins``, ``directions`` (n, 3); ``centers`` (m, 3); ``radii`` (m,); ``tnear``, ``tfar``
     scalars or (n,). A hit is the smallest root t of |o + t d - c| = r with tnear <= t <= tfar,
     so a ray starting inside a sphere hits its far side. The normal is (hit - c) / r: outward.
+    ``ambiguity`` (relative to the ray-to-sphere distance) plus ``absolute`` (in coordinate
+    units: a few float32 ulps of the coordinates) is the width of the undecidable band.
     """
     o = np.asarray(origins, np.float64)
     d = np.asarray(directions, np.float64)
@@ -149,9 +152,10 @@ def sphere_hits(
     length = np.sqrt(a)
     distance = np.sqrt(np.einsum("ij,ij->i", oc, oc))
     scale = distance + r[spheres]
-    slack_t = ambiguity * scale / length
+    band = ambiguity * scale + absolute
+    slack_t = band / length
     closest = np.sqrt(np.maximum(distance**2 - half_b**2 / a, 0.0))
-    grazing = np.abs(closest - r[spheres]) <= ambiguity * scale
+    grazing = np.abs(closest - r[spheres]) <= band
 
     real = disc >= 0.0
     ok0 = real & (t0 >= near[rays]) & (t0 <= far[rays])
@@ -344,6 +348,14 @@ def affine(rotation_axis, angle: float, scale, translation) -> np.ndarray:
     scaling = np.diag([*np.asarray(scale, float), 1.0])
     moving = trimesh.transformations.translation_matrix(translation)
     return moving @ rotation @ scaling
+
+
+# rotation about a skew axis, non-uniform scale, translation
+TRANSFORMS = [
+    affine([1, 2, 3], 0.7, [0.5, 1.5, 2.5], [3.0, -1.0, 2.0]),
+    affine([0, 0, 1], 2.0, [1.0, 1.0, 1.0], [-4.0, 2.0, 0.0]),
+    affine([1, -1, 0], -1.1, [2.0, 0.7, 1.2], [0.5, 4.0, -3.0]),
+]
 
 
 def transform_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:

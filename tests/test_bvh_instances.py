@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 from bvh_reference import (
+    TRANSFORMS,
     affine,
     assert_hits_match,
     float32_exact,
@@ -18,13 +19,7 @@ from bvh_reference import (
 )
 
 from embree_rt.embree import BVH
-
-# rotation about a skew axis, non-uniform scale, translation
-TRANSFORMS = [
-    affine([1, 2, 3], 0.7, [0.5, 1.5, 2.5], [3.0, -1.0, 2.0]),
-    affine([0, 0, 1], 2.0, [1.0, 1.0, 1.0], [-4.0, 2.0, 0.0]),
-    affine([1, -1, 0], -1.1, [2.0, 0.7, 1.2], [0.5, 4.0, -3.0]),
-]
+from embree_rt.embree.bvh import SPHERE_KINDS
 
 
 def mesh_kinds():
@@ -88,8 +83,9 @@ def test_many_instances_of_one_mesh_report_which_instance():
     assert len(np.unique(hits.inst_id[np.isfinite(hits.t)])) == len(TRANSFORMS)
 
 
+@pytest.mark.parametrize("kind", SPHERE_KINDS)
 @pytest.mark.parametrize("which", range(len(TRANSFORMS)))
-def test_instanced_spheres_become_ellipsoids(which):
+def test_instanced_spheres_become_ellipsoids(which, kind):
     """A sphere set under a non-uniform scale: trace the rays in object space (t is invariant
     under an affine map of the ray) and bring the normal back with the inverse transpose."""
     rng = np.random.default_rng(23)
@@ -98,7 +94,7 @@ def test_instanced_spheres_become_ellipsoids(which):
     matrix = TRANSFORMS[which]
     inverse = np.linalg.inv(matrix)
     with BVH() as child, BVH() as top:
-        spheres_gid = child.add_spheres(centers, radii)
+        spheres_gid = child.add_spheres(centers, radii, kind=kind)
         child.commit()
         inst_gid = top.add_instance(child, matrix)
         top.commit()
@@ -112,15 +108,16 @@ def test_instanced_spheres_become_ellipsoids(which):
     assert_hits_match(hits, ref, spheres_gid, inst_gid, normal_cos=0.9995, min_hit_fraction=0.1)
 
 
-def test_child_with_two_geometries_reports_the_inner_geometry_id():
+@pytest.mark.parametrize("kind", SPHERE_KINDS)
+def test_child_with_two_geometries_reports_the_inner_geometry_id(kind):
     ico = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
     with BVH() as child, BVH() as top:
-        sphere_gid = child.add_spheres([[0.0, 0.0, 0.0]], [1.0])
+        sphere_gid = child.add_spheres([[0.0, 0.0, 0.0]], [1.0], kind=kind)
         mesh_gid = child.add_triangles(ico.vertices + np.array([5.0, 0, 0]), ico.faces)
         child.commit()
         assert sphere_gid != mesh_gid
         move = affine([0, 0, 1], 0.0, [1, 1, 1], [0.0, 0.0, 10.0])
-        direct_gid = top.add_spheres([[0.0, 0.0, -10.0]], [1.0])
+        direct_gid = top.add_spheres([[0.0, 0.0, -10.0]], [1.0], kind=kind)
         inst_gid = top.add_instance(child, move)
         top.commit()
         origins = np.array([[0.0, 0.0, 20.0], [5.1, 0.05, 20.0], [0.0, 0.0, -20.0]])

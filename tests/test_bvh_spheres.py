@@ -1,4 +1,9 @@
-"""Analytic spheres in the BVH against the float64 ray–sphere quadratic (tests/bvh_reference.py)."""
+"""Analytic spheres in the BVH against the float64 ray–sphere quadratic (tests/bvh_reference.py).
+
+Every test runs on both kinds of sphere ``BVH.add_spheres`` offers: ``user`` (user geometry with
+compiled callbacks, the default) and ``point`` (Embree's own ``SPHERE_POINT``). The user kind's
+own edge cases (distant spheres, exact window bounds, packets) are in test_bvh_user_spheres.py.
+"""
 
 from __future__ import annotations
 
@@ -13,6 +18,7 @@ from bvh_reference import (
 )
 
 from embree_rt.embree import BVH
+from embree_rt.embree.bvh import SPHERE_KINDS
 
 
 def sphere_field(rng: np.random.Generator, count: int, extent: float = 10.0):
@@ -22,18 +28,23 @@ def sphere_field(rng: np.random.Generator, count: int, extent: float = 10.0):
     return centers, radii
 
 
-def spheres_bvh(centers: np.ndarray, radii: np.ndarray, threads: int | None = None):
+def spheres_bvh(centers: np.ndarray, radii: np.ndarray, kind: str, threads: int | None = None):
     bvh = BVH(threads=threads)
-    gid = bvh.add_spheres(centers, radii)
+    gid = bvh.add_spheres(centers, radii, kind=kind)
     bvh.commit()
     return bvh, gid
 
 
-@pytest.fixture(scope="module")
-def field():
+@pytest.fixture(params=SPHERE_KINDS)
+def kind(request) -> str:
+    return request.param
+
+
+@pytest.fixture(scope="module", params=SPHERE_KINDS)
+def field(request):
     rng = np.random.default_rng(1)
     centers, radii = sphere_field(rng, 400)
-    bvh, gid = spheres_bvh(centers, radii)
+    bvh, gid = spheres_bvh(centers, radii, request.param)
     origins, directions = rays_toward_box(rng, 5000, [-12] * 3, [12] * 3, 40.0)
     origins, directions = float32_exact(origins), float32_exact(directions)
     yield centers, radii, bvh, gid, origins, directions
@@ -74,13 +85,13 @@ def test_normals_point_outward_from_the_centre(field):
     np.testing.assert_allclose(distance, radii[hits.prim_id[hit]], rtol=1e-3, atol=1e-4)
 
 
-def test_nested_spheres_from_inside_hit_the_far_side_outward():
+def test_nested_spheres_from_inside_hit_the_far_side_outward(kind):
     # Three concentric spheres and one off-centre sphere inside the largest.
     centers = float32_exact([[0, 0, 0], [0, 0, 0], [0, 0, 0], [2.0, 0.5, 0]])
     radii = float32_exact([1.0, 2.0, 3.0, 0.4])
     rng = np.random.default_rng(2)
     with BVH() as bvh:
-        gid = bvh.add_spheres(centers, radii)
+        gid = bvh.add_spheres(centers, radii, kind=kind)
         bvh.commit()
 
         # From the common centre: closed form t = 1 / |d| on the innermost sphere, normal ∝ d.
@@ -106,7 +117,7 @@ def test_nested_spheres_from_inside_hit_the_far_side_outward():
 
 
 @pytest.mark.parametrize("offset", [-1e-2, -1e-3, -2e-4, 2e-4, 1e-3, 1e-2])
-def test_grazing_rays(offset):
+def test_grazing_rays(offset, kind):
     """Rays passing the centre at (1 + offset) radii hit exactly when offset < 0."""
     rng = np.random.default_rng(3)
     count = 2000
@@ -120,7 +131,7 @@ def test_grazing_rays(offset):
     origins = float32_exact(center + impact * side - back * direction)
     directions = float32_exact(direction)
     with BVH() as bvh:
-        gid = bvh.add_spheres(center[None], [radius])
+        gid = bvh.add_spheres(center[None], [radius], kind=kind)
         bvh.commit()
         hits = bvh.intersect(origins, directions)
     ref = sphere_hits(origins, directions, center[None], np.array([radius]), ambiguity=0.0)
@@ -134,7 +145,7 @@ def test_grazing_rays(offset):
     assert np.all(hits.geom_id[both] == gid)
 
 
-def test_exactly_tangent_rays_hit_at_the_touching_point_if_at_all():
+def test_exactly_tangent_rays_hit_at_the_touching_point_if_at_all(kind):
     rng = np.random.default_rng(4)
     count = 1000
     center = np.array([0.0, 0.0, 0.0])
@@ -142,7 +153,7 @@ def test_exactly_tangent_rays_hit_at_the_touching_point_if_at_all():
     side = unit(np.cross(direction, rng.normal(size=(count, 3))))
     origins = float32_exact(side - 5.0 * direction)
     with BVH() as bvh:
-        bvh.add_spheres(center[None], [1.0])
+        bvh.add_spheres(center[None], [1.0], kind=kind)
         bvh.commit()
         hits = bvh.intersect(origins, float32_exact(direction))
     hit = np.isfinite(hits.t)
@@ -150,14 +161,14 @@ def test_exactly_tangent_rays_hit_at_the_touching_point_if_at_all():
     np.testing.assert_allclose(hits.t[hit], 5.0, atol=2e-3)
 
 
-def test_window_on_a_row_of_spheres_finds_the_next_hit():
+def test_window_on_a_row_of_spheres_finds_the_next_hit(kind):
     # Spheres of radius 1 at x = 5, 10, 15, 20; a ray along +x from the origin meets their
     # surfaces at 4, 6, 9, 11, 14, 16, 19, 21.
     centers = np.array([[5.0, 0, 0], [10, 0, 0], [15, 0, 0], [20, 0, 0]])
     radii = np.ones(4)
     surfaces = [(4, 0, -1), (6, 0, 1), (9, 1, -1), (11, 1, 1), (14, 2, -1), (16, 2, 1)]
     with BVH() as bvh:
-        gid = bvh.add_spheres(centers, radii)
+        gid = bvh.add_spheres(centers, radii, kind=kind)
         bvh.commit()
         origin = np.zeros((1, 3))
         for direction_length in (1.0, 0.25, 4.0):
@@ -207,7 +218,7 @@ def test_per_ray_window_excluding_the_nearest_hit_finds_the_next_one(field):
     assert np.all(np.isinf(hits.t)) and np.all(hits.geom_id == -1)
 
 
-def test_prim_and_geom_ids_identify_each_sphere():
+def test_prim_and_geom_ids_identify_each_sphere(kind):
     # Two sphere sets on a 2D grid; one vertical ray per sphere straight down onto its centre.
     grid = np.stack(np.meshgrid(np.arange(12.0), np.arange(10.0), indexing="ij"), -1).reshape(-1, 2)
     first = np.c_[grid[:60], np.zeros(60)]
@@ -215,8 +226,8 @@ def test_prim_and_geom_ids_identify_each_sphere():
     radii_first = np.linspace(0.1, 0.4, 60)
     radii_second = np.linspace(0.4, 0.2, 60)
     with BVH() as bvh:
-        gid_a = bvh.add_spheres(first, radii_first)
-        gid_b = bvh.add_spheres(second, radii_second)
+        gid_a = bvh.add_spheres(first, radii_first, kind=kind)
+        gid_b = bvh.add_spheres(second, radii_second, kind=kind)
         bvh.commit()
         assert gid_a != gid_b
         tops = np.r_[first, second] + [0.0, 0.0, 3.0]
@@ -229,12 +240,12 @@ def test_prim_and_geom_ids_identify_each_sphere():
     np.testing.assert_allclose(unit(hits.normal), np.tile([0.0, 0.0, 1.0], (120, 1)), atol=1e-5)
 
 
-def test_float64_float32_and_integer_inputs_agree():
+def test_float64_float32_and_integer_inputs_agree(kind):
     centers = np.array([[0, 0, 0], [3, 0, 0]])
     radii = np.array([1, 2])
     with BVH() as a, BVH() as b:
-        a.add_spheres(centers, radii)
-        b.add_spheres(centers.astype(np.float32), radii.astype(np.float32))
+        a.add_spheres(centers, radii, kind=kind)
+        b.add_spheres(centers.astype(np.float32), radii.astype(np.float32), kind=kind)
         a.commit()
         b.commit()
         origins = np.array([[-5, 0, 0], [3, 0, 10]])
