@@ -95,13 +95,27 @@ class BVH:
 
     ``threads`` is the number of threads the queries run on (default: all cores); ``lanes`` how
     many rays go to Embree in one call: 1 (single rays) or a packet of 4, 8 or 16 (default: the
-    widest this CPU runs natively, see ``native_lanes``). Release the Embree objects with
-    ``close()`` or a ``with`` block; a finalizer does it otherwise.
+    widest this CPU runs natively, see ``native_lanes``). ``build_quality`` is Embree's: "low",
+    "medium" (Embree's default) or "high"; ``compact`` asks Embree for its compact (less memory)
+    structures. Release the Embree objects with ``close()`` or a ``with`` block; a finalizer does
+    it otherwise.
     """
 
-    def __init__(self, threads: int | None = None, lanes: int | None = None) -> None:
+    def __init__(
+        self,
+        threads: int | None = None,
+        lanes: int | None = None,
+        *,
+        build_quality: str = "medium",
+        compact: bool = False,
+    ) -> None:
         if threads is not None and (int(threads) != threads or threads < 1):
             raise ValueError(f"threads: must be a positive integer, got {threads!r}")
+        if build_quality not in library.BUILD_QUALITY:
+            raise ValueError(
+                f"build_quality: expected one of {list(library.BUILD_QUALITY)}, got "
+                f"{build_quality!r}"
+            )
         self.threads = int(threads) if threads is not None else numba.config.NUMBA_NUM_THREADS
         self.threads = min(self.threads, numba.config.NUMBA_NUM_THREADS)
         self._device = device_module.acquire()
@@ -111,6 +125,11 @@ class BVH:
         self._finalizer = weakref.finalize(
             self, _release_handles, self._lib, self._scene, self._device
         )
+        self._build_quality = library.BUILD_QUALITY[build_quality]
+        self._lib.rtcSetSceneBuildQuality(self._scene, self._build_quality)
+        if compact:
+            self._lib.rtcSetSceneFlags(self._scene, library.SCENE_FLAG_COMPACT)
+        self._device.check("setting the scene's build quality and flags")
         self._committed = False
         self._children: list[BVH] = []
         # (n, 4) float32 (x, y, z, r) of each sphere set by geometry id; Embree reads the user
@@ -197,6 +216,9 @@ class BVH:
             lib.rtcSetGeometryBoundsFunction(geometry, user_spheres.BOUNDS_CALLBACK, None)
             lib.rtcSetGeometryIntersectFunction(geometry, user_spheres.INTERSECT_CALLBACK)
             lib.rtcSetGeometryOccludedFunction(geometry, user_spheres.OCCLUDED_CALLBACK)
+            # A "low" scene builds each geometry on its own with the geometry's quality: the
+            # same "low" makes that Embree's Morton builder.
+            lib.rtcSetGeometryBuildQuality(geometry, self._build_quality)
             self._device.check("setting up user-geometry spheres")
         packed[:, :3] = centers
         packed[:, 3] = radii

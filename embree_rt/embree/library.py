@@ -31,6 +31,9 @@ DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED = 33
 DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED = 34
 DEVICE_PROPERTY_POINT_GEOMETRY_SUPPORTED = 101
 INVALID_ID = 0xFFFFFFFF
+# RTCBuildQuality (rtcore_common.h) by name, and RTCSceneFlags' RTC_SCENE_FLAG_COMPACT.
+BUILD_QUALITY = {"low": 0, "medium": 1, "high": 2}
+SCENE_FLAG_COMPACT = 1 << 1
 
 ERROR_NAMES = {
     0: "RTC_ERROR_NONE",
@@ -85,6 +88,9 @@ def _declare(lib: ctypes.CDLL) -> None:
         "rtcNewScene": (p, [p]),
         "rtcReleaseScene": (None, [p]),
         "rtcCommitScene": (None, [p]),
+        "rtcSetSceneBuildQuality": (None, [p, i]),
+        "rtcSetSceneFlags": (None, [p, i]),
+        "rtcSetGeometryBuildQuality": (None, [p, i]),
         "rtcAttachGeometry": (u, [p, p]),
         "rtcNewGeometry": (p, [p, i]),
         "rtcReleaseGeometry": (None, [p]),

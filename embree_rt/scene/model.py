@@ -117,10 +117,19 @@ class Scene:
         self.add_spheres(np.asarray([center]), np.asarray([radius]), material)
 
     def add_spheres(
-        self, centers: np.ndarray, radii: np.ndarray, materials: str | np.ndarray | list[str]
+        self,
+        centers: np.ndarray,
+        radii: np.ndarray,
+        materials: str | np.ndarray | list[str],
+        *,
+        copy: bool = True,
     ) -> None:
         """Append spheres: ``centers`` (n, 3), ``radii`` (n,), one material name for all, or
-        (n,) names, or (n,) int indices into ``material_names``."""
+        (n,) names, or (n,) int indices into ``material_names``.
+
+        ``copy=False`` hands the arrays over: when the scene holds no spheres yet and they are
+        already (n, 3) float32, (n,) float32 and (n,) int32, it keeps them as they are (no copy
+        of a hundred million spheres); do not modify them afterwards."""
         centers = np.asarray(centers, np.float32).reshape(-1, 3)
         radii = np.asarray(radii, np.float32).reshape(-1)
         if len(radii) != len(centers):
@@ -130,15 +139,20 @@ class Scene:
         else:
             materials = np.asarray(materials)
             if materials.dtype.kind in "iu":
-                ids = materials.astype(np.int32)
-                if len(ids) and (ids.min() < 0 or ids.max() >= len(self.materials)):
+                if len(materials) and (
+                    materials.min() < 0 or materials.max() >= len(self.materials)
+                ):
                     raise ValueError("materials: index out of range")
+                ids = np.asarray(materials, np.int32)
             else:
                 names, inverse = np.unique(materials.astype(str), return_inverse=True)
                 lookup = np.array([self.material_index(n) for n in names], np.int32)
                 ids = lookup[inverse]
             if len(ids) != len(centers):
                 raise ValueError(f"materials: {len(ids)} values for {len(centers)} centers")
+        if not copy and len(self.sphere_radii) == 0:
+            self.sphere_centers, self.sphere_radii, self.sphere_materials = centers, radii, ids
+            return
         self.sphere_centers = np.concatenate([self.sphere_centers, centers])
         self.sphere_radii = np.concatenate([self.sphere_radii, radii])
         self.sphere_materials = np.concatenate([self.sphere_materials, ids])
