@@ -1,7 +1,8 @@
 """Embree build quality and the compact flag on a huge random field: build time, memory, speed.
 
 For each setting (``--qualities`` x compact off/on) a fresh process generates the random field
-of ``--count`` spheres, builds the spheres' BVH with ``BVH(build_quality=..., compact=...)``,
+of ``--count`` spheres, builds the spheres' BVH with ``BVH(build_quality=..., compact=...)``
+(``--kind``: user-geometry spheres, or Embree's own point spheres),
 and traces the field's own camera rays (1920x1080, one per pixel) and shadow rays from their
 hits toward the first light, on all threads. Reported per setting: build seconds, the peak
 memory the build added (``VmHWM`` after the build minus ``VmRSS`` before it, with the peak
@@ -32,7 +33,7 @@ def _status_kib(field: str) -> int:
     raise RuntimeError(f"no {field} in /proc/self/status")
 
 
-def measure(count: int, quality: str, compact: bool, width: int, height: int) -> dict:
+def measure(count: int, kind: str, quality: str, compact: bool, width: int, height: int) -> dict:
     """One setting, in this process (run it in a fresh one for a clean peak)."""
     import numpy as np
 
@@ -47,7 +48,7 @@ def measure(count: int, quality: str, compact: bool, width: int, height: int) ->
     Path("/proc/self/clear_refs").write_text("5")  # reset VmHWM to the current RSS
     started = time.perf_counter()
     bvh = BVH(build_quality=quality, compact=compact)
-    bvh.add_spheres(scene.sphere_centers, scene.sphere_radii)
+    bvh.add_spheres(scene.sphere_centers, scene.sphere_radii, kind=kind)
     bvh.commit()
     build_s = time.perf_counter() - started
     peak, after = _status_kib("VmHWM"), _status_kib("VmRSS")
@@ -71,6 +72,7 @@ def measure(count: int, quality: str, compact: bool, width: int, height: int) ->
     bvh.close()
     return {
         "count": count,
+        "kind": kind,
         "quality": quality,
         "compact": compact,
         "build_s": round(build_s, 2),
@@ -87,6 +89,12 @@ def measure(count: int, quality: str, compact: bool, width: int, height: int) ->
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=10_000_000)
+    parser.add_argument(
+        "--kind",
+        choices=("user", "point"),
+        default="user",
+        help="spheres as user geometry (default) or Embree's SPHERE_POINT",
+    )
     parser.add_argument("--qualities", nargs="+", default=["low", "medium", "high"])
     parser.add_argument("--no-compact", action="store_true", help="only without the flag")
     parser.add_argument("--width", type=int, default=1920)
@@ -95,19 +103,20 @@ def main() -> None:
     args = parser.parse_args()
     if args.one:
         quality, compact = args.one[0], args.one[1] == "1"
-        print(json.dumps(measure(args.count, quality, compact, args.width, args.height)))
+        print(json.dumps(measure(args.count, args.kind, quality, compact, args.width, args.height)))
         return
     rows = []
     for quality in args.qualities:
         for compact in (False,) if args.no_compact else (False, True):
             command = [
-                sys.executable, __file__, "--count", str(args.count), "--width", str(args.width),
-                "--height", str(args.height), "--one", quality, "1" if compact else "0",
+                sys.executable, __file__, "--count", str(args.count), "--kind", args.kind,
+                "--width", str(args.width), "--height", str(args.height),
+                "--one", quality, "1" if compact else "0",
             ]  # fmt: skip
             output = subprocess.run(command, check=True, capture_output=True, text=True).stdout
             rows.append(json.loads(output.splitlines()[-1]))
             print(json.dumps(rows[-1]), file=sys.stderr)
-    config = {"count": args.count, "width": args.width, "height": args.height}
+    config = {"count": args.count, "kind": args.kind, "width": args.width, "height": args.height}
     print(json.dumps({"config": config, "rows": rows}))
     print("| quality | compact | build s | build peak GB | BVH B/sphere | primary Mrays/s | "
           "shadow Mrays/s |", file=sys.stderr)  # fmt: skip

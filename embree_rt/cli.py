@@ -92,7 +92,9 @@ def _apply_overrides(scene, args: argparse.Namespace) -> None:
             setattr(settings, name, value)
 
 
-def _render_and_save(scene, args: argparse.Namespace) -> None:
+def _render_and_save(scene, args: argparse.Namespace, made: tuple[str, float]) -> None:
+    """Render ``scene`` with the flags' overrides and save it; ``made`` is how the scene was
+    made and the seconds it took ("generate" or "load"), for the summary line."""
     from embree_rt.film import save_image
     from embree_rt.integrator import RenderStats, render
 
@@ -108,11 +110,12 @@ def _render_and_save(scene, args: argparse.Namespace) -> None:
         stats=stats,
     )
     save_image(image, args.output)
-    elapsed = time.perf_counter() - started
+    elapsed = made[1] + time.perf_counter() - started
     if not args.quiet:
         print(
             f"embree-rt: {settings.width}x{settings.height} at {settings.spp} spp in "
-            f"{elapsed:.2f} s (BVH {stats.build_s:.2f} s): {stats.total_rays:,} rays, "
+            f"{elapsed:.2f} s ({made[0]} {made[1]:.2f} s, BVH {stats.build_s:.2f} s, render "
+            f"{stats.render_s:.2f} s): {stats.total_rays:,} rays, "
             f"{stats.rays_per_s / 1e6:.1f} Mrays/s -> {args.output}",
             file=sys.stderr,
         )
@@ -123,8 +126,9 @@ def _command_render(args: argparse.Namespace) -> None:
     from embree_rt.scene import load_scene
 
     check_output_path(args.output)
+    started = time.perf_counter()
     scene = load_scene(args.scene)
-    _render_and_save(scene, args)
+    _render_and_save(scene, args, ("load", time.perf_counter() - started))
 
 
 def _command_random(args: argparse.Namespace) -> None:
@@ -138,10 +142,12 @@ def _command_random(args: argparse.Namespace) -> None:
             raise UsageError(f"--save-scene: {target}: expected a .toml or .json file name")
         if not target.parent.is_dir():
             raise UsageError(f"--save-scene: {target}: directory {target.parent} does not exist")
+    started = time.perf_counter()
     scene = random_field(args.count, seed=0 if args.seed is None else args.seed)
+    generate_s = time.perf_counter() - started
     if args.save_scene is not None:
         scene.save(args.save_scene)
-    _render_and_save(scene, args)
+    _render_and_save(scene, args, ("generate", generate_s))
 
 
 def _command_info(args: argparse.Namespace) -> None:

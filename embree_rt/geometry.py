@@ -1,7 +1,8 @@
 """Scene geometry: every object of a ``Scene`` in one Embree BVH, and what each hit is.
 
-Spheres go in as analytic spheres: by default Embree user geometry with compiled callbacks,
-``spheres="point"`` Embree's own point spheres, ``spheres="mesh"`` one tessellated icosphere
+Spheres go in as analytic spheres: by default Embree user geometry with compiled callbacks
+(Embree's own point spheres beyond ``USER_GEOMETRY_MAX_SPHERES``), ``spheres="point"`` Embree's
+own point spheres, ``spheres="mesh"`` one tessellated icosphere
 instanced per sphere. Each distinct triangle mesh is built once and instanced per placement.
 The floor is the Embree layer's analytic ground plane: exact at any distance, where a finite
 quad in the BVH would cut the horizon and lose float32 precision far away.
@@ -19,7 +20,21 @@ from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_nor
 from embree_rt.scene.model import Scene
 
 SPHERE_MODES = ("analytic", "point", "mesh")
+# Above this many spheres, "analytic" spheres are Embree's own point spheres. Measured on the
+# 1e7-sphere random field (2 threads, benchmarks/build_quality.py): they trace as fast as user
+# geometry there (primary 9.3-9.6 against 10.3-13.7 Mrays/s, shadow 12.3-14.4 against 12.4-12.9),
+# build in 2.9 s instead of 5.0-5.4 s, and take 49 bytes a sphere in Embree instead of 93 (the
+# whole command: 71 against 148), so 1e8 spheres fit in 8 GB. Below it user geometry traces up to
+# 1.5x faster (DESIGN.md).
+USER_GEOMETRY_MAX_SPHERES = 1 << 23
 ICOSPHERE_SUBDIVISIONS = 3
+
+
+def analytic_sphere_kind(count: int, spheres: str = "analytic") -> str:
+    """The ``BVH.add_spheres`` kind that ``count`` spheres of mode ``spheres`` go in as."""
+    if spheres == "point" or count > USER_GEOMETRY_MAX_SPHERES:
+        return "point"
+    return "user"
 
 
 @dataclass
@@ -78,7 +93,8 @@ class SceneGeometry:
         self._children: list[BVH] = []
         self.sphere_centers = np.asarray(scene.sphere_centers, np.float32)
         self.sphere_radii = np.asarray(scene.sphere_radii, np.float32)
-        self.sphere_materials = np.asarray(scene.sphere_materials, np.intp)
+        # int32 as the scene holds them: no N-sized copies (1e8 spheres are 0.4 GB of them)
+        self.sphere_materials = np.asarray(scene.sphere_materials, np.int32)
         self.sphere_geom_id = -1
         self.floor = scene.floor
         # The floor's material comes after the scene's own in the renderer's material table.
@@ -104,7 +120,7 @@ class SceneGeometry:
                     self.sphere_geom_id = self.bvh.add_spheres(
                         self.sphere_centers,
                         self.sphere_radii,
-                        kind="user" if spheres == "analytic" else "point",
+                        kind=analytic_sphere_kind(len(self.sphere_radii), spheres),
                     )
                 else:
                     self._add_tessellated_spheres()
@@ -197,7 +213,7 @@ class SceneGeometry:
             geometry_label=self.instance_material.astype(np.int64),
             geometry_scale=self.instance_scale,
             sphere_geom_id=self.sphere_geom_id,
-            sphere_label=self.sphere_materials.astype(np.int64),
+            sphere_label=self.sphere_materials,
             plane_y=None if self.floor is None else float(self.floor.height),
             plane_label=self.floor_material,
         )

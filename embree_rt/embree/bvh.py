@@ -48,7 +48,7 @@ class Hits:
 
 SPHERE_KINDS = ("user", "point")
 _NO_SPHERES = np.zeros((0, 4), np.float32)
-_NO_LABELS = np.zeros(0, np.int64)
+_NO_LABELS = np.zeros(0, np.int32)
 
 _kernel_lock = threading.Lock()
 _symbols_registered = False
@@ -363,7 +363,7 @@ class BVH:
             hits.normal, hits.u, hits.v, has_plane,
             np.float32(labels.plane_y if has_plane else 0.0), int(labels.plane_label),
             int(labels.sphere_geom_id) if len(spheres) else -1, spheres,
-            np.asarray(sphere_label, np.int64), np.asarray(labels.geometry_label, np.int64),
+            np.asarray(sphere_label, np.int32), np.asarray(labels.geometry_label, np.int64),
             np.asarray(labels.geometry_scale, np.float32), self._normal_matrix_array,
         )  # fmt: skip
         return HitRecords(*fields)

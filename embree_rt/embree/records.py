@@ -29,8 +29,9 @@ class HitLabels:
     ``geometry_label`` (g,) int64 and ``geometry_scale`` (g,) float32, by top-level geometry
     id (the instance's id for an instance hit): the label of every hit on that geometry and a
     bound on its world coordinates; ``sphere_geom_id`` the top-level sphere set whose hits take
-    ``sphere_label`` (m,) int64 by primitive instead (-1: none); ``plane_y`` the ground plane's
-    height (None: no plane) and ``plane_label`` its label.
+    ``sphere_label`` (m,) int32 by primitive instead (-1: none); ``plane_y`` the ground plane's
+    height (None: no plane) and ``plane_label`` its label. (Sphere labels are int32, as the
+    scene stores its sphere materials: no copy, 4 bytes a sphere.)
     """
 
     geometry_label: np.ndarray
