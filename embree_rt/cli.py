@@ -95,6 +95,7 @@ def _apply_overrides(scene, args: argparse.Namespace) -> None:
 def _render_and_save(scene, args: argparse.Namespace, made: tuple[str, float]) -> None:
     """Render ``scene`` with the flags' overrides and save it; ``made`` is how the scene was
     made and the seconds it took ("generate" or "load"), for the summary line."""
+    from embree_rt.budget import MemoryBudgetError
     from embree_rt.film import save_image
     from embree_rt.integrator import RenderStats, render
 
@@ -102,13 +103,16 @@ def _render_and_save(scene, args: argparse.Namespace, made: tuple[str, float]) -
     settings = scene.render
     stats = RenderStats()
     started = time.perf_counter()
-    image = render(
-        scene,
-        threads=args.threads,
-        spheres=args.spheres,
-        quiet=args.quiet,
-        stats=stats,
-    )
+    try:
+        image = render(
+            scene,
+            threads=args.threads,
+            spheres=args.spheres,
+            quiet=args.quiet,
+            stats=stats,
+        )
+    except MemoryBudgetError as error:
+        raise UsageError(f"{_memory_key(error, args)}: {error}") from None
     save_image(image, args.output)
     elapsed = made[1] + time.perf_counter() - started
     if not args.quiet:
@@ -131,9 +135,45 @@ def _command_render(args: argparse.Namespace) -> None:
     _render_and_save(scene, args, ("load", time.perf_counter() - started))
 
 
+def _memory_key(error, args: argparse.Namespace) -> str:
+    """The input to blame for a ``MemoryBudgetError``: the flags or the scene file's keys."""
+    scene_file = getattr(args, "scene", None)
+    if error.largest == "image":
+        if scene_file is None or args.width is not None or args.height is not None:
+            return "--width, --height"
+        return f"{scene_file}: render.width, render.height"
+    return "--count" if scene_file is None else f"{scene_file}: spheres"
+
+
+def _require_memory_for_field(count: int, settings, args: argparse.Namespace) -> None:
+    """Refuse, before a sphere is made, a field whose render cannot fit: the field's arrays,
+    its BVH and the image (``render`` checks the last two again once the field exists)."""
+    import os
+
+    from embree_rt import budget
+    from embree_rt.geometry import sphere_kind
+    from embree_rt.integrator import DEFAULT_BATCH_SIZE
+
+    needs = budget.render_needs(
+        count, sphere_kind(count, args.spheres), settings.width, settings.height, settings.spp,
+        DEFAULT_BATCH_SIZE, workers=args.threads or os.cpu_count() or 1,
+    )  # fmt: skip
+    bvh_bytes, _ = needs["spheres"]
+    needs["spheres"] = (budget.field_bytes(count) + bvh_bytes, f"{count:,} spheres")
+    try:
+        budget.require(needs)
+    except budget.MemoryBudgetError as error:
+        raise UsageError(f"{_memory_key(error, args)}: {error}") from None
+
+
 def _command_random(args: argparse.Namespace) -> None:
     from embree_rt.film import check_output_path
-    from embree_rt.scene import random_field
+    from embree_rt.scene.random_field import (
+        FieldParameterError,
+        add_field_spheres,
+        field_scene,
+        plan_field,
+    )
 
     check_output_path(args.output)
     if args.save_scene is not None:
@@ -143,7 +183,14 @@ def _command_random(args: argparse.Namespace) -> None:
         if not target.parent.is_dir():
             raise UsageError(f"--save-scene: {target}: directory {target.parent} does not exist")
     started = time.perf_counter()
-    scene = random_field(args.count, seed=0 if args.seed is None else args.seed)
+    try:
+        plan = plan_field(args.count, seed=0 if args.seed is None else args.seed)
+    except FieldParameterError as error:
+        raise UsageError(f"--{error.name}: {error.problem}") from None
+    scene = field_scene(plan)
+    _apply_overrides(scene, args)
+    _require_memory_for_field(plan.count, scene.render, args)
+    add_field_spheres(scene, plan)
     generate_s = time.perf_counter() - started
     if args.save_scene is not None:
         scene.save(args.save_scene)

@@ -30,8 +30,11 @@ USER_GEOMETRY_MAX_SPHERES = 1 << 23
 ICOSPHERE_SUBDIVISIONS = 3
 
 
-def analytic_sphere_kind(count: int, spheres: str = "analytic") -> str:
-    """The ``BVH.add_spheres`` kind that ``count`` spheres of mode ``spheres`` go in as."""
+def sphere_kind(count: int, spheres: str = "analytic") -> str:
+    """How ``count`` spheres of mode ``spheres`` (``SPHERE_MODES``) enter the BVH: "user" or
+    "point" (the ``BVH.add_spheres`` kinds), or "mesh" (instanced icospheres)."""
+    if spheres == "mesh":
+        return "mesh"
     if spheres == "point" or count > USER_GEOMETRY_MAX_SPHERES:
         return "point"
     return "user"
@@ -120,7 +123,7 @@ class SceneGeometry:
                     self.sphere_geom_id = self.bvh.add_spheres(
                         self.sphere_centers,
                         self.sphere_radii,
-                        kind=analytic_sphere_kind(len(self.sphere_radii), spheres),
+                        kind=sphere_kind(len(self.sphere_radii), spheres),
                     )
                 else:
                     self._add_tessellated_spheres()

@@ -20,12 +20,12 @@ from itertools import pairwise
 
 import numpy as np
 
-from embree_rt import shading
+from embree_rt import budget, shading
 from embree_rt.camera import camera_frame, primary_rays
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
-from embree_rt.geometry import SceneGeometry, SurfaceHits
+from embree_rt.geometry import SceneGeometry, SurfaceHits, sphere_kind
 from embree_rt.materials import MaterialTable
 from embree_rt.scene.model import Scene
 
@@ -482,6 +482,14 @@ def render(
     spp = settings.spp if spp is None else spp
     max_depth = settings.max_depth if max_depth is None else max_depth
     seed = settings.seed if seed is None else seed
+    # Refuse what cannot fit before building or allocating anything (MemoryBudgetError).
+    count = len(scene.sphere_radii)
+    budget.require(
+        budget.render_needs(
+            count, sphere_kind(count, spheres), width, height, spp, batch_size,
+            workers=threads or os.cpu_count() or 1,
+        )
+    )  # fmt: skip
     with Renderer(scene, spheres=spheres, threads=threads, batch_size=batch_size) as renderer:
         bar = None
         if not quiet and sys.stderr.isatty():

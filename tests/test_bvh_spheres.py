@@ -255,3 +255,31 @@ def test_float64_float32_and_integer_inputs_agree(kind):
     np.testing.assert_array_equal(ha.t, hb.t)
     np.testing.assert_allclose(ha.t, [4.0, 8.0], rtol=1e-6)
     np.testing.assert_array_equal(ha.prim_id, [0, 1])
+
+
+@pytest.mark.parametrize(("quality", "compact"), [("low", False), ("high", True), ("low", True)])
+def test_build_quality_and_compact_change_the_tree_not_the_answers(kind, quality, compact):
+    """Every Embree build variant finds the same nearest sphere at the same t (to float32
+    rounding: Embree's point-sphere leaves differ between variants), and the same shadow
+    answers: the tree differs, the geometry does not."""
+    rng = np.random.default_rng(9)
+    centers, radii = sphere_field(rng, 3000, extent=40.0)
+    origins, directions = rays_toward_box(rng, 4000, [-42] * 3, [42] * 3, 120.0)
+    reference, _ = spheres_bvh(centers, radii, kind)
+    other = BVH(build_quality=quality, compact=compact)
+    other.add_spheres(centers, radii, kind=kind)
+    other.commit()
+    with reference, other:
+        expected = reference.intersect(origins, directions)
+        got = other.intersect(origins, directions)
+        np.testing.assert_array_equal(got.prim_id, expected.prim_id)
+        np.testing.assert_allclose(got.t, expected.t, rtol=2.0**-20, atol=0.0)  # inf == inf
+        np.testing.assert_array_equal(
+            other.occluded(origins, directions, 0.0, 60.0),
+            reference.occluded(origins, directions, 0.0, 60.0),
+        )
+
+
+def test_an_unknown_build_quality_is_refused():
+    with pytest.raises(ValueError, match="build_quality"):
+        BVH(build_quality="best")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -404,3 +405,27 @@ def test_ctrl_c_exits_130_and_keeps_the_old_image(tmp_path: Path) -> None:
     assert "Traceback" not in stderr
     assert output.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png"]  # no .out.png.* temp file
+
+
+def test_the_summary_line_splits_the_time(tmp_path: Path) -> None:
+    """Making the scene (generating the field, or loading the file), building the BVH and
+    rendering, each timed, within the whole command's time."""
+    runs = {
+        "generate": run_cli("random", "--count", "20000", "-o", str(tmp_path / "a.png"), *TINY),
+        "load": run_cli(
+            "render", str(ROOT / "scenes" / "three_spheres.toml"), "-o", str(tmp_path / "b.png"),
+            *TINY,
+        ),
+    }  # fmt: skip
+    for made, result in runs.items():
+        assert result.returncode == 0, result.stderr
+        line = result.stderr.strip()
+        match = re.fullmatch(
+            rf"embree-rt: 16x9 at 1 spp in ([\d.]+) s \({made} ([\d.]+) s, BVH ([\d.]+) s, "
+            r"render ([\d.]+) s\): [\d,]+ rays, [\d.]+ Mrays/s -> .+\.png",
+            line,
+        )
+        assert match, line
+        total, *parts = (float(value) for value in match.groups())
+        assert sum(parts) <= total + 0.015  # each is rounded to 0.01 s
+        assert parts[1] > 0 and parts[2] > 0

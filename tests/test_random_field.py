@@ -1,16 +1,29 @@
 """The random sphere field: exact counts, three heroes in the middle, small spheres resting on the
-floor without touching each other (checked with a k-d tree), deterministic per seed, and a
-million spheres generated."""
+floor without touching each other (checked with a k-d tree), deterministic per seed, a million
+spheres generated, and the ring-by-ring generator equal to an all-at-once meshgrid reference
+whatever its ring size or thread count."""
 
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
 from embree_rt import Scene, random_field
+from embree_rt.budget import SCENE_BYTES_PER_SPHERE, available_memory
+from embree_rt.scene.random_field import (
+    COLORS_PER_KIND,
+    HERO_CLEARANCE,
+    HERO_RADIUS,
+    HEROES,
+    _stable_order,
+    add_field_spheres,
+    field_scene,
+    plan_field,
+)
 
 
 def materials_of(scene: Scene) -> list:
@@ -188,3 +201,109 @@ def test_mix_limits_the_kinds() -> None:
 def test_bad_parameters_name_the_parameter(arguments: dict, name: str) -> None:
     with pytest.raises(ValueError, match=name):
         random_field(100, **arguments)
+
+
+# -- generation in rings ---------------------------------------------------------------------
+
+
+def meshgrid_field(count: int, seed: int, **arguments) -> tuple[np.ndarray, ...]:
+    """The field as the first version made it, all at once: the grid cells of a meshgrid big
+    enough, the ``count - 3`` nearest the origin outside the heroes' clear rings (a stable sort
+    by float64 squared distance, cells in (x, z) order), then one Generator drawing radii,
+    jitter, kinds and shades for all spheres in turn. A reference that shares no code with the
+    ring-by-ring generator but the plan; returns centres, radii and materials of the spheres."""
+    plan = plan_field(count, seed, **arguments)
+    scene = field_scene(plan)
+    hero_xz = np.array([xz for xz, _ in HEROES[: plan.heroes]], np.float64).reshape(-1, 2)
+    keep_out = (HERO_RADIUS + HERO_CLEARANCE * plan.spacing) ** 2
+    half = math.ceil(plan.extent / plan.spacing) + 2
+    while True:
+        axis = (np.arange(-half, half) + 0.5) * plan.spacing
+        x, z = (grid.ravel() for grid in np.meshgrid(axis, axis, indexing="ij"))
+        distance = x * x + z * z
+        usable = distance <= (half * plan.spacing) ** 2
+        for hx, hz in hero_xz:
+            usable &= (x - hx) ** 2 + (z - hz) ** 2 > keep_out
+        if np.count_nonzero(usable) >= plan.small:
+            break
+        half *= 2
+    rows = np.flatnonzero(usable)
+    nearest = rows[np.argsort(distance[rows], kind="stable")[: plan.small]]
+    rng = np.random.default_rng([seed, 1])
+    radii = rng.uniform(*plan.radius, size=plan.small)
+    reach = plan.spacing / 2 - radii
+    jitter = (rng.random((plan.small, 2)) * 2 - 1) * reach[:, None]
+    kind = rng.choice(len(plan.mix), size=plan.small, p=np.array([p for _, p in plan.mix]))
+    shade = rng.integers(0, COLORS_PER_KIND, size=plan.small)
+    first = scene.material_index(f"{plan.mix[0][0]}_00")
+    centers = np.column_stack([x[nearest] + jitter[:, 0], radii, z[nearest] + jitter[:, 1]])
+    heroes = [((hx, HERO_RADIUS, hz), name) for (hx, hz), name in HEROES[: plan.heroes]]
+    return (
+        np.concatenate([np.reshape([c for c, _ in heroes], (-1, 3)), centers]).astype(np.float32),
+        np.concatenate([[HERO_RADIUS] * plan.heroes, radii]).astype(np.float32),
+        np.concatenate(
+            [[scene.material_index(n) for _, n in heroes], first + kind * COLORS_PER_KIND + shade]
+        ).astype(np.int32),
+    )
+
+
+FIELDS = [
+    (1, 0, {}),
+    (3, 0, {}),
+    (60, 1, {}),
+    (20_011, 2, {}),
+    (5_000, 3, {"extent": 40.0}),  # spacing below 1, not a power of two: rounded distances
+    (3_000, 6, {"radius": (0.3, 0.9)}),
+    (2_000, 7, {"extent": 8.0}),
+    (500, 4, {"heroes": False}),
+    (700, 5, {"mix": {"glass": 2.0, "metal": 1.0}}),
+]
+
+
+@pytest.mark.parametrize(("count", "seed", "arguments"), FIELDS)
+def test_rings_make_the_meshgrid_field_bit_for_bit(count: int, seed: int, arguments) -> None:
+    """Bitwise: both do the same float64 operations on the same numbers (IEEE arithmetic and a
+    correctly rounded sqrt, no libm transcendental), so every ISA gives the same bits."""
+    scene = random_field(count, seed, **arguments)
+    centers, radii, materials = meshgrid_field(count, seed, **arguments)
+    np.testing.assert_array_equal(scene.sphere_centers, centers)
+    np.testing.assert_array_equal(scene.sphere_radii, radii)
+    np.testing.assert_array_equal(scene.sphere_materials, materials)
+    assert scene.sphere_centers.dtype == np.float32 and scene.sphere_materials.dtype == np.int32
+
+
+@pytest.mark.parametrize(("ring_cells", "threads"), [(1, 1), (7, 3), (1000, 2), (1 << 22, 1)])
+def test_the_field_does_not_depend_on_ring_size_or_threads(ring_cells: int, threads: int) -> None:
+    """Rings of 1 to 4 million cells, made on 1 to 3 threads: the same field, bit for bit (each
+    sphere's numbers are drawn at its rank, whatever ring or thread makes it)."""
+    plan = plan_field(30_000, 11, extent=90.0)
+    reference = field_scene(plan)
+    add_field_spheres(reference, plan)
+    scene = field_scene(plan)
+    add_field_spheres(scene, plan, ring_cells=ring_cells, threads=threads)
+    for name in ("sphere_centers", "sphere_radii", "sphere_materials"):
+        np.testing.assert_array_equal(getattr(scene, name), getattr(reference, name))
+
+
+def test_stable_order_equals_one_stable_sort() -> None:
+    """The two-pass sort of a ring's distances, on values with many exact ties (a grid's
+    squared distances) and on values spread over the whole range."""
+    rng = np.random.default_rng(5)
+    cells = rng.integers(-300, 300, (2, 50_000)) + 0.5
+    grid = (cells**2).sum(axis=0)
+    for values, low, high in (
+        (grid, grid.min(), grid.max() + 1),
+        (rng.uniform(3.0, 4.0, 20_000), 3.0, 4.0),
+        (np.full(100, 2.0), 2.0, 2.0 + 1e-9),
+    ):
+        np.testing.assert_array_equal(
+            _stable_order(values, low, high), np.argsort(values, kind="stable")
+        )
+
+
+def test_a_huge_count_is_refused_before_anything_is_made() -> None:
+    count = max(10**10, 10 * (available_memory() or 0) // SCENE_BYTES_PER_SPHERE)
+    started = time.perf_counter()
+    with pytest.raises(ValueError, match=r"count: .* spheres would need ~[\d.,]+ GB .* available"):
+        random_field(count)
+    assert time.perf_counter() - started < 1.0

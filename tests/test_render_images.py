@@ -6,7 +6,19 @@ import numpy as np
 import pytest
 import trimesh
 
-from embree_rt import Background, Camera, Checker, Floor, Material, PointLight, Scene, preset
+import embree_rt.geometry as geometry_module
+from embree_rt import (
+    Background,
+    Camera,
+    Checker,
+    Floor,
+    Material,
+    PointLight,
+    Scene,
+    preset,
+    random_field,
+)
+from embree_rt.embree import BVH
 from embree_rt.integrator import batch_ranges, render
 
 
@@ -181,3 +193,26 @@ def test_batches_tile_the_samples_in_whole_pixels(total, batch_size, spp, worker
     if workers > 1 and len(range(0, total, max(1, batch_size // spp) * spp)) > workers:
         # the last round is cut finer: its batches are at most about a third of a full one
         assert max(counts[-workers:]) <= max(counts) // 3 + spp
+
+
+def test_spheres_beyond_the_user_geometry_limit_go_in_as_point_spheres(monkeypatch) -> None:
+    """``sphere_kind`` below, at and above the limit, and SceneGeometry following it (the limit
+    lowered to 10 so that a 20-sphere scene crosses it)."""
+    limit = geometry_module.USER_GEOMETRY_MAX_SPHERES
+    assert geometry_module.sphere_kind(limit) == "user"
+    assert geometry_module.sphere_kind(limit + 1) == "point"
+    assert geometry_module.sphere_kind(5, "point") == "point"
+    assert geometry_module.sphere_kind(limit + 1, "mesh") == "mesh"
+    kinds = []
+    add_spheres = BVH.add_spheres
+
+    def recording_add_spheres(self, centers, radii, kind="user"):
+        kinds.append(kind)
+        return add_spheres(self, centers, radii, kind=kind)
+
+    monkeypatch.setattr(BVH, "add_spheres", recording_add_spheres)
+    scene = random_field(20, seed=3)
+    for limit, expected in ((100, "user"), (10, "point")):
+        monkeypatch.setattr(geometry_module, "USER_GEOMETRY_MAX_SPHERES", limit)
+        with geometry_module.SceneGeometry(scene):
+            assert kinds[-1] == expected

@@ -974,3 +974,33 @@ def test_assets_are_what_make_assets_makes_one_per_format(tmp_path: Path) -> Non
     # trio.glb's balls carry their own colors: three matte base-color materials.
     trio_materials = {scene.materials[p.material].color for p in scene.meshes[5:]}
     assert len(trio_materials) == 3
+
+
+# -- Scene.add_spheres ------------------------------------------------------------------------
+
+
+def test_add_spheres_copies_unless_told_to_take_the_arrays() -> None:
+    centers = np.array([[0.0, 1.0, 0.0], [2.0, 0.5, 0.0]], np.float32)
+    radii = np.array([1.0, 0.5], np.float32)
+    materials = np.array([0, 1], np.int32)
+    copied = Scene()
+    copied.add_spheres(centers, radii, materials)
+    taken = Scene()
+    taken.add_spheres(centers, radii, materials, copy=False)
+    for kept, given in zip(
+        (taken.sphere_centers, taken.sphere_radii, taken.sphere_materials),
+        (centers, radii, materials),
+        strict=True,
+    ):
+        assert np.shares_memory(kept, given)  # no copy of a hundred million spheres
+    assert not np.shares_memory(copied.sphere_centers, centers)
+    # Taken only into an empty scene: a second batch is appended as ever.
+    taken.add_spheres(centers + 5, radii, "glass", copy=False)
+    np.testing.assert_array_equal(taken.sphere_centers, np.concatenate([centers, centers + 5]))
+    assert taken.sphere_materials.tolist() == [0, 1, *[taken.material_index("glass")] * 2]
+
+
+def test_add_spheres_rejects_material_indices_beyond_int32() -> None:
+    """An int64 index 2**32 must not wrap around to material 0 on its way to int32."""
+    with pytest.raises(ValueError, match="index out of range"):
+        Scene().add_spheres([[0.0, 1.0, 0.0]], [1.0], np.array([2**32], np.int64))

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from embree_rt import budget
 from embree_rt.materials import PRESETS, preset
 from embree_rt.scene.model import Camera, PointLight, RenderSettings, Scene
 
@@ -110,6 +111,10 @@ def plan_field(
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise FieldParameterError("seed", f"must be a non-negative integer, got {seed!r}")
     count, seed = int(count), int(seed)
+    try:  # before any sphere is made
+        budget.require({"spheres": (budget.field_bytes(count), f"{count:,} spheres")})
+    except budget.MemoryBudgetError as error:
+        raise FieldParameterError("count", str(error)) from None
     hero_count = min(count, len(HEROES)) if heroes else 0
     small = count - hero_count
     clear_area = hero_count * math.pi  # times (HERO_RADIUS + HERO_CLEARANCE * spacing) ** 2

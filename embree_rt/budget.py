@@ -1,0 +1,123 @@
+"""Memory budgets: what a random field or a render will need, known before anything is allocated.
+
+An input that cannot fit (a hundred-billion-pixel image, ten billion spheres) is refused up front
+with one line saying what it needs and what the machine has, instead of failing deep inside NumPy
+or Embree. The constants are peak resident memory measured on this project's own code
+(``/usr/bin/time -v``, the growth between two sizes of the same command, so the interpreter's own
+~0.2 GB cancels out); they are estimates, good to well within a factor of two.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+# The scene model's sphere arrays: (3,) float32 centre, float32 radius, int32 material.
+SCENE_BYTES_PER_SPHERE = 20
+# Generating a random field: one ring of cells in flight a thread (candidates, sort, random
+# draws). On 2 threads, 2e6 spheres added 80 MB and 6e6 160 MB: 20 bytes a sphere and ~40 MB.
+FIELD_RING_BYTES = 20 << 20
+# Beyond the scene's arrays, per sphere, by how the spheres enter the BVH: Embree's BVH and
+# buffers, the sphere buffer, the hit labels. Whole `embree-rt random` commands at a 64x36 image,
+# 1e6 -> 1e7 spheres, grew by 148 (user geometry) and 71 (point spheres) bytes a sphere, the
+# scene's 20 included; instanced icospheres (``--spheres mesh``), 2e4 -> 2e5 spheres, by 1244.
+GEOMETRY_BYTES_PER_SPHERE = {"user": 128, "point": 51, "mesh": 1224}
+# Per pixel: the film's float64 sums (24 bytes), the float32 image and its transposed copy, the
+# tone mapping's float32 temporaries and the encoder's bytes. 1920x1080 -> 7680x4320 at 1 spp
+# grew by 75-87 bytes a pixel for a PNG (66 for a .npy).
+FILM_BYTES_PER_PIXEL = 88
+# Per camera sample in flight: the rays and hit records of the batches the workers hold (up to
+# three batches a worker). 1920x1080 at 1 spp, 2 workers: ~60 bytes a sample.
+BYTES_PER_SAMPLE_IN_FLIGHT = 100
+BATCHES_IN_FLIGHT_PER_WORKER = 3
+
+
+class MemoryBudgetError(ValueError):
+    """An input that would need more memory than the machine has available.
+
+    ``needs`` maps what needs memory (``"spheres"``, ``"image"``) to (bytes, description);
+    ``largest`` is the key of the biggest need, so a caller can name the input at fault.
+    """
+
+    def __init__(self, needs: Mapping[str, tuple[int, str]], available: int) -> None:
+        self.needs = dict(needs)
+        self.available = available
+        self.needed = sum(size for size, _ in self.needs.values())
+        self.largest = max(self.needs, key=lambda key: self.needs[key][0])
+        # Name only the needs that matter: a sphere's bytes beside a terabyte image are noise.
+        named = [text for size, text in self.needs.values() if size >= 0.05 * self.needed]
+        super().__init__(
+            f"{' and '.join(named)} would need ~{format_bytes(self.needed)} of memory, "
+            f"this machine has {format_bytes(available)} available"
+        )
+
+
+def format_bytes(size: float) -> str:
+    """``size`` bytes as GB with three significant digits (``"0.512 GB"``, ``"800 GB"``)."""
+    gigabytes = size / 1e9
+    return f"{gigabytes:,.0f} GB" if gigabytes >= 100 else f"{gigabytes:.3g} GB"
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation now: ``MemAvailable`` from /proc/meminfo
+    (what the kernel can hand out without swapping), else the free physical pages, else None
+    (unknown: nothing is refused)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def field_bytes(count: int) -> int:
+    """What generating a random field of ``count`` spheres on all cores (as ``random_field``
+    does) needs: its arrays and a ring in the making on each core."""
+    return count * SCENE_BYTES_PER_SPHERE + (os.cpu_count() or 1) * FIELD_RING_BYTES
+
+
+def geometry_bytes(count: int, kind: str) -> int:
+    """What building the BVH of ``count`` spheres needs beyond the scene's own arrays, the
+    spheres going in as ``kind`` ("user", "point" or "mesh": ``geometry.sphere_kind``)."""
+    return count * GEOMETRY_BYTES_PER_SPHERE[kind]
+
+
+def image_bytes(width: int, height: int, spp: int, batch_size: int, workers: int) -> int:
+    """What rendering a ``width`` x ``height`` image at ``spp`` samples per pixel needs: the film
+    and the image, and the batches of ``batch_size`` samples that ``workers`` hold at once."""
+    pixels = width * height
+    in_flight = min(pixels * spp, batch_size * BATCHES_IN_FLIGHT_PER_WORKER * workers)
+    return pixels * FILM_BYTES_PER_PIXEL + in_flight * BYTES_PER_SAMPLE_IN_FLIGHT
+
+
+def render_needs(
+    sphere_count: int,
+    kind: str,
+    width: int,
+    height: int,
+    spp: int,
+    batch_size: int,
+    workers: int,
+) -> dict[str, tuple[int, str]]:
+    """What a render needs beyond the scene itself, for ``require``: the BVH of
+    ``sphere_count`` spheres entered as ``kind``, and the image with its batches."""
+    return {
+        "spheres": (geometry_bytes(sphere_count, kind), f"the BVH of {sphere_count:,} spheres"),
+        "image": (
+            image_bytes(width, height, spp, batch_size, workers),
+            f"a {width}x{height} image at {spp} spp",
+        ),
+    }
+
+
+def require(needs: Mapping[str, tuple[int, str]]) -> None:
+    """Raise ``MemoryBudgetError`` when the ``needs`` (key -> (bytes, description)) add up to
+    more than the memory available now."""
+    available = available_memory()
+    if available is not None and sum(size for size, _ in needs.values()) > available:
+        raise MemoryBudgetError(needs, available)
