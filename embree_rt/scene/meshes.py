@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from embree_rt.materials import RGB
 from embree_rt.scene.errors import SceneError
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -48,3 +49,20 @@ def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Tr
                 file, key, f"{path}: a face indexes a vertex outside [0, {len(mesh.vertices)})"
             )
     return parts
+
+
+def mesh_base_color(mesh: trimesh.Trimesh) -> RGB | None:
+    """The mesh's base color as linear-ish RGB in [0, 1], or None when it has only the default."""
+    visual = mesh.visual
+    try:
+        if visual.kind == "texture" and hasattr(visual.material, "main_color"):
+            rgba = np.asarray(visual.material.main_color, np.float64)
+        elif visual.kind in ("face", "vertex"):
+            colors = visual.face_colors if visual.kind == "face" else visual.vertex_colors
+            rgba = np.asarray(colors, np.float64).mean(axis=0)
+        else:
+            return None
+    except Exception:
+        return None
+    rgb = rgba[:3] / 255.0
+    return (float(rgb[0]), float(rgb[1]), float(rgb[2]))

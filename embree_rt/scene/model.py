@@ -8,6 +8,8 @@ import numpy as np
 import trimesh
 
 from embree_rt.materials import PRESETS, RGB, Checker, Material
+from embree_rt.scene.meshes import mesh_base_color
+from embree_rt.scene.writer import save_scene
 
 Vec3 = tuple[float, float, float]
 
@@ -159,8 +161,6 @@ class Scene:
 
     def save(self, path) -> None:
         """Write this scene to a ``.toml`` or ``.json`` file (bulk data beside it)."""
-        from embree_rt.scene.writer import save_scene
-
         save_scene(self, path)
 
     def _base_color_material(self, mesh: trimesh.Trimesh) -> str:
@@ -171,20 +171,3 @@ class Scene:
         if name not in self.materials:
             self.materials[name] = Material(color=color)
         return name
-
-
-def mesh_base_color(mesh: trimesh.Trimesh) -> RGB | None:
-    """The mesh's base color as linear-ish RGB in [0, 1], or None when it has only the default."""
-    visual = mesh.visual
-    try:
-        if visual.kind == "texture" and hasattr(visual.material, "main_color"):
-            rgba = np.asarray(visual.material.main_color, np.float64)
-        elif visual.kind in ("face", "vertex"):
-            colors = visual.face_colors if visual.kind == "face" else visual.vertex_colors
-            rgba = np.asarray(colors, np.float64).mean(axis=0)
-        else:
-            return None
-    except Exception:
-        return None
-    rgb = rgba[:3] / 255.0
-    return (float(rgb[0]), float(rgb[1]), float(rgb[2]))

@@ -9,11 +9,14 @@ from __future__ import annotations
 import json
 from dataclasses import asdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from embree_rt.materials import PRESETS
-from embree_rt.scene.model import Scene
+
+if TYPE_CHECKING:  # the model imports the writer (Scene.save); the writer needs only the type
+    from embree_rt.scene.model import Scene
 
 
 def scene_document(scene: Scene, path: Path) -> dict:
