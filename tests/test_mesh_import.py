@@ -24,7 +24,7 @@ from tolerances import (
 )
 from trimesh.ray.ray_triangle import ray_triangle_id
 
-from embree_rt import load_scene
+from embree_rt import SceneError, load_scene
 from embree_rt.geometry import SceneGeometry
 
 FORMATS = ("obj", "ply", "stl", "off", "glb")
@@ -342,3 +342,62 @@ scale = 2.0
     np.testing.assert_allclose(
         hits.normal.T[hits.hit], [[0, 1, 0]] * int(hits.hit.sum()), atol=1e-5
     )
+
+
+# -- tiny and singular scales ----------------------------------------------------------------------
+
+
+def node_scaled_gltf(path: Path, node_scale) -> None:
+    """A glTF holding one box 100 units on a side under a node that scales it by
+    ``node_scale`` (a number or three), as many exporters write centimetre models."""
+    gltf = trimesh.Scene()
+    node = np.diag([*np.broadcast_to(np.asarray(node_scale, float), (3,)), 1.0])
+    gltf.add_geometry(trimesh.creation.box(extents=(100.0, 100.0, 100.0)), transform=node)
+    gltf.export(path)
+
+
+@pytest.mark.parametrize("scale", [0.01, 1e-4])
+def test_a_tiny_uniform_scale_on_a_node_scaled_gltf_loads_and_traces(
+    tmp_path: Path, scale: float
+) -> None:
+    node_scaled_gltf(tmp_path / "centimetres.glb", 0.01)
+    write(
+        tmp_path / "scene.toml",
+        f'floor = false\n[[meshes]]\nfile = "centimetres.glb"\nscale = {scale}\n',
+    )
+    scene = load_scene(tmp_path / "scene.toml")
+    (placed,) = scene.meshes
+    np.testing.assert_allclose(placed.transform, np.diag([0.01 * scale] * 3 + [1.0]), rtol=1e-12)
+    # The box is 100 · 0.01 · scale wide: a ray down the z axis from 1 unit away meets its
+    # front face at half that.
+    half = 50.0 * 0.01 * scale
+    # (3, 2) origins: on the axis, and beside the box
+    origins = np.array([[0.0, 0.0, 1.0], [2 * half, 0.0, 1.0]], np.float32).T
+    directions = np.tile(np.float32([[0.0], [0.0], [-1.0]]), (1, 2))
+    with SceneGeometry(scene) as geometry:
+        hits = geometry.intersect(origins, directions)
+    assert hits.hit.tolist() == [True, False]
+    assert_close(hits.t[:1], [1.0 - half], atol=position_atol(1.0))
+
+
+@pytest.mark.parametrize(
+    "entry, node_scale, key",
+    [
+        ("scale = [1.0, 1.0, 1e-9]", 1.0, "meshes[0].scale"),
+        ("transform = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1e-9, 0], [0, 0, 0, 1]]", 1.0,
+         "meshes[0].transform"),
+        # each flattens by 1e-4, well conditioned on its own; together by 1e-8
+        ("scale = [1.0, 1.0, 1e-4]", [1.0, 1.0, 1e-4], "meshes[0].scale"),
+        ("scale = 2.0", [1.0, 1.0, 1e-9], "meshes[0].file"),  # the file's own node
+    ],
+    ids=["scale", "transform", "scale with the node", "node"],
+)  # fmt: skip
+def test_a_singular_placement_names_the_key_that_makes_it(
+    tmp_path: Path, entry: str, node_scale, key: str
+) -> None:
+    node_scaled_gltf(tmp_path / "box.glb", node_scale)
+    write(tmp_path / "scene.toml", f'[[meshes]]\nfile = "box.glb"\n{entry}\n')
+    with pytest.raises(SceneError) as caught:
+        load_scene(tmp_path / "scene.toml")
+    assert str(caught.value).startswith(f"{tmp_path / 'scene.toml'}: {key}: ")
+    assert "must be invertible" in str(caught.value)
