@@ -25,6 +25,7 @@ from tolerances import (
 from trimesh.ray.ray_triangle import ray_triangle_id
 
 from embree_rt import SceneError, load_scene
+from embree_rt.embree import BVH
 from embree_rt.geometry import SceneGeometry
 
 FORMATS = ("obj", "ply", "stl", "off", "glb")
@@ -401,3 +402,41 @@ def test_a_singular_placement_names_the_key_that_makes_it(
         load_scene(tmp_path / "scene.toml")
     assert str(caught.value).startswith(f"{tmp_path / 'scene.toml'}: {key}: ")
     assert "must be invertible" in str(caught.value)
+
+
+PLACEMENTS = {  # scene-file entry -> the placement it asks for
+    "scale = 1e-4": np.diag([1e-4, 1e-4, 1e-4, 1.0]),
+    "scale = [1.0, 1.0, 1e-5]": np.diag([1.0, 1.0, 1e-5, 1.0]),
+    "scale = [1.0, 1.0, 1e-7]": np.diag([1.0, 1.0, 1e-7, 1.0]),
+    "scale = [1.0, 1.0, 1e-13]": np.diag([1.0, 1.0, 1e-13, 1.0]),
+    "scale = [1e3, 1e-3, 1.0]": np.diag([1e3, 1e-3, 1.0, 1.0]),
+    "transform = [[1e-5, 0, 0, 0], [0, 1e-5, 0, 0], [0, 0, 1e-5, 0], [0, 0, 0, 1]]": np.diag(
+        [1e-5, 1e-5, 1e-5, 1.0]
+    ),
+    "transform = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1e-7, 0], [0, 0, 0, 1]]": np.diag(
+        [1.0, 1.0, 1e-7, 1.0]
+    ),
+}
+
+
+@pytest.mark.parametrize("entry", sorted(PLACEMENTS))
+def test_a_placement_that_loads_also_builds(tmp_path: Path, entry: str) -> None:
+    """One rule for placements: the loader refuses exactly what the BVH would refuse."""
+    node_scaled_gltf(tmp_path / "box.glb", 0.01)
+    write(tmp_path / "scene.toml", f'[[meshes]]\nfile = "box.glb"\n{entry}\n')
+    world = PLACEMENTS[entry] @ np.diag([0.01, 0.01, 0.01, 1.0])
+    child = BVH()
+    child.add_triangles(trimesh.creation.box().vertices, trimesh.creation.box().faces)
+    child.commit()
+    with child, BVH() as top:
+        try:
+            top.add_instance(child, world)
+        except ValueError as refused:
+            assert "must be invertible" in str(refused)
+            with pytest.raises(SceneError, match="must be invertible"):
+                load_scene(tmp_path / "scene.toml")
+            return
+    scene = load_scene(tmp_path / "scene.toml")
+    np.testing.assert_allclose(scene.meshes[0].transform, world, rtol=1e-12)
+    with SceneGeometry(scene) as geometry:
+        assert geometry.instance_count == 1

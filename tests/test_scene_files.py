@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -791,6 +792,33 @@ def test_bad_input_is_a_scene_error_naming_file_and_key(tmp_path: Path, case: st
     assert str(error) == f"{path}: {key}: {error.problem}"
     assert words in error.problem
     assert "\n" not in str(error)
+
+
+# Sines of the angle between ``up`` and the viewing direction, either side of what the camera
+# accepts (1e-6): the loader once let 1e-7 through on the unnormalised vectors.
+UP_SINES = (0.0, 1e-9, 1e-7, 5e-7, 2e-6, 1e-5, 0.3)
+
+
+@pytest.mark.parametrize("sine", UP_SINES)
+def test_a_camera_that_loads_also_frames_an_image(tmp_path: Path, sine: float) -> None:
+    """One rule for the camera: the loader refuses exactly the cameras the renderer would."""
+    from embree_rt.camera import camera_frame
+
+    # Looking straight down from 5 units up, with ``up`` tilted off the vertical by ``sine``.
+    up = [sine * 3.0, -math.sqrt(1.0 - sine * sine) * 3.0, 0.0]  # any length: only the angle counts
+    path = tmp_path / "s.toml"
+    path.write_text(f"[camera]\nposition = [0, 5, 0]\nlook_at = [0, 0, 0]\nup = {up}\n")
+    try:
+        scene = load_scene(path)
+    except SceneError as error:
+        assert error.key == "camera.up" and "parallel" in error.problem
+        with pytest.raises(ValueError, match=r"camera\.up"):
+            camera_frame(Camera(position=(0, 5, 0), look_at=(0, 0, 0), up=tuple(up)), 8, 8)
+        assert sine < 1e-6
+    else:
+        frame = camera_frame(scene.camera, 8, 8)
+        assert np.isfinite([frame.u, frame.v, frame.w]).all()
+        assert sine >= 1e-6
 
 
 def test_the_mistake_is_found_before_any_heavy_work(

@@ -21,7 +21,15 @@ from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
 from embree_rt.scene.meshes import load_mesh_parts
-from embree_rt.scene.model import Background, Camera, Floor, PointLight, RenderSettings, Scene
+from embree_rt.scene.model import (
+    Background,
+    Camera,
+    Floor,
+    PointLight,
+    RenderSettings,
+    Scene,
+    camera_problem,
+)
 from embree_rt.scene.random_field import (
     FieldParameterError,
     FieldPlan,
@@ -194,14 +202,12 @@ class SceneReader:
             position=table.vector("position", current.position),
             look_at=table.vector("look_at", current.look_at),
             up=table.vector("up", current.up),
-            fov=table.number("fov", current.fov, low=0, high=180, low_open=True, high_open=True),
+            fov=table.number("fov", current.fov),
         )
-        view = np.subtract(camera.look_at, camera.position)
-        if np.linalg.norm(view) < 1e-9:
-            raise table.error("look_at", "must differ from camera.position")
-        if np.linalg.norm(np.cross(camera.up, view)) < 1e-9 * np.linalg.norm(view):
-            raise table.error("up", "must not be zero or parallel to the viewing direction")
         table.finish()
+        # The rule the renderer's camera follows, so that a scene which loads also renders.
+        if (problem := camera_problem(camera)) is not None:
+            raise table.error(*problem)
         return camera
 
     def _light(self, table: Table) -> PointLight:
