@@ -24,7 +24,7 @@ from tolerances import (
 )
 from trimesh.ray.ray_triangle import ray_triangle_id
 
-from embree_rt import SceneError, load_scene
+from embree_rt import Scene, SceneError, load_scene
 from embree_rt.embree import BVH
 from embree_rt.geometry import SceneGeometry
 
@@ -440,3 +440,55 @@ def test_a_placement_that_loads_also_builds(tmp_path: Path, entry: str) -> None:
     np.testing.assert_allclose(scene.meshes[0].transform, world, rtol=1e-12)
     with SceneGeometry(scene) as geometry:
         assert geometry.instance_count == 1
+
+
+# -- the Python API ------------------------------------------------------------------------------
+
+
+def test_add_mesh_takes_a_trimesh_scene_as_the_loader_does(tmp_path: Path) -> None:
+    """``Scene.add_mesh(trimesh.load("x.glb"))``: one placement per node, at the caller's
+    transform after the node's, exactly as a ``[[meshes]]`` entry of the same file."""
+    multi_node_gltf(tmp_path / "multi.glb")
+    write(
+        tmp_path / "scene.toml",
+        '[[meshes]]\nfile = "multi.glb"\ntranslate = [10.0, 0.0, -5.0]\nrotate = [0, 30, 0]\n',
+    )
+    from_file = load_scene(tmp_path / "scene.toml")
+    loaded = trimesh.load(tmp_path / "multi.glb", process=False)
+    assert isinstance(loaded, trimesh.Scene)
+    built = Scene()
+    placed = built.add_mesh(loaded, transform=placement((10.0, 0.0, -5.0), (0, 30, 0), 1.0))
+    assert placed == built.meshes and len(placed) == 3
+    for ours, theirs in zip(built.meshes, from_file.meshes, strict=True):
+        np.testing.assert_allclose(ours.transform, theirs.transform, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(ours.mesh.faces, theirs.mesh.faces)
+        np.testing.assert_array_equal(ours.mesh.vertices, theirs.mesh.vertices)
+        assert ours.material == theirs.material and ours.smooth == theirs.smooth
+    balls = [m.mesh for m in built.meshes if len(m.mesh.faces) != 12]  # the box has 12
+    assert len(balls) == 2 and balls[0] is balls[1]  # the reused ball: one BVH child
+    with SceneGeometry(built) as geometry:
+        assert geometry.instance_count == 3
+        assert len(geometry.mesh_face_offset) == 2
+
+
+@pytest.mark.parametrize(
+    "arguments, error, argument",
+    [
+        (("box.glb",), TypeError, "mesh"),
+        ((trimesh.creation.box().vertices,), TypeError, "mesh"),
+        ((trimesh.creation.box(), 3), TypeError, "material"),
+        ((trimesh.creation.box(), "gold"), ValueError, "undefined material 'gold'"),
+        ((trimesh.creation.box(), None, np.eye(3)), ValueError, "transform"),
+        ((trimesh.creation.box(), None, np.diag([1.0, 1.0, 0.0, 1.0])), ValueError, "transform"),
+        ((trimesh.creation.box(), None, None, "yes"), TypeError, "smooth"),
+        ((trimesh.Scene(),), ValueError, "mesh"),
+    ],
+    ids=["a path", "an array", "material 3", "unknown material", "3x3", "flat", "smooth", "empty"],
+)
+def test_add_mesh_rejects_what_it_cannot_place_before_adding_anything(
+    arguments, error: type, argument: str
+) -> None:
+    scene = Scene()
+    with pytest.raises(error, match=argument):
+        scene.add_mesh(*arguments)
+    assert scene.meshes == [] and set(scene.materials) == set(Scene().materials)

@@ -143,6 +143,8 @@ class SceneReader:
             if entry.path not in parts:  # one load per file: its placements share the Trimesh
                 parts[entry.path] = load_mesh_parts(entry.path, self.path, entry.key)
             for _, node_transform in parts[entry.path]:
+                if np.array_equal(node_transform, np.eye(4)):
+                    continue  # the placement alone, checked when it was read
                 if (problem := affine_problem(node_transform)) is not None:
                     raise SceneError(self.path, entry.key, f"{entry.path}: a node {problem}")
                 if (problem := affine_problem(entry.placement @ node_transform)) is not None:

@@ -9,8 +9,9 @@ import numpy as np
 import trimesh
 
 from embree_rt.materials import PRESETS, RGB, Checker, Material
-from embree_rt.scene.meshes import mesh_base_color
+from embree_rt.scene.meshes import mesh_base_color, mesh_parts
 from embree_rt.scene.writer import save_scene
+from embree_rt.transforms import as_affine
 
 Vec3 = tuple[float, float, float]
 
@@ -187,23 +188,50 @@ class Scene:
 
     def add_mesh(
         self,
-        mesh: trimesh.Trimesh,
+        mesh: trimesh.Trimesh | trimesh.Scene,
         material: str | None = None,
         transform: np.ndarray | None = None,
         smooth: bool = True,
-    ) -> MeshObject:
-        """Place ``mesh``; with no material name, a matte material of the mesh's base color."""
-        if material is None:
-            material = self._base_color_material(mesh)
-        self.material_index(material)
-        obj = MeshObject(
-            mesh=mesh,
-            transform=np.eye(4) if transform is None else np.asarray(transform, np.float64),
-            material=material,
-            smooth=smooth,
-        )
-        self.meshes.append(obj)
-        return obj
+    ) -> list[MeshObject]:
+        """Place ``mesh`` by the (4, 4) ``transform`` (default: where it is) and return the
+        placements made.
+
+        A Trimesh is one placement. A trimesh.Scene (what ``trimesh.load`` gives for a glTF) is
+        one placement per node holding a triangle mesh, at ``transform`` @ the node's own
+        transform, as a scene file's ``[[meshes]]`` entry does. With no material name, each mesh
+        gets a matte material of its own base color. Raises TypeError for an argument of the
+        wrong type and ValueError for a transform that cannot place geometry
+        (``embree_rt.transforms``) or a mesh without triangles, before anything is added.
+        """
+        if not isinstance(mesh, trimesh.Trimesh | trimesh.Scene):
+            raise TypeError(
+                f"mesh: expected a trimesh.Trimesh or trimesh.Scene, got {type(mesh).__name__}"
+            )
+        if material is not None and not isinstance(material, str):
+            raise TypeError(f"material: expected a material name, got {type(material).__name__}")
+        if not isinstance(smooth, bool | np.bool_):
+            raise TypeError(f"smooth: expected True or False, got {type(smooth).__name__}")
+        placement = np.eye(4) if transform is None else as_affine(transform, "transform")
+        if material is not None:
+            self.material_index(material)
+        parts = mesh_parts(mesh)
+        if not parts:
+            raise ValueError(f"mesh: the {type(mesh).__name__} holds no triangles")
+        placements = [placement @ node_transform for _, node_transform in parts]
+        if isinstance(mesh, trimesh.Scene):  # a node's transform may spoil the placement
+            for matrix in placements:
+                as_affine(matrix, "transform")
+        added = [
+            MeshObject(
+                mesh=part,
+                transform=matrix,
+                material=self._base_color_material(part) if material is None else material,
+                smooth=bool(smooth),
+            )
+            for (part, _), matrix in zip(parts, placements, strict=True)
+        ]
+        self.meshes.extend(added)
+        return added
 
     def save(self, path) -> None:
         """Write this scene to a ``.toml`` or ``.json`` file (bulk data beside it)."""
