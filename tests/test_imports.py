@@ -91,3 +91,29 @@ def test_no_module_imports_itself_through_others() -> None:
     assert "embree_rt.scene.writer" in graph["embree_rt.scene.model"]  # Scene.save
     cycles = import_cycles(graph)
     assert not cycles, "import circles: " + "; ".join(" -> ".join(cycle) for cycle in cycles)
+
+
+def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path) -> None:
+    """trimesh (and SciPy's spatial modules behind it) take about a second to import: a scene of
+    spheres loads, renders and saves without them, so ``embree-rt random`` starts that much
+    sooner. Run in a fresh interpreter, as the command is."""
+    import subprocess
+    import sys
+
+    script = (
+        "import sys\n"
+        "import embree_rt.cli\n"
+        f"code = embree_rt.cli.main(['random', '--count', '50', '--width', '16', '--height', '9',"
+        f" '--spp', '1', '--quiet', '-o', {str(tmp_path / 'out.png')!r}])\n"
+        "code = code or embree_rt.cli.main(['render', 'scenes/three_spheres.toml', '--width', '16',"
+        f" '--height', '9', '--spp', '1', '--quiet', '-o', {str(tmp_path / 'three.png')!r}])\n"
+        "assert code == 0, code\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'trimesh'))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=PACKAGE.parent, capture_output=True, text=True,
+        check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
+    assert (tmp_path / "out.png").is_file() and (tmp_path / "three.png").is_file()

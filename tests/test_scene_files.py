@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 
 import embree_rt
 import embree_rt.scene.loader as loader_module
+import embree_rt.scene.meshes as meshes_module
 from embree_rt import (
     PRESETS,
     Background,
@@ -865,15 +866,18 @@ def test_the_mistake_is_found_before_any_heavy_work(
     or sphere array is read; a bad mesh is reported before the field is generated."""
     calls: list[str] = []
 
-    def spy(name, function):
+    def spy(module, name):
+        function = getattr(module, name)
+
         def wrapper(*args, **kwargs):
             calls.append(name)
             return function(*args, **kwargs)
 
-        monkeypatch.setattr(loader_module, name, wrapper)
+        monkeypatch.setattr(module, name, wrapper)
 
-    spy("add_field_spheres", loader_module.add_field_spheres)
-    spy("load_mesh_parts", loader_module.load_mesh_parts)
+    spy(loader_module, "add_field_spheres")
+    # The loader imports mesh loading when a scene has meshes (trimesh takes ~1 s to import).
+    spy(meshes_module, "load_mesh_parts")
     trimesh.creation.box().export(tmp_path / "box.ply")
     np.savez(tmp_path / "bulk.npz", centers=np.zeros((2, 3)), radii=np.ones(2))
     head = '[random_field]\ncount = 1000000\n[[sphere_arrays]]\nfile = "bulk.npz"\n' + MESH

@@ -15,12 +15,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
 
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
-from embree_rt.scene.meshes import load_mesh_parts
 from embree_rt.scene.model import (
     Background,
     Camera,
@@ -141,6 +139,8 @@ class SceneReader:
         parts: dict[Path, list] = {}
         for entry in self.meshes:
             if entry.path not in parts:  # one load per file: its placements share the Trimesh
+                from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
+
                 parts[entry.path] = load_mesh_parts(entry.path, self.path, entry.key)
             for _, node_transform in parts[entry.path]:
                 if np.array_equal(node_transform, np.eye(4)):
@@ -321,7 +321,9 @@ class SceneReader:
         else:
             scale = (table.number("scale", 1.0, low=0, low_open=True),) * 3
         # Static-axes XYZ Euler angles: R = Rz @ Ry @ Rx.
-        rotation = trimesh.transformations.euler_matrix(*(math.radians(a) for a in rotate), "sxyz")
+        from trimesh.transformations import euler_matrix
+
+        rotation = euler_matrix(*(math.radians(a) for a in rotate), "sxyz")
         matrix = rotation @ np.diag([*scale, 1.0])
         matrix[:3, 3] = translate
         # Rotation and translation keep a matrix invertible: only the scale can spoil it.

@@ -5,14 +5,16 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from embree_rt.materials import PRESETS, RGB, Checker, Material
-from embree_rt.scene.meshes import mesh_material, mesh_parts
 from embree_rt.scene.writer import save_scene
 from embree_rt.transforms import as_affine
+
+if TYPE_CHECKING:  # trimesh (and SciPy behind it) loads in ~1 s: only scenes with meshes pay
+    import trimesh
 
 Vec3 = tuple[float, float, float]
 
@@ -210,6 +212,10 @@ class Scene:
         argument of the wrong type and ValueError for a transform that cannot place geometry
         (``embree_rt.transforms``) or a mesh without triangles, before anything is added.
         """
+        import trimesh
+
+        from embree_rt.scene.meshes import mesh_parts
+
         if not isinstance(mesh, trimesh.Trimesh | trimesh.Scene):
             raise TypeError(
                 f"mesh: expected a trimesh.Trimesh or trimesh.Scene, got {type(mesh).__name__}"
@@ -248,6 +254,8 @@ class Scene:
     def _mesh_material(self, mesh: trimesh.Trimesh) -> str:
         """The name of the material the mesh's own file gives it (added to ``materials`` under a
         name made of its values), or "matte" when the file gives none."""
+        from embree_rt.scene.meshes import mesh_material
+
         material = mesh_material(mesh)
         if material is None:
             return "matte"
