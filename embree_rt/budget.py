@@ -13,6 +13,8 @@ import os
 from collections.abc import Mapping
 from pathlib import Path
 
+from embree_rt.errors import InputError
+
 # The scene model's sphere arrays: (3,) float32 centre, float32 radius, int32 material.
 SCENE_BYTES_PER_SPHERE = 20
 # Generating a random field: one ring of cells in flight a thread (candidates, sort, random
@@ -33,8 +35,9 @@ BYTES_PER_SAMPLE_IN_FLIGHT = 100
 BATCHES_IN_FLIGHT_PER_WORKER = 3
 
 
-class MemoryBudgetError(ValueError):
-    """An input that would need more memory than the machine has available.
+class MemoryBudgetError(InputError, ValueError):
+    """An input that would need more memory than the machine has available: a request the
+    machine cannot meet, so bad input (the command names the flag or key at fault).
 
     ``needs`` maps what needs memory (``"spheres"``, ``"image"``) to (bytes, description);
     ``largest`` is the key of the biggest need, so a caller can name the input at fault.

@@ -9,11 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from embree_rt.sampling import uniform
-from embree_rt.scene.model import Camera
-
-# sin of the smallest angle allowed between ``up`` and the viewing direction: below it the
-# camera's roll is decided by rounding error.
-_MIN_UP_SINE = 1e-6
+from embree_rt.scene.model import Camera, camera_problem
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,16 +32,6 @@ class CameraFrame:
     height: int
 
 
-def _vector(value: object, name: str) -> np.ndarray:
-    try:
-        array = np.asarray(value, np.float64)
-    except (TypeError, ValueError):
-        array = None
-    if array is None or array.shape != (3,) or not np.isfinite(array).all():
-        raise ValueError(f"camera.{name}: expected three finite numbers, got {value!r}")
-    return array
-
-
 def _positive_integer(value: object, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
         raise ValueError(f"{name}: must be a positive integer, got {value!r}")
@@ -62,30 +48,16 @@ def camera_frame(camera: Camera, width: int, height: int) -> CameraFrame:
     """
     width = _positive_integer(width, "width")
     height = _positive_integer(height, "height")
-    try:
-        fov = float(camera.fov)
-    except (TypeError, ValueError):
-        raise ValueError(f"camera.fov: expected a number of degrees, got {camera.fov!r}") from None
-    if not (math.isfinite(fov) and 0.0 < fov < 180.0):
-        raise ValueError(f"camera.fov: must lie strictly between 0 and 180 degrees, got {fov}")
-    position = _vector(camera.position, "position")
-    look_at = _vector(camera.look_at, "look_at")
-    up = _vector(camera.up, "up")
-
+    if (problem := camera_problem(camera)) is not None:
+        field, text = problem
+        raise ValueError(f"camera.{field}: {text}")
+    fov = float(camera.fov)
+    position, look_at, up = (
+        np.asarray(vector, np.float64) for vector in (camera.position, camera.look_at, camera.up)
+    )
     view = position - look_at
-    distance = np.linalg.norm(view)
-    if not distance > 0.0:
-        raise ValueError(f"camera.look_at: must differ from camera.position, both are {look_at}")
-    w = view / distance
-    up_length = np.linalg.norm(up)
-    if not up_length > 0.0:
-        raise ValueError("camera.up: must not be the zero vector")
-    side = np.cross(up / up_length, w)
-    if np.linalg.norm(side) < _MIN_UP_SINE:
-        raise ValueError(
-            f"camera.up: {camera.up} is parallel to the viewing direction "
-            f"(from {camera.position} to {camera.look_at})"
-        )
+    w = view / np.linalg.norm(view)
+    side = np.cross(up / np.linalg.norm(up), w)
     u = side / np.linalg.norm(side)
     v = np.cross(w, u)
     half_height = math.tan(math.radians(fov) / 2.0)

@@ -5,16 +5,56 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import traceback
 from pathlib import Path
 
 import numpy as np
 
+from embree_rt.errors import InputError
+
+EXIT_BUG = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
+BUG_REPORT = (
+    "embree-rt: internal error: this is a bug in embree_rt, not a problem with your input; "
+    "please report it with the traceback above"
+)
 
 
-class UsageError(Exception):
+class UsageError(InputError):
     """Bad input found by the command itself; printed as one line, exit code 2."""
+
+
+def _check_output(path: str) -> None:
+    """The image path's checks (``film.check_output_path``) as bad input: every ValueError it
+    raises is about the path, its RuntimeError about OpenEXR missing for ``.exr``."""
+    from embree_rt.film import check_output_path
+
+    try:
+        check_output_path(path)
+    except (ValueError, RuntimeError) as error:
+        raise UsageError(str(error)) from None
+
+
+def _check_library() -> None:
+    """Load Embree before any work: a library that is missing, or that ``EMBREE_RT_LIBRARY``
+    names wrongly, is the installation's problem, not a bug (later Embree errors are bugs)."""
+    from embree_rt.embree import EmbreeError
+    from embree_rt.embree.library import load_library
+
+    try:
+        load_library()
+    except EmbreeError as error:
+        raise UsageError(str(error)) from None
+
+
+def _writing(path: str, write) -> None:
+    """Run ``write()``, which writes the user's file ``path``: an OSError there (no space, no
+    permission) is the user's to fix."""
+    try:
+        write()
+    except OSError as error:
+        raise UsageError(f"{path}: cannot write: {error.strerror or error}") from None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -100,6 +140,7 @@ def _render_and_save(scene, args: argparse.Namespace, made: tuple[str, float]) -
     from embree_rt.integrator import RenderStats, render
 
     _apply_overrides(scene, args)
+    _check_library()
     settings = scene.render
     stats = RenderStats()
     started = time.perf_counter()
@@ -113,7 +154,8 @@ def _render_and_save(scene, args: argparse.Namespace, made: tuple[str, float]) -
         )
     except MemoryBudgetError as error:
         raise UsageError(f"{_memory_key(error, args)}: {error}") from None
-    save_image(image, args.output)
+    _check_output(args.output)  # again: the directory may have gone during the render
+    _writing(args.output, lambda: save_image(image, args.output))
     elapsed = made[1] + time.perf_counter() - started
     if not args.quiet:
         print(
@@ -126,10 +168,9 @@ def _render_and_save(scene, args: argparse.Namespace, made: tuple[str, float]) -
 
 
 def _command_render(args: argparse.Namespace) -> None:
-    from embree_rt.film import check_output_path
     from embree_rt.scene import load_scene
 
-    check_output_path(args.output)
+    _check_output(args.output)
     started = time.perf_counter()
     scene = load_scene(args.scene)
     _render_and_save(scene, args, ("load", time.perf_counter() - started))
@@ -167,7 +208,6 @@ def _require_memory_for_field(count: int, settings, args: argparse.Namespace) ->
 
 
 def _command_random(args: argparse.Namespace) -> None:
-    from embree_rt.film import check_output_path
     from embree_rt.scene.random_field import (
         FieldParameterError,
         add_field_spheres,
@@ -175,7 +215,7 @@ def _command_random(args: argparse.Namespace) -> None:
         plan_field,
     )
 
-    check_output_path(args.output)
+    _check_output(args.output)
     if args.save_scene is not None:
         target = Path(args.save_scene)
         if target.suffix.lower() not in (".toml", ".json"):
@@ -185,7 +225,7 @@ def _command_random(args: argparse.Namespace) -> None:
     started = time.perf_counter()
     try:
         plan = plan_field(args.count, seed=0 if args.seed is None else args.seed)
-    except FieldParameterError as error:
+    except FieldParameterError as error:  # the flags' values, refused by the field itself
         raise UsageError(f"--{error.name}: {error.problem}") from None
     scene = field_scene(plan)
     _apply_overrides(scene, args)
@@ -193,7 +233,7 @@ def _command_random(args: argparse.Namespace) -> None:
     add_field_spheres(scene, plan)
     generate_s = time.perf_counter() - started
     if args.save_scene is not None:
-        scene.save(args.save_scene)
+        _writing(args.save_scene, lambda: scene.save(args.save_scene))
     _render_and_save(scene, args, ("generate", generate_s))
 
 
@@ -202,6 +242,7 @@ def _command_info(args: argparse.Namespace) -> None:
     from embree_rt.scene import load_scene
 
     scene = load_scene(args.scene)
+    _check_library()
     started = time.perf_counter()
     with SceneGeometry(scene, spheres=args.spheres) as geometry:
         build_s = time.perf_counter() - started
@@ -265,9 +306,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("embree-rt: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (UsageError, ValueError, OSError, RuntimeError) as error:
+    except InputError as error:  # scene files, flags, the user's files: one line
         print(f"embree-rt: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except Exception:  # anything else is ours to fix: say so, with what a report needs
+        traceback.print_exc()
+        print(BUG_REPORT, file=sys.stderr)
+        return EXIT_BUG
     return 0
 
 

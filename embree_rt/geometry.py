@@ -11,13 +11,16 @@ quad in the BVH would cut the horizon and lose float32 precision far away.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from embree_rt.embree import BVH, HitLabels
 from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_normals
 from embree_rt.scene.model import Scene
+
+if TYPE_CHECKING:
+    import trimesh
 
 SPHERE_MODES = ("analytic", "point", "mesh")
 # Above this many spheres, "analytic" spheres are Embree's own point spheres. Measured on the
@@ -166,7 +169,9 @@ class SceneGeometry:
         self.instance_count += 1
 
     def _add_tessellated_spheres(self) -> None:
-        unit = trimesh.creation.icosphere(subdivisions=ICOSPHERE_SUBDIVISIONS, radius=1.0)
+        from trimesh.creation import icosphere
+
+        unit = icosphere(subdivisions=ICOSPHERE_SUBDIVISIONS, radius=1.0)
         child = self._child(unit)
         transform = np.eye(4)
         for center, radius, material in zip(

@@ -8,12 +8,16 @@ Everything here works on whole batches of hits, in the mesh's own space.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from embree_rt.columns import scatter
-from embree_rt.scene.meshes import MeshSurface, mesh_surface
 from embree_rt.scene.model import MeshObject
 from embree_rt.textures import sample_bilinear
+
+if TYPE_CHECKING:  # mesh import loads trimesh (~1 s): only scenes with meshes pay for it
+    from embree_rt.scene.meshes import MeshSurface
 
 # A vertex normal shorter than this has no direction to give: trimesh's average of the faces
 # around a vertex cancels to zero (or to rounding residue, 1e-30) where back-to-back faces meet.
@@ -119,6 +123,8 @@ class MeshColors:
                 continue
             key = id(placement.mesh)
             if key not in index_of_mesh:
+                from embree_rt.scene.meshes import mesh_surface  # loads trimesh: meshes only
+
                 surface = mesh_surface(placement.mesh)
                 index_of_mesh[key] = len(self._surfaces) if surface is not None else -1
                 if surface is not None:

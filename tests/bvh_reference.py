@@ -17,11 +17,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+from tolerances import assert_close, ray_t_atol
 from trimesh.ray.ray_triangle import ray_triangle_id
 
 # Relative size of the band, around every decision boundary, inside which float32 Embree and a
 # float64 reference may legitimately disagree.
 AMBIGUITY = 1e-5
+# Barycentric distance from a triangle's edge within which a hit may go to the neighbour, at the
+# least (a grazing ray's u, v are less certain: see ``ReferenceHits.uv_atol``).
+EDGE_BAND = 1e-4
 
 
 @dataclass
@@ -31,7 +35,11 @@ class ReferenceHits:
     ``t`` (n,) float64, inf on a miss; ``prim_id`` (n,) int64, -1 on a miss; ``normal`` (n, 3)
     float64 unit outward/front-face normal, zero on a miss; ``u``, ``v`` (n,) float64 barycentric
     coordinates of triangle hits (NaN elsewhere); ``ambiguous`` (n,) bool, rays whose answer float32
-    rounding may change (leave them out of exact comparisons).
+    rounding may change (leave them out of exact comparisons). ``t_atol`` (n,) float64: how far a
+    float32 t may lie from ``t`` on any ISA (``tolerances.ray_t_atol``: ulps of the coordinates
+    of the ray and the primitive, over the cosine of incidence), 0 on a miss; ``uv_atol`` (n,):
+    the same for u and v (the hit point's tolerance over the triangle's height), NaN off
+    triangles.
     """
 
     t: np.ndarray
@@ -40,6 +48,8 @@ class ReferenceHits:
     u: np.ndarray
     v: np.ndarray
     ambiguous: np.ndarray
+    t_atol: np.ndarray
+    uv_atol: np.ndarray
 
     @property
     def hit(self) -> np.ndarray:
@@ -173,6 +183,12 @@ def sphere_hits(
     point = o[hit] + t[hit, None] * d[hit]
     normal[hit] = (point - c[spheres[pairs]]) / r[spheres[pairs], None]
 
+    t_atol = np.zeros(n)
+    t_atol[hit] = ray_t_atol(
+        o[hit], d[hit], np.abs(c[spheres[pairs]]).max(axis=1) + r[spheres[pairs]],
+        normals=normal[hit],
+    )  # fmt: skip
+
     ambiguous = np.zeros(n, bool)
     # two surfaces at nearly the same distance: either may be reported
     tie_slack = np.zeros(n)
@@ -189,7 +205,7 @@ def sphere_hits(
         )
         ambiguous[rays[on_bound]] = True
     nan = np.full(n, np.nan)
-    return ReferenceHits(t, prim, normal, nan, nan.copy(), ambiguous)
+    return ReferenceHits(t, prim, normal, nan, nan.copy(), ambiguous, t_atol, nan.copy())
 
 
 # -- triangles ------------------------------------------------------------------------------------
@@ -207,6 +223,16 @@ class _BruteForceTree:
         box = np.asarray(box)
         overlap = (self.lower <= box[3:]).all(axis=1) & (self.upper >= box[:3]).all(axis=1)
         return np.flatnonzero(overlap)
+
+
+def triangle_heights(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(k,) float64 smallest height of each of the ``faces`` (k, 3) into ``vertices`` (m, 3):
+    twice the area over the longest edge. A point error e moves barycentrics by up to e / height.
+    """
+    tri = np.asarray(vertices, np.float64)[np.asarray(faces)]
+    edges = tri[:, [1, 2, 0]] - tri
+    doubled_area = np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
+    return doubled_area / np.linalg.norm(edges, axis=2).max(axis=1)
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -255,6 +281,14 @@ def triangle_hits(
     slack_t = AMBIGUITY * scale / np.linalg.norm(d[rays], axis=1)
     in_window = (t_pair >= near[rays]) & (t_pair <= far[rays])
     best, t_first, t_second = _nearest_per_ray(rays[in_window], t_pair[in_window], n)
+    # How well float32 knows each pair's t, and u, v (the point's tolerance over the height).
+    pair_t_atol = ray_t_atol(
+        o[rays], d[rays], np.abs(triangles[tri]).max(axis=(1, 2)),
+        normals=face_normals(vertices, faces[tri]),
+    )  # fmt: skip
+    pair_uv_atol = (
+        pair_t_atol * np.linalg.norm(d[rays], axis=1) / triangle_heights(vertices, faces[tri])
+    )
 
     hit = best >= 0
     pairs = np.flatnonzero(in_window)[best[hit]]
@@ -266,18 +300,27 @@ def triangle_hits(
     v = np.full(n, np.nan)
     u[hit] = weights[pairs, 1]
     v[hit] = weights[pairs, 2]
+    t_atol = np.zeros(n)
+    t_atol[hit] = pair_t_atol[pairs]
+    uv_atol = np.full(n, np.nan)
+    uv_atol[hit] = pair_uv_atol[pairs]
 
     ambiguous = np.zeros(n, bool)
     tie_slack = np.zeros(n)
     tie_slack[hit] = slack_t[pairs]
     ambiguous[hit] |= t_second[hit] - t_first[hit] <= tie_slack[hit]
-    # on an edge or a vertex: the neighbour (or nothing, at the mesh border) may be reported
-    on_edge = weights.min(axis=1, initial=1.0) <= 1e-4 if len(tri) else np.zeros(0, bool)
+    # on an edge or a vertex (within float32's reach of u, v): the neighbour (or nothing, at the
+    # mesh border) may be reported
+    on_edge = (
+        weights.min(axis=1, initial=1.0) <= np.maximum(EDGE_BAND, pair_uv_atol)
+        if len(tri)
+        else np.zeros(0, bool)
+    )
     reach_t = np.where(np.isfinite(t_first[rays]), t_first[rays], far[rays]) + slack_t
     ambiguous[rays[on_edge & (t_pair <= reach_t)]] = True
     on_bound = (np.abs(t_pair - near[rays]) <= slack_t) | (np.abs(t_pair - far[rays]) <= slack_t)
     ambiguous[rays[on_bound]] = True
-    return ReferenceHits(t_first, prim, normal, u, v, ambiguous)
+    return ReferenceHits(t_first, prim, normal, u, v, ambiguous, t_atol, uv_atol)
 
 
 @dataclass
@@ -383,8 +426,9 @@ def random_soup(rng: np.random.Generator, count: int, extent: float = 4.0):
 # -- comparing the BVH's answer with a reference --------------------------------------------------
 
 
-def near_triangle_edge(u: np.ndarray, v: np.ndarray, tolerance: float = 1e-4) -> np.ndarray:
-    """(n,) bool: barycentric (u, v) within ``tolerance`` of a triangle's edge."""
+def near_triangle_edge(u: np.ndarray, v: np.ndarray, tolerance=EDGE_BAND) -> np.ndarray:
+    """(n,) bool: barycentric (u, v) within ``tolerance`` (a number or (n,)) of a triangle's
+    edge."""
     u = np.asarray(u, np.float64)
     v = np.asarray(v, np.float64)
     return np.minimum(np.minimum(u, v), 1.0 - u - v) <= tolerance
@@ -410,7 +454,6 @@ def assert_hits_match(
     triangles: bool = False,
     t_rtol: float = 1e-4,
     normal_cos: float = 0.9999,
-    uv_atol: float = 1e-4,
     max_ambiguous: float = 0.01,
     min_hit_fraction: float = 0.2,
     min_miss_fraction: float = 0.0,
@@ -418,8 +461,9 @@ def assert_hits_match(
     """Assert the BVH's ``hits`` equal the reference on every ray the reference is sure about.
 
     ``geom_id`` / ``inst_id``: what a hit must report, scalar or (n,) per ray (used where the
-    reference hits). For ``triangles``, barycentric u, v are compared too, and rays the BVH hits
-    on a triangle edge count as undecidable (trimesh drops near-misses it cannot see). Also
+    reference hits). t must lie within ``t_rtol`` of the reference plus its per-ray ``t_atol``.
+    For ``triangles``, barycentric u, v are compared too (within ``ref.uv_atol``), and rays the
+    BVH hits on a triangle edge count as undecidable (trimesh drops near-misses it cannot see). Also
     checks that the comparison is not vacuous: few undecidable rays, enough hits (and misses).
     Returns the (n,) bool mask of rays that were compared.
     """
@@ -427,7 +471,8 @@ def assert_hits_match(
     ours_hit = np.isfinite(hits.t)
     sure = ~ref.ambiguous
     if triangles:
-        sure &= ~(ours_hit & near_triangle_edge(hits.u, hits.v))
+        band = np.maximum(EDGE_BAND, np.nan_to_num(ref.uv_atol, nan=0.0))
+        sure &= ~(ours_hit & near_triangle_edge(hits.u, hits.v, band))
     assert sure.mean() >= 1.0 - max_ambiguous, f"only {sure.mean():.4f} of rays decidable"
     assert (ref.hit & sure).mean() >= min_hit_fraction, "too few reference hits to be a test"
     assert (~ref.hit & sure).mean() >= min_miss_fraction, "too few reference misses"
@@ -443,9 +488,10 @@ def assert_hits_match(
     for name in ("geom_id", "prim_id", "inst_id"):
         assert np.all(getattr(hits, name)[missed] == -1), f"{name} must be -1 on a miss"
 
-    np.testing.assert_allclose(
-        hits.t[both], ref.t[both], rtol=t_rtol, atol=1e-6, err_msg="t differs from the reference"
-    )
+    assert_close(
+        hits.t[both], ref.t[both], atol=ref.t_atol[both], rtol=t_rtol,
+        err_msg="t differs from the reference",
+    )  # fmt: skip
     bad_prim = both & (hits.prim_id != ref.prim_id)
     assert not bad_prim.any(), (
         f"{bad_prim.sum()} rays report another primitive, e.g. rays {_first_rays(bad_prim)}: "
@@ -464,6 +510,7 @@ def assert_hits_match(
         f"reference {ref.normal[both][bad_normal][:3].tolist()}"
     )
     if triangles:
-        np.testing.assert_allclose(hits.u[both], ref.u[both], atol=uv_atol, err_msg="u differs")
-        np.testing.assert_allclose(hits.v[both], ref.v[both], atol=uv_atol, err_msg="v differs")
+        uv_atol = ref.uv_atol[both]
+        assert_close(hits.u[both], ref.u[both], atol=uv_atol, rtol=0.0, err_msg="u differs")
+        assert_close(hits.v[both], ref.v[both], atol=uv_atol, rtol=0.0, err_msg="v differs")
     return sure

@@ -4,7 +4,8 @@ Bad input: exit code 2, exactly one stderr line ``embree-rt: error: ...`` naming
 key, no traceback, no output file, an existing image left byte for byte. Good input: PNG and NPY
 images of the asked size (the PNG is the NPY tone-mapped by Reinhard and gamma 2.2, computed here),
 ``info`` counts that match the scene file, a million-sphere field, ``--save-scene``, and Ctrl-C
-(exit 130, old image intact, no temp file left).
+(exit 130, old image intact, no temp file left). A bug (any other exception, whatever its type):
+a traceback, a request for a report, exit code 1.
 """
 
 from __future__ import annotations
@@ -340,7 +341,10 @@ def test_save_scene_writes_the_generated_field(tmp_path: Path) -> None:
     reference = random_field(500, seed=0)  # the command's default seed
     np.testing.assert_array_equal(loaded.sphere_centers, reference.sphere_centers)
     np.testing.assert_array_equal(loaded.sphere_radii, reference.sphere_radii)
-    # rendering the saved file gives the very image the random command rendered
+    # Rendering the saved file gives the very image the random command rendered. Bitwise, on
+    # any ISA: both renders run on one machine from the same float32 spheres and the same
+    # camera, lights and materials (TOML writes every float so that it reads back exactly),
+    # so they perform the same float operations on the same values.
     assert run_cli("render", str(saved), "-o", str(second), *TINY, "--quiet").returncode == 0
     np.testing.assert_array_equal(np.load(first), np.load(second))
 
@@ -405,6 +409,121 @@ def test_ctrl_c_exits_130_and_keeps_the_old_image(tmp_path: Path) -> None:
     assert "Traceback" not in stderr
     assert output.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png"]  # no .out.png.* temp file
+
+
+# -- bad input or a bug: which is which -----------------------------------------------------------
+
+
+def _one_sphere_scene(folder: Path) -> Path:
+    scene = folder / "scene.toml"
+    scene.write_text(SPHERE, encoding="utf-8")
+    return scene
+
+
+def _fail_with(error: BaseException):
+    def fail(*args, **kwargs):
+        raise error
+
+    return fail
+
+
+# What a bug deep inside embree_rt may raise; none of it is the user's to fix.
+BUGS = {
+    "ValueError": ValueError("operands could not be broadcast together"),
+    "RuntimeError": RuntimeError("Embree failed in rtcCommitScene: invalid argument"),
+    "OSError": OSError(5, "Input/output error"),
+    "KeyError": KeyError("pixel"),
+    "TypeError": TypeError("unsupported operand"),
+}
+# Where each command meets the bug: (command line, module attribute to break).
+BROKEN_STAGES = {
+    "render": (["render", "{scene}", "-o", "{out}"], "embree_rt.integrator.render"),
+    "random": (["random", "--count", "5", "-o", "{out}"], "embree_rt.integrator.render"),
+    "random field": (["random", "--count", "5", "-o", "{out}"], "embree_rt.scene.random_field"),
+    "info": (["info", "{scene}"], "embree_rt.geometry.SceneGeometry"),
+}
+
+
+@pytest.mark.parametrize("stage", sorted(BROKEN_STAGES))
+@pytest.mark.parametrize("bug", sorted(BUGS))
+def test_a_bug_is_reported_as_a_bug_exit_1_not_as_bad_input(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys, stage: str, bug: str
+) -> None:
+    from embree_rt import cli
+
+    line, target = BROKEN_STAGES[stage]
+    monkeypatch.setattr(target, _fail_with(BUGS[bug]))
+    out = tmp_path / "out.png"
+    values = {"scene": str(_one_sphere_scene(tmp_path)), "out": str(out)}
+    argv = [part.format(**values) for part in line]
+    code = cli.main([*argv, *([*TINY, "--quiet"] if argv[0] != "info" else [])])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_BUG == 1, err
+    assert "Traceback (most recent call last)" in err and f"{bug}: " in err
+    assert err.splitlines()[-1] == cli.BUG_REPORT
+    assert "embree-rt: error:" not in err
+    assert not out.exists()
+
+
+def test_a_failed_write_of_the_image_is_bad_input(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    import errno
+
+    from embree_rt import cli, film
+
+    monkeypatch.setitem(film.WRITERS, ".png", _fail_with(OSError(errno.ENOSPC, "No space left")))
+    out = tmp_path / "out.png"
+    code = cli.main(["render", str(_one_sphere_scene(tmp_path)), "-o", str(out), *TINY, "--quiet"])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_BAD_INPUT
+    assert err == f"embree-rt: error: {out}: cannot write: No space left\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]  # no image, no temp file
+
+
+def test_a_failed_write_of_the_saved_scene_is_bad_input(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    from embree_rt import Scene, cli
+
+    monkeypatch.setattr(Scene, "save", _fail_with(PermissionError(13, "Permission denied")))
+    saved, out = tmp_path / "field.toml", tmp_path / "out.png"
+    code = cli.main(
+        ["random", "--count", "5", "--save-scene", str(saved), "-o", str(out), *TINY, "--quiet"]
+    )
+    assert code == cli.EXIT_BAD_INPUT
+    assert (
+        capsys.readouterr().err == f"embree-rt: error: {saved}: cannot write: Permission denied\n"
+    )
+    assert not out.exists()
+
+
+def test_a_field_the_flags_ask_for_but_cannot_have_is_bad_input(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    from embree_rt import cli
+    from embree_rt.scene.random_field import FieldParameterError
+
+    refusal = FieldParameterError("count", "needs 80 GB, the machine has 8")
+    monkeypatch.setattr("embree_rt.scene.random_field", _fail_with(refusal))
+    out = tmp_path / "out.png"
+    code = cli.main(["random", "--count", "5", "-o", str(out), *TINY, "--quiet"])
+    assert code == cli.EXIT_BAD_INPUT
+    assert capsys.readouterr().err == "embree-rt: error: --count: needs 80 GB, the machine has 8\n"
+
+
+def test_an_embree_library_that_is_not_there_is_bad_input(tmp_path: Path) -> None:
+    out = tmp_path / "out.png"
+    result = subprocess.run(
+        [sys.executable, "-m", "embree_rt", "random", "--count", "5", "-o", str(out), *TINY],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+        env={**os.environ, "EMBREE_RT_LIBRARY": str(tmp_path / "libembree4.so.4")},
+    )
+    assert_one_line_error(result, ["EMBREE_RT_LIBRARY", "libembree4.so.4", "no such file"])
+    assert not out.exists()
 
 
 def test_the_summary_line_splits_the_time(tmp_path: Path) -> None:

@@ -14,9 +14,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from tolerances import (
+    RTOL32,
+    assert_close,
+    assert_vectors_close,
+    coordinate_scale,
+    position_atol,
+    ray_t_atol,
+)
 from trimesh.ray.ray_triangle import ray_triangle_id
 
-from embree_rt import load_scene
+from embree_rt import Scene, SceneError, load_scene
+from embree_rt.embree import BVH
 from embree_rt.geometry import SceneGeometry
 
 FORMATS = ("obj", "ply", "stl", "off", "glb")
@@ -176,13 +185,19 @@ scale = {list(scale)}
     with SceneGeometry(scene) as geometry:
         hits = geometry.intersect(origins.T, directions.T)
     np.testing.assert_array_equal(hits.hit, np.isfinite(reference_t))
-    np.testing.assert_allclose(hits.t[aimed], reference_t[aimed], rtol=1e-5, atol=1e-5)
+    # float32 against float64: t to rounding of the coordinates over the cosine of incidence
+    outward = world.face_normals[reference_face[aimed]]
+    t_atol = ray_t_atol(
+        origins[aimed], directions[aimed], coordinate_scale(world.vertices), normals=outward
+    )
+    assert_close(hits.t[aimed], reference_t[aimed], atol=t_atol, rtol=RTOL32)
     expected_position = origins[aimed] + directions[aimed] * reference_t[aimed, None]
-    np.testing.assert_allclose(hits.position.T[aimed], expected_position, atol=1e-4)
+    assert_vectors_close(
+        hits.position.T[aimed], expected_position, atol=t_atol + position_atol(origins)
+    )
     assert (hits.material[aimed] == scene.material_index("mirror")).all()
     # flat shading: the normal is the world face normal of the face the reference hit (a ray
     # on a shared edge may report the neighbour, whose normal is still within a few degrees)
-    outward = world.face_normals[reference_face[aimed]]
     cosine = np.einsum("ij,ij->i", hits.normal.T[aimed], outward)
     assert (cosine > 0.9).all()
     assert np.mean(cosine > 1 - 1e-5) > 0.95
@@ -323,7 +338,157 @@ scale = 2.0
         hits = geometry.intersect(origins.T.astype(np.float32), directions.T.astype(np.float32))
     expected_t = 10.0 - columns[:, 2]
     np.testing.assert_array_equal(hits.hit, np.isfinite(expected_t))
-    np.testing.assert_allclose(hits.t[hits.hit], expected_t[hits.hit], atol=1e-5)
+    hit = hits.hit
+    assert_close(hits.t[hit], expected_t[hit], atol=ray_t_atol(origins[hit], directions[hit], 10.0))
     np.testing.assert_allclose(
         hits.normal.T[hits.hit], [[0, 1, 0]] * int(hits.hit.sum()), atol=1e-5
     )
+
+
+# -- tiny and singular scales ----------------------------------------------------------------------
+
+
+def node_scaled_gltf(path: Path, node_scale) -> None:
+    """A glTF holding one box 100 units on a side under a node that scales it by
+    ``node_scale`` (a number or three), as many exporters write centimetre models."""
+    gltf = trimesh.Scene()
+    node = np.diag([*np.broadcast_to(np.asarray(node_scale, float), (3,)), 1.0])
+    gltf.add_geometry(trimesh.creation.box(extents=(100.0, 100.0, 100.0)), transform=node)
+    gltf.export(path)
+
+
+@pytest.mark.parametrize("scale", [0.01, 1e-4])
+def test_a_tiny_uniform_scale_on_a_node_scaled_gltf_loads_and_traces(
+    tmp_path: Path, scale: float
+) -> None:
+    node_scaled_gltf(tmp_path / "centimetres.glb", 0.01)
+    write(
+        tmp_path / "scene.toml",
+        f'floor = false\n[[meshes]]\nfile = "centimetres.glb"\nscale = {scale}\n',
+    )
+    scene = load_scene(tmp_path / "scene.toml")
+    (placed,) = scene.meshes
+    np.testing.assert_allclose(placed.transform, np.diag([0.01 * scale] * 3 + [1.0]), rtol=1e-12)
+    # The box is 100 · 0.01 · scale wide: a ray down the z axis from 1 unit away meets its
+    # front face at half that.
+    half = 50.0 * 0.01 * scale
+    # (3, 2) origins: on the axis, and beside the box
+    origins = np.array([[0.0, 0.0, 1.0], [2 * half, 0.0, 1.0]], np.float32).T
+    directions = np.tile(np.float32([[0.0], [0.0], [-1.0]]), (1, 2))
+    with SceneGeometry(scene) as geometry:
+        hits = geometry.intersect(origins, directions)
+    assert hits.hit.tolist() == [True, False]
+    assert_close(hits.t[:1], [1.0 - half], atol=position_atol(1.0))
+
+
+@pytest.mark.parametrize(
+    "entry, node_scale, key",
+    [
+        ("scale = [1.0, 1.0, 1e-9]", 1.0, "meshes[0].scale"),
+        ("transform = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1e-9, 0], [0, 0, 0, 1]]", 1.0,
+         "meshes[0].transform"),
+        # each flattens by 1e-4, well conditioned on its own; together by 1e-8
+        ("scale = [1.0, 1.0, 1e-4]", [1.0, 1.0, 1e-4], "meshes[0].scale"),
+        ("scale = 2.0", [1.0, 1.0, 1e-9], "meshes[0].file"),  # the file's own node
+    ],
+    ids=["scale", "transform", "scale with the node", "node"],
+)  # fmt: skip
+def test_a_singular_placement_names_the_key_that_makes_it(
+    tmp_path: Path, entry: str, node_scale, key: str
+) -> None:
+    node_scaled_gltf(tmp_path / "box.glb", node_scale)
+    write(tmp_path / "scene.toml", f'[[meshes]]\nfile = "box.glb"\n{entry}\n')
+    with pytest.raises(SceneError) as caught:
+        load_scene(tmp_path / "scene.toml")
+    assert str(caught.value).startswith(f"{tmp_path / 'scene.toml'}: {key}: ")
+    assert "must be invertible" in str(caught.value)
+
+
+PLACEMENTS = {  # scene-file entry -> the placement it asks for
+    "scale = 1e-4": np.diag([1e-4, 1e-4, 1e-4, 1.0]),
+    "scale = [1.0, 1.0, 1e-5]": np.diag([1.0, 1.0, 1e-5, 1.0]),
+    "scale = [1.0, 1.0, 1e-7]": np.diag([1.0, 1.0, 1e-7, 1.0]),
+    "scale = [1.0, 1.0, 1e-13]": np.diag([1.0, 1.0, 1e-13, 1.0]),
+    "scale = [1e3, 1e-3, 1.0]": np.diag([1e3, 1e-3, 1.0, 1.0]),
+    "transform = [[1e-5, 0, 0, 0], [0, 1e-5, 0, 0], [0, 0, 1e-5, 0], [0, 0, 0, 1]]": np.diag(
+        [1e-5, 1e-5, 1e-5, 1.0]
+    ),
+    "transform = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1e-7, 0], [0, 0, 0, 1]]": np.diag(
+        [1.0, 1.0, 1e-7, 1.0]
+    ),
+}
+
+
+@pytest.mark.parametrize("entry", sorted(PLACEMENTS))
+def test_a_placement_that_loads_also_builds(tmp_path: Path, entry: str) -> None:
+    """One rule for placements: the loader refuses exactly what the BVH would refuse."""
+    node_scaled_gltf(tmp_path / "box.glb", 0.01)
+    write(tmp_path / "scene.toml", f'[[meshes]]\nfile = "box.glb"\n{entry}\n')
+    world = PLACEMENTS[entry] @ np.diag([0.01, 0.01, 0.01, 1.0])
+    child = BVH()
+    child.add_triangles(trimesh.creation.box().vertices, trimesh.creation.box().faces)
+    child.commit()
+    with child, BVH() as top:
+        try:
+            top.add_instance(child, world)
+        except ValueError as refused:
+            assert "must be invertible" in str(refused)
+            with pytest.raises(SceneError, match="must be invertible"):
+                load_scene(tmp_path / "scene.toml")
+            return
+    scene = load_scene(tmp_path / "scene.toml")
+    np.testing.assert_allclose(scene.meshes[0].transform, world, rtol=1e-12)
+    with SceneGeometry(scene) as geometry:
+        assert geometry.instance_count == 1
+
+
+# -- the Python API ------------------------------------------------------------------------------
+
+
+def test_add_mesh_takes_a_trimesh_scene_as_the_loader_does(tmp_path: Path) -> None:
+    """``Scene.add_mesh(trimesh.load("x.glb"))``: one placement per node, at the caller's
+    transform after the node's, exactly as a ``[[meshes]]`` entry of the same file."""
+    multi_node_gltf(tmp_path / "multi.glb")
+    write(
+        tmp_path / "scene.toml",
+        '[[meshes]]\nfile = "multi.glb"\ntranslate = [10.0, 0.0, -5.0]\nrotate = [0, 30, 0]\n',
+    )
+    from_file = load_scene(tmp_path / "scene.toml")
+    loaded = trimesh.load(tmp_path / "multi.glb", process=False)
+    assert isinstance(loaded, trimesh.Scene)
+    built = Scene()
+    placed = built.add_mesh(loaded, transform=placement((10.0, 0.0, -5.0), (0, 30, 0), 1.0))
+    assert placed == built.meshes and len(placed) == 3
+    for ours, theirs in zip(built.meshes, from_file.meshes, strict=True):
+        np.testing.assert_allclose(ours.transform, theirs.transform, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(ours.mesh.faces, theirs.mesh.faces)
+        np.testing.assert_array_equal(ours.mesh.vertices, theirs.mesh.vertices)
+        assert ours.material == theirs.material and ours.smooth == theirs.smooth
+    balls = [m.mesh for m in built.meshes if len(m.mesh.faces) != 12]  # the box has 12
+    assert len(balls) == 2 and balls[0] is balls[1]  # the reused ball: one BVH child
+    with SceneGeometry(built) as geometry:
+        assert geometry.instance_count == 3
+        assert len(geometry.mesh_face_offset) == 2
+
+
+@pytest.mark.parametrize(
+    "arguments, error, argument",
+    [
+        (("box.glb",), TypeError, "mesh"),
+        ((trimesh.creation.box().vertices,), TypeError, "mesh"),
+        ((trimesh.creation.box(), 3), TypeError, "material"),
+        ((trimesh.creation.box(), "gold"), ValueError, "undefined material 'gold'"),
+        ((trimesh.creation.box(), None, np.eye(3)), ValueError, "transform"),
+        ((trimesh.creation.box(), None, np.diag([1.0, 1.0, 0.0, 1.0])), ValueError, "transform"),
+        ((trimesh.creation.box(), None, None, "yes"), TypeError, "smooth"),
+        ((trimesh.Scene(),), ValueError, "mesh"),
+    ],
+    ids=["a path", "an array", "material 3", "unknown material", "3x3", "flat", "smooth", "empty"],
+)
+def test_add_mesh_rejects_what_it_cannot_place_before_adding_anything(
+    arguments, error: type, argument: str
+) -> None:
+    scene = Scene()
+    with pytest.raises(error, match=argument):
+        scene.add_mesh(*arguments)
+    assert scene.meshes == [] and set(scene.materials) == set(Scene().materials)

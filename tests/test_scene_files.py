@@ -5,18 +5,22 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
+import re
 import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+import tomli_w
 import trimesh
 from scene_compare import assert_same_scene, in_frame, sharing
 from scipy.spatial.transform import Rotation
 
 import embree_rt
 import embree_rt.scene.loader as loader_module
+import embree_rt.scene.meshes as meshes_module
 from embree_rt import (
     PRESETS,
     Background,
@@ -279,6 +283,41 @@ def test_save_then_load_gives_the_same_scene(tmp_path: Path, suffix: str, floor:
     bulk = np.load(tmp_path / "saved.spheres.npz", allow_pickle=False)
     assert len(bulk["radii"]) == len(scene.sphere_radii)
     assert len(list(tmp_path.glob("saved.mesh*.ply"))) == 2  # one file per distinct mesh
+
+
+@pytest.mark.parametrize("suffix", [".toml", ".json"])
+def test_a_saved_scene_writes_vectors_inline_as_a_person_would(tmp_path: Path, suffix: str) -> None:
+    scene = Scene(camera=Camera(position=(0.0, 1.6, 6.5), look_at=(0.0, 0.8, 0.0), fov=45.0))
+    scene.lights = [PointLight((4.0, 6.0, 4.0), (1.0, 0.9, 0.8)), PointLight((-5.0, 4.0, 2.0))]
+    scene.add_material("odd", Material(color=(0.1, 0.2, 0.3), specular=0.4, metallic=True))
+    scene.add_sphere((0.0, 1.0, 0.0), 1.0, "odd")
+    torus = trimesh.creation.torus(0.6, 0.2, major_sections=16, minor_sections=8)
+    for angle in range(0, 360, 60):  # one mesh, six placements
+        matrix = trimesh.transformations.rotation_matrix(np.radians(angle), (0, 1, 0))
+        matrix[:3, 3] = (3 * np.cos(np.radians(angle)), 0.2, 3 * np.sin(np.radians(angle)))
+        scene.add_mesh(torus, "odd", matrix)
+    scene.add_mesh(torus, "odd", np.eye(4))
+    path = tmp_path / f"saved{suffix}"
+    scene.save(path)
+    text = path.read_text(encoding="utf-8")
+    lines = [line.strip() for line in text.splitlines()]
+    if suffix == ".toml":
+        camera = ["position = [0.0, 1.6, 6.5]", "look_at = [0.0, 0.8, 0.0]", "up = [0.0, 1.0, 0.0]"]
+        assert "\n".join(["[camera]", *camera]) in text
+        assert "[0.0, 0.0, 0.0, 1.0]," in lines  # a 4x4 transform: one row a line
+        written = tomllib.loads(text)
+    else:
+        assert '"position": [0.0, 1.6, 6.5],' in lines
+        written = json.loads(text)
+    # No number stands on a line of its own, so the file is under half as long as the
+    # one-number-a-line layout of the same document (tomli-w's, or json.dumps(indent=2)'s),
+    # and it reads back exactly.
+    number = re.compile(r"-?\d+(\.\d+)?(e-?\d+)?,?")
+    assert not [line for line in lines if number.fullmatch(line)]
+    spread = tomli_w.dumps(written) if suffix == ".toml" else json.dumps(written, indent=2)
+    assert len(lines) < 0.5 * len(spread.splitlines())
+    assert max(len(line) for line in text.splitlines()) <= 100
+    assert_same_scene(load_scene(path), scene, mesh_atol=1e-6)
 
 
 def test_save_of_an_empty_scene_round_trips(tmp_path: Path) -> None:
@@ -793,6 +832,33 @@ def test_bad_input_is_a_scene_error_naming_file_and_key(tmp_path: Path, case: st
     assert "\n" not in str(error)
 
 
+# Sines of the angle between ``up`` and the viewing direction, either side of what the camera
+# accepts (1e-6): the loader once let 1e-7 through on the unnormalised vectors.
+UP_SINES = (0.0, 1e-9, 1e-7, 5e-7, 2e-6, 1e-5, 0.3)
+
+
+@pytest.mark.parametrize("sine", UP_SINES)
+def test_a_camera_that_loads_also_frames_an_image(tmp_path: Path, sine: float) -> None:
+    """One rule for the camera: the loader refuses exactly the cameras the renderer would."""
+    from embree_rt.camera import camera_frame
+
+    # Looking straight down from 5 units up, with ``up`` tilted off the vertical by ``sine``.
+    up = [sine * 3.0, -math.sqrt(1.0 - sine * sine) * 3.0, 0.0]  # any length: only the angle counts
+    path = tmp_path / "s.toml"
+    path.write_text(f"[camera]\nposition = [0, 5, 0]\nlook_at = [0, 0, 0]\nup = {up}\n")
+    try:
+        scene = load_scene(path)
+    except SceneError as error:
+        assert error.key == "camera.up" and "parallel" in error.problem
+        with pytest.raises(ValueError, match=r"camera\.up"):
+            camera_frame(Camera(position=(0, 5, 0), look_at=(0, 0, 0), up=tuple(up)), 8, 8)
+        assert sine < 1e-6
+    else:
+        frame = camera_frame(scene.camera, 8, 8)
+        assert np.isfinite([frame.u, frame.v, frame.w]).all()
+        assert sine >= 1e-6
+
+
 def test_the_mistake_is_found_before_any_heavy_work(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -800,15 +866,18 @@ def test_the_mistake_is_found_before_any_heavy_work(
     or sphere array is read; a bad mesh is reported before the field is generated."""
     calls: list[str] = []
 
-    def spy(name, function):
+    def spy(module, name):
+        function = getattr(module, name)
+
         def wrapper(*args, **kwargs):
             calls.append(name)
             return function(*args, **kwargs)
 
-        monkeypatch.setattr(loader_module, name, wrapper)
+        monkeypatch.setattr(module, name, wrapper)
 
-    spy("add_field_spheres", loader_module.add_field_spheres)
-    spy("load_mesh_parts", loader_module.load_mesh_parts)
+    spy(loader_module, "add_field_spheres")
+    # The loader imports mesh loading when a scene has meshes (trimesh takes ~1 s to import).
+    spy(meshes_module, "load_mesh_parts")
     trimesh.creation.box().export(tmp_path / "box.ply")
     np.savez(tmp_path / "bulk.npz", centers=np.zeros((2, 3)), radii=np.ones(2))
     head = '[random_field]\ncount = 1000000\n[[sphere_arrays]]\nfile = "bulk.npz"\n' + MESH

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from embree_rt.transforms import as_affine
+
 
 def _first_bad_row(bad: np.ndarray) -> int:
     return int(np.flatnonzero(bad)[0])
@@ -58,17 +60,9 @@ def as_triangle_indices(values: np.ndarray, name: str, vertex_count: int) -> np.
 
 
 def as_transform(values: np.ndarray, name: str) -> np.ndarray:
-    """``values`` as a (4, 4) float64 invertible affine matrix (last row 0, 0, 0, 1)."""
-    matrix = np.asarray(values, dtype=np.float64)
-    if matrix.shape != (4, 4):
-        raise ValueError(f"{name}: expected shape (4, 4), got {matrix.shape}")
-    if not np.isfinite(matrix).all():
-        raise ValueError(f"{name}: contains NaN or inf")
-    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
-        raise ValueError(f"{name}: last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
-    if abs(np.linalg.det(matrix[:3, :3])) < 1e-12:
-        raise ValueError(f"{name}: the linear part is singular")
-    return matrix
+    """``values`` as a (4, 4) float64 invertible affine matrix (last row 0, 0, 0, 1), by the rule
+    every placement in embree_rt follows (``embree_rt.transforms``)."""
+    return as_affine(values, name)
 
 
 def as_ray_bounds(

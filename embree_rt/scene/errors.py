@@ -5,9 +5,12 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 
+from embree_rt.errors import InputError
 
-class SceneError(ValueError):
-    """A problem with a scene file. ``key`` is a dotted path such as ``spheres[3].radius``."""
+
+class SceneError(InputError, ValueError):
+    """A problem with a scene file (bad input, and a ValueError to the Python API). ``key`` is a
+    dotted path such as ``spheres[3].radius``."""
 
     def __init__(self, file: object, key: str, problem: str) -> None:
         self.file = str(file)

@@ -15,13 +15,19 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
 
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
-from embree_rt.scene.meshes import load_mesh_parts
-from embree_rt.scene.model import Background, Camera, Floor, PointLight, RenderSettings, Scene
+from embree_rt.scene.model import (
+    Background,
+    Camera,
+    Floor,
+    PointLight,
+    RenderSettings,
+    Scene,
+    camera_problem,
+)
 from embree_rt.scene.random_field import (
     FieldParameterError,
     FieldPlan,
@@ -29,6 +35,7 @@ from embree_rt.scene.random_field import (
     field_scene,
     plan_field,
 )
+from embree_rt.transforms import affine_problem
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -87,6 +94,7 @@ class _MeshEntry:
     material: str | None
     smooth: bool
     placement: np.ndarray
+    placement_key: str  # the key that sets how the placement scales: transform or scale
 
 
 class SceneReader:
@@ -131,7 +139,18 @@ class SceneReader:
         parts: dict[Path, list] = {}
         for entry in self.meshes:
             if entry.path not in parts:  # one load per file: its placements share the Trimesh
+                from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
+
                 parts[entry.path] = load_mesh_parts(entry.path, self.path, entry.key)
+            for _, node_transform in parts[entry.path]:
+                if np.array_equal(node_transform, np.eye(4)):
+                    continue  # the placement alone, checked when it was read
+                if (problem := affine_problem(node_transform)) is not None:
+                    raise SceneError(self.path, entry.key, f"{entry.path}: a node {problem}")
+                if (problem := affine_problem(entry.placement @ node_transform)) is not None:
+                    raise SceneError(
+                        self.path, entry.placement_key, f"with the file's node transforms {problem}"
+                    )
         # Step 3: build.
         if self.field is not None:
             add_field_spheres(scene, self.field)
@@ -185,14 +204,12 @@ class SceneReader:
             position=table.vector("position", current.position),
             look_at=table.vector("look_at", current.look_at),
             up=table.vector("up", current.up),
-            fov=table.number("fov", current.fov, low=0, high=180, low_open=True, high_open=True),
+            fov=table.number("fov", current.fov),
         )
-        view = np.subtract(camera.look_at, camera.position)
-        if np.linalg.norm(view) < 1e-9:
-            raise table.error("look_at", "must differ from camera.position")
-        if np.linalg.norm(np.cross(camera.up, view)) < 1e-9 * np.linalg.norm(view):
-            raise table.error("up", "must not be zero or parallel to the viewing direction")
         table.finish()
+        # The rule the renderer's camera follows, so that a scene which loads also renders.
+        if (problem := camera_problem(camera)) is not None:
+            raise table.error(*problem)
         return camera
 
     def _light(self, table: Table) -> PointLight:
@@ -280,6 +297,7 @@ class SceneReader:
             material=self._material_name(table, None),
             smooth=table.boolean("smooth", True),
             placement=self._placement(table),
+            placement_key=table.key("transform" if table.has("transform") else "scale"),
         )
         table.finish()
         return entry
@@ -290,18 +308,10 @@ class SceneReader:
             for name in ("translate", "rotate", "scale"):
                 if table.has(name):
                     raise table.error(name, "give either transform or translate/rotate/scale")
-            try:
-                matrix = np.asarray(table.raw("transform"), dtype=np.float64)
-            except (TypeError, ValueError):
-                raise table.error("transform", "expected a 4x4 list of numbers") from None
-            if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
-                raise table.error("transform", "expected a 4x4 list of finite numbers")
-            if (
-                not np.allclose(matrix[3], [0, 0, 0, 1])
-                or abs(np.linalg.det(matrix[:3, :3])) < 1e-12
-            ):
-                raise table.error("transform", "must be an invertible affine matrix")
-            return matrix
+            matrix = table.raw("transform")
+            if (problem := affine_problem(matrix)) is not None:
+                raise table.error("transform", problem)
+            return np.asarray(matrix, np.float64)
         translate = table.vector("translate", (0.0, 0.0, 0.0))
         rotate = table.vector("rotate", (0.0, 0.0, 0.0))
         if isinstance(table.raw("scale"), list | tuple):
@@ -311,9 +321,14 @@ class SceneReader:
         else:
             scale = (table.number("scale", 1.0, low=0, low_open=True),) * 3
         # Static-axes XYZ Euler angles: R = Rz @ Ry @ Rx.
-        rotation = trimesh.transformations.euler_matrix(*(math.radians(a) for a in rotate), "sxyz")
+        from trimesh.transformations import euler_matrix
+
+        rotation = euler_matrix(*(math.radians(a) for a in rotate), "sxyz")
         matrix = rotation @ np.diag([*scale, 1.0])
         matrix[:3, 3] = translate
+        # Rotation and translation keep a matrix invertible: only the scale can spoil it.
+        if (problem := affine_problem(matrix)) is not None:
+            raise table.error("scale", f"{problem}, from {list(scale)}")
         return matrix
 
     # -- files --------------------------------------------------------------------------------

@@ -17,6 +17,25 @@ from embree_rt.textures import texels_from_image
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
 
+def mesh_parts(
+    loaded: trimesh.Trimesh | trimesh.Scene,
+) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
+    """The triangle meshes in ``loaded``, each with its (4, 4) float64 transform to the
+    scene's space: a Trimesh with the identity, or a trimesh.Scene's nodes that hold a Trimesh,
+    with the node's world transform (a mesh under several nodes appears once per node, as the
+    same object). Meshes without a face, points and paths are left out."""
+    if isinstance(loaded, trimesh.Trimesh):
+        parts = [(loaded, np.eye(4))]
+    else:
+        parts = []
+        for node in loaded.graph.nodes_geometry:
+            transform, geometry_name = loaded.graph[node]
+            geometry = loaded.geometry[geometry_name]
+            if isinstance(geometry, trimesh.Trimesh):
+                parts.append((geometry, np.asarray(transform, np.float64)))
+    return [(mesh, transform) for mesh, transform in parts if len(mesh.faces)]
+
+
 def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
     """The meshes in ``path`` with their (4, 4) float64 node transforms (identity for a plain
     mesh; a multi-node glTF keeps one part per node). Errors name the scene ``file`` and ``key``."""
@@ -30,16 +49,7 @@ def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Tr
         loaded = trimesh.load(str(path), process=False)
     except Exception as error:  # trimesh raises many kinds for a file it cannot parse
         raise SceneError(file, key, f"{path}: cannot read mesh: {error}") from None
-    parts: list[tuple[trimesh.Trimesh, np.ndarray]] = []
-    if isinstance(loaded, trimesh.Scene):
-        for node in loaded.graph.nodes_geometry:
-            transform, geometry_name = loaded.graph[node]
-            geometry = loaded.geometry[geometry_name]
-            if isinstance(geometry, trimesh.Trimesh):
-                parts.append((geometry, np.asarray(transform, np.float64)))
-    elif isinstance(loaded, trimesh.Trimesh):
-        parts.append((loaded, np.eye(4)))
-    parts = [(mesh, transform) for mesh, transform in parts if len(mesh.faces)]
+    parts = mesh_parts(loaded) if isinstance(loaded, trimesh.Trimesh | trimesh.Scene) else []
     if not parts:
         raise SceneError(file, key, f"{path}: the mesh has no triangles")
     for mesh, _ in parts:

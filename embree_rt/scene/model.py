@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from embree_rt.materials import PRESETS, RGB, Checker, Material
-from embree_rt.scene.meshes import mesh_material
+from embree_rt.scene.writer import save_scene
+from embree_rt.transforms import as_affine
+
+if TYPE_CHECKING:  # trimesh (and SciPy behind it) loads in ~1 s: only scenes with meshes pay
+    import trimesh
 
 Vec3 = tuple[float, float, float]
 
@@ -22,6 +27,51 @@ class Camera:
     look_at: Vec3 = (0.0, 0.0, 0.0)
     up: Vec3 = (0.0, 1.0, 0.0)
     fov: float = 45.0
+
+
+# sin of the smallest angle allowed between a camera's ``up`` and its viewing direction: below
+# it the camera's roll is decided by rounding error.
+MIN_UP_SINE = 1e-6
+
+
+def camera_problem(camera: Camera) -> tuple[str, str] | None:
+    """What keeps ``camera`` from defining an image, as (field, problem), or None if nothing.
+
+    The one rule for a camera, followed by scene files and by ``camera.camera_frame``: ``fov``
+    a number of degrees strictly between 0 and 180; ``position``, ``look_at`` and ``up`` three
+    finite numbers each; ``look_at`` apart from ``position``; ``up`` not zero and at least
+    ``MIN_UP_SINE`` (sine of the angle) away from the viewing direction.
+    """
+    try:
+        fov = float(camera.fov)
+    except (TypeError, ValueError):
+        return "fov", f"expected a number of degrees, got {camera.fov!r}"
+    if not (math.isfinite(fov) and 0.0 < fov < 180.0):
+        return "fov", f"must be > 0 and < 180 degrees, got {fov:g}"
+    vectors = {}
+    for name in ("position", "look_at", "up"):
+        value = getattr(camera, name)
+        try:
+            vector = np.asarray(value, np.float64)
+        except (TypeError, ValueError):
+            vector = None
+        if vector is None or vector.shape != (3,) or not np.isfinite(vector).all():
+            return name, f"expected three finite numbers, got {value!r}"
+        vectors[name] = vector
+    view = vectors["position"] - vectors["look_at"]
+    distance = np.linalg.norm(view)
+    if not distance > 0.0:
+        return "look_at", f"must differ from camera.position, both are {list(camera.look_at)}"
+    up_length = np.linalg.norm(vectors["up"])
+    if not up_length > 0.0:
+        return "up", "must not be the zero vector"
+    sine = np.linalg.norm(np.cross(vectors["up"] / up_length, view / distance))
+    if not sine >= MIN_UP_SINE:
+        return "up", (
+            f"{list(camera.up)} is parallel to the viewing direction (from "
+            f"{list(camera.position)} to {list(camera.look_at)})"
+        )
+    return None
 
 
 @dataclass
@@ -159,37 +209,67 @@ class Scene:
 
     def add_mesh(
         self,
-        mesh: trimesh.Trimesh,
+        mesh: trimesh.Trimesh | trimesh.Scene,
         material: str | None = None,
         transform: np.ndarray | None = None,
         smooth: bool = True,
-    ) -> MeshObject:
-        """Place ``mesh``. With no material name it looks as its file says: the material the
-        file gives it (see ``embree_rt.scene.meshes.mesh_material``) and, per point, its
-        base-colour texture and vertex or face colours. A material name overrides all of that."""
-        mesh_colors = material is None
-        if material is None:
-            material = self._mesh_material(mesh)
-        self.material_index(material)
-        obj = MeshObject(
-            mesh=mesh,
-            transform=np.eye(4) if transform is None else np.asarray(transform, np.float64),
-            material=material,
-            smooth=smooth,
-            mesh_colors=mesh_colors,
-        )
-        self.meshes.append(obj)
-        return obj
+    ) -> list[MeshObject]:
+        """Place ``mesh`` by the (4, 4) ``transform`` (default: where it is) and return the
+        placements made.
+
+        A Trimesh is one placement. A trimesh.Scene (what ``trimesh.load`` gives for a glTF) is
+        one placement per node holding a triangle mesh, at ``transform`` @ the node's own
+        transform, as a scene file's ``[[meshes]]`` entry does. With no material name, each mesh
+        looks as its file says: the material the file gives it (see
+        ``embree_rt.scene.meshes.mesh_material``) and, per point, its base-colour texture and
+        vertex or face colours. A material name overrides all of that. Raises TypeError for an
+        argument of the wrong type and ValueError for a transform that cannot place geometry
+        (``embree_rt.transforms``) or a mesh without triangles, before anything is added.
+        """
+        import trimesh
+
+        from embree_rt.scene.meshes import mesh_parts
+
+        if not isinstance(mesh, trimesh.Trimesh | trimesh.Scene):
+            raise TypeError(
+                f"mesh: expected a trimesh.Trimesh or trimesh.Scene, got {type(mesh).__name__}"
+            )
+        if material is not None and not isinstance(material, str):
+            raise TypeError(f"material: expected a material name, got {type(material).__name__}")
+        if not isinstance(smooth, bool | np.bool_):
+            raise TypeError(f"smooth: expected True or False, got {type(smooth).__name__}")
+        placement = np.eye(4) if transform is None else as_affine(transform, "transform")
+        if material is not None:
+            self.material_index(material)
+        parts = mesh_parts(mesh)
+        if not parts:
+            raise ValueError(f"mesh: the {type(mesh).__name__} holds no triangles")
+        placements = [placement @ node_transform for _, node_transform in parts]
+        if isinstance(mesh, trimesh.Scene):  # a node's transform may spoil the placement
+            for matrix in placements:
+                as_affine(matrix, "transform")
+        added = [
+            MeshObject(
+                mesh=part,
+                transform=matrix,
+                material=self._mesh_material(part) if material is None else material,
+                smooth=bool(smooth),
+                mesh_colors=material is None,
+            )
+            for (part, _), matrix in zip(parts, placements, strict=True)
+        ]
+        self.meshes.extend(added)
+        return added
 
     def save(self, path) -> None:
         """Write this scene to a ``.toml`` or ``.json`` file (bulk data beside it)."""
-        from embree_rt.scene.writer import save_scene
-
         save_scene(self, path)
 
     def _mesh_material(self, mesh: trimesh.Trimesh) -> str:
         """The name of the material the mesh's own file gives it (added to ``materials`` under a
         name made of its values), or "matte" when the file gives none."""
+        from embree_rt.scene.meshes import mesh_material
+
         material = mesh_material(mesh)
         if material is None:
             return "matte"

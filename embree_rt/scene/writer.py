@@ -7,13 +7,17 @@ that file, so loading the saved scene shares one Trimesh between the placements 
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import asdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from embree_rt.materials import PRESETS
-from embree_rt.scene.model import Scene
+
+if TYPE_CHECKING:  # the model imports the writer (Scene.save); the writer needs only the type
+    from embree_rt.scene.model import Scene
 
 
 def scene_document(scene: Scene, path: Path) -> dict:
@@ -99,11 +103,36 @@ def save_scene(scene: Scene, path: str | Path) -> None:
         raise ValueError(f"{path}: expected a .toml or .json file name")
     document = _plain(scene_document(scene, path))
     if suffix == ".json":
-        path.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+        text = json.dumps(document, indent=2) + "\n"
     else:
         import tomli_w
 
-        path.write_text(tomli_w.dumps(document), encoding="utf-8")
+        text = tomli_w.dumps(document)
+    path.write_text(inline_short_arrays(text), encoding="utf-8")
+
+
+# An array of numbers, as json.dumps(indent=...) and tomli-w write it: "[", one number per line
+# (a comma after each, or after all but the last), "]". Strings never hold a raw newline in
+# either format, so "[" at the end of a line always opens an array.
+_NUMBER = r"-?(?:\d+(?:\.\d+)?(?:[eE][-+]?\d+)?|inf|nan|Infinity|NaN)"
+_NUMBER_ARRAY = re.compile(rf"\[\n((?:[ \t]*{_NUMBER},?\n)+)[ \t]*\]")
+MAX_LINE = 100
+
+
+def inline_short_arrays(text: str) -> str:
+    """``text`` (TOML from tomli-w or indented JSON) with each array of numbers that fits on a
+    line of ``MAX_LINE`` characters written on it, as a person would (``position = [0.0, 1.6,
+    6.5]``): tomli-w has no option for it, and writes every vector one number per line. A 4 × 4
+    transform becomes one row a line."""
+
+    def inline(match: re.Match) -> str:
+        numbers = [line.strip().rstrip(",") for line in match.group(1).splitlines()]
+        written = "[" + ", ".join(numbers) + "]"
+        line_start = text.rfind("\n", 0, match.start()) + 1
+        fits = match.start() - line_start + len(written) + 1 <= MAX_LINE  # + 1: a comma after
+        return written if fits else match.group(0)
+
+    return _NUMBER_ARRAY.sub(inline, text)
 
 
 def _plain(value):
