@@ -5,6 +5,7 @@ whatever its ring size or thread count."""
 
 from __future__ import annotations
 
+import importlib
 import math
 import time
 
@@ -24,6 +25,9 @@ from embree_rt.scene.random_field import (
     field_scene,
     plan_field,
 )
+
+# The module, not the function of the same name that ``embree_rt.scene`` exports.
+random_field_module = importlib.import_module("embree_rt.scene.random_field")
 
 
 def materials_of(scene: Scene) -> list:
@@ -263,29 +267,63 @@ FIELDS = [
 ]
 
 
+def by_cell(centers: np.ndarray, *arrays: np.ndarray) -> list[np.ndarray]:
+    """``centers`` and ``arrays`` reordered by position (x, then z): the field's spheres as a
+    set, whatever order they are stored in."""
+    order = np.lexsort((centers[:, 2], centers[:, 0]))
+    return [centers[order], *(array[order] for array in arrays)]
+
+
+def stored_order_keys(scene: Scene, plan, ring_cells: int) -> np.ndarray:
+    """(k, 3) (ring, i, j) of the small spheres as stored: their cell (i, j), and the ring of
+    squared distance its centre falls in, as the field's documentation defines rings."""
+    small = scene.sphere_centers[plan.heroes :].astype(np.float64)
+    i = np.floor(small[:, 0] / plan.spacing)
+    j = np.floor(small[:, 2] / plan.spacing)
+    x, z = (i + 0.5) * plan.spacing, (j + 0.5) * plan.spacing
+    width = ring_cells * plan.spacing**2 / math.pi
+    bounds = np.arange(int((x * x + z * z).max() / width) + 2) * width
+    ring = np.searchsorted(bounds, x * x + z * z, side="right") - 1
+    return np.column_stack([ring, i, j])
+
+
 @pytest.mark.parametrize(("count", "seed", "arguments"), FIELDS)
 def test_rings_make_the_meshgrid_field_bit_for_bit(count: int, seed: int, arguments) -> None:
-    """Bitwise: both do the same float64 operations on the same numbers (IEEE arithmetic and a
-    correctly rounded sqrt, no libm transcendental), so every ISA gives the same bits."""
+    """The same spheres, bitwise, heroes first in the same order: both do the same float64
+    operations on the same numbers (IEEE arithmetic and a correctly rounded sqrt, no libm
+    transcendental), so every ISA gives the same bits. Only the storage order of the small
+    spheres differs (ring by ring, row by row, for locality)."""
     scene = random_field(count, seed, **arguments)
     centers, radii, materials = meshgrid_field(count, seed, **arguments)
-    np.testing.assert_array_equal(scene.sphere_centers, centers)
-    np.testing.assert_array_equal(scene.sphere_radii, radii)
-    np.testing.assert_array_equal(scene.sphere_materials, materials)
+    heroes = plan_field(count, seed, **arguments).heroes
+    np.testing.assert_array_equal(scene.sphere_centers[:heroes], centers[:heroes])
+    stored = by_cell(scene.sphere_centers, scene.sphere_radii, scene.sphere_materials)
+    for got, expected in zip(stored, by_cell(centers, radii, materials), strict=True):
+        np.testing.assert_array_equal(got, expected)
     assert scene.sphere_centers.dtype == np.float32 and scene.sphere_materials.dtype == np.int32
 
 
 @pytest.mark.parametrize(("ring_cells", "threads"), [(1, 1), (7, 3), (1000, 2), (1 << 22, 1)])
-def test_the_field_does_not_depend_on_ring_size_or_threads(ring_cells: int, threads: int) -> None:
-    """Rings of 1 to 4 million cells, made on 1 to 3 threads: the same field, bit for bit (each
-    sphere's numbers are drawn at its rank, whatever ring or thread makes it)."""
+def test_rings_and_threads_change_only_the_storage_order(
+    ring_cells: int, threads: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Rings of 1 to 4 million cells, made on 1 to 3 threads: the same spheres, bit for bit
+    (each draws its numbers at its rank by distance, whatever ring or thread makes it), stored
+    ring by ring and row by row within a ring."""
     plan = plan_field(30_000, 11, extent=90.0)
     reference = field_scene(plan)
     add_field_spheres(reference, plan)
+    monkeypatch.setattr(random_field_module, "RING_CELLS", ring_cells)
     scene = field_scene(plan)
-    add_field_spheres(scene, plan, ring_cells=ring_cells, threads=threads)
-    for name in ("sphere_centers", "sphere_radii", "sphere_materials"):
-        np.testing.assert_array_equal(getattr(scene, name), getattr(reference, name))
+    add_field_spheres(scene, plan, threads=threads)
+    stored = by_cell(scene.sphere_centers, scene.sphere_radii, scene.sphere_materials)
+    expected = by_cell(reference.sphere_centers, reference.sphere_radii, reference.sphere_materials)
+    for got, want in zip(stored, expected, strict=True):
+        np.testing.assert_array_equal(got, want)
+    keys = stored_order_keys(scene, plan, ring_cells)
+    ascending = np.lexsort(keys.T[::-1])
+    np.testing.assert_array_equal(ascending, np.arange(len(keys)))
+    assert len(np.unique(keys, axis=0)) == len(keys)  # one sphere a cell
 
 
 def test_stable_order_equals_one_stable_sort() -> None:

@@ -47,8 +47,8 @@ DEFAULT_MIX: dict[str, float] = {
 }
 COLORS_PER_KIND = 16
 SHADE_BITS = 4  # a palette shade is the top bits of a 32-bit draw: 2**4 = COLORS_PER_KIND
-# Small spheres are generated a ring of about this many grid cells at a time: bounded memory,
-# and (measured at 1e7 spheres) faster than rings of 2**16 or 2**20 cells.
+# Small spheres are generated a ring of about this many grid cells at a time, and stored ring by
+# ring: bounded memory, and (measured at 1e7 spheres) faster than rings of 2**16 or 2**20 cells.
 RING_CELLS = 1 << 18
 # Default small-sphere radii per unit of grid spacing: the cover's 0.2 in a unit cell, varied.
 RADIUS_PER_SPACING = (0.12, 0.22)
@@ -186,17 +186,16 @@ def field_scene(plan: FieldPlan) -> Scene:
     return scene
 
 
-def add_field_spheres(
-    scene: Scene, plan: FieldPlan, *, ring_cells: int = RING_CELLS, threads: int | None = None
-) -> None:
+def add_field_spheres(scene: Scene, plan: FieldPlan, *, threads: int | None = None) -> None:
     """Generate the field's spheres into ``scene`` (made by ``field_scene(plan)``): the heroes,
     then ``plan.small`` small spheres.
 
-    The small spheres are made one ring of about ``ring_cells`` grid cells at a time, on
+    The small spheres are made one ring of about ``RING_CELLS`` grid cells at a time, on
     ``threads`` threads (default: all cores), each ring written straight into its slice of the
-    scene's arrays: the memory beyond those arrays (20 bytes a sphere) stays bounded. The field
-    depends on neither: each sphere draws its random numbers at its own rank in the seed's stream
-    (PCG64 jumped ahead), as if all were drawn at once.
+    scene's arrays: the memory beyond those arrays (20 bytes a sphere) stays bounded. Each sphere
+    draws its random numbers at its rank by distance in the seed's stream (PCG64 jumped ahead),
+    as if all were drawn at once, so the spheres do not depend on the rings or the threads; the
+    rings decide only the order they are stored in: ring by ring, row by row within a ring.
     """
     count = plan.heroes + plan.small
     centers = np.empty((count, 3), np.float32)
@@ -213,11 +212,11 @@ def add_field_spheres(
         draws = _SphereDraws(plan, first_material=scene.material_index(f"{plan.mix[0][0]}_00"))
 
         def make(ring: _Ring) -> None:
-            x, z = layout.cells(ring)
+            x, z, rank = layout.cells(ring)
             rows = slice(plan.heroes + ring.first, plan.heroes + ring.first + ring.count)
-            draws.fill(ring.first, x, z, centers[rows], radii[rows], materials[rows])
+            draws.fill(ring.first, x, z, rank, centers[rows], radii[rows], materials[rows])
 
-        rings = layout.rings(plan.small, ring_cells)
+        rings = layout.rings(plan.small, RING_CELLS)
         with ThreadPoolExecutor(max_workers=threads or os.cpu_count() or 1) as pool:
             for _ in pool.map(make, rings):  # re-raises a ring's error
                 pass
@@ -280,17 +279,18 @@ class _SphereDraws:
         first: int,
         x: np.ndarray,
         z: np.ndarray,
+        rank: np.ndarray,
         centers: np.ndarray,
         radii: np.ndarray,
         materials: np.ndarray,
     ) -> None:
-        """Spheres of ranks ``first`` ... ``first + k - 1`` in the cells centred at ``x``, ``z``
-        (k,) float64, written into ``centers`` (k, 3) float32, ``radii`` (k,) float32 and
-        ``materials`` (k,) int32."""
+        """The spheres of ranks ``first + rank`` (k,) int64, a permutation of 0 ... k - 1, in
+        the cells centred at ``x``, ``z`` (k,) float64, written into ``centers`` (k, 3) float32,
+        ``radii`` (k,) float32 and ``materials`` (k,) int32 in that order."""
         plan, n, k = self.plan, self.plan.small, len(x)
-        radius = np.random.Generator(self._stream(first)).uniform(*plan.radius, size=k)
+        radius = np.random.Generator(self._stream(first)).uniform(*plan.radius, size=k)[rank]
         reach = plan.spacing / 2 - radius  # the sphere stays inside its cell, so none overlap
-        jitter = np.random.Generator(self._stream(n + 2 * first)).random((k, 2))
+        jitter = np.random.Generator(self._stream(n + 2 * first)).random((k, 2))[rank]
         jitter *= 2
         jitter -= 1
         jitter *= reach[:, None]
@@ -301,7 +301,7 @@ class _SphereDraws:
         radii[:] = radius
         # The kind is the number of cumulative probabilities <= the draw: choice(p=...)'s
         # searchsorted(side="right"), in a few passes.
-        uniform = np.random.Generator(self._stream(3 * n + first)).random(k)
+        uniform = np.random.Generator(self._stream(3 * n + first)).random(k)[rank]
         kind = np.zeros(k, np.int32)
         for bound in self.cdf[:-1]:
             kind += uniform >= bound
@@ -309,7 +309,7 @@ class _SphereDraws:
         halves = np.empty((len(raw), 2), np.uint32)
         halves[:, 0] = raw  # the low 32 bits
         halves[:, 1] = raw >> np.uint64(32)
-        shade = halves.reshape(-1)[first % 2 : first % 2 + k] >> np.uint32(32 - SHADE_BITS)
+        shade = halves.reshape(-1)[first % 2 : first % 2 + k][rank] >> np.uint32(32 - SHADE_BITS)
         kind *= COLORS_PER_KIND
         kind += self.first_material
         np.add(kind, shade, out=materials, casting="unsafe")
@@ -346,7 +346,9 @@ class _CellLayout:
             self.hero_zone = (hero_reach + math.sqrt(self.keep_out) + spacing) ** 2
 
     def rings(self, needed: int, ring_cells: int) -> list[_Ring]:
-        """The rings holding the ``needed`` nearest cells, of about ``ring_cells`` cells each."""
+        """The rings holding the ``needed`` nearest cells, of about ``ring_cells`` cells each:
+        ring k holds the cells with ``k * w <= x * x + z * z < (k + 1) * w``, for ``w`` the area
+        of ``ring_cells`` cells over pi."""
         width = max(ring_cells, 1) * self.spacing**2 / math.pi  # a ring's squared-distance span
         rings: list[_Ring] = []
         found = 0
@@ -361,13 +363,20 @@ class _CellLayout:
             found += count
         return [ring for ring in rings if ring.count]
 
-    def cells(self, ring: _Ring) -> tuple[np.ndarray, np.ndarray]:
-        """(count,) float64 x and z of the ring's first ``ring.count`` cells, in order."""
+    def cells(self, ring: _Ring) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ring's ``ring.count`` nearest cells: (count,) float64 x and z in (i, j) order (the
+        order they are stored in: neighbours stay close in memory, which Embree's build and the
+        traversal's caches like), and (count,) int64 the rank of each by distance (0: nearest)."""
         x, z = self._candidates(ring.low, ring.high)
         distance = x * x
         distance += z * z
-        order = _stable_order(distance, ring.low, ring.high)[: ring.count]
-        return x[order], z[order]
+        nearest = _stable_order(distance, ring.low, ring.high)[: ring.count]
+        rank = np.full(len(x), -1, np.int64)
+        rank[nearest] = np.arange(ring.count)
+        if ring.count < len(x):  # the field's last ring: only its nearest cells
+            kept = np.flatnonzero(rank >= 0)
+            x, z, rank = x[kept], z[kept], rank[kept]
+        return x, z, rank
 
     def _candidates(self, low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
         """x, z (k,) float64 of the ring's cells that are clear of the heroes, in (i, j) order."""
