@@ -99,14 +99,15 @@ def _nearest_root(floats, n, lane, cx, cy, cz, r):
     dz = np.float64(floats[(RAY_DIR + 2) * n + lane])
     a = dx * dx + dy * dy + dz * dz
     b = -(ox * dx + oy * dy + oz * dz)
-    # l: the offset from the centre to the ray's point of closest approach.
-    s = b / a
-    lx = ox + s * dx
-    ly = oy + s * dy
-    lz = oz + s * dz
-    disc = a * (r * r - (lx * lx + ly * ly + lz * lz))
-    if not disc >= 0.0:
+    # m = a·l, with l the offset from the centre to the ray's point of closest approach: the
+    # discriminant a (r² − l·l) is (a² r² − m·m) / a, so a miss costs no division.
+    mx = a * ox + b * dx
+    my = a * oy + b * dy
+    mz = a * oz + b * dz
+    excess = a * a * (r * r) - (mx * mx + my * my + mz * mz)
+    if not excess >= 0.0:
         return np.nan
+    disc = excess / a
     q = b + math.copysign(math.sqrt(disc), b)
     c = ox * ox + oy * oy + oz * oz - r * r
     if q == 0.0:  # b = 0 and a tangent ray: one root at the origin's foot
