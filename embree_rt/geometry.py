@@ -2,10 +2,10 @@
 
 Spheres go in as analytic spheres: by default Embree user geometry with compiled callbacks
 (Embree's own point spheres beyond ``USER_GEOMETRY_MAX_SPHERES``), ``spheres="point"`` Embree's
-own point spheres, ``spheres="mesh"`` one tessellated icosphere
-instanced per sphere. Each distinct triangle mesh is built once and instanced per placement.
-The floor is the Embree layer's analytic ground plane: exact at any distance, where a finite
-quad in the BVH would cut the horizon and lose float32 precision far away.
+own point spheres, ``spheres="mesh"`` one tessellated icosphere instanced per sphere. Each
+distinct triangle mesh is built once and instanced per placement. The floor is the Embree
+layer's analytic ground plane: exact at any distance, where a finite quad in the BVH would cut
+the horizon and lose float32 precision far away.
 """
 
 from __future__ import annotations
