@@ -13,6 +13,8 @@ import numpy as np
 from embree_rt.errors import InputError
 
 EXIT_BUG = 1
+# geometry.SPHERE_MODES, spelled out so that --help does not load Embree and numba.
+SPHERE_CHOICES = ("analytic", "point", "mesh")
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 BUG_REPORT = (
@@ -98,9 +100,10 @@ def _add_render_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=_positive_int(), help="default: all cores")
     parser.add_argument(
         "--spheres",
-        choices=("analytic", "mesh"),
+        choices=SPHERE_CHOICES,
         default="analytic",
-        help="analytic Embree spheres, or tessellated icospheres",
+        help="analytic spheres (compiled user geometry), Embree's own point spheres, or "
+        "tessellated icospheres",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
@@ -120,7 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render_flags(random)
     info = commands.add_parser("info", help="describe a scene: objects, bounds, build time")
     info.add_argument("scene", help="scene file")
-    info.add_argument("--spheres", choices=("analytic", "mesh"), default="analytic")
+    info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic")
     return parser
 
 

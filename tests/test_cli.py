@@ -553,3 +553,10 @@ def test_the_summary_line_splits_the_time(tmp_path: Path) -> None:
         assert match, line
         total, *parts = (float(value) for value in match.groups())
         assert min(parts) >= 0 and sum(parts) <= total + 0.015  # each is rounded to 0.01 s
+
+
+def test_the_sphere_flag_offers_exactly_the_geometry_modes() -> None:
+    """The command spells the modes out (so --help loads no Embree): they must be the same."""
+    from embree_rt import cli, geometry
+
+    assert cli.SPHERE_CHOICES == geometry.SPHERE_MODES
