@@ -164,7 +164,7 @@ def unit_shadow_rays(origins, directions, hits, light: np.ndarray):
     origins, directions (h, 3) float32, tfar (h,) float32. Mitsuba's ellipsoid test assumes unit
     directions (it finds the point nearest the centre as t = -o·d / |d|, not / |d|²) and loses
     precision without them."""
-    s_origins, to_light, s_tfar = shadow_rays(origins, directions, hits, light)
+    _, s_origins, to_light, s_tfar = shadow_rays(origins, directions, hits, light)
     length = np.linalg.norm(to_light.astype(np.float64), axis=1)
     s_directions = (to_light / length[:, None]).astype(np.float32)
     return s_origins, s_directions, (s_tfar * length).astype(np.float32)
