@@ -335,8 +335,7 @@ class SceneGeometry:
         ``origins``, ``directions`` (3, n) float32."""
         origins = np.asarray(origins, np.float32)
         directions = np.asarray(directions, np.float32)
-        plane_y = None if self.floor is None else float(self.floor.height)
-        return self.bvh.occluded(origins.T, directions.T, tnear, tfar, plane_y=plane_y)
+        return self.bvh.occluded(origins.T, directions.T, tnear, tfar, plane_y=self.labels.plane_y)
 
 
 @dataclass

@@ -126,21 +126,26 @@ def _nearest_root(floats, n, lane, cx, cy, cz, r):
     return np.nan
 
 
-@cfunc(_CALLBACK, nopython=True, cache=True)
-def _intersect(address):
+@njit(inline="always")
+def _unpack(address):
+    """The fields of an RTCIntersect/OccludedFunctionNArguments both callbacks read: the 64-bit
+    words, the lane count N, the primitive, the valid mask (N,) and the sphere as float64."""
     args = carray(_words64(address), 6)
     n = args[5] & 0xFFFFFFFF
-    geom_id = args[5] >> 32
     prim = args[2] & 0xFFFFFFFF
     valid = carray(_ints(args[0]), n)
     sphere = carray(_floats(args[1] + 16 * prim), 4)
+    return (args, n, prim, valid, np.float64(sphere[0]), np.float64(sphere[1]),
+            np.float64(sphere[2]), np.float64(sphere[3]))  # fmt: skip
+
+
+@cfunc(_CALLBACK, nopython=True, cache=True)
+def _intersect(address):
+    args, n, prim, valid, cx, cy, cz, r = _unpack(address)
+    geom_id = args[5] >> 32
     context = carray(_words32(args[3]), 2)
     floats = carray(_floats(args[4]), 21 * n)
     words = carray(_words32(args[4]), 21 * n)
-    cx = np.float64(sphere[0])
-    cy = np.float64(sphere[1])
-    cz = np.float64(sphere[2])
-    r = np.float64(sphere[3])
     for lane in range(n):
         if valid[lane] == 0:
             continue
@@ -165,16 +170,8 @@ def _intersect(address):
 
 @cfunc(_CALLBACK, nopython=True, cache=True)
 def _occluded(address):
-    args = carray(_words64(address), 6)
-    n = args[5] & 0xFFFFFFFF
-    prim = args[2] & 0xFFFFFFFF
-    valid = carray(_ints(args[0]), n)
-    sphere = carray(_floats(args[1] + 16 * prim), 4)
+    args, n, _, valid, cx, cy, cz, r = _unpack(address)
     floats = carray(_floats(args[4]), 12 * n)
-    cx = np.float64(sphere[0])
-    cy = np.float64(sphere[1])
-    cz = np.float64(sphere[2])
-    r = np.float64(sphere[3])
     for lane in range(n):
         if valid[lane] == 0:
             continue
