@@ -25,9 +25,10 @@ FIELD_RING_BYTES = 20 << 20
 # 1e6 -> 1e7 spheres, grew by 148 (user geometry) and 71 (point spheres) bytes a sphere, the
 # scene's 20 included; instanced icospheres (``--spheres mesh``), 2e4 -> 2e5 spheres, by 1244.
 GEOMETRY_BYTES_PER_SPHERE = {"user": 128, "point": 51, "mesh": 1224}
-# Per pixel: the film's float64 sums (24 bytes), the float32 image and its transposed copy, the
-# tone mapping's float32 temporaries and the encoder's bytes. 1920x1080 -> 7680x4320 at 1 spp
-# grew by 75-87 bytes a pixel for a PNG (66 for a .npy).
+# Per pixel: the film's float64 sums (24 bytes), the float32 image, the tone mapping's float32
+# temporaries and the encoder's bytes. 1920x1080 -> 7680x4320 at 1 spp grew by 75-87 bytes a
+# pixel for a PNG (66 for a .npy), when the film still made a transposed copy of the image (12
+# bytes): an upper bound now.
 FILM_BYTES_PER_PIXEL = 88
 # Per camera sample in flight: the rays and hit records of the batches the workers hold (up to
 # three batches a worker). 1920x1080 at 1 spp, 2 workers: ~60 bytes a sample.

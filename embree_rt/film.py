@@ -46,8 +46,10 @@ class Film:
         """(height, width, 3) float32: the sums divided by ``spp`` samples per pixel."""
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
-        mean = (self._sum / spp).astype(np.float32)
-        return np.ascontiguousarray(mean.T.reshape(self.height, self.width, 3))
+        # One pass: divide in float64, round once to float32, written pixel-major.
+        mean = np.empty((self.width * self.height, 3), np.float32)
+        np.divide(self._sum.T, spp, out=mean, casting="same_kind")
+        return mean.reshape(self.height, self.width, 3)
 
 
 class FilmBlock:
@@ -76,6 +78,12 @@ class FilmBlock:
     @property
     def sums(self) -> np.ndarray:
         """(3, count) float64 per-pixel sums of everything added so far."""
+        self.settle()
+        return self._sums
+
+    def settle(self) -> None:
+        """Sum the samples added so far into the block's pixels. The renderer calls it in the
+        thread that traced the batch: the thread adding blocks to the film then only adds."""
         if self._pixels:
             local = np.concatenate(self._pixels) - self.first
             rgb = np.concatenate(self._rgb, axis=1)
@@ -85,7 +93,6 @@ class FilmBlock:
                 self._sums[channel] += np.bincount(
                     local, weights=rgb[channel], minlength=self.count
                 )
-        return self._sums
 
 
 def tonemap(image: np.ndarray) -> np.ndarray:

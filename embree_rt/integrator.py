@@ -184,6 +184,7 @@ class Renderer:
             rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
             work.rays["primary"] += count
             self._trace(rays, work, max_depth)
+            work.block.settle()
             return work
 
         began = time.perf_counter()
