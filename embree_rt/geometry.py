@@ -19,7 +19,7 @@ import numpy as np
 
 from embree_rt.embree import BVH, HitLabels
 from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_normals
-from embree_rt.scene.model import Scene
+from embree_rt.scene.model import MeshObject, Scene
 
 if TYPE_CHECKING:
     import trimesh
@@ -212,7 +212,17 @@ class SceneGeometry:
             self._place(children[key], placement.transform, material, placement.smooth)
         # Mesh looks: the placements showing their own texture or vertex colours, by geom id.
         geom_ids = self._instance_geom_ids[len(self._instance_geom_ids) - len(scene.meshes) :]
-        self.mesh_colors = MeshColors(scene.meshes, geom_ids)
+        looks = list(scene.meshes)
+        for entry in scene.instances:  # one instance array per entry, its mesh built once
+            key = id(entry.mesh)
+            if key not in children:
+                children[key] = self._child(entry.mesh)
+            geom_ids.append(self._place_array(
+                [children[key]], entry.transforms, None, entry.materials, entry.smooth
+            ))  # fmt: skip
+            # a one-mesh array's hits name its faces as the mesh's own: the same lookups
+            looks.append(MeshObject(mesh=entry.mesh, mesh_colors=entry.mesh_colors))
+        self.mesh_colors = MeshColors(looks, geom_ids)
 
     def _finish_tables(self) -> None:
         size = self.bvh.geometry_count
