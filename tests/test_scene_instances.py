@@ -222,3 +222,80 @@ def test_instances_render_as_the_same_meshes_placed_one_by_one(tmp_path: Path):
     difference = np.abs(image - reference).max(axis=2)
     assert np.mean(difference > 1.0 / 512) < 0.002, np.sort(difference.ravel())[-10:]
     assert difference.mean() < 1e-4
+
+
+# -- the command --------------------------------------------------------------------------------
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "embree_rt", *args], capture_output=True,
+                          text=True, timeout=180, cwd=ROOT)  # fmt: skip
+
+
+def test_random_instance_replaces_small_spheres_and_renders_as_meshes_placed_one_by_one(
+    tmp_path: Path,
+):
+    image_path, saved = tmp_path / "field.npy", tmp_path / "field.toml"
+    result = run_cli("random", "--count", "40", "--instance", str(GEM), "--seed", "3",
+                     "--width", "64", "--height", "40", "--spp", "2", "--max-depth", "3",
+                     "--save-scene", str(saved), "-o", str(image_path), "--quiet")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    scene = load_scene(saved)
+    field = random_field(40, seed=3)
+    heroes = 3
+    np.testing.assert_array_equal(scene.sphere_radii, field.sphere_radii[:heroes])
+    (entry,) = scene.instances
+    assert len(entry) == 40 - heroes
+    np.testing.assert_array_equal(entry.materials, field.sphere_materials[heroes:])
+    linear = entry.transforms[:, :3, :3]
+    scale = linear[:, 1, 1]
+    # only a turn about y and a uniform scale: rows (s cos, 0, s sin), (0, s, 0), (-s sin, 0, s cos)
+    np.testing.assert_allclose(linear[:, 1], np.stack([0 * scale, scale, 0 * scale], 1), atol=1e-12)
+    np.testing.assert_allclose(np.einsum("nij,nkj->nik", linear, linear),
+                               scale[:, None, None] ** 2 * np.eye(3), atol=1e-12)  # fmt: skip
+    assert len(np.unique(np.round(np.arctan2(linear[:, 0, 2], linear[:, 0, 0]), 6))) == 40 - heroes
+    # scaled to fit the sphere's ball, then lowered onto the sphere's bottom: inside the
+    # sphere's footprint and height, and touching its bottom
+    world = np.einsum("nij,kj->nki", linear, entry.mesh.vertices) + entry.transforms[:, None, :3, 3]
+    centers = field.sphere_centers[heroes:].astype(np.float64)
+    radii = field.sphere_radii[heroes:].astype(np.float64)
+    span = np.linalg.norm(world[:, :, None] - world[:, None, :], axis=3).max(axis=(1, 2))
+    assert np.all(span <= 2 * radii * (1 + 1e-6))
+    sideways = np.linalg.norm((world - centers[:, None])[:, :, [0, 2]], axis=2).max(axis=1)
+    assert np.all(sideways <= radii * (1 + 1e-6))
+    assert np.all(world[:, :, 1].max(axis=1) <= centers[:, 1] + radii)
+    np.testing.assert_allclose(world[:, :, 1].min(axis=1), centers[:, 1] - radii, atol=1e-6)
+    # the image equals the same placements as one [[meshes]] placement each
+    one_by_one = load_scene(saved)
+    one_by_one.instances = []
+    names = one_by_one.material_names
+    for matrix, material in zip(entry.transforms, entry.materials, strict=True):
+        one_by_one.add_mesh(entry.mesh, names[material], matrix)
+    reference = render(one_by_one, width=64, height=40, spp=2, max_depth=3)
+    image = np.load(image_path)
+    difference = np.abs(image - reference).max(axis=2)
+    assert np.mean(difference > 1.0 / 512) < 0.002 and difference.mean() < 1e-4
+
+
+def test_info_reports_instances_meshes_triangles_and_memory(tmp_path: Path):
+    positions, rotations, scales = scattered(9)
+    path = write_instances_scene(tmp_path, {"positions": positions, "rotations": rotations,
+                                            "scales": scales}, 'material = "red"')  # fmt: skip
+    result = run_cli("info", str(path))
+    assert result.returncode == 0, result.stderr
+    info = {k.strip(): v.strip() for k, v in (line.split(":", 1) for line in
+                                              result.stdout.splitlines())}  # fmt: skip
+    assert info["instances"] == "9"
+    assert info["arrays"] == "1 instance arrays holding 9 instances"
+    assert info["meshes"] == "9 placements of 1 distinct meshes"
+    assert info["triangles"] == "20 stored, 180 placed"
+    assert "MiB (estimate)" in info["memory"] and "MiB measured" in info["memory"]
+
+
+def test_a_bad_instance_mesh_is_one_line_and_writes_nothing(tmp_path: Path):
+    missing = tmp_path / "nothing.ply"
+    result = run_cli("random", "--count", "10", "--instance", str(missing),
+                     "-o", str(tmp_path / "out.png"))  # fmt: skip
+    assert result.returncode == 2
+    assert result.stderr.splitlines() == [f"embree-rt: error: --instance: {missing}: no such file"]
+    assert list(tmp_path.iterdir()) == []

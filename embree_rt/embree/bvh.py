@@ -150,6 +150,7 @@ class BVH:
         self.geometry_count = 0
         self.primitive_count = 0
         self.instance_count = 0  # instances in instance arrays
+        self.array_count = 0  # instance arrays
         # max |coordinate| over this BVH's own geometry: what an instance array's hit scale
         # is bounded from
         self.coordinate_bound = 0.0
@@ -363,6 +364,7 @@ class BVH:
         self._arrays[geom_id] = (packed, index, bounds)
         self._children.extend(children)
         self.instance_count += count
+        self.array_count += 1
         return geom_id
 
     def commit(self) -> None:

@@ -179,3 +179,49 @@ def mesh_from_parts(parts: list[tuple[trimesh.Trimesh, np.ndarray]]) -> trimesh.
         copy.apply_transform(transform)
         baked.append(copy)
     return trimesh.util.concatenate(baked)
+
+
+def bounding_ball(vertices: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre (3,) float64 and radius of a ball holding all (m, 3) ``vertices``: centred on
+    their bounding box, as large as the farthest vertex from there."""
+    vertices = np.asarray(vertices, np.float64)
+    center = (vertices.min(axis=0) + vertices.max(axis=0)) / 2.0
+    return center, float(np.linalg.norm(vertices - center, axis=1).max())
+
+
+def spheres_to_instances(scene, mesh: trimesh.Trimesh, keep: int, seed: int) -> MeshInstances:
+    """Replace every sphere of ``scene`` after the first ``keep`` by a copy of ``mesh``, fitted
+    into the sphere's ball, resting where the sphere rests (its lowest point at the sphere's
+    bottom), turned about y by a random angle (drawn from ``seed``), in the sphere's material;
+    returns the ``MeshInstances`` added (the n replaced spheres are removed).
+
+    The placements are (n, 4, 4) float64: 128 bytes each while they are made, 48 in Embree."""
+    centers = np.asarray(scene.sphere_centers[keep:], np.float64)
+    radii = np.asarray(scene.sphere_radii[keep:], np.float64)
+    materials = np.asarray(scene.sphere_materials[keep:], np.int32)
+    n = len(radii)
+    ball_center, ball_radius = bounding_ball(mesh.vertices)
+    if not ball_radius > 0.0:
+        raise ValueError("mesh: all its vertices are one point")
+    lowest = float(np.asarray(mesh.vertices)[:, 1].min())
+    angle = np.random.default_rng([seed, 12]).uniform(0.0, 2.0 * np.pi, n)  # its own stream
+    scale = radii / ball_radius
+    cos, sin = np.cos(angle) * scale, np.sin(angle) * scale
+    transforms = np.zeros((n, 4, 4))
+    transforms[:, 0, 0] = cos
+    transforms[:, 0, 2] = sin
+    transforms[:, 1, 1] = scale
+    transforms[:, 2, 0] = -sin
+    transforms[:, 2, 2] = cos
+    transforms[:, 3, 3] = 1.0
+    # world = s R (v - c) + q: q over the sphere's centre, low enough for the mesh's lowest
+    # point to touch the sphere's bottom (a turn about y leaves heights alone)
+    bottom = centers[:, 1] - radii
+    q = np.stack([centers[:, 0], bottom - scale * (lowest - ball_center[1]), centers[:, 2]], 1)
+    transforms[:, :3, 3] = q - np.einsum("nij,j->ni", transforms[:, :3, :3], ball_center)
+    scene.sphere_centers = scene.sphere_centers[:keep].copy()
+    scene.sphere_radii = scene.sphere_radii[:keep].copy()
+    scene.sphere_materials = scene.sphere_materials[:keep].copy()
+    added = MeshInstances(mesh=mesh, transforms=transforms, materials=materials)
+    scene.instances.append(added)
+    return added
