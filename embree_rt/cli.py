@@ -203,8 +203,10 @@ def _require_memory_for_field(count: int, settings, args: argparse.Namespace) ->
     from embree_rt.geometry import sphere_kind
     from embree_rt.integrator import DEFAULT_BATCH_SIZE
 
+    # --instance: the small spheres become an instance array, as --spheres mesh makes them
+    spheres = "mesh" if getattr(args, "instance", None) else args.spheres
     needs = budget.render_needs(
-        count, sphere_kind(count, args.spheres), settings.width, settings.height, settings.spp,
+        count, sphere_kind(count, spheres), settings.width, settings.height, settings.spp,
         DEFAULT_BATCH_SIZE, workers=args.threads or os.cpu_count() or 1,
     )  # fmt: skip
     bvh_bytes, _ = needs["spheres"]

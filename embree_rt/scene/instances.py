@@ -196,17 +196,20 @@ def spheres_to_instances(scene, mesh: trimesh.Trimesh, keep: int, seed: int) -> 
     returns the ``MeshInstances`` added (the n replaced spheres are removed).
 
     The placements are (n, 4, 4) float64: 128 bytes each while they are made, 48 in Embree."""
-    centers = np.asarray(scene.sphere_centers[keep:], np.float64)
-    radii = np.asarray(scene.sphere_radii[keep:], np.float64)
-    materials = np.asarray(scene.sphere_materials[keep:], np.int32)
+    centers = scene.sphere_centers[keep:]
+    radii = scene.sphere_radii[keep:]
     n = len(radii)
     ball_center, ball_radius = bounding_ball(mesh.vertices)
     if not ball_radius > 0.0:
         raise ValueError("mesh: all its vertices are one point")
     lowest = float(np.asarray(mesh.vertices)[:, 1].min())
     angle = np.random.default_rng([seed, 12]).uniform(0.0, 2.0 * np.pi, n)  # its own stream
-    scale = radii / ball_radius
-    cos, sin = np.cos(angle) * scale, np.sin(angle) * scale
+    scale = radii / np.float64(ball_radius)
+    cos = np.cos(angle)
+    cos *= scale
+    sin = np.sin(angle)
+    sin *= scale
+    del angle
     transforms = np.zeros((n, 4, 4))
     transforms[:, 0, 0] = cos
     transforms[:, 0, 2] = sin
@@ -216,9 +219,11 @@ def spheres_to_instances(scene, mesh: trimesh.Trimesh, keep: int, seed: int) -> 
     transforms[:, 3, 3] = 1.0
     # world = s R (v - c) + q: q over the sphere's centre, low enough for the mesh's lowest
     # point to touch the sphere's bottom (a turn about y leaves heights alone)
-    bottom = centers[:, 1] - radii
-    q = np.stack([centers[:, 0], bottom - scale * (lowest - ball_center[1]), centers[:, 2]], 1)
-    transforms[:, :3, 3] = q - np.einsum("nij,j->ni", transforms[:, :3, :3], ball_center)
+    cx, cy, cz = ball_center
+    transforms[:, 0, 3] = centers[:, 0] - (cos * cx + sin * cz)
+    transforms[:, 1, 3] = (centers[:, 1] - radii) - scale * (lowest - cy) - scale * cy
+    transforms[:, 2, 3] = centers[:, 2] - (cos * cz - sin * cx)
+    materials = np.array(scene.sphere_materials[keep:], np.int32)
     scene.sphere_centers = scene.sphere_centers[:keep].copy()
     scene.sphere_radii = scene.sphere_radii[:keep].copy()
     scene.sphere_materials = scene.sphere_materials[:keep].copy()
