@@ -72,12 +72,12 @@ def scattered(count: int, seed: int = 5) -> tuple[np.ndarray, np.ndarray, np.nda
     return positions, rotations, scales
 
 
-def write_instances_scene(folder: Path, arrays: dict, entry: str = "") -> Path:
+def write_instances_scene(folder: Path, arrays: dict, entry: str = "", mesh: Path = GEM) -> Path:
     np.savez(folder / "placements.npz", **arrays)
     scene = folder / "scene.toml"
     scene.write_text(SCENE_HEAD + f"""
 [[instances]]
-mesh = "{GEM}"
+mesh = "{mesh}"
 transforms = "placements.npz"
 {entry}
 """)
@@ -299,3 +299,27 @@ def test_a_bad_instance_mesh_is_one_line_and_writes_nothing(tmp_path: Path):
     assert result.returncode == 2
     assert result.stderr.splitlines() == [f"embree-rt: error: --instance: {missing}: no such file"]
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("asset", ["quadrant_cube.glb", "trio.glb"])
+def test_a_meshs_own_look_and_nodes_carry_over_to_its_instances(asset: str, tmp_path: Path):
+    """No material: each copy looks as the file says (quadrant_cube.glb: a texture), and a
+    multi-node glTF (trio.glb) is one mesh, its nodes baked: the same picture as the file placed
+    by one [[meshes]] entry per copy."""
+    path = ROOT / "assets" / asset
+    positions, rotations, _ = scattered(9, seed=8)
+    transforms = placement_matrices(positions, rotations, np.full(9, 0.6))
+    instances = load_scene(write_instances_scene(tmp_path, {"transforms": transforms}, mesh=path))
+    lines = [SCENE_HEAD] + [f'[[meshes]]\nfile = "{path}"\ntransform = {m.tolist()}\n'
+                            for m in transforms]  # fmt: skip
+    (tmp_path / "meshes.toml").write_text("\n".join(lines))
+    one_by_one = load_scene(tmp_path / "meshes.toml")
+    (entry,) = instances.instances
+    nodes = len(one_by_one.meshes) // 9  # placements per copy: one per node
+    assert len(entry.mesh.faces) == sum(len(m.mesh.faces) for m in one_by_one.meshes[:nodes])
+    assert entry.mesh_colors
+    image, reference = render(instances), render(one_by_one)
+    empty = render(Scene(camera=instances.camera, lights=instances.lights, render=instances.render))
+    assert (np.abs(image - empty).max(axis=2) > 0.05).mean() > 0.05
+    difference = np.abs(image - reference).max(axis=2)
+    assert np.mean(difference > 1.0 / 512) < 0.002 and difference.mean() < 1e-4
