@@ -2,8 +2,10 @@
 
 Spheres go in as analytic spheres: by default Embree user geometry with compiled callbacks
 (Embree's own point spheres beyond ``USER_GEOMETRY_MAX_SPHERES``), ``spheres="point"`` Embree's
-own point spheres, ``spheres="mesh"`` one tessellated icosphere instanced per sphere. Each
-distinct triangle mesh is built once and instanced per placement. The floor is the Embree
+own point spheres, ``spheres="mesh"`` one tessellated icosphere placed once per sphere through
+one Embree instance array. Each distinct triangle mesh is built once and instanced per
+placement; a scene's ``instances`` (meshes placed by the thousand) go in as one instance array
+each. The floor is the Embree
 layer's analytic ground plane: exact at any distance, where a finite quad in the BVH would cut
 the horizon and lose float32 precision far away.
 """
@@ -17,7 +19,7 @@ import numpy as np
 
 from embree_rt.embree import BVH, HitLabels
 from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_normals
-from embree_rt.scene.model import Scene
+from embree_rt.scene.model import MeshObject, Scene
 
 if TYPE_CHECKING:
     import trimesh
@@ -118,6 +120,8 @@ class SceneGeometry:
         self._mesh_missing_normals: list[np.ndarray] = []
         self._mesh_face_normals: list[np.ndarray] = []
         self._mesh_faces: list[np.ndarray] = []
+        # Instance arrays: (geom id, its child mesh indices, per-instance materials, smooth)
+        self._arrays: list[tuple[int, list[int], np.ndarray, bool]] = []
         self.triangle_count = 0
         self.instance_count = 0
         try:
@@ -168,18 +172,35 @@ class SceneGeometry:
         self.triangle_count += len(self._mesh_faces[child])
         self.instance_count += 1
 
+    def _place_array(
+        self, children: list[int], transforms: np.ndarray, child_index: np.ndarray | None,
+        materials: np.ndarray, smooth: bool,
+    ) -> int:
+        """Place meshes ``children`` (indices into ``_children``) by (n, 4, 4) ``transforms``
+        as one instance array, ``child_index`` (n,) picking each one's mesh (None: the only
+        one), with (n,) int32 ``materials``; returns its geometry id."""
+        geom_id = self.bvh.add_instances(
+            [self._children[c] for c in children], transforms, child_index
+        )
+        self._arrays.append((geom_id, children, np.ascontiguousarray(materials, np.int32),
+                             bool(smooth)))  # fmt: skip
+        faces = np.array([len(self._mesh_faces[c]) for c in children], np.int64)
+        placed = faces[0] * len(transforms) if child_index is None else faces[child_index].sum()
+        self.triangle_count += int(placed)
+        self.instance_count += len(transforms)
+        return geom_id
+
     def _add_tessellated_spheres(self) -> None:
         from trimesh.creation import icosphere
 
         unit = icosphere(subdivisions=ICOSPHERE_SUBDIVISIONS, radius=1.0)
         child = self._child(unit)
-        transform = np.eye(4)
-        for center, radius, material in zip(
-            self.sphere_centers, self.sphere_radii, self.sphere_materials, strict=True
-        ):
-            transform[:3, :3] = np.eye(3) * float(radius)
-            transform[:3, 3] = center
-            self._place(child, transform, int(material), smooth=True)
+        transforms = np.zeros((len(self.sphere_radii), 4, 4))
+        for axis in range(3):
+            transforms[:, axis, axis] = self.sphere_radii
+        transforms[:, :3, 3] = self.sphere_centers
+        transforms[:, 3, 3] = 1.0
+        self._place_array([child], transforms, None, self.sphere_materials, smooth=True)
 
     def _add_meshes(self, scene: Scene) -> None:
         children: dict[int, int] = {}
@@ -191,7 +212,17 @@ class SceneGeometry:
             self._place(children[key], placement.transform, material, placement.smooth)
         # Mesh looks: the placements showing their own texture or vertex colours, by geom id.
         geom_ids = self._instance_geom_ids[len(self._instance_geom_ids) - len(scene.meshes) :]
-        self.mesh_colors = MeshColors(scene.meshes, geom_ids)
+        looks = list(scene.meshes)
+        for entry in scene.instances:  # one instance array per entry, its mesh built once
+            key = id(entry.mesh)
+            if key not in children:
+                children[key] = self._child(entry.mesh)
+            geom_ids.append(self._place_array(
+                [children[key]], entry.transforms, None, entry.materials, entry.smooth
+            ))  # fmt: skip
+            # a one-mesh array's hits name its faces as the mesh's own: the same lookups
+            looks.append(MeshObject(mesh=entry.mesh, mesh_colors=entry.mesh_colors))
+        self.mesh_colors = MeshColors(looks, geom_ids)
 
     def _finish_tables(self) -> None:
         size = self.bvh.geometry_count
@@ -207,6 +238,18 @@ class SceneGeometry:
             self.instance_smooth[ids] = self._instance_smooth
             self.instance_normal_matrix[ids] = self._instance_normal_matrix
             self.instance_scale[ids] = self._instance_scale
+        # Per instance array: its mesh by (geom id, position among the array's children); the
+        # transforms themselves stay in the BVH, which takes its hits' normals to world space.
+        widest = max((len(children) for _, children, _, _ in self._arrays), default=1)
+        self.array_child = np.full((size, widest), -1, np.int32)
+        instance_labels = {}
+        for geom_id, children, materials, smooth in self._arrays:
+            self.array_child[geom_id, : len(children)] = children
+            self.instance_child[geom_id] = children[0]
+            self.instance_material[geom_id] = materials[0]
+            self.instance_smooth[geom_id] = smooth
+            self.instance_normal_matrix[geom_id] = np.eye(3)
+            instance_labels[geom_id] = materials
         if self._mesh_faces:
             vertex_offsets = np.cumsum([0] + [len(n) for n in self._mesh_vertex_normals[:-1]])
             self.mesh_faces = np.concatenate(
@@ -224,6 +267,7 @@ class SceneGeometry:
             sphere_label=self.sphere_materials,
             plane_y=None if self.floor is None else float(self.floor.height),
             plane_label=self.floor_material,
+            instance_labels=instance_labels,
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
 
@@ -289,8 +333,8 @@ class SceneGeometry:
         if self.smooth_meshes and meshes.stop > meshes.start:
             normal = face_normal.copy()
             normal[:, meshes] = self._smooth_normals(
-                records.inst_id[meshes], records.prim_id[meshes], records.u[meshes],
-                records.v[meshes], face_normal[:, meshes],
+                records.inst_id[meshes], records.inst_prim_id[meshes], records.prim_id[meshes],
+                records.u[meshes], records.v[meshes], face_normal[:, meshes],
             )  # fmt: skip
         surfaces = SurfaceHits(
             t=records.t,
@@ -310,18 +354,27 @@ class SceneGeometry:
             )  # fmt: skip
         return records.rays, surfaces
 
-    def _smooth_normals(self, inst, prim, u, v, face_normal) -> np.ndarray:
+    def _smooth_normals(self, inst, inst_prim, prim, u, v, face_normal) -> np.ndarray:
         """(3, k) unit world shading normals of k mesh hits: the vertex normals interpolated at
-        (u, v) where the placement is smooth, ``face_normal`` (3, k) elsewhere."""
+        (u, v) where the placement is smooth, ``face_normal`` (3, k) elsewhere. ``inst_prim``
+        (k,) the instance within an instance array (-1 for other hits)."""
         smooth = self.instance_smooth[inst]
-        face = self.mesh_face_offset[self.instance_child[inst]] + prim
+        child = self.instance_child[inst]
+        if self._arrays:
+            position = self.bvh.instance_children(inst, inst_prim)
+            in_array = position >= 0
+            child = np.where(in_array, self.array_child[inst, np.maximum(position, 0)], child)
+        face = self.mesh_face_offset[child] + prim
         corners = self.mesh_faces[face]
         # Never zero: corners without a normal, and blends that cancel, take the face's.
         interpolated = blend_normals(
             self.mesh_vertex_normals, self.mesh_missing_normals, corners, u, v,
             self.mesh_face_normals, face,
         )  # fmt: skip
-        world = _unit(np.einsum("nij,nj->in", self.instance_normal_matrix[inst], interpolated))
+        world = np.einsum("nij,nj->in", self.instance_normal_matrix[inst], interpolated)
+        if self._arrays:  # instance arrays: M^-T from the BVH's own transforms
+            world = self.bvh.instance_normals(inst, inst_prim, world)
+        world = _unit(world)
         return np.where(smooth, world, face_normal)
 
     def occluded(

@@ -61,3 +61,31 @@ def test_the_embree_layer_follows_the_same_rule() -> None:
         top.add_instance(child, scaled(1e-4))  # accepted: well conditioned
         with pytest.raises(ValueError, match="transform: must be invertible"):
             top.add_instance(child, scaled(1.0, 1.0, 1e-9))
+
+
+def test_the_batched_rule_is_the_single_matrix_rule() -> None:
+    """``affine_array_problem`` (a million matrices at once) accepts exactly what
+    ``affine_problem`` accepts, across the condition-number boundary and every other way a
+    placement can be wrong, and names the first bad row."""
+    from embree_rt.transforms import affine_array_problem
+
+    rng = np.random.default_rng(3)
+    matrices = []
+    for flat in (0.3, 0.9, 1.0, 1.1, 3.0):  # around cond = MAX_CONDITION
+        rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        matrix = np.eye(4)
+        matrix[:3, :3] = rotation @ np.diag([1.0, 0.5, flat / MAX_CONDITION])
+        matrices.append(matrix)
+    matrices += [np.diag([1.0, 1.0, 1.0, 2.0]), np.diag([1.0, np.nan, 1.0, 1.0]),
+                 np.diag([1e39, 1.0, 1.0, 1.0]), np.diag([0.0, 0.0, 0.0, 1.0])]  # fmt: skip
+    for _ in range(20):  # mirrors, shears, tiny and huge uniform scales
+        matrix = np.eye(4)
+        matrix[:3, :3] = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-6, 6)
+        matrix[:3, 3] = rng.normal(size=3)
+        matrices.append(matrix)
+    for matrix in matrices:
+        single = affine_problem(matrix)
+        batched = affine_array_problem(np.stack([np.eye(4), matrix]))
+        assert (single is None) == (batched is None), (matrix, single, batched)
+        if single is not None:
+            assert batched == (1, single)

@@ -11,7 +11,7 @@ import numba
 import numpy as np
 
 from embree_rt.embree import device as device_module
-from embree_rt.embree import kernels, library, records, user_spheres
+from embree_rt.embree import instance_arrays, kernels, library, records, user_spheres
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
     as_points,
@@ -20,6 +20,7 @@ from embree_rt.embree.validation import (
     as_transform,
     as_triangle_indices,
 )
+from embree_rt.transforms import affine_array_problem
 
 
 @dataclass
@@ -29,7 +30,9 @@ class Hits:
     ``t`` (n,) float32, ``inf`` on a miss; ``geom_id``, ``prim_id``, ``inst_id`` (n,) int32, -1
     where none (``geom_id`` is the geometry inside the instanced BVH for an instance hit, and
     ``inst_id`` the instance's geometry id); ``normal`` (n, 3) float32 unnormalised geometric
-    normal in world space; ``u``, ``v`` (n,) float32 hit coordinates (barycentric on triangles).
+    normal in world space; ``u``, ``v`` (n,) float32 hit coordinates (barycentric on triangles);
+    ``inst_prim_id`` (n,) int32 the instance's number inside an instance array
+    (``BVH.add_instances``), -1 where the hit is not in one.
     """
 
     t: np.ndarray
@@ -39,6 +42,7 @@ class Hits:
     normal: np.ndarray
     u: np.ndarray
     v: np.ndarray
+    inst_prim_id: np.ndarray | None = None
 
     @property
     def hit(self) -> np.ndarray:
@@ -138,8 +142,18 @@ class BVH:
         # Inverse-transpose of each instance's linear part, by geometry id, for world normals.
         self._normal_matrices: dict[int, np.ndarray] = {}
         self._normal_matrix_array: np.ndarray | None = None
+        # Instance arrays by geometry id: the buffers Embree reads (transforms, child index) and
+        # the children's coordinate bounds, all kept alive here; described to the compiled
+        # passes by one table at commit (instance_arrays.ARRAY_* columns).
+        self._arrays: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray]] = {}
+        self._array_table: np.ndarray | None = None
         self.geometry_count = 0
         self.primitive_count = 0
+        self.instance_count = 0  # instances in instance arrays
+        self.array_count = 0  # instance arrays
+        # max |coordinate| over this BVH's own geometry: what an instance array's hit scale
+        # is bounded from
+        self.coordinate_bound = 0.0
         self.lanes = native_lanes(self._device) if lanes is None else _valid_lanes(lanes)
 
     # -- lifetime -----------------------------------------------------------------------------
@@ -223,6 +237,9 @@ class BVH:
         packed[:, :3] = centers
         packed[:, 3] = radii
         self.primitive_count += count
+        if count:
+            reach = float((np.abs(centers).max(axis=1) + radii).max())
+            self.coordinate_bound = max(self.coordinate_bound, reach)
         geom_id = self._attach(geometry, "adding spheres")
         self._sphere_buffers[geom_id] = packed
         return geom_id
@@ -247,6 +264,8 @@ class BVH:
             target = (ctypes.c_uint32 * faces.size).from_address(index_pointer)
             np.ctypeslib.as_array(target)[:] = faces.reshape(-1)
         self.primitive_count += len(faces)
+        if len(vertices):
+            self.coordinate_bound = max(self.coordinate_bound, float(np.abs(vertices).max()))
         return self._attach(geometry, "adding triangles")
 
     def add_instance(self, other: BVH, transform: np.ndarray) -> int:
@@ -272,6 +291,82 @@ class BVH:
         self._normal_matrices[geom_id] = np.linalg.inv(matrix[:3, :3]).T.astype(np.float32)
         return geom_id
 
+    def add_instances(
+        self,
+        children: BVH | list[BVH],
+        transforms: np.ndarray,
+        child_index: np.ndarray | None = None,
+    ) -> int:
+        """Place committed BVHs by n affine ``transforms`` (n, 4, 4) (object → world) as ONE
+        Embree instance array; returns its geometry id.
+
+        ``children`` is one BVH, or a list of them with ``child_index`` (n,) ints choosing each
+        instance's child (default: all the first). A hit in the array reports the array's id as
+        ``inst_id`` and the instance's number as ``inst_prim_id``. The BVH keeps the (n, 3, 4)
+        float32 transforms (48 bytes an instance) and the (n,) uint32 child index for Embree.
+        """
+        children = [children] if isinstance(children, BVH) else list(children)
+        if not children:
+            raise ValueError("children: expected at least one BVH")
+        for child in children:
+            if not isinstance(child, BVH):
+                raise TypeError(f"children: expected BVHs, got {type(child).__name__}")
+            if child is self:
+                raise ValueError("children: a BVH cannot instance itself")
+            if not child._committed:
+                raise ValueError("children: commit each child BVH before instancing it")
+        problem = affine_array_problem(transforms)
+        if problem is not None:
+            row, text = problem
+            raise ValueError(f"transforms: {text}" if row < 0 else f"transforms: row {row}: {text}")
+        count = len(transforms)
+        if count == 0:
+            raise ValueError("transforms: expected at least one placement, got none")
+        if count >= library.INVALID_ID:
+            raise ValueError(f"transforms: at most {library.INVALID_ID - 1} instances, got {count}")
+        # (n, 3, 4) float32 row major: RTC_FORMAT_FLOAT3X4_ROW_MAJOR, exactly M[:, :3, :4]
+        packed = np.empty((count, 3, 4), np.float32)
+        packed[:] = np.asarray(transforms)[:, :3, :]
+        index = None
+        if child_index is not None or len(children) > 1:
+            if child_index is None:
+                raise ValueError("child_index: required with several children")
+            index = np.asarray(child_index)
+            if index.shape != (count,) or (count and index.dtype.kind not in "iu"):
+                raise ValueError(f"child_index: expected shape ({count},) integers, got "
+                                 f"{index.shape} {index.dtype}")  # fmt: skip
+            bad = (index < 0) | (index >= len(children))
+            if bad.any():
+                row = int(np.flatnonzero(bad)[0])
+                raise ValueError(f"child_index: row {row} is {index[row]}, outside "
+                                 f"[0, {len(children)})")  # fmt: skip
+            index = np.ascontiguousarray(index, np.uint32)
+        self._live_scene()
+        lib = self._lib
+        geometry = lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_INSTANCE_ARRAY)
+        self._device.check("rtcNewGeometry(INSTANCE_ARRAY)")
+        if index is None:
+            lib.rtcSetGeometryInstancedScene(geometry, children[0]._live_scene())
+        else:
+            scenes = np.array([child._live_scene() for child in children], np.uint64)
+            lib.rtcSetGeometryInstancedScenes(geometry, scenes.ctypes.data, len(children))
+            lib.rtcSetSharedGeometryBuffer(
+                geometry, library.BUFFER_TYPE_INDEX, 0, library.FORMAT_UINT, index.ctypes.data,
+                0, 4, count,
+            )  # fmt: skip
+        lib.rtcSetSharedGeometryBuffer(
+            geometry, library.BUFFER_TYPE_TRANSFORM, 0, library.FORMAT_FLOAT3X4_ROW_MAJOR,
+            packed.ctypes.data, 0, 48, count,
+        )  # fmt: skip
+        self._device.check("setting up an instance array")
+        geom_id = self._attach(geometry, "adding an instance array")
+        bounds = np.array([child.coordinate_bound for child in children], np.float32)
+        self._arrays[geom_id] = (packed, index, bounds)
+        self._children.extend(children)
+        self.instance_count += count
+        self.array_count += 1
+        return geom_id
+
     def commit(self) -> None:
         """Build the BVH. Geometry cannot be added afterwards."""
         self._lib.rtcCommitScene(self._live_scene())
@@ -286,6 +381,17 @@ class BVH:
         self._normal_matrix_array = table
         self._has_instances = bool(self._normal_matrices)
         self._normal_matrices = {}
+        if self._arrays:
+            table = np.zeros((max(self.geometry_count, 1), instance_arrays.ARRAY_COLUMNS),
+                             np.uint64)  # fmt: skip
+            for geom_id, (packed, index, bounds) in self._arrays.items():
+                table[geom_id, instance_arrays.ARRAY_TRANSFORMS] = packed.ctypes.data
+                table[geom_id, instance_arrays.ARRAY_COUNT] = len(packed)
+                table[geom_id, instance_arrays.ARRAY_CHILD_INDEX] = (
+                    0 if index is None else index.ctypes.data
+                )
+                table[geom_id, instance_arrays.ARRAY_CHILD_BOUND] = bounds.ctypes.data
+            self._array_table = table
 
     # -- queries ------------------------------------------------------------------------------
 
@@ -310,6 +416,22 @@ class BVH:
             u=np.empty(n, np.float32),
             v=np.empty(n, np.float32),
         )
+        if self._array_table is not None:  # the loop that also copies out instPrimID
+            hits.inst_prim_id = np.empty(n, np.int32)
+            if n:
+                arguments = (
+                    self._live_scene(), self.lanes, origins, directions, tnear, tfar, hits.t,
+                    hits.normal, hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
+                    hits.inst_prim_id,
+                )  # fmt: skip
+                if self.threads == 1:
+                    instance_arrays.intersect_serial(*arguments)
+                else:
+                    with _query_lock:
+                        numba.set_num_threads(self.threads)
+                        instance_arrays.intersect(*arguments)
+            return hits
+        hits.inst_prim_id = np.full(n, -1, np.int32)
         if n:
             arguments = (
                 self._live_scene(), self.lanes, origins, directions, tnear, tfar, hits.t,
@@ -338,6 +460,9 @@ class BVH:
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         hits = self._raw_hits(origins, directions, tnear, tfar)
         self._normals_to_world(hits)
+        if self._array_table is not None:
+            instance_arrays.hits_to_world(hits.inst_id, hits.inst_prim_id, hits.normal,
+                                          self._array_table)  # fmt: skip
         return hits
 
     def intersect_records(
@@ -366,7 +491,59 @@ class BVH:
             np.asarray(sphere_label, np.int32), np.asarray(labels.geometry_label, np.int64),
             np.asarray(labels.geometry_scale, np.float32), self._normal_matrix_array,
         )  # fmt: skip
-        return HitRecords(*fields)
+        result = HitRecords(*fields)
+        if self._array_table is None:
+            result.inst_prim_id = np.full(len(result.t), -1, np.int32)
+        else:
+            other = result.group("other")
+            result.inst_prim_id = np.full(len(result.t), -1, np.int32)
+            result.inst_prim_id[other] = instance_arrays.finish_records(
+                result.rays, other.start, other.stop, hits.inst_id, hits.inst_prim_id,
+                hits.normal, result.normal, result.label, result.scale,
+                self._labelled_array_table(labels),
+            )  # fmt: skip
+        return result
+
+    def _labelled_array_table(self, labels: HitLabels) -> np.ndarray:
+        """The array table with the caller's per-instance labels' addresses filled in."""
+        if not labels.instance_labels:
+            return self._array_table
+        table = self._array_table.copy()
+        for geom_id, values in labels.instance_labels.items():
+            if geom_id not in self._arrays:
+                raise ValueError(f"instance_labels: geometry {geom_id} is not an instance array")
+            if values.dtype != np.int32 or values.shape != (len(self._arrays[geom_id][0]),):
+                raise ValueError(
+                    f"instance_labels: geometry {geom_id} needs ({len(self._arrays[geom_id][0])},)"
+                    f" int32 labels, got {values.shape} {values.dtype}"
+                )
+            if not values.flags.c_contiguous:
+                raise ValueError(f"instance_labels: geometry {geom_id}'s labels must be contiguous")
+            table[geom_id, instance_arrays.ARRAY_LABELS] = values.ctypes.data
+        return table
+
+    def instance_normals(
+        self, inst_id: np.ndarray, inst_prim_id: np.ndarray, normals: np.ndarray
+    ) -> np.ndarray:
+        """(3, k) float32: ``normals`` (3, k) of k hits taken from their child's space to unit
+        world normals where the hit (``inst_id``, ``inst_prim_id`` (k,) int32) is in an
+        instance array; other columns unchanged."""
+        if self._array_table is None:
+            return np.asarray(normals, np.float32)
+        return instance_arrays.normals_to_world(
+            np.ascontiguousarray(inst_id, np.int32), np.ascontiguousarray(inst_prim_id, np.int32),
+            np.asarray(normals, np.float32), self._array_table,
+        )  # fmt: skip
+
+    def instance_children(self, inst_id: np.ndarray, inst_prim_id: np.ndarray) -> np.ndarray:
+        """(k,) int32: for k hits, the position in its array's ``children`` of the child each
+        was in (-1 for hits outside instance arrays)."""
+        if self._array_table is None:
+            return np.full(len(inst_id), -1, np.int32)
+        return instance_arrays.child_of_hits(
+            np.ascontiguousarray(inst_id, np.int32), np.ascontiguousarray(inst_prim_id, np.int32),
+            self._array_table,
+        )  # fmt: skip
 
     def occluded(
         self,

@@ -19,11 +19,15 @@ GEOMETRY_TYPE_TRIANGLE = 0
 GEOMETRY_TYPE_SPHERE_POINT = 50
 GEOMETRY_TYPE_USER = 120
 GEOMETRY_TYPE_INSTANCE = 121
+GEOMETRY_TYPE_INSTANCE_ARRAY = 122
 BUFFER_TYPE_INDEX = 0
 BUFFER_TYPE_VERTEX = 1
+BUFFER_TYPE_TRANSFORM = 23
+FORMAT_UINT = 0x5001
 FORMAT_UINT3 = 0x5003
 FORMAT_FLOAT3 = 0x9003
 FORMAT_FLOAT4 = 0x9004
+FORMAT_FLOAT3X4_ROW_MAJOR = 0x9134
 FORMAT_FLOAT4X4_COLUMN_MAJOR = 0x9244
 DEVICE_PROPERTY_VERSION = 0
 DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED = 32
@@ -97,6 +101,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "rtcCommitGeometry": (None, [p]),
         "rtcSetNewGeometryBuffer": (p, [p, i, u, i, z, z]),
         "rtcSetGeometryInstancedScene": (None, [p, p]),
+        "rtcSetGeometryInstancedScenes": (None, [p, p, z]),
+        "rtcSetSharedGeometryBuffer": (None, [p, i, u, i, p, z, z, z]),
         "rtcSetGeometryTransform": (None, [p, u, i, p]),
         "rtcSetGeometryUserPrimitiveCount": (None, [p, u]),
         "rtcSetGeometryUserData": (None, [p, p]),

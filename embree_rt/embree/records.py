@@ -31,7 +31,9 @@ class HitLabels:
     bound on its world coordinates; ``sphere_geom_id`` the top-level sphere set whose hits take
     ``sphere_label`` (m,) int32 by primitive instead (-1: none); ``plane_y`` the ground plane's
     height (None: no plane) and ``plane_label`` its label. (Sphere labels are int32, as the
-    scene stores its sphere materials: no copy, 4 bytes a sphere.)
+    scene stores its sphere materials: no copy, 4 bytes a sphere.) ``instance_labels`` maps an
+    instance array's geometry id to the (n,) int32 labels of its instances (arrays not in it
+    take ``geometry_label``).
     """
 
     geometry_label: np.ndarray
@@ -40,6 +42,7 @@ class HitLabels:
     sphere_label: np.ndarray | None = None
     plane_y: float | None = None
     plane_label: int = -1
+    instance_labels: dict[int, np.ndarray] | None = None
 
 
 @dataclass
@@ -53,7 +56,8 @@ class HitRecords:
     the plane, outward on spheres); ``label`` (k,) int64; ``scale`` (k,) float32 bound on the
     coordinates (max |position| on the plane; |centre| + radius on a sphere; the table's value
     otherwise); ``incoming`` (3, k) float32 ray directions; ``prim_id``, ``inst_id`` (k,) int32
-    and ``u``, ``v`` (k,) float32 as Embree reported them (``prim_id`` -1 on the plane).
+    and ``u``, ``v`` (k,) float32 as Embree reported them (``prim_id`` -1 on the plane);
+    ``inst_prim_id`` (k,) int32 the instance's number inside its instance array (-1 elsewhere).
     """
 
     rays: np.ndarray
@@ -68,6 +72,7 @@ class HitRecords:
     inst_id: np.ndarray
     u: np.ndarray
     v: np.ndarray
+    inst_prim_id: np.ndarray | None = None
 
     def group(self, name: str) -> slice:
         """The columns of group ``name`` (one of ``GROUPS``)."""

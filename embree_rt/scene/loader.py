@@ -88,6 +88,16 @@ class _SphereArrayEntry:
 
 
 @dataclass
+class _InstancesEntry:
+    key: str  # the ``mesh`` key
+    path: Path
+    placements_key: str  # the ``transforms`` key, which errors inside the .npz name
+    placements_path: Path
+    material: str | None
+    smooth: bool
+
+
+@dataclass
 class _MeshEntry:
     key: str
     path: Path
@@ -130,13 +140,23 @@ class SceneReader:
         self.spheres = [self._sphere(t) for t in root.tables("spheres")]
         self.sphere_arrays = [self._sphere_array(t) for t in root.tables("sphere_arrays")]
         self.meshes = [self._mesh(t) for t in root.tables("meshes")]
+        self.instances = [self._instances(t) for t in root.tables("instances")]
         root.finish()
 
     def build(self) -> Scene:
         scene = self.scene
         # Step 2: the files the scene names, each checked before anything is generated.
         arrays = [self._read_sphere_array(entry) for entry in self.sphere_arrays]
+        placements = [self._read_placements(entry) for entry in self.instances]
         parts: dict[Path, list] = {}
+        for entry in self.instances:
+            if entry.path not in parts:
+                from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
+
+                parts[entry.path] = load_mesh_parts(entry.path, self.path, entry.key)
+            for _, node_transform in parts[entry.path]:
+                if (problem := affine_problem(node_transform)) is not None:
+                    raise SceneError(self.path, entry.key, f"{entry.path}: a node {problem}")
         for entry in self.meshes:
             if entry.path not in parts:  # one load per file: its placements share the Trimesh
                 from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
@@ -163,6 +183,16 @@ class SceneReader:
             for mesh, node_transform in parts[entry.path]:
                 # The node's own transform first, then the user's placement of the whole file.
                 scene.add_mesh(mesh, entry.material, entry.placement @ node_transform, entry.smooth)
+        if self.instances:
+            from embree_rt.scene.instances import mesh_from_parts
+
+            baked: dict[Path, object] = {}  # one mesh per file: entries sharing it share a child
+            for entry, (transforms, materials) in zip(self.instances, placements, strict=True):
+                if entry.path not in baked:
+                    baked[entry.path] = mesh_from_parts(parts[entry.path])
+                scene.add_instances(baked[entry.path], transforms,
+                                    entry.material if materials is None else materials,
+                                    entry.smooth)  # fmt: skip
         return scene
 
     # -- sections -----------------------------------------------------------------------------
@@ -302,6 +332,18 @@ class SceneReader:
         table.finish()
         return entry
 
+    def _instances(self, table: Table) -> _InstancesEntry:
+        entry = _InstancesEntry(
+            key=table.key("mesh"),
+            path=(self.base / table.string("mesh", required=True)).resolve(),
+            placements_key=table.key("transforms"),
+            placements_path=(self.base / table.string("transforms", required=True)).resolve(),
+            material=self._material_name(table, None),
+            smooth=table.boolean("smooth", True),
+        )
+        table.finish()
+        return entry
+
     def _placement(self, table: Table) -> np.ndarray:
         """(4, 4) float64 placement: ``transform``, else scale, rotate X, Y, Z, translate."""
         if table.has("transform"):
@@ -370,14 +412,29 @@ class SceneReader:
             return centers, radii, entry.material
         if materials.dtype.kind == "S":
             materials = materials.astype(str)
+        if (problem := self._materials_problem(materials, n)) is not None:
+            raise fail(problem)
+        return centers, radii, materials
+
+    def _materials_problem(self, materials: np.ndarray, n: int) -> str | None:
+        """What is wrong with a file's (n,) ``materials`` array of names or ids, or None."""
         if materials.shape != (n,) or materials.dtype.kind not in "iuU":
-            raise fail(
-                f"materials must be ({n},) names or ids, got {materials.shape} {materials.dtype}"
-            )
+            return f"materials must be ({n},) names or ids, got {materials.shape} {materials.dtype}"
         if materials.dtype.kind == "U":
             unknown = sorted(set(np.unique(materials).tolist()) - set(self.scene.materials))
             if unknown:
-                raise fail(f"materials: undefined material {unknown[0]!r}")
+                return f"materials: undefined material {unknown[0]!r}"
         elif n and (materials.min() < 0 or materials.max() >= len(self.scene.materials)):
-            raise fail(f"materials: id out of range [0, {len(self.scene.materials)})")
-        return centers, radii, materials
+            return f"materials: id out of range [0, {len(self.scene.materials)})"
+        return None
+
+    def _read_placements(self, entry: _InstancesEntry) -> tuple[np.ndarray, np.ndarray | None]:
+        """(transforms (n, 4, 4), materials (n,) names or ids or None) of an instances entry."""
+        from embree_rt.scene.instances import read_placements
+
+        path = entry.placements_path
+
+        def fail(problem: str) -> SceneError:
+            return SceneError(self.path, entry.placements_key, f"{path}: {problem}")
+
+        return read_placements(path, fail, self._materials_problem)

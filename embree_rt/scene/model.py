@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt.materials import PRESETS, RGB, Checker, Material
+from embree_rt.scene.instances import MeshInstances
 from embree_rt.scene.writer import save_scene
 from embree_rt.transforms import as_affine
 
@@ -148,6 +149,7 @@ class Scene:
     sphere_radii: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     sphere_materials: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     meshes: list[MeshObject] = field(default_factory=list)
+    instances: list[MeshInstances] = field(default_factory=list)
 
     @property
     def material_names(self) -> list[str]:
@@ -184,28 +186,74 @@ class Scene:
         radii = np.asarray(radii, np.float32).reshape(-1)
         if len(radii) != len(centers):
             raise ValueError(f"radii: {len(radii)} values for {len(centers)} centers")
-        if isinstance(materials, str):
-            ids = np.full(len(centers), self.material_index(materials), np.int32)
-        else:
-            materials = np.asarray(materials)
-            if materials.dtype.kind in "iu":
-                if len(materials) and (
-                    materials.min() < 0 or materials.max() >= len(self.materials)
-                ):
-                    raise ValueError("materials: index out of range")
-                ids = np.asarray(materials, np.int32)
-            else:
-                names, inverse = np.unique(materials.astype(str), return_inverse=True)
-                lookup = np.array([self.material_index(n) for n in names], np.int32)
-                ids = lookup[inverse]
-            if len(ids) != len(centers):
-                raise ValueError(f"materials: {len(ids)} values for {len(centers)} centers")
+        ids = self.material_ids(materials, len(centers), "centers")
         if not copy and len(self.sphere_radii) == 0:
             self.sphere_centers, self.sphere_radii, self.sphere_materials = centers, radii, ids
             return
         self.sphere_centers = np.concatenate([self.sphere_centers, centers])
         self.sphere_radii = np.concatenate([self.sphere_radii, radii])
         self.sphere_materials = np.concatenate([self.sphere_materials, ids])
+
+    def material_ids(self, materials: str | np.ndarray | list[str], count: int,
+                     what: str = "objects") -> np.ndarray:  # fmt: skip
+        """(count,) int32 indices into ``material_names`` of one material name for all, (count,)
+        names, or (count,) int indices (checked against the table); ValueError otherwise."""
+        if isinstance(materials, str):
+            return np.full(count, self.material_index(materials), np.int32)
+        materials = np.asarray(materials)
+        if materials.dtype.kind in "iu":
+            if len(materials) and (materials.min() < 0 or materials.max() >= len(self.materials)):
+                raise ValueError("materials: index out of range")
+            ids = np.asarray(materials, np.int32)
+        else:
+            names, inverse = np.unique(materials.astype(str), return_inverse=True)
+            lookup = np.array([self.material_index(n) for n in names], np.int32)
+            ids = lookup[inverse].astype(np.int32, copy=False)
+        if ids.shape != (count,):
+            raise ValueError(f"materials: {len(ids)} values for {count} {what}")
+        return ids
+
+    def add_instances(
+        self,
+        mesh: trimesh.Trimesh | trimesh.Scene,
+        transforms: np.ndarray,
+        materials: str | np.ndarray | list[str] | None = None,
+        smooth: bool = True,
+    ) -> MeshInstances:
+        """Place ``mesh`` by each of the (n, 4, 4) ``transforms`` (mesh space to world), as one
+        Embree instance array; returns the ``MeshInstances`` added.
+
+        ``materials``: one name for all, (n,) names or ids, or None: each copy looks as the
+        mesh's file says (as ``add_mesh``). A trimesh.Scene becomes one mesh, its nodes baked at
+        their transforms. Raises TypeError or ValueError (naming the first bad row) before
+        anything is added.
+        """
+        import trimesh
+
+        from embree_rt.scene.instances import single_mesh
+        from embree_rt.transforms import affine_array_problem
+
+        if not isinstance(mesh, trimesh.Trimesh | trimesh.Scene):
+            raise TypeError(
+                f"mesh: expected a trimesh.Trimesh or trimesh.Scene, got {type(mesh).__name__}"
+            )
+        if not isinstance(smooth, bool | np.bool_):
+            raise TypeError(f"smooth: expected True or False, got {type(smooth).__name__}")
+        if (problem := affine_array_problem(transforms)) is not None:
+            row, text = problem
+            raise ValueError(f"transforms: {text}" if row < 0 else f"transforms: row {row}: {text}")
+        transforms = np.array(transforms, np.float64)
+        if len(transforms) == 0:
+            raise ValueError("transforms: expected at least one placement, got none")
+        child = single_mesh(mesh)
+        if materials is None:
+            ids = self.material_ids(self._mesh_material(child), len(transforms), "transforms")
+        else:
+            ids = self.material_ids(materials, len(transforms), "transforms")
+        added = MeshInstances(mesh=child, transforms=transforms, materials=ids,
+                              smooth=bool(smooth), mesh_colors=materials is None)  # fmt: skip
+        self.instances.append(added)
+        return added
 
     def add_mesh(
         self,

@@ -1,4 +1,5 @@
-"""``Scene`` → scene file (TOML or JSON): spheres go to a sibling ``.npz``, meshes to PLY files.
+"""``Scene`` → scene file (TOML or JSON): spheres and instance placements go to sibling ``.npz``
+files, meshes to PLY files.
 
 Each distinct mesh object is written once (``NAME.meshK.ply``) and every placement of it refers to
 that file, so loading the saved scene shares one Trimesh between the placements again.
@@ -68,24 +69,40 @@ def scene_document(scene: Scene, path: Path) -> dict:
             materials=names[scene.sphere_materials],
         )
         document["sphere_arrays"] = [{"file": spheres_path.name}]
+    files: dict[int, str] = {}  # each distinct mesh written once, for meshes and instances
+
+    def mesh_file(mesh) -> str:
+        if id(mesh) not in files:
+            mesh_path = path.with_name(f"{path.stem}.mesh{len(files)}.ply")
+            mesh.export(mesh_path)
+            files[id(mesh)] = mesh_path.name
+        return files[id(mesh)]
+
     if scene.meshes:
-        files: dict[int, str] = {}
         entries = []
         for placement in scene.meshes:
-            key = id(placement.mesh)
-            if key not in files:
-                mesh_path = path.with_name(f"{path.stem}.mesh{len(files)}.ply")
-                placement.mesh.export(mesh_path)
-                files[key] = mesh_path.name
             entries.append(
                 {
-                    "file": files[key],
+                    "file": mesh_file(placement.mesh),
                     "material": placement.material,
                     "smooth": placement.smooth,
                     "transform": np.asarray(placement.transform, float).tolist(),
                 }
             )
         document["meshes"] = entries
+    if scene.instances:
+        names = np.asarray(scene.material_names)
+        entries = []
+        for number, instances in enumerate(scene.instances):
+            placements_path = path.with_name(f"{path.stem}.instances{number}.npz")
+            np.savez_compressed(placements_path, transforms=instances.transforms,
+                                materials=names[instances.materials])  # fmt: skip
+            entries.append({
+                "mesh": mesh_file(instances.mesh),
+                "transforms": placements_path.name,
+                "smooth": instances.smooth,
+            })  # fmt: skip
+        document["instances"] = entries
     return document
 
 
