@@ -57,6 +57,8 @@ class SurfaceHits:
     error scales with it; ``incoming`` (3, k) float32, the direction of the ray that made it.
     ``colored`` (j,) int64 columns whose base colour is the surface's own (a mesh's texture or
     vertex colours), ``color`` (3, j) float32 linear those colours; both None when none is.
+    ``prim_id``, ``inst_id`` (k,) int32: Embree's primitive and top-level instance ids of each
+    hit (-1 on the floor; ``inst_id`` -1 on the sphere set), which name the object hit.
     """
 
     t: np.ndarray
@@ -70,6 +72,8 @@ class SurfaceHits:
     incoming: np.ndarray
     colored: np.ndarray | None = None
     color: np.ndarray | None = None
+    prim_id: np.ndarray | None = None
+    inst_id: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -226,6 +230,8 @@ class SceneGeometry:
             plane_label=self.floor_material,
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
+        # Instance geometry ids in the order placed: tessellated spheres, then scene.meshes.
+        self.placement_geom_ids = np.asarray(self._instance_geom_ids, np.int64)
 
     def close(self) -> None:
         self.bvh.close()
@@ -302,6 +308,8 @@ class SceneGeometry:
             floor_count=int(records.counts[0]),
             scale=records.scale,
             incoming=records.incoming,
+            prim_id=records.prim_id,
+            inst_id=records.inst_id,
         )
         if self.mesh_colors and meshes.stop > meshes.start:  # mesh looks: textures, colours
             surfaces.colored, surfaces.color = self.mesh_colors.hit_colors(

@@ -470,12 +470,19 @@ def render(
     batch_size: int = DEFAULT_BATCH_SIZE,
     quiet: bool = True,
     stats: RenderStats | None = None,
-) -> np.ndarray:
+    aovs: list[str] | tuple[str, ...] | None = None,
+) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
     """Render ``scene`` to a (height, width, 3) float32 linear image.
 
     Arguments left as None come from ``scene.render``. With ``quiet=False`` a progress bar runs
     on stderr (when it is a terminal). Pass a ``RenderStats`` to receive ray counts and timings.
+    With ``aovs`` (names from ``embree_rt.aovs.AOV_NAMES``) it returns the image, bitwise the
+    same, and a dict of those AOVs (``embree_rt.aovs.render_aovs``).
     """
+    if aovs is not None:
+        from embree_rt.aovs import aov_bytes, check_aov_names
+
+        aovs = check_aov_names(aovs)
     settings = scene.render
     width = settings.width if width is None else width
     height = settings.height if height is None else height
@@ -484,12 +491,14 @@ def render(
     seed = settings.seed if seed is None else seed
     # Refuse what cannot fit before building or allocating anything (MemoryBudgetError).
     count = len(scene.sphere_radii)
-    budget.require(
-        budget.render_needs(
-            count, sphere_kind(count, spheres), width, height, spp, batch_size,
-            workers=threads or os.cpu_count() or 1,
-        )
+    needs = budget.render_needs(
+        count, sphere_kind(count, spheres), width, height, spp, batch_size,
+        workers=threads or os.cpu_count() or 1,
     )  # fmt: skip
+    if aovs:
+        size, text = needs["image"]
+        needs["image"] = (size + aov_bytes(width, height, aovs), f"{text} with AOVs")
+    budget.require(needs)
     with Renderer(scene, spheres=spheres, threads=threads, batch_size=batch_size) as renderer:
         bar = None
         if not quiet and sys.stderr.isatty():
@@ -514,4 +523,13 @@ def render(
             stats.rays = dict(renderer.stats.rays)
             stats.build_s = renderer.stats.build_s
             stats.render_s = renderer.stats.render_s
-    return image
+        if aovs is None:
+            return image
+        from embree_rt.aovs import render_aovs
+
+        began = time.perf_counter()
+        layers = render_aovs(renderer, width=width, height=height, names=aovs)
+        if stats is not None:
+            stats.rays["aov"] = width * height  # one pixel-centre ray per pixel
+            stats.render_s += time.perf_counter() - began
+    return image, layers
