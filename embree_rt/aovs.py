@@ -32,6 +32,7 @@ import numpy as np
 
 from embree_rt import film
 from embree_rt.camera import camera_frame, pixel_center_rays
+from embree_rt.columns import scatter
 
 if TYPE_CHECKING:
     from embree_rt.geometry import SceneGeometry, SurfaceHits
@@ -127,13 +128,13 @@ def hit_object_ids(surfaces: SurfaceHits, instance_objects: np.ndarray) -> np.nd
 # -- the pass ---------------------------------------------------------------------------------
 
 
-def empty_aovs(names: tuple[str, ...], width: int, height: int) -> dict[str, np.ndarray]:
-    """The AOV arrays of an image where every ray escapes: depth inf, vectors zero, ids -1."""
-    pixels = width * height
+def empty_aovs(names: tuple[str, ...], pixels: int) -> dict[str, np.ndarray]:
+    """The AOV arrays of ``pixels`` pixels where every ray escapes, one pixel per column: depth
+    (pixels,) inf, normal and albedo (3, pixels) zero, ids (pixels,) -1."""
     empty = {
         "depth": lambda: np.full(pixels, np.inf, np.float32),
-        "normal": lambda: np.zeros((pixels, 3), np.float32),
-        "albedo": lambda: np.zeros((pixels, 3), np.float32),
+        "normal": lambda: np.zeros((3, pixels), np.float32),
+        "albedo": lambda: np.zeros((3, pixels), np.float32),
         "object_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
         "material_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
     }
@@ -153,7 +154,9 @@ def render_aovs(
 
     names = check_aov_names(names)
     frame = camera_frame(renderer.scene.camera, width, height)
-    flat = empty_aovs(names, width, height)
+    if not names:
+        return {}
+    flat = empty_aovs(names, width * height)
     instance_objects = (
         instance_object_table(renderer.geometry, renderer.scene) if "object_id" in names else None
     )
@@ -167,9 +170,9 @@ def render_aovs(
             flat["depth"][hit] = surfaces.t
         if "normal" in flat:
             normal, _, _ = Renderer._facing_the_ray(surfaces.incoming, surfaces)
-            flat["normal"][hit] = normal.T
+            scatter(flat["normal"], hit, normal)
         if "albedo" in flat:
-            flat["albedo"][hit] = renderer._surface_color(surfaces).T
+            scatter(flat["albedo"], hit, renderer._surface_color(surfaces))
         if "material_id" in flat:
             flat["material_id"][hit] = surfaces.material
         if instance_objects is not None:
@@ -183,8 +186,12 @@ def render_aovs(
     else:
         for batch in batches:
             run(batch)
+    # Vectors were filled as (3, pixels) columns, one cheap 1-D scatter per component.
     return {
-        name: values.reshape(height, width, *values.shape[1:]) for name, values in flat.items()
+        name: np.ascontiguousarray(values.T).reshape(height, width, 3)
+        if values.ndim == 2
+        else values.reshape(height, width)
+        for name, values in flat.items()
     }
 
 

@@ -379,6 +379,21 @@ def test_a_textured_meshs_albedo_is_its_texture() -> None:
     np.testing.assert_array_equal(object_id[decided], 0)  # the first and only object
 
 
+def test_a_scene_of_only_the_floor_and_sky() -> None:
+    scene = rt.Scene(camera=rt.Camera(position=(0.0, 1.0, 4.0), look_at=(0.0, 0.5, 0.0)))
+    _, layers = render_with_aovs(scene)
+    object_id = flat(layers["object_id"])
+    assert set(np.unique(object_id).tolist()) == {FLOOR_ID, NOTHING_ID}
+    floor = object_id == FLOOR_ID
+    np.testing.assert_array_equal(flat(layers["material_id"])[floor], len(scene.materials))
+    np.testing.assert_array_equal(flat(layers["material_id"])[~floor], NOTHING_ID)
+    assert np.isfinite(flat(layers["depth"])[floor]).all()
+    assert np.isinf(flat(layers["depth"])[~floor]).all()
+    # No AOVs asked for: the image and an empty dict.
+    image, none = rt.render(scene, width=8, height=5, spp=1, aovs=[])
+    assert none == {} and image.shape == (5, 8, 3)
+
+
 def test_unknown_names_are_refused() -> None:
     assert aov_module.parse_aov_list("depth, normal,depth") == ("depth", "normal")
     for bad in ("depth,bogus", "", "depth,,normal"):
@@ -403,6 +418,11 @@ def test_npz_holds_the_beauty_and_every_aov(tmp_path: Path, rendered) -> None:
         for name in AOV_NAMES:
             assert data[name].dtype == layers[name].dtype
             np.testing.assert_array_equal(data[name], layers[name])
+    # Without AOVs an .npz holds the beauty alone.
+    rt.save_image(beauty, tmp_path / "plain.npz")
+    with np.load(tmp_path / "plain.npz", allow_pickle=False) as data:
+        assert data.files == ["beauty"]
+        np.testing.assert_array_equal(data["beauty"], beauty)
 
 
 def test_exr_layers_read_back_by_openexr(tmp_path: Path, rendered) -> None:
