@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, BinaryIO
 import numpy as np
 
 from embree_rt import film
+from embree_rt.batches import batch_ranges, ordered_results
 from embree_rt.camera import camera_frame, pixel_center_rays
 from embree_rt.columns import scatter
 
@@ -150,8 +151,6 @@ def render_aovs(
     One ray through each pixel centre, in the renderer's batches and on its workers; each batch
     fills its own pixels, so the result does not depend on the batch size or thread count.
     """
-    from embree_rt.integrator import Renderer, batch_ranges
-
     names = check_aov_names(names)
     frame = camera_frame(renderer.scene.camera, width, height)
     if not names:
@@ -168,8 +167,10 @@ def render_aovs(
         if "depth" in flat:
             # The rays start at the camera position with unit directions: t is the distance.
             flat["depth"][hit] = surfaces.t
+        # The integrator's own stages, not copies of them: the normal it shades with, turned
+        # to the side the ray came from, and the colour it lights.
         if "normal" in flat:
-            normal, _, _ = Renderer._facing_the_ray(surfaces.incoming, surfaces)
+            normal, _, _ = renderer._facing_the_ray(surfaces.incoming, surfaces)
             scatter(flat["normal"], hit, normal)
         if "albedo" in flat:
             scatter(flat["albedo"], hit, renderer._surface_color(surfaces))
@@ -178,14 +179,20 @@ def render_aovs(
         if instance_objects is not None:
             flat["object_id"][hit] = hit_object_ids(surfaces, instance_objects)
 
-    batches = batch_ranges(width * height, renderer.batch_size, 1, renderer.workers)
-    if renderer.workers > 1 and len(batches) > 1:
-        with ThreadPoolExecutor(max_workers=renderer.workers) as pool:
-            for _ in pool.map(run, batches):
-                pass
-    else:
-        for batch in batches:
-            run(batch)
+    workers = renderer.workers
+    batches = batch_ranges(width * height, renderer.batch_size, 1, workers)
+    # As the beauty runs its batches: side by side, waiting in slices so Ctrl-C gets through,
+    # and on an error or Ctrl-C the batches not yet started are dropped.
+    pool = ThreadPoolExecutor(max_workers=workers)
+    try:
+        if workers > 1:
+            done = ordered_results(pool, run, batches, ahead=2 * workers)
+        else:
+            done = map(run, batches)
+        for _ in done:
+            pass
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
     # Vectors were filled as (3, pixels) columns, one cheap 1-D scatter per component.
     return {
         name: np.ascontiguousarray(values.T).reshape(height, width, 3)

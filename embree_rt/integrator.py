@@ -12,15 +12,14 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections import deque
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from itertools import pairwise
 
 import numpy as np
 
 from embree_rt import budget, shading
+from embree_rt.batches import batch_ranges, ordered_results
 from embree_rt.camera import camera_frame, primary_rays
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.embree import retain_freed_memory
@@ -194,7 +193,7 @@ class Renderer:
         try:
             done = 0
             if self.workers > 1:
-                results = _ordered_results(pool, run, batches, ahead=2 * self.workers)
+                results = ordered_results(pool, run, batches, ahead=2 * self.workers)
             else:
                 results = map(run, batches)
             for work in results:
@@ -415,46 +414,6 @@ class Renderer:
                     self.light_rgb[light],
                 ),
             )
-
-
-def batch_ranges(total: int, batch_size: int, spp: int, workers: int) -> list[tuple[int, int]]:
-    """(start, count) of each batch of the ``total`` camera samples, in order: whole pixels of
-    ``spp`` samples, at most ``batch_size`` samples (or one pixel). With several workers the
-    last round of batches is cut into three times as many pieces, so that no worker idles long
-    while another finishes a full batch at the bottom of the image."""
-    step = max(1, batch_size // spp) * spp
-    starts = list(range(0, total, step))
-    if workers > 1 and len(starts) > workers:
-        tail = starts[-workers]
-        pixels = (total - tail) // spp
-        pieces = 3 * workers
-        starts = starts[:-workers] + [tail + pixels * k // pieces * spp for k in range(pieces)]
-    bounds = [*starts, total]
-    return [(a, b - a) for a, b in pairwise(bounds) if b > a]
-
-
-def _ordered_results(pool: ThreadPoolExecutor, function, items, ahead: int):
-    """``function(item)`` for each item, in order, with at most ``ahead`` extra items running.
-
-    Waits in short slices: a thread blocked on a future without a timeout would not see the
-    Ctrl-C that Python delivers to the main thread.
-    """
-    pending: deque[Future] = deque()
-    items = iter(items)
-    for item in items:
-        pending.append(pool.submit(function, item))
-        if len(pending) > ahead:
-            yield _wait(pending.popleft())
-    while pending:
-        yield _wait(pending.popleft())
-
-
-def _wait(future: Future):
-    while True:
-        try:
-            return future.result(timeout=0.05)
-        except TimeoutError:
-            continue
 
 
 def render(

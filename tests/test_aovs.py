@@ -479,6 +479,14 @@ def test_png_writes_one_picture_per_aov_beside_the_image(tmp_path: Path, rendere
     assert grey[near] == 255 and grey[far] < grey[near]
 
 
+def test_npy_writes_each_aov_array_beside_the_image(tmp_path: Path, rendered) -> None:
+    beauty, layers = rendered
+    written = save_with_aovs(beauty, {"depth": layers["depth"]}, tmp_path / "out.npy")
+    assert written == [tmp_path / "out.depth.npy"]
+    np.testing.assert_array_equal(np.load(tmp_path / "out.npy"), beauty)
+    np.testing.assert_array_equal(np.load(written[0]), layers["depth"])
+
+
 def test_id_colours_are_distinct_for_distinct_ids() -> None:
     ids = np.arange(-2, 200_000)
     colors = id_colors(ids)
