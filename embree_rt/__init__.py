@@ -1,5 +1,6 @@
 """embree_rt: a Whitted-style ray tracer for scenes of very many objects."""
 
+from embree_rt.aovs import AOV_NAMES, save_with_aovs
 from embree_rt.film import save_image
 from embree_rt.integrator import RenderStats, render
 from embree_rt.materials import PRESETS, Checker, Material, preset
@@ -17,6 +18,7 @@ from embree_rt.scene import (
 )
 
 __all__ = [
+    "AOV_NAMES",
     "PRESETS",
     "Background",
     "Camera",
@@ -34,4 +36,5 @@ __all__ = [
     "random_field",
     "render",
     "save_image",
+    "save_with_aovs",
 ]

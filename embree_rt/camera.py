@@ -98,6 +98,19 @@ def strata(spp: int) -> tuple[int, int, np.ndarray]:
     return nx, ny, cells
 
 
+def _check_range(start: object, count: object, total: int, units: str, image: str) -> None:
+    """Raise ValueError unless ``start`` and ``count`` are non-negative integers with
+    ``start + count <= total``; the message counts ``units`` of the ``image`` it describes."""
+    if isinstance(start, bool) or not isinstance(start, numbers.Integral) or start < 0:
+        raise ValueError(f"start: must be a non-negative integer, got {start!r}")
+    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 0:
+        raise ValueError(f"count: must be a non-negative integer, got {count!r}")
+    if start + count > total:
+        raise ValueError(
+            f"{units} {start}..{start + count} run past the image's {total} ({image})"
+        )
+
+
 def primary_rays(
     frame: CameraFrame, spp: int, seed: int, start: int, count: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -110,16 +123,8 @@ def primary_rays(
     directions (3, count) float32 (one ray per column) and pixel (count,) int64.
     """
     nx, ny, cells = strata(spp)
-    total = frame.width * frame.height * spp
-    if isinstance(start, bool) or not isinstance(start, numbers.Integral) or start < 0:
-        raise ValueError(f"start: must be a non-negative integer, got {start!r}")
-    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 0:
-        raise ValueError(f"count: must be a non-negative integer, got {count!r}")
-    if start + count > total:
-        raise ValueError(
-            f"samples {start}..{start + count} run past the image's {total} "
-            f"({frame.width}x{frame.height} at {spp} spp)"
-        )
+    size = f"{frame.width}x{frame.height}"
+    _check_range(start, count, frame.width * frame.height * spp, "samples", f"{size} at {spp} spp")
     index = np.arange(start, start + count, dtype=np.int64)
     # Floor division and remainder by a scalar, not np.divmod: NumPy divides by a constant
     # through libdivide only in these two (13x faster here).
@@ -133,15 +138,38 @@ def primary_rays(
         cell_y, cell_x = cell // nx, cell % nx
         jitter_x = (cell_x + jitter_x) / nx
         jitter_y = (cell_y + jitter_y) / ny
+    return _rays_through(frame, col + jitter_x, row + jitter_y, pixel)
+
+
+def pixel_center_rays(
+    frame: CameraFrame, start: int, count: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One camera ray through the centre of each pixel ``start .. start + count - 1``
+    (row-major, as ``primary_rays`` numbers them), with no jitter: the rays of the AOVs.
+    Returns origins (3, count) float32, unit directions (3, count) float32 and pixel (count,)
+    int64, as ``primary_rays`` does."""
+    size = f"{frame.width}x{frame.height}"
+    _check_range(start, count, frame.width * frame.height, "pixels", size)
+    pixel = np.arange(start, start + count, dtype=np.int64)
+    row = pixel // frame.width
+    col = pixel % frame.width
+    return _rays_through(frame, col + 0.5, row + 0.5, pixel)
+
+
+def _rays_through(
+    frame: CameraFrame, column: np.ndarray, row: np.ndarray, pixel: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rays from the eye through the image points at (n,) float64 ``column``, ``row`` (in
+    pixels, from the top left corner), for ``primary_rays`` and ``pixel_center_rays``."""
     # Position in [0, 1) across the image, left to right and top to bottom, in float64: the
     # jitter must survive being added to a column number in the thousands.
-    x = (col + jitter_x) / frame.width
-    y = (row + jitter_y) / frame.height
+    x = column / frame.width
+    y = row / frame.height
     screen_x = ((2.0 * x - 1.0) * frame.half_width).astype(np.float32)
     screen_y = ((1.0 - 2.0 * y) * frame.half_height).astype(np.float32)
     u, v, w = (axis.astype(np.float32)[:, None] for axis in (frame.u, frame.v, frame.w))
     directions = u * screen_x + v * screen_y - w  # (3, count) float32
     directions /= np.sqrt(directions[0] ** 2 + directions[1] ** 2 + directions[2] ** 2)
-    origins = np.empty((3, count), np.float32)
+    origins = np.empty((3, len(pixel)), np.float32)
     origins[:] = frame.origin.astype(np.float32)[:, None]
     return origins, directions, pixel

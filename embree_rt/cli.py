@@ -27,13 +27,19 @@ class UsageError(InputError):
     """Bad input found by the command itself; printed as one line, exit code 2."""
 
 
-def _check_output(path: str) -> None:
-    """The image path's checks (``film.check_output_path``) as bad input: every ValueError it
-    raises is about the path, its RuntimeError about OpenEXR missing for ``.exr``."""
+def _check_output(path: str, aovs: tuple[str, ...] | None = None) -> None:
+    """The image path's checks (``film.check_output_path``), and those of the AOV files beside
+    it, as bad input: every ValueError it raises is about the path, its RuntimeError about
+    OpenEXR missing for ``.exr``."""
     from embree_rt.film import check_output_path
 
     try:
         check_output_path(path)
+        if aovs:
+            from embree_rt.aovs import aov_paths
+
+            for side in aov_paths(path, aovs).values():
+                check_output_path(side)
     except (ValueError, RuntimeError) as error:
         raise UsageError(str(error)) from None
 
@@ -90,8 +96,26 @@ def _non_negative_int():
     return _int_at_least(0)
 
 
+def _aov_list(text: str) -> tuple[str, ...]:
+    from embree_rt.aovs import parse_aov_list
+
+    try:
+        return parse_aov_list(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def _add_render_flags(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("-o", "--output", required=True, help="image to write: .png, .npy or .exr")
+    parser.add_argument(
+        "-o", "--output", required=True, help="image to write: .png, .npy, .npz or .exr"
+    )
+    parser.add_argument(
+        "--aov",
+        type=_aov_list,
+        metavar="NAMES",
+        help="also write AOVs, any of depth,normal,albedo,object_id,material_id: in the .npz or "
+        ".exr, or one file each beside a .png or .npy",
+    )
     parser.add_argument("--width", type=_positive_int())
     parser.add_argument("--height", type=_positive_int())
     parser.add_argument("--spp", type=_positive_int(), help="samples per pixel")
@@ -159,11 +183,21 @@ def _render_and_save(scene, args: argparse.Namespace, made: tuple[str, float]) -
             spheres=args.spheres,
             quiet=args.quiet,
             stats=stats,
+            aovs=args.aov,
         )
     except MemoryBudgetError as error:
         raise UsageError(f"{_memory_key(error, args)}: {error}") from None
-    _check_output(args.output)  # again: the directory may have gone during the render
-    _writing(args.output, lambda: save_image(image, args.output))
+    _check_output(args.output, args.aov)  # again: the directory may have gone meanwhile
+    if args.aov is None:
+        _writing(args.output, lambda: save_image(image, args.output))
+    else:
+        from embree_rt.aovs import save_with_aovs
+
+        beauty, layers = image
+        written: list[Path] = []
+        _writing(args.output, lambda: written.extend(save_with_aovs(beauty, layers, args.output)))
+        for side in written:  # the AOV files beside the image, for scripts to pick up
+            print(side)
     elapsed = made[1] + time.perf_counter() - started
     if not args.quiet:
         print(
@@ -178,7 +212,7 @@ def _render_and_save(scene, args: argparse.Namespace, made: tuple[str, float]) -
 def _command_render(args: argparse.Namespace) -> None:
     from embree_rt.scene import load_scene
 
-    _check_output(args.output)
+    _check_output(args.output, args.aov)
     started = time.perf_counter()
     scene = load_scene(args.scene)
     _render_and_save(scene, args, ("load", time.perf_counter() - started))
@@ -225,7 +259,7 @@ def _command_random(args: argparse.Namespace) -> None:
         plan_field,
     )
 
-    _check_output(args.output)
+    _check_output(args.output, args.aov)
     if args.save_scene is not None:
         target = Path(args.save_scene)
         if target.suffix.lower() not in (".toml", ".json"):
@@ -283,6 +317,7 @@ def _command_info(args: argparse.Namespace) -> None:
     with SceneGeometry(scene, spheres=args.spheres) as geometry:
         build_s = time.perf_counter() - started
         resident_growth = _resident_bytes() - resident_before
+        floor_material = geometry.floor_material
         triangles = geometry.triangle_count
         instances = geometry.instance_count
         in_arrays = geometry.bvh.instance_count
@@ -315,6 +350,10 @@ def _command_info(args: argparse.Namespace) -> None:
     print(f"BVH build:  {build_s:.3f} s")
     print(f"memory:     ~{estimate / 2**20:.1f} MiB (estimate), "
           f"{resident_growth / 2**20:.1f} MiB measured (resident set growth while building)")
+    from embree_rt.aovs import id_listing
+
+    for line in id_listing(scene, floor_material):
+        print(line)
 
 
 def _resident_bytes() -> int:

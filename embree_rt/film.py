@@ -11,7 +11,7 @@ from typing import BinaryIO
 import numpy as np
 
 GAMMA = 2.2
-IMAGE_SUFFIXES = (".png", ".npy", ".exr")
+IMAGE_SUFFIXES = (".png", ".npy", ".npz", ".exr")
 
 
 class Film:
@@ -156,10 +156,19 @@ def _write_npy(image: np.ndarray, handle: BinaryIO) -> None:
     np.save(handle, np.asarray(image, np.float32))
 
 
+def _write_npz(image: np.ndarray, handle: BinaryIO) -> None:
+    np.savez(handle, beauty=np.asarray(image, np.float32))
+
+
 def _write_exr(image: np.ndarray, handle: BinaryIO) -> None:
+    write_exr_channels({"RGB": np.ascontiguousarray(image, np.float32)}, handle)
+
+
+def write_exr_channels(channels: dict[str, np.ndarray], handle: BinaryIO) -> None:
+    """Write ``channels`` (name -> (h, w) float32 or uint32 array; "RGB" -> (h, w, 3) float32,
+    stored as R, G, B) as a ZIP-compressed scanline EXR to the file ``handle`` is open on."""
     OpenEXR = _exr_module()
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    channels = {"RGB": np.ascontiguousarray(image, np.float32)}
     # OpenEXR writes by file name; the open handle only reserved that name.
     with OpenEXR.File(header, channels) as exr:
         exr.write(os.fspath(handle.name))
@@ -169,37 +178,55 @@ def _write_exr(image: np.ndarray, handle: BinaryIO) -> None:
 WRITERS: dict[str, Callable[[np.ndarray, BinaryIO], None]] = {
     ".png": _write_png,
     ".npy": _write_npy,
+    ".npz": _write_npz,
     ".exr": _write_exr,
 }
 
 
-def save_image(image: np.ndarray, path: str | os.PathLike) -> None:
-    """Write the (h, w, 3) float32 linear ``image`` to ``path`` by its extension
-    (case-insensitive): ``.png`` tone-mapped 8-bit, ``.npy`` and ``.exr`` linear float32.
-
-    Atomic: the image goes to a temp file in the same directory, renamed over ``path`` only
-    once complete; on any failure, Ctrl-C included, the temp file is removed and an existing
-    file at ``path`` is left as it was.
-    """
-    check_output_path(path)
+def check_image_shape(image: np.ndarray, path: str | os.PathLike) -> np.ndarray:
+    """``image`` as an array; ValueError naming ``path`` unless it is (h, w, 3), h, w >= 1."""
     image = np.asarray(image)
     if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
         raise ValueError(f"{path}: expected an (h, w, 3) image, got shape {image.shape}")
+    return image
+
+
+def save_image(image: np.ndarray, path: str | os.PathLike) -> None:
+    """Write the (h, w, 3) float32 linear ``image`` to ``path`` by its extension
+    (case-insensitive): ``.png`` tone-mapped 8-bit, ``.npy``, ``.npz`` (as ``beauty``) and
+    ``.exr`` linear float32.
+
+    Atomic (``write_atomically``): on any failure, Ctrl-C included, an existing file at
+    ``path`` is left as it was and no partial file is left.
+    """
+    check_output_path(path)
+    image = check_image_shape(image, path)
     target = Path(path)
     writer = WRITERS[target.suffix.lower()]
-    # A plain exclusive open(), not tempfile's: the umask then gives the image the usual mode
-    # (tempfile's files are private, 0600).
-    temp: Path | None = target.with_name(f".{target.name}.{secrets.token_hex(8)}.tmp")
+    write_atomically([(target, lambda handle: writer(image, handle))])
+
+
+def write_atomically(files: list[tuple[Path, Callable[[BinaryIO], None]]]) -> None:
+    """Write each of ``files`` (target path, writer(binary handle)) all or nothing.
+
+    Every file goes to a temp file in its target's directory; only once all are complete are
+    they renamed over their targets. On any failure, Ctrl-C included, the temp files are
+    removed and existing files at the targets are left as they were.
+    """
+    temps: list[Path] = []
     try:
-        try:
+        for target, write in files:
+            # A plain exclusive open(), not tempfile's: the umask then gives the image the usual
+            # mode (tempfile's files are private, 0600). A name someone else holds raises
+            # FileExistsError before it joins ``temps``: never delete another's file.
+            temp = target.with_name(f".{target.name}.{secrets.token_hex(8)}.tmp")
             handle = open(temp, "xb")  # noqa: SIM115 (closed by the with below)
-        except FileExistsError:
-            temp = None  # someone else's file: never delete it
-            raise
-        with handle:
-            writer(image, handle)
-        os.replace(temp, target)
+            temps.append(temp)
+            with handle:
+                write(handle)
+        for temp, (target, _) in zip(temps, files, strict=True):
+            os.replace(temp, target)
     except BaseException:
-        if temp is not None:
+        for temp in temps:
             temp.unlink(missing_ok=True)
         raise

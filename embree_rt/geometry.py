@@ -59,6 +59,10 @@ class SurfaceHits:
     error scales with it; ``incoming`` (3, k) float32, the direction of the ray that made it.
     ``colored`` (j,) int64 columns whose base colour is the surface's own (a mesh's texture or
     vertex colours), ``color`` (3, j) float32 linear those colours; both None when none is.
+    ``prim_id``, ``inst_id``, ``inst_prim_id`` (k,) int32: Embree's primitive, top-level
+    instance and instance-array copy ids of each hit (-1 on the floor; ``inst_id`` -1 on the
+    sphere set; ``inst_prim_id`` -1 outside instance arrays), which name the object hit
+    (``SceneGeometry.object_ids``).
     """
 
     t: np.ndarray
@@ -72,6 +76,9 @@ class SurfaceHits:
     incoming: np.ndarray
     colored: np.ndarray | None = None
     color: np.ndarray | None = None
+    prim_id: np.ndarray | None = None
+    inst_id: np.ndarray | None = None
+    inst_prim_id: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -122,6 +129,8 @@ class SceneGeometry:
         self._mesh_faces: list[np.ndarray] = []
         # Instance arrays: (geom id, its child mesh indices, per-instance materials, smooth)
         self._arrays: list[tuple[int, list[int], np.ndarray, bool]] = []
+        # Object id of each instance geometry's first copy, by geometry id (Scene.object_id_starts)
+        self._object_start: dict[int, int] = {}
         self.triangle_count = 0
         self.instance_count = 0
         try:
@@ -200,26 +209,31 @@ class SceneGeometry:
             transforms[:, axis, axis] = self.sphere_radii
         transforms[:, :3, 3] = self.sphere_centers
         transforms[:, 3, 3] = 1.0
-        self._place_array([child], transforms, None, self.sphere_materials, smooth=True)
+        geom_id = self._place_array([child], transforms, None, self.sphere_materials, smooth=True)
+        self._object_start[geom_id] = 0  # copy j is sphere j
 
     def _add_meshes(self, scene: Scene) -> None:
         children: dict[int, int] = {}
-        for placement in scene.meshes:
+        mesh_ids, instance_starts = scene.object_id_starts()
+        for placement, object_id in zip(scene.meshes, mesh_ids, strict=True):
             key = id(placement.mesh)
             if key not in children:
                 children[key] = self._child(placement.mesh)
             material = scene.material_index(placement.material)
             self._place(children[key], placement.transform, material, placement.smooth)
+            self._object_start[self._instance_geom_ids[-1]] = int(object_id)
         # Mesh looks: the placements showing their own texture or vertex colours, by geom id.
         geom_ids = self._instance_geom_ids[len(self._instance_geom_ids) - len(scene.meshes) :]
         looks = list(scene.meshes)
-        for entry in scene.instances:  # one instance array per entry, its mesh built once
+        # one instance array per entry, its mesh built once
+        for entry, first_id in zip(scene.instances, instance_starts, strict=True):
             key = id(entry.mesh)
             if key not in children:
                 children[key] = self._child(entry.mesh)
             geom_ids.append(self._place_array(
                 [children[key]], entry.transforms, None, entry.materials, entry.smooth
             ))  # fmt: skip
+            self._object_start[geom_ids[-1]] = int(first_id)
             # a one-mesh array's hits name its faces as the mesh's own: the same lookups
             looks.append(MeshObject(mesh=entry.mesh, mesh_colors=entry.mesh_colors))
         self.mesh_colors = MeshColors(looks, geom_ids)
@@ -270,6 +284,9 @@ class SceneGeometry:
             instance_labels=instance_labels,
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
+        self.object_start = np.full(size, -1, np.int64)
+        for geom_id, start in self._object_start.items():
+            self.object_start[geom_id] = start
 
     def close(self) -> None:
         self.bvh.close()
@@ -346,6 +363,9 @@ class SceneGeometry:
             floor_count=int(records.counts[0]),
             scale=records.scale,
             incoming=records.incoming,
+            prim_id=records.prim_id,
+            inst_id=records.inst_id,
+            inst_prim_id=records.inst_prim_id,
         )
         if self.mesh_colors and meshes.stop > meshes.start:  # mesh looks: textures, colours
             surfaces.colored, surfaces.color = self.mesh_colors.hit_colors(

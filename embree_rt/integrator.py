@@ -12,15 +12,14 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections import deque
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from itertools import pairwise
 
 import numpy as np
 
 from embree_rt import budget, shading
+from embree_rt.batches import batch_ranges, ordered_results
 from embree_rt.camera import camera_frame, primary_rays
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.embree import retain_freed_memory
@@ -195,7 +194,7 @@ class Renderer:
         try:
             done = 0
             if self.workers > 1:
-                results = _ordered_results(pool, run, batches, ahead=2 * self.workers)
+                results = ordered_results(pool, run, batches, ahead=2 * self.workers)
             else:
                 results = map(run, batches)
             for work in results:
@@ -418,46 +417,6 @@ class Renderer:
             )
 
 
-def batch_ranges(total: int, batch_size: int, spp: int, workers: int) -> list[tuple[int, int]]:
-    """(start, count) of each batch of the ``total`` camera samples, in order: whole pixels of
-    ``spp`` samples, at most ``batch_size`` samples (or one pixel). With several workers the
-    last round of batches is cut into three times as many pieces, so that no worker idles long
-    while another finishes a full batch at the bottom of the image."""
-    step = max(1, batch_size // spp) * spp
-    starts = list(range(0, total, step))
-    if workers > 1 and len(starts) > workers:
-        tail = starts[-workers]
-        pixels = (total - tail) // spp
-        pieces = 3 * workers
-        starts = starts[:-workers] + [tail + pixels * k // pieces * spp for k in range(pieces)]
-    bounds = [*starts, total]
-    return [(a, b - a) for a, b in pairwise(bounds) if b > a]
-
-
-def _ordered_results(pool: ThreadPoolExecutor, function, items, ahead: int):
-    """``function(item)`` for each item, in order, with at most ``ahead`` extra items running.
-
-    Waits in short slices: a thread blocked on a future without a timeout would not see the
-    Ctrl-C that Python delivers to the main thread.
-    """
-    pending: deque[Future] = deque()
-    items = iter(items)
-    for item in items:
-        pending.append(pool.submit(function, item))
-        if len(pending) > ahead:
-            yield _wait(pending.popleft())
-    while pending:
-        yield _wait(pending.popleft())
-
-
-def _wait(future: Future):
-    while True:
-        try:
-            return future.result(timeout=0.05)
-        except TimeoutError:
-            continue
-
-
 def render(
     scene: Scene,
     *,
@@ -471,12 +430,19 @@ def render(
     batch_size: int = DEFAULT_BATCH_SIZE,
     quiet: bool = True,
     stats: RenderStats | None = None,
-) -> np.ndarray:
+    aovs: list[str] | tuple[str, ...] | None = None,
+) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
     """Render ``scene`` to a (height, width, 3) float32 linear image.
 
     Arguments left as None come from ``scene.render``. With ``quiet=False`` a progress bar runs
     on stderr (when it is a terminal). Pass a ``RenderStats`` to receive ray counts and timings.
+    With ``aovs`` (names from ``embree_rt.aovs.AOV_NAMES``) it returns the image, bitwise the
+    same, and a dict of those AOVs (``embree_rt.aovs.render_aovs``).
     """
+    if aovs is not None:
+        from embree_rt.aovs import aov_bytes, check_aov_names
+
+        aovs = check_aov_names(aovs)
     settings = scene.render
     width = settings.width if width is None else width
     height = settings.height if height is None else height
@@ -485,12 +451,14 @@ def render(
     seed = settings.seed if seed is None else seed
     # Refuse what cannot fit before building or allocating anything (MemoryBudgetError).
     count = len(scene.sphere_radii)
-    budget.require(
-        budget.render_needs(
-            count, sphere_kind(count, spheres), width, height, spp, batch_size,
-            workers=threads or os.cpu_count() or 1,
-        )
+    needs = budget.render_needs(
+        count, sphere_kind(count, spheres), width, height, spp, batch_size,
+        workers=threads or os.cpu_count() or 1,
     )  # fmt: skip
+    if aovs:
+        size, text = needs["image"]
+        needs["image"] = (size + aov_bytes(width, height, aovs), f"{text} with AOVs")
+    budget.require(needs)
     with Renderer(scene, spheres=spheres, threads=threads, batch_size=batch_size) as renderer:
         bar = None
         if not quiet and sys.stderr.isatty():
@@ -515,4 +483,13 @@ def render(
             stats.rays = dict(renderer.stats.rays)
             stats.build_s = renderer.stats.build_s
             stats.render_s = renderer.stats.render_s
-    return image
+        if aovs is None:
+            return image
+        from embree_rt.aovs import render_aovs
+
+        began = time.perf_counter()
+        layers = render_aovs(renderer, width=width, height=height, names=aovs)
+        if stats is not None:
+            stats.rays["aov"] = width * height  # one pixel-centre ray per pixel
+            stats.render_s += time.perf_counter() - began
+    return image, layers

@@ -155,6 +155,17 @@ class Scene:
     def material_names(self) -> list[str]:
         return list(self.materials)
 
+    def object_id_starts(self) -> tuple[np.ndarray, np.ndarray]:
+        """The objects' numbering (the ids AOVs and ``info`` give them): spheres 0 .. n - 1 in
+        scene order, then each mesh placement, then each ``instances`` entry's copies in
+        order. Returns (len(meshes),) int64, each placement's id, and (len(instances),) int64,
+        the id of each entry's first copy (copy j of entry e is ``starts[e] + j``)."""
+        first_mesh = len(self.sphere_radii)
+        mesh_ids = first_mesh + np.arange(len(self.meshes), dtype=np.int64)
+        sizes = np.array([len(entry) for entry in self.instances], np.int64)
+        instance_starts = first_mesh + len(self.meshes) + np.cumsum(sizes) - sizes
+        return mesh_ids, instance_starts
+
     def material_index(self, name: str) -> int:
         try:
             return self.material_names.index(name)

@@ -1,0 +1,354 @@
+"""AOVs (arbitrary output variables) for dataset makers: depth, normals, albedo, object and
+material ids, from one extra ray through each pixel centre.
+
+The beauty image is rendered as always (jittered samples, every bounce); the AOVs come from a
+separate pass of one unjittered camera ray per pixel, so ids are exact and edges crisp (as
+Mitsuba's ``aov`` integrator and pbrt-v4's ``GBufferFilm`` do). That pass goes through the
+renderer's own geometry and shading stages — the hit records of ``SceneGeometry``, the
+integrator's surface colour and its normal facing the ray — so an AOV cannot disagree with
+what the beauty shades.
+
+- ``depth`` (h, w) float32: distance from the camera position to the first hit along the
+  pixel-centre ray; inf where the ray escapes.
+- ``normal`` (h, w, 3) float32: unit world-space shading normal, turned to face the camera;
+  zero where the ray escapes.
+- ``albedo`` (h, w, 3) float32 linear: the surface colour (material colour, a mesh's texture
+  or vertex colours, the checker on the floor); zero where the ray escapes.
+- ``object_id`` (h, w) int32: spheres numbered in scene order from 0, then each mesh
+  placement in scene order; ``FLOOR_ID`` (-2) on the floor, ``NOTHING_ID`` (-1) where the ray
+  escapes.
+- ``material_id`` (h, w) int32: the scene's materials in order (presets first, as
+  ``Scene.materials`` holds them), then the floor's; -1 where the ray escapes.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import TYPE_CHECKING, BinaryIO
+
+import numpy as np
+
+from embree_rt import film
+from embree_rt.batches import batch_ranges, ordered_results
+from embree_rt.camera import camera_frame, pixel_center_rays
+from embree_rt.columns import scatter
+
+if TYPE_CHECKING:
+    from embree_rt.geometry import SurfaceHits
+    from embree_rt.integrator import Renderer
+    from embree_rt.scene.model import Scene
+
+AOV_NAMES = ("depth", "normal", "albedo", "object_id", "material_id")
+NOTHING_ID = -1
+FLOOR_ID = -2
+# Bytes a pixel of every AOV holds (float32 depth, normal and albedo, int32 ids), for the budget.
+AOV_BYTES = {"depth": 4, "normal": 12, "albedo": 12, "object_id": 4, "material_id": 4}
+# The EXR channels of each AOV, in the order of the array's last axis.
+EXR_CHANNELS = {
+    "depth": ("depth.Z",),
+    "normal": ("normal.X", "normal.Y", "normal.Z"),
+    "albedo": ("albedo.R", "albedo.G", "albedo.B"),
+    "object_id": ("object_id.id",),
+    "material_id": ("material_id.id",),
+}
+# Output formats that hold every AOV in the one file; the others get one file per AOV beside it.
+SINGLE_FILE_SUFFIXES = (".npz", ".exr")
+
+
+def check_aov_names(names: object) -> tuple[str, ...]:
+    """The AOV ``names`` (an iterable of strings from ``AOV_NAMES``) as a tuple without repeats,
+    in the order given. Raises ValueError naming the first unknown name, TypeError for a lone
+    string (``"depth"`` is not ``["depth"]``) or a non-string."""
+    if isinstance(names, str):
+        raise TypeError(f"aovs: expected a list of names, got the string {names!r}")
+    chosen: list[str] = []
+    for name in names:  # type: ignore[attr-defined]
+        if not isinstance(name, str):
+            raise TypeError(f"aovs: expected names, got {type(name).__name__}")
+        if name not in AOV_NAMES:
+            raise ValueError(f"unknown AOV {name!r}; choose from {', '.join(AOV_NAMES)}")
+        if name not in chosen:
+            chosen.append(name)
+    return tuple(chosen)
+
+
+def parse_aov_list(text: str) -> tuple[str, ...]:
+    """The names in a comma-separated list such as ``"depth,normal"`` (``check_aov_names``)."""
+    names = [part.strip() for part in text.split(",")]
+    if "" in names:
+        raise ValueError(f"expected names separated by commas, got {text!r}")
+    return check_aov_names(names)
+
+
+def aov_bytes(width: int, height: int, names: tuple[str, ...]) -> int:
+    """Memory the arrays of the AOVs ``names`` take for a ``width`` x ``height`` image."""
+    return width * height * sum(AOV_BYTES[name] for name in names)
+
+
+# -- ids --------------------------------------------------------------------------------------
+
+
+def hit_object_ids(surfaces: SurfaceHits, object_start: np.ndarray) -> np.ndarray:
+    """(k,) int32 object id of each of the k ``surfaces`` (floor hits first): ``FLOOR_ID`` on
+    the floor, the sphere's index on the sphere set (no instance), and on an instance its
+    geometry's first id from ``object_start`` (``SceneGeometry.object_start``, by top-level
+    geometry id) plus the copy's number in an instance array."""
+    ids = np.empty(len(surfaces), np.int32)
+    ids[: surfaces.floor_count] = FLOOR_ID
+    rest = slice(surfaces.floor_count, None)
+    inst = surfaces.inst_id[rest]
+    copy = np.maximum(surfaces.inst_prim_id[rest], 0)
+    ids[rest] = np.where(
+        inst >= 0, np.take(object_start, np.maximum(inst, 0)) + copy, surfaces.prim_id[rest]
+    )
+    return ids
+
+
+# -- the pass ---------------------------------------------------------------------------------
+
+
+def empty_aovs(names: tuple[str, ...], pixels: int) -> dict[str, np.ndarray]:
+    """The AOV arrays of ``pixels`` pixels where every ray escapes, one pixel per column: depth
+    (pixels,) inf, normal and albedo (3, pixels) zero, ids (pixels,) -1."""
+    empty = {
+        "depth": lambda: np.full(pixels, np.inf, np.float32),
+        "normal": lambda: np.zeros((3, pixels), np.float32),
+        "albedo": lambda: np.zeros((3, pixels), np.float32),
+        "object_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
+        "material_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
+    }
+    return {name: empty[name]() for name in names}
+
+
+def render_aovs(
+    renderer: Renderer, *, width: int, height: int, names: tuple[str, ...]
+) -> dict[str, np.ndarray]:
+    """The AOVs ``names`` of ``renderer``'s scene at ``width`` x ``height``: name -> (height,
+    width) or (height, width, 3) array (see the module's docstring for each).
+
+    One ray through each pixel centre, in the renderer's batches and on its workers; each batch
+    fills its own pixels, so the result does not depend on the batch size or thread count.
+    """
+    names = check_aov_names(names)
+    frame = camera_frame(renderer.scene.camera, width, height)
+    if not names:
+        return {}
+    flat = empty_aovs(names, width * height)
+
+    def run(batch: tuple[int, int]) -> None:
+        origins, directions, pixel = pixel_center_rays(frame, *batch)
+        rows, surfaces = renderer.geometry.intersect_compact(origins, directions)
+        hit = pixel[rows]
+        if "depth" in flat:
+            # The rays start at the camera position with unit directions: t is the distance.
+            flat["depth"][hit] = surfaces.t
+        # The integrator's own stages, not copies of them: the normal it shades with, turned
+        # to the side the ray came from, and the colour it lights.
+        if "normal" in flat:
+            normal, _, _ = renderer._facing_the_ray(surfaces.incoming, surfaces)
+            scatter(flat["normal"], hit, normal)
+        if "albedo" in flat:
+            scatter(flat["albedo"], hit, renderer._surface_color(surfaces))
+        if "material_id" in flat:
+            flat["material_id"][hit] = surfaces.material
+        if "object_id" in flat:
+            flat["object_id"][hit] = hit_object_ids(surfaces, renderer.geometry.object_start)
+
+    workers = renderer.workers
+    batches = batch_ranges(width * height, renderer.batch_size, 1, workers)
+    # As the beauty runs its batches: side by side, waiting in slices so Ctrl-C gets through,
+    # and on an error or Ctrl-C the batches not yet started are dropped.
+    pool = ThreadPoolExecutor(max_workers=workers)
+    try:
+        if workers > 1:
+            done = ordered_results(pool, run, batches, ahead=2 * workers)
+        else:
+            done = map(run, batches)
+        for _ in done:
+            pass
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    # Vectors were filled as (3, pixels) columns, one cheap 1-D scatter per component.
+    return {
+        name: np.ascontiguousarray(values.T).reshape(height, width, 3)
+        if values.ndim == 2
+        else values.reshape(height, width)
+        for name, values in flat.items()
+    }
+
+
+# -- files ------------------------------------------------------------------------------------
+
+
+def aov_paths(path: str | os.PathLike, names: tuple[str, ...]) -> dict[str, Path]:
+    """Where the AOVs ``names`` go beside the image ``path`` when its format holds one image
+    (``.png``, ``.npy``): ``render.depth.png`` and so on; none for ``.npz`` and ``.exr``, which
+    hold them all."""
+    target = Path(path)
+    if target.suffix.lower() in SINGLE_FILE_SUFFIXES:
+        return {}
+    return {name: target.with_name(f"{target.stem}.{name}{target.suffix}") for name in names}
+
+
+def save_with_aovs(
+    image: np.ndarray, aovs: dict[str, np.ndarray], path: str | os.PathLike
+) -> list[Path]:
+    """Write the (h, w, 3) float32 linear beauty ``image`` and its ``aovs`` (``render_aovs``)
+    to ``path`` by its extension, all or nothing (``film.write_atomically``); returns the files
+    written besides ``path``.
+
+    ``.npz``: ``beauty`` and one array per AOV under its name. ``.exr``: the beauty as R, G, B
+    and the AOVs as the layers of ``EXR_CHANNELS``, float32, the ids as UINT channels holding
+    the int32 values' bits (read them back with ``.view(np.int32)``: -1 is 0xFFFFFFFF).
+    ``.png``: the beauty as ``save_image`` writes it and each AOV beside it, visualised
+    (``visualize``); ``.npy``: the beauty and each AOV's array beside it.
+    """
+    film.check_output_path(path)
+    image = film.check_image_shape(image, path)
+    target = Path(path)
+    suffix = target.suffix.lower()
+    beauty = np.asarray(image, np.float32)
+    if suffix == ".npz":
+        files = [(target, lambda handle: np.savez(handle, beauty=beauty, **aovs))]
+    elif suffix == ".exr":
+        files = [(target, lambda handle: film.write_exr_channels(exr_channels(beauty, aovs),
+                                                                 handle))]  # fmt: skip
+    else:
+        writer = film.WRITERS[suffix]
+        files = [(target, lambda handle: writer(image, handle))]
+        for name, side in aov_paths(target, tuple(aovs)).items():
+            files.append((side, _side_writer(suffix, name, aovs[name])))
+    film.write_atomically(files)
+    return [side for side, _ in files[1:]]
+
+
+def _side_writer(suffix: str, name: str, values: np.ndarray):
+    """A writer(handle) of the AOV ``name``'s ``values`` as a file of its own."""
+
+    def write(handle: BinaryIO) -> None:
+        if suffix == ".npy":
+            np.save(handle, values)
+        else:
+            from PIL import Image
+
+            Image.fromarray(visualize(name, values)).save(handle, format="PNG")
+
+    return write
+
+
+def exr_channels(beauty: np.ndarray, aovs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The EXR channels of ``beauty`` (h, w, 3) float32 and ``aovs``: "RGB" and the names of
+    ``EXR_CHANNELS`` -> (h, w) float32, or uint32 bits of the int32 ids."""
+    channels = {"RGB": np.ascontiguousarray(beauty, np.float32)}
+    for name, values in aovs.items():
+        if values.dtype == np.int32:
+            values = values.view(np.uint32)
+        planes = values[..., None] if values.ndim == 2 else values
+        for axis, channel in enumerate(EXR_CHANNELS[name]):
+            channels[channel] = np.ascontiguousarray(planes[..., axis])
+    return channels
+
+
+# -- pictures of the AOVs ---------------------------------------------------------------------
+
+
+def visualize(name: str, values: np.ndarray) -> np.ndarray:
+    """(h, w, 3) uint8 picture of the AOV ``name``'s ``values`` (as ``render_aovs`` returns).
+
+    depth: inverse depth, nearest hit white, falling toward black with distance (escapes
+    black); normal: ``(n + 1) / 2`` as RGB (escapes black); albedo: gamma 2.2; ids: distinct
+    colours (``id_colors``)."""
+    if name == "depth":
+        finite = np.isfinite(values)
+        # (Never zero: a camera on a surface would make every other depth infinitely far.)
+        nearest = max(float(values[finite].min()), 1e-30) if finite.any() else 1.0
+        with np.errstate(divide="ignore"):
+            level = np.where(finite, nearest / np.maximum(values, nearest), 0.0)
+        return np.repeat(_to_bytes(level)[..., None], 3, axis=2)
+    if name == "normal":
+        hit = np.any(values != 0, axis=-1, keepdims=True)
+        return _to_bytes(np.where(hit, (values + 1.0) / 2.0, 0.0))
+    if name == "albedo":
+        return _to_bytes(np.clip(values, 0.0, 1.0) ** (1.0 / film.GAMMA))
+    if name in ("object_id", "material_id"):
+        return id_colors(values)
+    raise ValueError(f"unknown AOV {name!r}; choose from {', '.join(AOV_NAMES)}")
+
+
+def _to_bytes(values: np.ndarray) -> np.ndarray:
+    return np.clip(np.rint(np.asarray(values, np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def id_colors(ids: np.ndarray) -> np.ndarray:
+    """(..., 3) uint8 colour of each int id in ``ids``: black for -1 (nothing), and for every
+    other id a colour by a bijection of the 24-bit number ``id + 1`` (an odd multiplier and an
+    xor-shift, both invertible mod 2^24), so ids that differ by less than 2^24 never share a
+    colour and neighbours look unrelated."""
+    code = (np.asarray(ids, np.int64) + 1) & 0xFFFFFF
+    code = (code * 0x9E3779) & 0xFFFFFF  # odd: invertible mod 2^24
+    code ^= code >> 12
+    code = (code * 0x5BD1E9) & 0xFFFFFF  # odd again
+    code ^= code >> 11
+    rgb = np.stack([(code >> 16) & 0xFF, (code >> 8) & 0xFF, code & 0xFF], axis=-1)
+    return rgb.astype(np.uint8)
+
+
+# -- what `embree-rt info` lists --------------------------------------------------------------
+
+# How many objects of each kind `info` lists one by one before it summarises the rest.
+LISTED_PER_KIND = 32
+
+
+def id_listing(scene: Scene, floor_material: int) -> list[str]:
+    """Lines for ``embree-rt info``: the objects and materials with the ids the AOVs give them
+    (the first ``LISTED_PER_KIND`` spheres and mesh placements one by one, the rest as ranges;
+    each ``instances`` entry as the range of its copies). ``floor_material`` is the floor's
+    material id (``SceneGeometry.floor_material``)."""
+    spheres = len(scene.sphere_radii)
+    placements, instance_starts = scene.object_id_starts()
+    names = scene.material_names
+
+    def span(first: int, count: int) -> str:
+        return f"{first:,}..{first + count - 1:,}" if count else "none"
+
+    first_mesh = int(placements[0]) if len(placements) else spheres
+    copies = sum(len(entry) for entry in scene.instances)
+    first_copy = int(instance_starts[0]) if len(instance_starts) else first_mesh + len(placements)
+    lines = [
+        f"object ids: spheres {span(0, spheres)} in scene order, mesh placements "
+        f"{span(first_mesh, len(placements))}, instances {span(first_copy, copies)}, "
+        f"floor {FLOOR_ID}, nothing {NOTHING_ID}"
+    ]
+    for index in range(min(spheres, LISTED_PER_KIND)):
+        center = np.round(scene.sphere_centers[index].astype(np.float64), 4).tolist()
+        material = int(scene.sphere_materials[index])
+        lines.append(
+            f"  object {index}: sphere at {center}, radius {float(scene.sphere_radii[index]):g}, "
+            f"material {material} ({names[material]})"
+        )
+    if spheres > LISTED_PER_KIND:
+        lines.append(f"  more spheres: ids {LISTED_PER_KIND:,}..{spheres - 1:,} (not listed)")
+    for object_id, placement in zip(placements[:LISTED_PER_KIND], scene.meshes, strict=False):
+        material = scene.material_index(placement.material)
+        position = np.round(placement.transform[:3, 3], 4).tolist()
+        lines.append(
+            f"  object {object_id}: mesh of {len(placement.mesh.faces):,} triangles at "
+            f"{position}, material {material} ({placement.material})"
+        )
+    if len(placements) > LISTED_PER_KIND:
+        lines.append(
+            f"  more mesh placements: ids {placements[LISTED_PER_KIND]:,}..{placements[-1]:,} "
+            "(not listed)"
+        )
+    for number, (entry, start) in enumerate(zip(scene.instances, instance_starts, strict=True)):
+        lines.append(
+            f"  objects {span(int(start), len(entry))}: instances[{number}], {len(entry):,} "
+            f"copies of a mesh of {len(entry.mesh.faces):,} triangles"
+        )
+    lines.append(f"material ids: as listed, nothing {NOTHING_ID}")
+    lines += [f"  material {index}: {name}" for index, name in enumerate(names)]
+    if scene.floor is not None:
+        lines.append(f"  material {floor_material}: floor")
+    return lines
