@@ -109,7 +109,6 @@ def primary_rays(
     of the indices into batches yields the same rays. Returns origins (3, count) float32, unit
     directions (3, count) float32 (one ray per column) and pixel (count,) int64.
     """
-    nx, ny, cells = strata(spp)
     total = frame.width * frame.height * spp
     if isinstance(start, bool) or not isinstance(start, numbers.Integral) or start < 0:
         raise ValueError(f"start: must be a non-negative integer, got {start!r}")
@@ -120,7 +119,17 @@ def primary_rays(
             f"samples {start}..{start + count} run past the image's {total} "
             f"({frame.width}x{frame.height} at {spp} spp)"
         )
-    index = np.arange(start, start + count, dtype=np.int64)
+    return sample_rays(frame, spp, seed, np.arange(start, start + count, dtype=np.int64))
+
+
+def sample_rays(
+    frame: CameraFrame, spp: int, seed: int, index: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Camera rays for the (n,) int64 global sample indices ``index`` (any order, each below
+    ``width * height * spp``), placed as ``primary_rays`` places them: sample i of a render is
+    the same ray whichever call makes it. Returns origins (3, n) float32, unit directions
+    (3, n) float32 and pixel (n,) int64."""
+    nx, ny, cells = strata(spp)
     # Floor division and remainder by a scalar, not np.divmod: NumPy divides by a constant
     # through libdivide only in these two (13x faster here).
     pixel = index // spp
@@ -142,6 +151,6 @@ def primary_rays(
     u, v, w = (axis.astype(np.float32)[:, None] for axis in (frame.u, frame.v, frame.w))
     directions = u * screen_x + v * screen_y - w  # (3, count) float32
     directions /= np.sqrt(directions[0] ** 2 + directions[1] ** 2 + directions[2] ** 2)
-    origins = np.empty((3, count), np.float32)
+    origins = np.empty((3, len(index)), np.float32)
     origins[:] = frame.origin.astype(np.float32)[:, None]
     return origins, directions, pixel
