@@ -5,6 +5,8 @@ Fresnel split of the light each child carries."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -29,6 +31,23 @@ TRANSPARENCY = PRESETS["glass"].transparency
 # that starts a child off the surface (2^-18 of the coordinates' size).
 POINT_TOLERANCE = 1e-2
 ANGLE_TOLERANCE = 1e-4  # radians: directions of unit float32 vectors from such points
+
+
+@dataclass
+class Path:
+    points: np.ndarray
+    weights: np.ndarray
+    kinds: np.ndarray
+
+
+def traced(layout: Layout) -> list[Path]:
+    """The layout's light paths one by one, unpacked from ``LightPaths``."""
+    packed = trace_layout(layout)
+    bounds = packed.starts
+    return [
+        Path(packed.points[a:b], packed.weights[a - k : b - k - 1], packed.kinds[a - k : b - k - 1])
+        for k, (a, b) in enumerate(pairwise(bounds))
+    ]
 
 
 def layout(circles, materials, light, rays=1, spread=0.0, aim=0.0) -> Layout:
@@ -57,7 +76,7 @@ def schlick(cos_i: float, n1: float, n2: float) -> float:
 
 
 def test_light_fan_is_evenly_spread_and_leaves_the_box_without_circles():
-    lines = trace_layout(layout([], [], (300.0, 200.0), rays=12, spread=360.0))
+    lines = traced(layout([], [], (300.0, 200.0), rays=12, spread=360.0))
     assert len(lines) == 12
     for k, line in enumerate(lines):
         assert line.kinds.tolist() == [LIGHT] and line.weights.tolist() == [1.0]
@@ -72,7 +91,7 @@ def test_light_fan_is_evenly_spread_and_leaves_the_box_without_circles():
 def test_mirror_reflects_at_equal_angles_with_the_mirror_weight():
     center, radius = np.array([500.0, 300.0]), 100.0
     light = (200.0, 340.0)  # the ray along +x hits the circle 40 units off its axis
-    (line,) = trace_layout(layout([[*center, radius]], [MIRROR], light))
+    (line,) = traced(layout([[*center, radius]], [MIRROR], light))
     assert line.kinds.tolist() == [LIGHT, REFLECTION]
     hit = line.points[1]
     expected_hit = (center[0] - math.sqrt(radius**2 - 40.0**2), 340.0)
@@ -85,14 +104,14 @@ def test_mirror_reflects_at_equal_angles_with_the_mirror_weight():
 
 
 def test_matte_absorbs():
-    (line,) = trace_layout(layout([[500, 300, 100]], [MATTE], (200.0, 300.0)))
+    (line,) = traced(layout([[500, 300, 100]], [MATTE], (200.0, 300.0)))
     assert line.kinds.tolist() == [LIGHT]
     assert np.allclose(line.points[1], (400, 300), atol=POINT_TOLERANCE)
 
 
 def test_glass_refracts_by_snell_and_splits_by_fresnel():
     center, radius, offset = np.array([500.0, 300.0]), 100.0, 60.0
-    lines = trace_layout(layout([[*center, radius]], [GLASS], (200.0, 300.0 + offset)))
+    lines = traced(layout([[*center, radius]], [GLASS], (200.0, 300.0 + offset)))
     main = lines[0]  # the refracted ray carries most of the light: it continues the path
     assert main.kinds[:3].tolist() == [LIGHT, REFRACTION, REFRACTION]
     hit = main.points[1]
@@ -124,7 +143,7 @@ def test_total_internal_reflection_past_the_critical_angle(distance):
     is past the critical angle (41.1 degrees), at 30 it is not."""
     center, radius = np.array([500.0, 300.0]), 100.0
     light = (500.0, 300.0 + distance)
-    (line, *others) = trace_layout(layout([[*center, radius]], [GLASS], light))
+    (line, *others) = traced(layout([[*center, radius]], [GLASS], light))
     incidence = math.asin(distance / radius)
     critical = math.asin(1 / IOR)
     hit = line.points[1]
@@ -144,7 +163,7 @@ def test_total_internal_reflection_past_the_critical_angle(distance):
 
 def test_paths_are_continuous_and_stop_at_the_depth_limit():
     circles = [[300, 200, 60], [600, 350, 90], [450, 450, 50], [700, 150, 40]]
-    lines = trace_layout(layout(circles, [GLASS, MIRROR, GLASS, MIRROR], (100.0, 300.0),
+    lines = traced(layout(circles, [GLASS, MIRROR, GLASS, MIRROR], (100.0, 300.0),
                                 rays=90, spread=360.0))  # fmt: skip
     for line in lines:
         assert len(line.points) == len(line.weights) + 1

@@ -156,19 +156,16 @@ async def _trace_reply(message: dict) -> dict:
         raise MessageError(f"unknown message type {message['type']!r}; expected 'trace'")
     layout = messages.layout_2d(message)
     started = time.perf_counter()
-    lines = await asyncio.to_thread(trace_layout, layout)
+    paths = await asyncio.to_thread(trace_layout, layout)
     return {
         "type": "rays",
         "id": message.get("id") if isinstance(message.get("id"), int) else None,
         "trace_ms": round(1000 * (time.perf_counter() - started), 2),
-        "polylines": [
-            {
-                "points": np.round(line.points, 3).tolist(),
-                "weights": np.round(line.weights, 5).tolist(),
-                "kinds": line.kinds.tolist(),
-            }
-            for line in lines
-        ],
+        # Packed as ``LightPaths`` is: path k's points from starts[k] to starts[k + 1].
+        "points": np.round(paths.points, 3).ravel().tolist(),
+        "weights": np.round(paths.weights, 5).tolist(),
+        "kinds": paths.kinds.tolist(),
+        "starts": paths.starts.tolist(),
     }
 
 

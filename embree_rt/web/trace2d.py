@@ -7,8 +7,9 @@ reflection, and glass split between the two by Schlick's Fresnel term, with the 
 integrator gives them (the presets' reflectivity and transparency, children below
 ``integrator.MIN_WEIGHT`` dropped). Matte circles absorb.
 
-The result is a set of polylines, one per light path: a ray and the child that carries most of
-its light continue one polyline; the other child of a glass split starts a new one at the hit.
+The result is a set of polylines (``LightPaths``), one per light path: a ray and the child that
+carries most of its light continue one polyline; the other child of a glass split starts a new
+one at the hit.
 """
 
 from __future__ import annotations
@@ -50,13 +51,26 @@ class Layout:
 
 
 @dataclass
-class Polyline:
-    """A light path: ``points`` (m + 1, 2) float64, and per segment ``weights`` (m,) float64
-    (the light it carries, 1 leaving the light) and ``kinds`` (m,) int64 (``SEGMENT_KINDS``)."""
+class LightPaths:
+    """The light paths of a layout, as polylines packed end to end.
+
+    Path k's points are ``points[starts[k]:starts[k + 1]]`` ((m + 1, 2) float64 for m
+    segments), and its segments' ``weights`` (the light each carries, 1 leaving the light) and
+    ``kinds`` (``SEGMENT_KINDS``) are ``weights[starts[k] - k:starts[k + 1] - k - 1]`` (float64,
+    int64). ``starts`` is (paths + 1,) int64.
+    """
 
     points: np.ndarray
     weights: np.ndarray
     kinds: np.ndarray
+    starts: np.ndarray
+
+    def segments(self) -> np.ndarray:
+        """(segments, 4) float64 (x0, y0, x1, y1) of every segment, path after path."""
+        inner = np.ones(len(self.points), bool)
+        inner[self.starts[1:] - 1] = False  # a path's last point starts no segment
+        first = np.flatnonzero(inner)
+        return np.hstack([self.points[first], self.points[first + 1]])
 
 
 def fan_directions(layout: Layout) -> np.ndarray:
@@ -82,7 +96,7 @@ def _in_plane(xy: np.ndarray) -> np.ndarray:
     return np.vstack([xy, np.zeros((1, xy.shape[1]))]).astype(np.float32)
 
 
-def trace_layout(layout: Layout) -> list[Polyline]:
+def trace_layout(layout: Layout) -> LightPaths:
     """Trace the light's fan through ``layout`` with embree_rt's BVH and shading, down to
     ``layout.max_depth`` bounces; the light paths in order of the fan's rays."""
     count = len(layout.circles)
@@ -96,7 +110,7 @@ def trace_layout(layout: Layout) -> list[Polyline]:
         segments = _trace(bvh, layout)
     finally:
         bvh.close()
-    return _polylines(segments)
+    return _pack(segments)
 
 
 def _trace(bvh: BVH, layout: Layout) -> dict[str, np.ndarray]:
@@ -181,19 +195,18 @@ def _trace(bvh: BVH, layout: Layout) -> dict[str, np.ndarray]:
     }
 
 
-def _polylines(segments: dict[str, np.ndarray]) -> list[Polyline]:
+def _pack(segments: dict[str, np.ndarray]) -> LightPaths:
     """Group the segments into paths: by path id, each path's segments in order of depth."""
     order = np.lexsort((segments["depth"], segments["path"]))
     path = segments["path"][order]
-    start, end = segments["start"][:, order], segments["end"][:, order]
-    weight = segments["weight"][order].astype(np.float64)
-    kind = segments["kind"][order]
-    breaks = np.flatnonzero(np.diff(path)) + 1
-    lines = []
-    for rows in np.split(np.arange(len(path)), breaks):
-        if len(rows) == 0:
-            continue
-        points = np.concatenate([start[:, rows[:1]], end[:, rows]], axis=1).T
-        lines.append(Polyline(points, weight[rows], kind[rows]))
-    return lines
-
+    count = len(path)
+    first = np.ones(count, bool)  # the first segment of its path
+    first[1:] = path[1:] != path[:-1]
+    paths_before = np.cumsum(first)  # paths begun up to and including each segment
+    points = np.empty((count + int(paths_before[-1]) if count else 0, 2))
+    end_at = np.arange(count) + paths_before  # each segment's end, after its path's start
+    points[end_at] = segments["end"][:, order].T
+    points[end_at[first] - 1] = segments["start"][:, order].T[first]
+    starts = np.append(end_at[first] - 1, len(points)).astype(np.int64)
+    weights = segments["weight"][order].astype(np.float64)
+    return LightPaths(points, weights, segments["kind"][order], starts)

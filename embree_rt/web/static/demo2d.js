@@ -7,6 +7,7 @@ const context = canvas.getContext("2d");
 const WIDTH = 960;
 const HEIGHT = 600;
 const LIGHT_GRAB = 14;
+const LEVELS = 16; // shades of light a segment is drawn with
 const status = document.getElementById("status");
 
 const state = {
@@ -18,7 +19,7 @@ const state = {
   light: [150, 330],
   material: "glass",
 };
-let polylines = [];
+let paths = null; // the server's answer: points, weights, kinds packed path after path
 let inFlight = false;
 let stale = false;
 let sentAt = 0;
@@ -69,15 +70,14 @@ function changed() {
     spread: Number(sliders.spread.value),
     aim: Number(sliders.aim.value),
   });
-  draw();
 }
 
 function onMessage(message) {
   if (message.type === "error") {
     setStatus(status, message.message, true);
   } else if (message.type === "rays") {
-    polylines = message.polylines;
-    const segments = polylines.reduce((sum, line) => sum + line.weights.length, 0);
+    paths = message;
+    const segments = message.weights.length;
     const roundTrip = performance.now() - sentAt;
     setStatus(
       status,
@@ -111,16 +111,30 @@ function drawRays() {
   context.lineWidth = 1.3;
   context.lineCap = "round";
   const colors = ["255, 214, 120", "255, 226, 150", "140, 220, 255", "255, 140, 200"];
-  for (const line of polylines) {
-    for (let k = 0; k < line.weights.length; k++) {
-      const [x0, y0] = line.points[k];
-      const [x1, y1] = line.points[k + 1];
-      context.strokeStyle = `rgba(${colors[line.kinds[k]]}, ${0.15 + 0.7 * line.weights[k]})`;
-      context.beginPath();
-      context.moveTo(x0, y0);
-      context.lineTo(x1, y1);
-      context.stroke();
+  if (paths === null) return;
+  const { points, weights, kinds, starts } = paths;
+  // One stroke per kind and level of light: a thousand separate strokes take the browser
+  // tens of milliseconds to paint, a few dozen paths almost nothing.
+  const buckets = new Map();
+  for (let path = 0; path + 1 < starts.length; path++) {
+    // Path k's points are starts[k] .. starts[k + 1] - 1; its segments' weights start k
+    // places earlier (each path has one point more than it has segments).
+    for (let point = starts[path]; point + 1 < starts[path + 1]; point++) {
+      const segment = point - path;
+      const key = kinds[segment] * LEVELS + Math.round(weights[segment] * (LEVELS - 1));
+      if (!buckets.has(key)) buckets.set(key, []);
+      buckets.get(key).push(point);
     }
+  }
+  for (const [key, segmentPoints] of buckets) {
+    const level = (key % LEVELS) / (LEVELS - 1);
+    context.strokeStyle = `rgba(${colors[Math.floor(key / LEVELS)]}, ${0.15 + 0.7 * level})`;
+    context.beginPath();
+    for (const point of segmentPoints) {
+      context.moveTo(points[2 * point], points[2 * point + 1]);
+      context.lineTo(points[2 * point + 2], points[2 * point + 3]);
+    }
+    context.stroke();
   }
   context.restore();
 }
