@@ -28,6 +28,7 @@ SHOWCASE = Path(__file__).parent.parent / "scenes" / "showcase.toml"
 # Small enough that the preview converges and the full-size render finishes in seconds.
 RENDER_SIZE = (320, 180)
 VIEWPORT = {"width": 900, "height": 620}
+VIEWPORT_2D = {"width": 1280, "height": 700}
 
 # Records every segment the page strokes (moveTo then lineTo), frame by frame (clearRect).
 RECORD_SEGMENTS = """
@@ -112,6 +113,7 @@ def _set_slider(page, name: str, value: float) -> None:
 
 def test_2d_clicks_place_circles_and_draw_the_tracers_segments(server, page):
     sent = _trace_messages(page)
+    page.set_viewport_size(VIEWPORT_2D)
     page.add_init_script(RECORD_SEGMENTS)
     page.goto(f"{server}/2d")
     wait_until(lambda: _answered(page, sent), 10, "the first layout's rays")
@@ -139,20 +141,21 @@ def test_2d_clicks_place_circles_and_draw_the_tracers_segments(server, page):
     order = np.lexsort(expected.T[::-1])
     assert np.allclose(drawn[np.lexsort(drawn.T[::-1])], expected[order], atol=2e-3)
     assert (paths.kinds == INTERNAL).sum() > 0  # the glass around the light reflects totally
-    screenshot(page, "serve_2d.png")
 
 
 def test_2d_click_is_answered_within_50_ms(server, page):
     sent = _trace_messages(page)
+    page.set_viewport_size(VIEWPORT_2D)
     page.goto(f"{server}/2d")
     wait_until(lambda: _answered(page, sent), 10, "the first layout's rays")
+    screenshot(page, "serve_2d.png")  # the page's own first layout
     page.click("#clear")
     round_trips = []
     for k in range(12):
         page.wait_for_timeout(150)  # as a person clicks: the last answer painted by now
         _click_canvas(page, 80 + 60 * k, 80 + 35 * k)
-        wait_until(lambda: _answered(page, sent) and len(sent[-1]["circles"]) == k + 1, 5,
-                   "the click's rays")  # fmt: skip
+        wait_until(lambda placed=k + 1: _answered(page, sent) and len(sent[-1]["circles"])
+                   == placed, 5, "the click's rays")  # fmt: skip
         text = page.inner_text("#status")
         round_trips.append(float(text.split("answered in ")[1].split(" ms")[0]))
     print(f"2D click round trips (ms): {sorted(round_trips)}")

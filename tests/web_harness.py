@@ -32,7 +32,8 @@ def _read_line(stream, timeout: float) -> str:
 @contextmanager
 def running_server(*args: str):
     """Start ``embree-rt serve --port 0 ARGS``; yields (base URL, process). On exit, Ctrl-C
-    (SIGINT) stops it: it must exit as the command does on Ctrl-C, code 130, no traceback."""
+    (SIGINT) stops it: it must exit as the command does on Ctrl-C, code 130, no traceback.
+    Its stderr is then ``process.stderr_text``."""
     process = subprocess.Popen(
         [sys.executable, "-m", "embree_rt", "serve", "--port", "0", *args],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -44,6 +45,7 @@ def running_server(*args: str):
         yield match.group(1), process
         process.send_signal(signal.SIGINT)
         _, stderr = process.communicate(timeout=20)
+        process.stderr_text = stderr
         assert process.returncode == 130, stderr
         assert "Traceback" not in stderr, stderr
     finally:
@@ -70,7 +72,11 @@ def screenshot(page, name: str) -> None:
     """Save the page for the README when ``EMBREE_RT_SCREENSHOTS`` names a directory."""
     folder = os.environ.get("EMBREE_RT_SCREENSHOTS")
     if folder:
-        page.screenshot(path=str(Path(folder) / name))
+        # Down to the bottom of the page's content, not the empty viewport below it.
+        bottom = page.evaluate("document.querySelector('main').getBoundingClientRect().bottom")
+        width = page.viewport_size["width"]
+        page.screenshot(path=str(Path(folder) / name),
+                        clip={"x": 0, "y": 0, "width": width, "height": bottom})  # fmt: skip
 
 
 def wait_until(condition, timeout: float, what: str, page=None):

@@ -110,7 +110,8 @@ function drawRays() {
   context.globalCompositeOperation = "lighter";
   context.lineWidth = 1.3;
   context.lineCap = "round";
-  const colors = ["255, 214, 120", "255, 226, 150", "140, 220, 255", "255, 140, 200"];
+  // By SEGMENT_KINDS: from the light, reflected, refracted, totally internally reflected.
+  const colors = ["255, 214, 120", "255, 236, 180", "130, 210, 255", "190, 160, 255"];
   if (paths === null) return;
   const { points, weights, kinds, starts } = paths;
   // One stroke per kind and level of light: a thousand separate strokes take the browser
@@ -150,15 +151,17 @@ function drawCircle(circle) {
     const shine = context.createLinearGradient(
       circle.x - circle.r, circle.y - circle.r, circle.x + circle.r, circle.y + circle.r
     );
-    shine.addColorStop(0, "rgba(235, 240, 250, 0.35)");
-    shine.addColorStop(1, "rgba(90, 100, 120, 0.35)");
+    shine.addColorStop(0, "rgba(245, 248, 255, 0.75)");
+    shine.addColorStop(0.5, "rgba(150, 160, 180, 0.45)");
+    shine.addColorStop(1, "rgba(60, 66, 80, 0.6)");
     context.fillStyle = shine;
-    context.strokeStyle = "rgba(230, 235, 245, 0.95)";
+    context.strokeStyle = "rgba(245, 248, 255, 1)";
+    context.lineWidth = 3;
   } else {
-    context.fillStyle = "rgba(60, 60, 68, 0.95)";
-    context.strokeStyle = "rgba(120, 120, 130, 0.9)";
+    context.fillStyle = "rgba(52, 48, 46, 0.97)";
+    context.strokeStyle = "rgba(105, 98, 92, 0.9)";
   }
-  context.lineWidth = 2;
+  if (circle.material !== "mirror") context.lineWidth = 2;
   context.fill();
   context.stroke();
   context.restore();

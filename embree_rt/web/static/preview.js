@@ -39,8 +39,7 @@ function onMessage(message, blob) {
     renderButton.textContent = `Render full size (${settings.width}×${settings.height}, ` +
       `${settings.spp} spp)`;
     document.getElementById("scene-info").textContent =
-      `${message.spheres} spheres · preview converges to embree-rt render's ${settings.spp} ` +
-      "samples per pixel";
+      `${message.spheres} spheres · converges to embree-rt render's ${settings.spp} spp`;
     sendSize();
   } else if (message.type === "pass") {
     showPass(message, blob);
