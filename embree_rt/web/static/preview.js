@@ -177,3 +177,11 @@ function renderFinished() {
   cancelButton.hidden = true;
   progress.hidden = true;
 }
+
+let resizing = null;
+window.addEventListener("resize", () => {
+  clearTimeout(resizing);
+  resizing = setTimeout(() => {
+    if (settings !== null) sendSize();
+  }, 250);
+});
