@@ -88,3 +88,20 @@ def test_the_edited_scene_file_is_the_scene_as_edited(tmp_path):
         assert len(edited.meshes) == len(session.scene.meshes) > 0
     finally:
         session.close()
+
+
+def test_a_cancelled_full_render_stops_at_the_next_batch():
+    session = _session("three_spheres.toml")
+    session.scene.render.width, session.scene.render.height = 320, 180  # 2 batches of samples
+    reports = []
+
+    def cancel_on_first_report(done: int, total: int) -> None:
+        reports.append(done)
+        session.render_generation += 1  # as the page's Cancel button does
+
+    try:
+        with pytest.raises(OvertakenError):
+            session.full_render(session.render_generation, cancel_on_first_report)
+        assert len(reports) == 1 and reports[0] < 320 * 180 * session.scene.render.spp
+    finally:
+        session.close()
