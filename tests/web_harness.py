@@ -7,6 +7,7 @@ tests/test_web_browser.py``.
 
 from __future__ import annotations
 
+import io
 import os
 import re
 import selectors
@@ -75,8 +76,12 @@ def screenshot(page, name: str) -> None:
         # Down to the bottom of the page's content, not the empty viewport below it.
         bottom = page.evaluate("document.querySelector('main').getBoundingClientRect().bottom")
         width = page.viewport_size["width"]
-        page.screenshot(path=str(Path(folder) / name),
-                        clip={"x": 0, "y": 0, "width": width, "height": bottom})  # fmt: skip
+        shot = page.screenshot(clip={"x": 0, "y": 0, "width": width, "height": bottom})
+        # 256 colours: the 2D demo's thousand faint lines make a full-colour PNG 3x larger.
+        from PIL import Image
+
+        image = Image.open(io.BytesIO(shot)).convert("RGB").quantize(256, dither=Image.Dither.NONE)
+        image.save(Path(folder) / name, optimize=True)
 
 
 def wait_until(condition, timeout: float, what: str, page=None):
