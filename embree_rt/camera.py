@@ -122,10 +122,19 @@ def primary_rays(
     of the indices into batches yields the same rays. Returns origins (3, count) float32, unit
     directions (3, count) float32 (one ray per column) and pixel (count,) int64.
     """
-    nx, ny, cells = strata(spp)
     size = f"{frame.width}x{frame.height}"
     _check_range(start, count, frame.width * frame.height * spp, "samples", f"{size} at {spp} spp")
-    index = np.arange(start, start + count, dtype=np.int64)
+    return sample_rays(frame, spp, seed, np.arange(start, start + count, dtype=np.int64))
+
+
+def sample_rays(
+    frame: CameraFrame, spp: int, seed: int, index: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Camera rays for the (n,) int64 global sample indices ``index`` (any order, each below
+    ``width * height * spp``), placed as ``primary_rays`` places them: sample i of a render is
+    the same ray whichever call makes it. Returns origins (3, n) float32, unit directions
+    (3, n) float32 and pixel (n,) int64."""
+    nx, ny, cells = strata(spp)
     # Floor division and remainder by a scalar, not np.divmod: NumPy divides by a constant
     # through libdivide only in these two (13x faster here).
     pixel = index // spp

@@ -153,6 +153,10 @@ def build_parser() -> argparse.ArgumentParser:
     info = commands.add_parser("info", help="describe a scene: objects, bounds, build time")
     info.add_argument("scene", help="scene file")
     info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic")
+    serve = commands.add_parser("serve", help="the 2D ray demo and a live preview in a browser")
+    serve.add_argument("scene", nargs="?", help="scene file (default: the showcase)")
+    serve.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    serve.add_argument("--port", type=_non_negative_int(), default=8000, help="0: any free port")
     return parser
 
 
@@ -394,7 +398,24 @@ def _bounds(scene) -> tuple[np.ndarray, np.ndarray] | None:
     return np.min(lows, axis=0), np.max(highs, axis=0)
 
 
-COMMANDS = {"render": _command_render, "random": _command_random, "info": _command_info}
+def _command_serve(args: argparse.Namespace) -> None:
+    import importlib.util
+
+    if any(importlib.util.find_spec(name) is None for name in ("starlette", "uvicorn",
+                                                               "websockets")):  # fmt: skip
+        raise UsageError("serve needs the web extra: pip install 'embree-rt[web]'")
+    _check_library()
+    from embree_rt.web.serve import serve
+
+    serve(args.scene, args.host, args.port)
+
+
+COMMANDS = {
+    "render": _command_render,
+    "random": _command_random,
+    "info": _command_info,
+    "serve": _command_serve,
+}
 
 
 def main(argv: list[str] | None = None) -> int:

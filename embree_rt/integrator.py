@@ -20,7 +20,7 @@ import numpy as np
 
 from embree_rt import budget, shading
 from embree_rt.batches import batch_ranges, ordered_results
-from embree_rt.camera import camera_frame, primary_rays
+from embree_rt.camera import CameraFrame, camera_frame, primary_rays, sample_rays
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
@@ -209,6 +209,23 @@ class Renderer:
             # On Ctrl-C or an error, drop the batches not yet started instead of finishing them.
             pool.shutdown(wait=True, cancel_futures=True)
         return film.image(spp)
+
+    def trace_pixels(
+        self, frame: CameraFrame, spp: int, seed: int, sample: int, first: int, count: int,
+        max_depth: int,
+    ) -> FilmBlock:  # fmt: skip
+        """The film block of sample ``sample`` (of ``spp``) of each of the ``count`` pixels from
+        ``first``: the very rays ``render`` traces for those samples, for a preview that shows
+        a render one sample per pixel at a time."""
+        if not 0 <= sample < spp:
+            raise ValueError(f"sample: must lie in [0, {spp}), got {sample}")
+        index = np.arange(first, first + count, dtype=np.int64) * spp + sample
+        origins, directions, pixel = sample_rays(frame, spp, seed, index)
+        work = BatchWork(FilmBlock(first, count))
+        rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
+        work.rays["primary"] += count
+        self._trace(rays, work, max_depth)
+        return work.block
 
     # -- one batch, all depths ----------------------------------------------------------------
 

@@ -1,0 +1,1 @@
+"""embree_rt in the browser."""

@@ -1,0 +1,89 @@
+"""``embree-rt serve``: bind the port, warm the kernels, run the app until Ctrl-C."""
+
+from __future__ import annotations
+
+import ipaddress
+import socket
+import sys
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from embree_rt.errors import InputError
+from embree_rt.web.messages import MAX_MESSAGE_BYTES
+
+# The scene shown when none is given: the seed article's showcase, shipped with the package.
+DEFAULT_SCENE = "default_scene.toml"
+
+
+def listen(host: str, port: int) -> tuple[socket.socket, bool]:
+    """A listening TCP socket on ``host``:``port`` (0: any free port) and whether the address
+    is a loopback one. InputError (one line) when the name does not resolve or the port is
+    taken."""
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(
+            host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )[0]
+    except socket.gaierror as error:
+        raise InputError(f"--host: {host}: {error.strerror}") from None
+    listener = socket.socket(family, kind, proto)
+    listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        listener.bind(address)
+        listener.listen(64)
+    except OSError as error:
+        listener.close()
+        raise InputError(f"--port: cannot listen on {host}:{port}: {error.strerror}") from None
+    return listener, ipaddress.ip_address(address[0]).is_loopback
+
+
+def _warm_up(session) -> None:
+    """Compile (or load from numba's cache) every kernel a request needs, before the first
+    request: the first click would otherwise wait seconds."""
+    from embree_rt.film import Film
+    from embree_rt.web.trace2d import Layout, trace_layout
+
+    circle = np.array([[480.0, 300.0, 80.0]])
+    trace_layout(Layout(circle, np.array([1]), (300.0, 300.0), 8, 360.0, 0.0, 960.0, 600.0))
+    session.set_size(16, 9)
+    session.render_pass(0, session.generation, Film(16, 9))
+    session.close()
+
+
+def serve(scene_path: str | None, host: str, port: int) -> None:
+    """Serve the pages for the scene file ``scene_path`` (None: the showcase) until Ctrl-C."""
+    import uvicorn
+
+    from embree_rt.scene import load_scene
+    from embree_rt.web.app import create_app
+    from embree_rt.web.preview import session_factory
+
+    path = Path(scene_path) if scene_path is not None else _default_scene()
+    scene = load_scene(path)  # a bad file is one line and exit 2, before the port is taken
+    new_session = session_factory(scene, path)
+    listener, loopback = listen(host, port)
+    with listener:
+        _warm_up(new_session())
+        bound_host, bound_port = listener.getsockname()[:2]
+        if not loopback:
+            print(f"embree-rt: warning: listening on {bound_host}, not a loopback address: anyone "
+                  "who can reach this port can drive the server", file=sys.stderr)  # fmt: skip
+        shown = f"[{bound_host}]" if ":" in bound_host else bound_host
+        print(f"embree-rt: serving {path.name} at http://{shown}:{bound_port}/ (the 2D demo at "
+              f"http://{shown}:{bound_port}/2d); Ctrl-C stops", flush=True)  # fmt: skip
+        config = uvicorn.Config(
+            create_app(new_session, loopback=loopback),
+            log_level="warning",
+            lifespan="off",
+            ws="websockets-sansio",
+            # The protocol's own limit, far above the app's: messages between the two get the
+            # app's error reply; beyond it the connection is closed (1009, message too big).
+            ws_max_size=16 * MAX_MESSAGE_BYTES,
+            timeout_graceful_shutdown=2,
+        )
+        uvicorn.Server(config).run(sockets=[listener])
+
+
+def _default_scene() -> Path:
+    return Path(str(resources.files("embree_rt.web") / DEFAULT_SCENE))
