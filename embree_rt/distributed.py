@@ -20,6 +20,7 @@ does not change.
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 import pickle
 import sys
@@ -481,23 +482,26 @@ def progress_bar(total: int, quiet: bool) -> Iterator[Callable[[ClusterProgress]
 
 @contextmanager
 def connect(
-    cluster: str | None, scheduler: str | None, *, timeout_s: float = 10.0
+    cluster: str | None, scheduler: str | None, *, timeout_s: float | None = None
 ) -> Iterator[distributed.Client]:
     """A client on ``--cluster local:N`` (a ``LocalCluster`` of N worker processes of one thread
-    each, closed afterwards) or on the running scheduler at ``--scheduler ADDRESS``. Bad values
-    and unreachable schedulers are ``InputError``s naming the flag."""
+    each, closed afterwards) or on the running scheduler at ``--scheduler ADDRESS``, tried for
+    ``timeout_s`` (default Dask's ``distributed.comm.timeouts.connect``, 30 s unless configured,
+    e.g. ``DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT=5s``). Bad values and unreachable
+    schedulers are ``InputError``s naming the flag."""
     if cluster is not None:
         count = _local_worker_count(cluster)
         # No memory limit: the BVH is memory Dask does not manage, and a limit would have the
         # nanny kill a worker for holding a big scene.
         with distributed.LocalCluster(
             n_workers=count, threads_per_worker=1, processes=True, dashboard_address=None,
-            memory_limit=0,
+            memory_limit=0, silence_logs=logging.ERROR,
         ) as local, distributed.Client(local) as client:  # fmt: skip
             yield client
         return
     try:
-        client = distributed.Client(scheduler, timeout=timeout_s)
+        timeout = {} if timeout_s is None else {"timeout": timeout_s}
+        client = distributed.Client(scheduler, **timeout)
     except (OSError, TimeoutError, ValueError) as error:
         raise ClusterError(f"--scheduler: {scheduler}: cannot connect: {error}") from None
     with client:
