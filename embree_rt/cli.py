@@ -152,7 +152,8 @@ def _render_and_save(
 
     _apply_overrides(scene, args)
     _check_library()
-    if scene.animation is not None or args.cluster or args.scheduler or args.frames:
+    framed = args.frames or "{frame" in args.output  # an animation's pattern, or a mistake
+    if scene.animation is not None or args.cluster or args.scheduler or framed:
         from embree_rt.frames import render_command
 
         try:

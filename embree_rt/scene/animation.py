@@ -88,6 +88,12 @@ def cameras_on_keyframes(camera: Camera, keys: list[Keyframe], frames) -> list[C
         positions = catmull_rom(np.array([key.position for key in keys], np.float64))
         looks = catmull_rom(np.array([key.look_at for key in keys], np.float64))
         fovs = PchipInterpolator(knots, np.array([key.fov for key in keys], np.float64))(inside)
+        # A frame on a keyframe (or held before the first, after the last) is that keyframe
+        # exactly, not the spline's value rounded there.
+        at = np.minimum(np.searchsorted(knots, inside), len(keys) - 1)
+        for i in np.flatnonzero(knots[at] == inside):
+            key = keys[at[i]]
+            positions[i], looks[i], fovs[i] = key.position, key.look_at, key.fov
     return [
         replace(camera, position=_vec(p), look_at=_vec(a), fov=float(f))
         for p, a, f in zip(positions, looks, fovs, strict=True)
