@@ -28,7 +28,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import distributed
@@ -37,7 +37,7 @@ import numpy as np
 from embree_rt.camera import CameraFrame, camera_frame
 from embree_rt.errors import InputError
 from embree_rt.film import Film
-from embree_rt.integrator import DEFAULT_BATCH_SIZE, RAY_KINDS, RenderStats, batch_ranges
+from embree_rt.integrator import DEFAULT_BATCH_SIZE, RenderStats, batch_ranges
 from embree_rt.scene.model import Camera, Scene
 from embree_rt.scene.random_field import FieldPlan
 
@@ -245,7 +245,6 @@ class _Frame:
     label: object
     film: Film
     pending: int
-    rays: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAY_KINDS, 0))
 
 
 class ClusterRenderer:
@@ -318,19 +317,25 @@ class ClusterRenderer:
         in_flight: dict[distributed.Future, _Frame] = {}
         began = time.perf_counter()
 
-        def submit_next_frame() -> bool:
+        submitted = 0
+
+        def submit_next_frame() -> None:
+            nonlocal submitted
             item = next(queue, None)
             if item is None:
-                return False
+                return
             label, frame = item
             image = _Frame(label, Film(settings.width, settings.height), len(batches))
-            for start, count in batches:
-                future = self.client.submit(
-                    render_batch, self.key, self.source, frame, settings.spp, settings.seed,
-                    settings.max_depth, start, count, pure=False,
-                )  # fmt: skip
-                in_flight[future] = image
-            return True
+            n = len(batches)
+            # One graph for the frame's batches; earlier frames first.
+            futures = self.client.map(
+                render_batch, [self.key] * n, [self.source] * n, [frame] * n,
+                [settings.spp] * n, [settings.seed] * n, [settings.max_depth] * n,
+                [start for start, _ in batches], [count for _, count in batches],
+                pure=False, priority=-submitted,
+            )  # fmt: skip
+            submitted += 1
+            in_flight.update(dict.fromkeys(futures, image))
 
         try:
             for _ in range(ahead):
@@ -342,14 +347,13 @@ class ClusterRenderer:
                 if now - last_check > 1.0 or not done:
                     state.workers = len(self._wait_for_workers(state))
                     last_check = now
-                for future in done:
+                # All finished batches' results in one round trip, not one each.
+                for future, result in zip(done, _results(self.client, done), strict=True):
                     image = in_flight.pop(future)
-                    result: BatchResult = _result(future)
                     future.release()
                     image.film.add_block(result)  # a BatchResult reads as a FilmBlock
                     self.bytes_returned += result.sums.nbytes
                     for kind, n in result.rays.items():
-                        image.rays[kind] += n
                         self.stats.rays[kind] += n
                     state.done += result.count * settings.spp
                     state.rays += sum(result.rays.values())
@@ -390,11 +394,13 @@ class ClusterRenderer:
             time.sleep(POLL_S)
 
 
-def _result(future: distributed.Future) -> BatchResult:
-    """The future's result; a task that killed workers one after another is the cluster's
+def _results(client: distributed.Client, futures: list) -> list[BatchResult]:
+    """The futures' results; a task that killed workers one after another is the cluster's
     problem (out of memory, say), not a bug."""
+    if not futures:
+        return []
     try:
-        return future.result()
+        return client.gather(futures)
     except distributed.client.FutureCancelledError as error:
         raise ClusterError(f"a batch was cancelled on the cluster: {error}") from None
     except distributed.scheduler.KilledWorker as error:

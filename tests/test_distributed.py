@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
 # Small images cut in small batches: dozens of tasks, so both workers take part.
 SMALL = {"width": 96, "height": 54, "spp": 2}
-SMALL_BATCH = 96 * 2 * 4  # four rows of pixels a task
+SMALL_BATCH = 96 * 2 * 6  # six rows of pixels a task: about a dozen tasks an image
 TIMEOUT_S = 120
 
 
@@ -106,7 +106,7 @@ def test_scene_is_scattered_once_and_built_once_per_worker(cluster) -> None:
     images = {}
     bounded(renderer.render_frames, settings, cameras, images.__setitem__)
     assert sorted(images) == [0, 1, 2]
-    # Three frames of 14 batches each, spread over both workers: one build on each.
+    # Three frames of a dozen batches each, spread over both workers: one build on each.
     assert renderer.builds() == dict.fromkeys(client.nthreads(), 1)
     assert renderer.key != rd.ClusterRenderer(rt.load_scene(SCENES / "three_spheres.toml"),
                                               client).key  # fmt: skip
@@ -128,33 +128,12 @@ def test_animation_frames_equal_frames_rendered_one_by_one_locally(cluster) -> N
     assert not np.array_equal(images[0], images[3])  # the camera did move
 
 
-def test_a_worker_killed_mid_render_leaves_the_image_unchanged(cluster) -> None:
-    _, client = cluster
-    scene = rt.load_scene(SCENES / "three_spheres.toml")
-    renderer = rd.ClusterRenderer(scene, client, batch_size=96)  # one row a task: 108 tasks
-    victim = sorted(client.nthreads())[0]
-    pid = client.run(os.getpid, workers=[victim])[victim]
-    killed = threading.Event()
-
-    def kill_once(state: rd.ClusterProgress) -> None:
-        if state.done and not killed.is_set():
-            killed.set()
-            # The worker process dies at once; its nanny starts a new one, which has to load
-            # the scene again. The batches it held run elsewhere.
-            os.kill(pid, signal.SIGKILL)
-
-    settings = rd.Settings(max_depth=6, seed=0, **SMALL)
-    image = bounded(renderer.render, settings, scene.camera, kill_once)
-    assert killed.is_set()
-    assert np.array_equal(image, local_image(scene))
-    client.wait_for_workers(2, timeout=TIMEOUT_S)  # leave the cluster as the module found it
-
-
 def test_a_worker_that_joins_late_takes_part(cluster) -> None:
     local, client = cluster
     scene = rt.load_scene(SCENES / "three_spheres.toml")
     scene.render.seed = 5
-    renderer = rd.ClusterRenderer(scene, client, batch_size=96)  # plugin and scene: 2 workers
+    # Plugin registered and scene scattered while there are 2 workers.
+    renderer = rd.ClusterRenderer(scene, client, batch_size=96 * 2 * 2)
     before = set(client.nthreads())
     local.scale(3)
     try:
@@ -181,6 +160,28 @@ def test_a_worker_that_cannot_load_the_scene_is_bad_input(cluster, tmp_path: Pat
     settings = rd.Settings(width=8, height=8, spp=1, max_depth=1, seed=0)
     with pytest.raises(rd.WorkerSceneError, match=r"sphere_arrays\[0\]\.file: .*no such file"):
         bounded(renderer.render, settings, rt.Camera())
+
+
+def test_a_worker_killed_mid_render_leaves_the_image_unchanged(cluster) -> None:
+    # Last of the cluster's tests: the worker's nanny restarts it while the module closes.
+    _, client = cluster
+    scene = rt.load_scene(SCENES / "three_spheres.toml")
+    renderer = rd.ClusterRenderer(scene, client, batch_size=96 * 2 * 2)  # 27 tasks of 2 rows
+    victim = sorted(client.nthreads())[0]
+    pid = client.run(os.getpid, workers=[victim])[victim]
+    killed = threading.Event()
+
+    def kill_once(state: rd.ClusterProgress) -> None:
+        if state.done and not killed.is_set():
+            killed.set()
+            # The worker process dies at once; its nanny starts a new one, which has to load
+            # the scene again. The batches it held run elsewhere.
+            os.kill(pid, signal.SIGKILL)
+
+    settings = rd.Settings(max_depth=6, seed=0, **SMALL)
+    image = bounded(renderer.render, settings, scene.camera, kill_once)
+    assert killed.is_set()
+    assert np.array_equal(image, local_image(scene))
 
 
 def test_a_cluster_without_workers_is_an_error_not_a_hang() -> None:
@@ -225,6 +226,9 @@ def stop(process: subprocess.Popen) -> None:
             process.wait()
 
 
+ORBIT = "\n[animation]\nframes = 6\norbit = 60.0\n"
+
+
 def test_command_on_dask_scheduler_and_worker_processes(tmp_path: Path) -> None:
     address = f"tcp://127.0.0.1:{free_port()}"
     bin_dir = Path(sys.executable).parent
@@ -242,18 +246,53 @@ def test_command_on_dask_scheduler_and_worker_processes(tmp_path: Path) -> None:
         ))  # fmt: skip
         with distributed.Client(address, timeout=TIMEOUT_S) as client:
             client.wait_for_workers(1, timeout=TIMEOUT_S)
-        output = tmp_path / "three.npy"
-        flags = ["--width", "64", "--height", "36", "--spp", "2"]
-        result = run_cli("render", "scenes/three_spheres.toml", "-o", str(output), *flags,
-                         "--scheduler", address)  # fmt: skip
+        # An animated scene: the command's frame files, rendered on the cluster.
+        scene_file = tmp_path / "orbit.toml"
+        scene_file.write_text((SCENES / "three_spheres.toml").read_text() + ORBIT)
+        pattern = str(tmp_path / "f{frame}.npy")
+        flags = ["--width", "64", "--height", "36", "--spp", "2", "--frames", "2:4"]
+        result = run_cli("render", str(scene_file), "-o", pattern, *flags, "--scheduler", address)
         assert result.returncode == 0, result.stderr
         assert "on 1 Dask worker " in result.stderr
-        scene = rt.load_scene(SCENES / "three_spheres.toml")
-        expected = rt.render(scene, width=64, height=36, spp=2)
-        assert np.array_equal(np.load(output), expected)
+        assert sorted(p.name for p in tmp_path.glob("*.npy")) == ["f2.npy", "f3.npy"]
+        scene = rt.load_scene(scene_file)
+        for f in (2, 3):
+            camera = camera_at(scene.camera, scene.animation, f)
+            expected = rt.render(replace(scene, camera=camera), width=64, height=36, spp=2)
+            assert np.array_equal(np.load(tmp_path / f"f{f}.npy"), expected), f"frame {f}"
     finally:
         for process in reversed(started):
             stop(process)
+
+
+def test_ctrl_c_on_a_local_cluster_exits_130_and_writes_nothing(tmp_path: Path) -> None:
+    import psutil  # distributed's own dependency
+
+    output = tmp_path / "out.png"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "embree_rt", "random", "--count", "1000", "-o", str(output),
+         "--width", "1920", "--height", "1080", "--spp", "64", "--quiet", "--cluster", "local:1"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        # Until the worker process has worked a while: the render is under way.
+        deadline = time.monotonic() + TIMEOUT_S
+        while time.monotonic() < deadline and process.poll() is None:
+            children = psutil.Process(process.pid).children(recursive=True)
+            busy = sum(sum(c.cpu_times()[:2]) for c in children if c.is_running())
+            if len(children) >= 1 and busy > 2.5:
+                break
+            time.sleep(0.2)
+        assert process.poll() is None, "the render ended before it could be interrupted"
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_command_with_an_unreachable_scheduler_fails_in_one_line(tmp_path: Path) -> None:
