@@ -250,7 +250,8 @@ def _command_random(args: argparse.Namespace) -> None:
     scene = field_scene(plan)
     _apply_overrides(scene, args)
     _require_memory_for_field(plan.count, scene.render, args)
-    add_field_spheres(scene, plan)
+    if not (args.cluster or args.scheduler) or args.save_scene is not None:
+        add_field_spheres(scene, plan)  # (a cluster's workers generate the field themselves)
     generate_s = time.perf_counter() - started
     if args.save_scene is not None:
         _writing(args.save_scene, lambda: scene.save(args.save_scene))

@@ -78,6 +78,8 @@ def render_command(scene: Scene, args: argparse.Namespace, made: tuple[str, floa
     from embree_rt.film import check_output_path, save_image
 
     animation = scene.animation
+    if args.threads is not None and (args.cluster or args.scheduler):
+        raise InputError("--threads: sets local threads; a Dask worker has its own (--nthreads)")
     if animation is None and args.frames is not None:
         raise InputError("--frames: the scene has no [animation]")
     frames = frame_range(args.frames, animation.frames) if animation is not None else None
@@ -102,23 +104,26 @@ def render_command(scene: Scene, args: argparse.Namespace, made: tuple[str, floa
 
     started = time.perf_counter()
     if args.cluster is None and args.scheduler is None:
-        rays, where = _render_locally(scene, args, settings, cameras, write), "locally"
+        rays, render_s, where = _render_locally(scene, args, settings, cameras, write)
     else:
-        rays, where = _render_on_cluster(scene, args, settings, cameras, write, source)
+        rays, render_s, where = _render_on_cluster(scene, args, settings, cameras, write, source)
     elapsed = time.perf_counter() - started
     if not args.quiet:
         skipped = len(paths) - len(todo)
+        setup = "BVH" if where == "locally" else "cluster"
         what = "" if frames is None else f"{len(todo)} frames ({skipped} already on disk) of "
         print(
             f"embree-rt: {what}{settings.width}x{settings.height} at {settings.spp} spp {where} "
-            f"in {made[1] + elapsed:.2f} s ({made[0]} {made[1]:.2f} s, render {elapsed:.2f} s): "
-            f"{rays:,} rays, {rays / max(elapsed, 1e-9) / 1e6:.1f} Mrays/s -> {args.output}",
+            f"in {made[1] + elapsed:.2f} s ({made[0]} {made[1]:.2f} s, {setup} "
+            f"{elapsed - render_s:.2f} s, render {render_s:.2f} s): {rays:,} rays, "
+            f"{rays / max(render_s, 1e-9) / 1e6:.1f} Mrays/s -> {args.output}",
             file=sys.stderr,
         )
 
 
-def _render_locally(scene, args, settings, cameras, write: Callable) -> int:
-    """Render the frames one after another on one ``Renderer``; the rays traced."""
+def _render_locally(scene, args, settings, cameras, write: Callable) -> tuple[int, float, str]:
+    """Render the frames one after another on one ``Renderer``: the rays traced, the seconds
+    spent rendering (the rest was building the BVH), and where."""
     from embree_rt import budget
     from embree_rt.geometry import sphere_kind
     from embree_rt.integrator import DEFAULT_BATCH_SIZE, Renderer
@@ -130,18 +135,24 @@ def _render_locally(scene, args, settings, cameras, write: Callable) -> int:
             settings.spp, DEFAULT_BATCH_SIZE, workers=args.threads or os.cpu_count() or 1,
         )
     )  # fmt: skip
+    render_s = 0.0
     with Renderer(scene, spheres=args.spheres, threads=args.threads) as renderer:
         for frame, camera in cameras:
             image = renderer.render(
                 width=settings.width, height=settings.height, spp=settings.spp,
                 max_depth=settings.max_depth, seed=settings.seed, camera=camera,
             )  # fmt: skip
+            render_s += renderer.stats.render_s
             write(frame, image)
-        return renderer.stats.total_rays
+        return renderer.stats.total_rays, render_s, "locally"
 
 
-def _render_on_cluster(scene, args, settings, cameras, write: Callable, source) -> tuple[int, str]:
-    """Render the frames on ``--cluster``/``--scheduler``; the rays traced and where."""
+def _render_on_cluster(
+    scene, args, settings, cameras, write: Callable, source
+) -> tuple[int, float, str]:
+    """Render the frames on ``--cluster``/``--scheduler``: the rays traced, the seconds from the
+    first batch sent to the last frame written (the workers build their BVH in it; the rest was
+    starting or reaching the cluster), and where."""
     try:
         from embree_rt import distributed
     except ImportError as error:
@@ -159,7 +170,8 @@ def _render_on_cluster(scene, args, settings, cameras, write: Callable, source) 
         with distributed.progress_bar(total, args.quiet) as show:
             renderer.render_frames(distributed.Settings.of(scene), cameras, write, progress=show)
         workers = len(client.nthreads())
-    return renderer.stats.total_rays, f"on {workers} Dask worker{'s' if workers != 1 else ''}"
+    where = f"on {workers} Dask worker{'s' if workers != 1 else ''}"
+    return renderer.stats.total_rays, renderer.stats.render_s, where
 
 
 @contextmanager

@@ -1,4 +1,5 @@
-"""Camera paths: a scene's ``[animation]`` table, the camera of each frame, and its checks.
+"""Camera paths: a scene's ``[animation]``, the camera of each frame, and its file table
+(``animation_file`` reads and checks it).
 
 Two kinds of path, both about the scene's ``[camera]``:
 
@@ -22,8 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from embree_rt.scene.fields import Table
+if TYPE_CHECKING:  # the model imports this module: no import of the model at run time
     from embree_rt.scene.model import Camera
 
 Vec3 = tuple[float, float, float]
@@ -113,54 +113,6 @@ def _vec(values) -> Vec3:
 
 
 # -- scene files -----------------------------------------------------------------------------
-
-
-def read_animation(table: Table, camera: Camera) -> Animation:
-    """The ``[animation]`` table, checked: every frame's camera must define an image (the rule
-    of ``model.camera_problem``). Raises ``SceneError`` naming the key."""
-    from embree_rt.scene.model import Camera, camera_problem
-
-    table.require("frames")
-    frames = table.integer("frames", low=1)
-    keyframe_tables = table.tables("keyframes")
-    if table.has("orbit") == bool(keyframe_tables):
-        raise table.error("orbit", "give either orbit (degrees) or a list of keyframes")
-    if table.has("orbit"):
-        animation = Animation(frames, orbit=table.number("orbit"))
-        table.finish()
-        return animation  # turning about up keeps the angle between up and the view
-    keys: list[Keyframe] = []
-    previous = Keyframe(-1, tuple(camera.position), tuple(camera.look_at), float(camera.fov))
-    for key_table in keyframe_tables:
-        key_table.require("frame")
-        number = key_table.integer("frame", low=0)
-        if number >= frames:
-            raise key_table.error("frame", f"must be < animation.frames ({frames}), got {number}")
-        if number <= previous.frame:
-            raise key_table.error(
-                "frame", f"must be greater than the previous keyframe's ({previous.frame})"
-            )
-        key = Keyframe(
-            frame=number,
-            position=key_table.vector("position", previous.position),
-            look_at=key_table.vector("look_at", previous.look_at),
-            fov=key_table.number("fov", previous.fov),
-        )
-        key_table.finish()
-        at_key = Camera(key.position, key.look_at, camera.up, key.fov)
-        if (problem := camera_problem(at_key)) is not None:
-            name, text = problem
-            raise key_table.error(name if name != "up" else "look_at", text)
-        keys.append(key)
-        previous = key
-    table.finish()
-    animation = Animation(frames, keyframes=keys)
-    # The spline may pass through a camera no keyframe has (look_at meeting position).
-    for number, between in enumerate(frame_cameras(camera, animation)):
-        if (problem := camera_problem(between)) is not None:
-            name, text = problem
-            raise table.error("keyframes", f"frame {number}'s interpolated camera: {name} {text}")
-    return animation
 
 
 def animation_document(animation: Animation) -> dict:

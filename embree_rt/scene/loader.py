@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from embree_rt.materials import PRESETS, Checker, Material
-from embree_rt.scene.animation import read_animation
+from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
 from embree_rt.scene.model import (
