@@ -275,14 +275,23 @@ class ClusterRenderer:
         self.stats = RenderStats()
         self.bytes_returned = 0
         name = plugin_name(self.key)
-        registered = client.run_on_scheduler(_has_worker_plugin, name=name)
-        if not registered:
+        # Another renderer of the same scene may have registered it: share its workers' BVHs.
+        self.registered = not client.run_on_scheduler(_has_worker_plugin, name=name)
+        if self.registered:
             client.register_plugin(SceneRendererPlugin(self.key, spheres), name=name)
         if isinstance(scene, Scene):
             # Once to every worker now; a worker that joins later fetches it from a peer once.
             self.source = client.scatter(scene, broadcast=True, hash=False)
         else:
             self.source = scene
+
+    def release(self) -> None:
+        """Free the workers' renderers of this scene (and the scattered scene), if this
+        renderer registered them: a long-lived cluster otherwise keeps every scene's BVH."""
+        if self.registered:
+            self.client.unregister_worker_plugin(plugin_name(self.key))
+            self.registered = False
+        self.source = None
 
     def builds(self) -> dict[str, int]:
         """Renderer builds per worker address (each worker that has taken a batch: 1)."""
@@ -437,13 +446,18 @@ def render(
     """``embree_rt.render`` on ``client``'s cluster: the same (height, width, 3) float32 image,
     bit for bit. ``scene`` is a ``Scene`` (scattered once to every worker) or the path of a scene
     file every worker can read. Arguments left as None come from the scene's ``render`` table.
+    The workers' renderers are freed afterwards; for several images or frames of one scene use
+    a ``ClusterRenderer``, which builds once per worker for all of them.
     """
     local = scene if isinstance(scene, Scene) else _local_view(scene)
     settings = Settings.of(local, width=width, height=height, spp=spp, max_depth=max_depth,
                            seed=seed)  # fmt: skip
     renderer = ClusterRenderer(scene, client, spheres=spheres, batch_size=batch_size)
-    with progress_bar(settings.width * settings.height * settings.spp, quiet) as show:
-        image = renderer.render(settings, local.camera if camera is None else camera, show)
+    try:
+        with progress_bar(settings.width * settings.height * settings.spp, quiet) as show:
+            image = renderer.render(settings, local.camera if camera is None else camera, show)
+    finally:
+        renderer.release()  # one image: nothing to keep (a ClusterRenderer keeps its BVHs)
     if stats is not None:
         stats.rays = dict(renderer.stats.rays)
         stats.render_s = renderer.stats.render_s

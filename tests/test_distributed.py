@@ -79,6 +79,11 @@ def test_cluster_image_is_bitwise_the_local_image(cluster, name: str, as_path: b
     expected = local_image(scene)
     assert image.dtype == np.float32 and image.shape == expected.shape
     assert np.array_equal(image, expected)
+    # render() freed the workers' renderers of the scene. (A lambda: pickled by value, where a
+    # function of this module would be looked up, in vain, by name on the workers.)
+    name = rd.plugin_name(rd.scene_key(rd.SceneFile(str(path)) if as_path else scene, "analytic"))
+    held = client.run(lambda dask_worker, name=name: name in dask_worker.plugins)
+    assert held and not any(held.values())
 
 
 def test_random_field_of_1e5_spheres_is_bitwise_the_local_image(cluster) -> None:
