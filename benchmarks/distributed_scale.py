@@ -99,7 +99,7 @@ def main() -> None:
     frame = camera_frame(scene.camera, args.width, args.height)
     task_args = len(pickle.dumps(("0" * 16, recipe, frame, args.spp, 0, 6, 0, 1)))
     median = {name: statistics.median(values) for name, values in times.items()}
-    rays = one.stats.total_rays
+    rays = one.stats.total_rays // (args.rounds + 1)  # the stats add up every render
     result = {
         "count": args.count,
         "image": f"{args.width}x{args.height} at {args.spp} spp",
