@@ -319,21 +319,23 @@ class ClusterRenderer:
         workers = self._wait_for_workers(state)
         threads = sum(workers.values())
         batches = batch_ranges(total, self.batch_size, settings.spp, threads)
-        # Enough frames in flight to keep every worker thread busy, no more (memory: one film
-        # and its batches' results per frame in flight).
-        ahead = max(1, -(-4 * threads // len(batches)))
+        # The next frame's batches are queued while the last of this one's run, so no worker
+        # waits between frames; no more than that (memory: a film per frame in flight).
+        queued = 4 * threads
         queue = iter(frames)
         in_flight: dict[distributed.Future, _Frame] = {}
         began = time.perf_counter()
 
         submitted = 0
 
-        def submit_next_frame() -> None:
+        def top_up() -> None:
+            """Submit frames until ``queued`` batches are in flight or none are left."""
             nonlocal submitted
-            item = next(queue, None)
-            if item is None:
-                return
-            label, frame = item
+            while len(in_flight) < queued and (item := next(queue, None)) is not None:
+                submit(*item)
+                submitted += 1
+
+        def submit(label: object, frame: CameraFrame) -> None:
             image = _Frame(label, Film(settings.width, settings.height), len(batches))
             n = len(batches)
             # One graph for the frame's batches; earlier frames first.
@@ -343,12 +345,10 @@ class ClusterRenderer:
                 [start for start, _ in batches], [count for _, count in batches],
                 pure=False, priority=-submitted,
             )  # fmt: skip
-            submitted += 1
             in_flight.update(dict.fromkeys(futures, image))
 
         try:
-            for _ in range(ahead):
-                submit_next_frame()
+            top_up()
             last_check = 0.0
             while in_flight:
                 done = self._wait_some(list(in_flight))
@@ -370,7 +370,7 @@ class ClusterRenderer:
                     if image.pending == 0:
                         on_frame(image.label, image.film.image(settings.spp))
                         state.frames_done += 1
-                        submit_next_frame()
+                top_up()
                 state.elapsed_s = self.stats.render_s = time.perf_counter() - began
                 if progress is not None:
                     progress(state)

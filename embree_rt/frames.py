@@ -103,7 +103,9 @@ def render_command(scene: Scene, args: argparse.Namespace, made: tuple[str, floa
             raise InputError(f"{path}: cannot write: {error.strerror or error}") from None
 
     started = time.perf_counter()
-    if args.cluster is None and args.scheduler is None:
+    if not cameras:  # every frame asked for is on disk
+        rays, render_s, where = 0, 0.0, "(all on disk)"
+    elif args.cluster is None and args.scheduler is None:
         rays, render_s, where = _render_locally(scene, args, settings, cameras, write)
     else:
         rays, render_s, where = _render_on_cluster(scene, args, settings, cameras, write, source)
