@@ -195,7 +195,10 @@ def render_batch(
 ) -> BatchResult:
     """The Dask task: camera samples ``[start, start + count)`` of ``frame`` on this worker's
     renderer for scene ``key``. Pure: the same arguments give the same bits on any worker."""
-    plugin = distributed.get_worker().plugins[plugin_name(key)]
+    worker = distributed.get_worker()
+    plugin = worker.plugins.get(plugin_name(key))
+    if plugin is None:  # released (ClusterRenderer.release) while another render still ran
+        raise ClusterError(f"worker {worker.address} holds no renderer for scene {key}")
     work = plugin.renderer_for(source).trace_batch(frame, spp, seed, max_depth, start, count)
     return BatchResult(work.block.first, work.block.count, work.block.sums, dict(work.rays))
 
