@@ -243,3 +243,11 @@ def test_bad_patterns_and_frame_ranges_are_one_line_errors(
     line = one_line_error(run_cli("render", str(path), "-o", str(target), *flags))
     assert needle.format(out=target) in line
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]  # nothing written
+
+
+def test_the_shipped_animation_loads_and_moves_its_camera() -> None:
+    (path,) = sorted((Path(__file__).resolve().parent.parent / "scenes" / "animations").glob("*"))
+    scene = rt.load_scene(path)
+    cameras = frame_cameras(scene.camera, scene.animation)
+    assert len(cameras) == scene.animation.frames > 1
+    assert len({c.position for c in cameras}) == len(cameras)  # a new view every frame
