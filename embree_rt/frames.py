@@ -102,10 +102,13 @@ def render_command(scene: Scene, args: argparse.Namespace, made: tuple[str, floa
         except OSError as error:
             raise InputError(f"{path}: cannot write: {error.strerror or error}") from None
 
+    if not cameras:
+        if not args.quiet:
+            print(f"embree-rt: all {len(paths)} frames are on disk (--overwrite renders them "
+                  f"again) -> {args.output}", file=sys.stderr)  # fmt: skip
+        return
     started = time.perf_counter()
-    if not cameras:  # every frame asked for is on disk
-        rays, render_s, where = 0, 0.0, "(all on disk)"
-    elif args.cluster is None and args.scheduler is None:
+    if args.cluster is None and args.scheduler is None:
         rays, render_s, where = _render_locally(scene, args, settings, cameras, write)
     else:
         rays, render_s, where = _render_on_cluster(scene, args, settings, cameras, write, source)

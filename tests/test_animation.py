@@ -217,6 +217,10 @@ def test_frames_are_written_by_pattern_skipped_when_present_and_equal_local_fram
     for f in (1, 3):
         expected = rt.render(replace(scene, camera=camera_at(scene.camera, scene.animation, f)))
         assert np.array_equal(np.load(tmp_path / "shots" / f"f_{f:03d}.npy"), expected)
+    stamps = {p: p.stat().st_mtime_ns for p in (tmp_path / "shots").iterdir()}
+    result = run_cli("render", str(path), "-o", pattern, "--frames", "1:4")
+    assert result.returncode == 0 and "all 3 frames are on disk" in result.stderr
+    assert {p: p.stat().st_mtime_ns for p in (tmp_path / "shots").iterdir()} == stamps
     result = run_cli("render", str(path), "-o", pattern, "--frames", "2", "--overwrite", "--quiet")
     assert result.returncode == 0, result.stderr
     expected = rt.render(replace(scene, camera=camera_at(scene.camera, scene.animation, 2)))
