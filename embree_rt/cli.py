@@ -130,6 +130,11 @@ def _add_render_flags(parser: argparse.ArgumentParser) -> None:
         "tessellated icospheres",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    cluster = parser.add_mutually_exclusive_group()  # embree_rt/distributed.py
+    cluster.add_argument("--cluster", metavar="local:N", help="render on N local Dask workers")
+    cluster.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="render on a Dask cluster")
+    parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
+    parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -168,15 +173,27 @@ def _apply_overrides(scene, args: argparse.Namespace) -> None:
             setattr(settings, name, value)
 
 
-def _render_and_save(scene, args: argparse.Namespace, made: tuple[str, float]) -> None:
+def _render_and_save(
+    scene, args: argparse.Namespace, made: tuple[str, float], source: object = None
+) -> None:
     """Render ``scene`` with the flags' overrides and save it; ``made`` is how the scene was
-    made and the seconds it took ("generate" or "load"), for the summary line."""
+    made and the seconds it took ("generate" or "load"), for the summary line; ``source`` the
+    scene file or field plan a cluster's workers make the scene from."""
     from embree_rt.budget import MemoryBudgetError
     from embree_rt.film import save_image
     from embree_rt.integrator import RenderStats, render
 
     _apply_overrides(scene, args)
     _check_library()
+    framed = args.frames or "{frame" in args.output  # an animation's pattern, or a mistake
+    if scene.animation is not None or args.cluster or args.scheduler or framed:
+        from embree_rt.frames import render_command
+
+        try:
+            render_command(scene, args, made, source)
+        except MemoryBudgetError as error:
+            raise UsageError(f"{_memory_key(error, args)}: {error}") from None
+        return
     settings = scene.render
     stats = RenderStats()
     started = time.perf_counter()
@@ -219,7 +236,7 @@ def _command_render(args: argparse.Namespace) -> None:
     _check_output(args.output, args.aov)
     started = time.perf_counter()
     scene = load_scene(args.scene)
-    _render_and_save(scene, args, ("load", time.perf_counter() - started))
+    _render_and_save(scene, args, ("load", time.perf_counter() - started), Path(args.scene))
 
 
 def _memory_key(error, args: argparse.Namespace) -> str:
@@ -279,7 +296,11 @@ def _command_random(args: argparse.Namespace) -> None:
     _apply_overrides(scene, args)
     mesh = None if args.instance is None else _instance_mesh(args.instance)
     _require_memory_for_field(plan.count, scene.render, args)
-    add_field_spheres(scene, plan)
+    # A cluster's workers generate a plain field themselves, from its plan; a field of
+    # instances, or one to be saved, is made here.
+    on_workers = bool(args.cluster or args.scheduler) and args.save_scene is None and mesh is None
+    if not on_workers:
+        add_field_spheres(scene, plan)
     if mesh is not None:
         from embree_rt.scene.instances import spheres_to_instances
 
@@ -287,7 +308,7 @@ def _command_random(args: argparse.Namespace) -> None:
     generate_s = time.perf_counter() - started
     if args.save_scene is not None:
         _writing(args.save_scene, lambda: scene.save(args.save_scene))
-    _render_and_save(scene, args, ("generate", generate_s))
+    _render_and_save(scene, args, ("generate", generate_s), None if mesh is not None else plan)
 
 
 def _instance_mesh(path: str):

@@ -26,7 +26,7 @@ from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits, sphere_kind
 from embree_rt.materials import MaterialTable
-from embree_rt.scene.model import Scene
+from embree_rt.scene.model import Camera, Scene
 
 DEFAULT_BATCH_SIZE = 1 << 18
 # A child whose every channel weighs less than half an 8-bit step cannot change the picture.
@@ -163,13 +163,15 @@ class Renderer:
         max_depth: int,
         seed: int,
         progress: Callable[[int, int], None] | None = None,
+        camera: Camera | None = None,
     ) -> np.ndarray:
-        """The (height, width, 3) float32 linear image. ``progress(done, total)`` counts samples."""
+        """The (height, width, 3) float32 linear image. ``progress(done, total)`` counts samples;
+        ``camera`` (default the scene's) lets one BVH serve every frame of a camera path."""
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
         if max_depth < 0:
             raise ValueError(f"max_depth: must be >= 0, got {max_depth}")
-        frame = camera_frame(self.scene.camera, width, height)
+        frame = camera_frame(self.scene.camera if camera is None else camera, width, height)
         film = Film(width, height)
         total = width * height * spp
         # Batches hold whole pixels and each batch sums into its own block, in ray order, so
@@ -177,14 +179,7 @@ class Renderer:
         batches = batch_ranges(total, self.batch_size, spp, self.workers)
 
         def run(batch: tuple[int, int]) -> BatchWork:
-            start, count = batch
-            work = BatchWork(FilmBlock(start // spp, count // spp))
-            origins, directions, pixel = primary_rays(frame, spp, seed, start, count)
-            rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
-            work.rays["primary"] += count
-            self._trace(rays, work, max_depth)
-            work.block.settle()
-            return work
+            return self.trace_batch(frame, spp, seed, max_depth, *batch)
 
         began = time.perf_counter()
         # Workers run batches side by side (NumPy's large array operations and the Embree kernels
@@ -228,6 +223,21 @@ class Renderer:
         return work.block
 
     # -- one batch, all depths ----------------------------------------------------------------
+
+    def trace_batch(
+        self, frame: CameraFrame, spp: int, seed: int, max_depth: int, start: int, count: int
+    ) -> BatchWork:
+        """Trace and shade the camera samples ``[start, start + count)`` (whole pixels, as
+        ``batch_ranges`` cuts them) through every bounce: their film block and ray counts.
+        A pure function of its arguments and the scene, so any process holding the same scene
+        computes the same block (``embree_rt.distributed`` runs it on Dask workers)."""
+        work = BatchWork(FilmBlock(start // spp, count // spp))
+        origins, directions, pixel = primary_rays(frame, spp, seed, start, count)
+        rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
+        work.rays["primary"] += count
+        self._trace(rays, work, max_depth)
+        work.block.settle()  # in this worker thread, not in the one adding blocks to the film
+        return work
 
     def _trace(self, rays: RayBatch, work: BatchWork, max_depth: int) -> None:
         depth = 0

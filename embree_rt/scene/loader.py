@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from embree_rt.materials import PRESETS, Checker, Material
+from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
 from embree_rt.scene.model import (
@@ -122,6 +123,8 @@ class SceneReader:
             scene.render = self._render(table, scene.render)
         if (table := root.table("camera")) is not None:
             scene.camera = self._camera(table, scene.camera)
+        if (table := root.table("animation")) is not None:
+            scene.animation = read_animation(table, scene.camera)
         if (table := root.table("background")) is not None:
             scene.background = Background(
                 horizon=table.color("horizon", scene.background.horizon),

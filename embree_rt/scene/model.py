@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt.materials import PRESETS, RGB, Checker, Material
+from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
 from embree_rt.scene.writer import save_scene
 from embree_rt.transforms import as_affine
@@ -150,6 +151,8 @@ class Scene:
     sphere_materials: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     meshes: list[MeshObject] = field(default_factory=list)
     instances: list[MeshInstances] = field(default_factory=list)
+    # A camera path (``scene.animation``): None for a still image.
+    animation: Animation | None = None
 
     @property
     def material_names(self) -> list[str]:

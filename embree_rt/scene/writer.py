@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt.materials import PRESETS
+from embree_rt.scene.animation import animation_document
 
 if TYPE_CHECKING:  # the model imports the writer (Scene.save); the writer needs only the type
     from embree_rt.scene.model import Scene
@@ -40,6 +41,8 @@ def scene_document(scene: Scene, path: Path) -> dict:
             for lt in scene.lights
         ],
     }
+    if scene.animation is not None:
+        document["animation"] = animation_document(scene.animation)
     materials = {
         name: _material_dict(material)
         for name, material in scene.materials.items()

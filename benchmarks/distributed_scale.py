@@ -1,0 +1,130 @@
+"""Rendering on Dask against rendering locally, on this machine: local threads against 1 and 2
+worker processes, the per-task overhead, and the bytes a render moves.
+
+One random field is rendered by a local ``Renderer`` on 1 and on 2 threads and by a
+``ClusterRenderer`` on a ``LocalCluster`` of 1 and of 2 worker processes (one thread each),
+taking turns ``--rounds`` times after a warm-up render each (the workers build their BVH in the
+warm-up). Per-task overhead is measured two ways: empty tasks through the scheduler, and the
+cluster's time on one worker minus the local time on one thread, over the number of batches.
+Bytes: the scene as it would be scattered (pickled), the task arguments, and the float64 block
+sums that come back.
+
+    python benchmarks/distributed_scale.py                    # 1e5 spheres, 960x540, 4 spp
+    python benchmarks/distributed_scale.py --count 1000000 --rounds 3
+
+Prints one JSON object on stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pickle
+import statistics
+import time
+
+import distributed
+
+from embree_rt import distributed as rd
+from embree_rt.camera import camera_frame
+from embree_rt.integrator import DEFAULT_BATCH_SIZE, Renderer, batch_ranges
+from embree_rt.scene import random_field
+from embree_rt.scene.random_field import plan_field
+
+
+def empty_task(i: int) -> int:
+    return i
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--count", type=int, default=100_000, help="spheres")
+    parser.add_argument("--width", type=int, default=960)
+    parser.add_argument("--height", type=int, default=540)
+    parser.add_argument("--spp", type=int, default=4)
+    parser.add_argument("--batch-size", type=int, default=DEFAULT_BATCH_SIZE)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--empty-tasks", type=int, default=500)
+    args = parser.parse_args()
+
+    settings = rd.Settings(args.width, args.height, args.spp, max_depth=6, seed=0)
+    image = {"width": args.width, "height": args.height, "spp": args.spp, "max_depth": 6, "seed": 0}
+    scene = random_field(args.count)
+    recipe = rd.FieldRecipe(plan_field(args.count))
+    times: dict[str, list[float]] = {"local_1": [], "local_2": [], "dask_1": [], "dask_2": []}
+
+    with Renderer(scene, threads=1) as one, Renderer(scene, threads=2) as two:
+        one.render(**image)
+        two.render(**image)
+        clusters = {}
+        try:
+            for workers in (1, 2):
+                cluster = distributed.LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True,
+                    dashboard_address=None, memory_limit=0, silence_logs=50,
+                )  # fmt: skip
+                client = distributed.Client(cluster)
+                client.wait_for_workers(workers)
+                renderer = rd.ClusterRenderer(recipe, client, batch_size=args.batch_size)
+                started = time.perf_counter()
+                renderer.render(settings, scene.camera)  # workers generate the field, build
+                clusters[workers] = (cluster, client, renderer, time.perf_counter() - started)
+            for _ in range(args.rounds):
+                for name, render in (
+                    ("local_1", lambda: one.render(**image)),
+                    ("local_2", lambda: two.render(**image)),
+                    ("dask_1", lambda: clusters[1][2].render(settings, scene.camera)),
+                    ("dask_2", lambda: clusters[2][2].render(settings, scene.camera)),
+                ):
+                    started = time.perf_counter()
+                    render()
+                    times[name].append(time.perf_counter() - started)
+            client = clusters[1][1]
+            started = time.perf_counter()
+            client.gather(client.map(empty_task, range(args.empty_tasks), pure=False))
+            empty_s = (time.perf_counter() - started) / args.empty_tasks
+            started = time.perf_counter()
+            scattered = client.scatter(scene, broadcast=True, hash=False)
+            scatter_s = time.perf_counter() - started
+            del scattered
+            first_s = {w: round(c[3], 3) for w, c in clusters.items()}
+            returned = clusters[2][2].bytes_returned // (args.rounds + 1)
+        finally:
+            for cluster, client, _, _ in clusters.values():
+                client.close()
+                cluster.close()
+
+    total = args.width * args.height * args.spp
+    batches = batch_ranges(total, args.batch_size, args.spp, 2)
+    frame = camera_frame(scene.camera, args.width, args.height)
+    task_args = len(pickle.dumps(("0" * 16, recipe, frame, args.spp, 0, 6, 0, 1)))
+    median = {name: statistics.median(values) for name, values in times.items()}
+    rays = one.stats.total_rays // (args.rounds + 1)  # the stats add up every render
+    result = {
+        "count": args.count,
+        "image": f"{args.width}x{args.height} at {args.spp} spp",
+        "rays_per_image": rays,
+        "batches_per_image": len(batches),
+        "render_s_median": {k: round(v, 3) for k, v in median.items()},
+        "render_s_all": {k: [round(x, 3) for x in v] for k, v in times.items()},
+        "speedup_vs_local_1_thread": {
+            k: round(median["local_1"] / v, 2) for k, v in median.items()
+        },
+        "dask_2_over_local_2": round(median["dask_2"] / median["local_2"], 3),
+        "first_render_s_with_field_and_bvh": first_s,
+        "empty_task_s": round(empty_s, 5),
+        "overhead_per_batch_s": round((median["dask_1"] - median["local_1"]) / len(batches), 4),
+        "bytes": {
+            "scene_pickled_for_scatter": len(pickle.dumps(scene, protocol=5)),
+            "scene_as_field_recipe": len(pickle.dumps(recipe)),
+            "scatter_broadcast_s": round(scatter_s, 3),
+            "task_arguments_each": task_args,
+            "block_sums_returned_per_image": returned,
+            "image_float32": args.width * args.height * 3 * 4,
+        },
+    }
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()

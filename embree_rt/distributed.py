@@ -1,0 +1,538 @@
+"""Rendering on a Dask cluster (``pip install 'embree-rt[distributed]'``), bit for bit as locally.
+
+The work is cut exactly as the local renderer cuts it: ``integrator.batch_ranges`` batches of
+whole pixels, each traced and shaded by ``Renderer.trace_batch`` into its own ``FilmBlock``. A
+batch is a Dask task; the client adds the returned float64 block sums into a ``Film`` with
+``Film.add_block``. Every pixel's sum is formed inside one block, by the same code on the same
+scene, and added once onto zero, so the image is bitwise the one ``embree_rt.render`` makes
+(given the same CPU: on another instruction set Embree may pick other kernels, see README).
+
+A worker builds a scene's ``Renderer`` once (its BVH holds Embree pointers and cannot travel):
+``SceneRendererPlugin``, registered under a name made from a hash of the scene, so that several
+scenes share a cluster, and sent by the scheduler to workers that join later. How the scene
+reaches a worker (``SceneSource``): a scene file travels as its path (every worker must read it
+at that path), a random field as its parameters, any other ``Scene`` is scattered once to every
+worker with ``broadcast=True`` and tasks refer to it by its future, never carrying it themselves.
+Tasks are pure, so when a worker dies the scheduler reruns its batches elsewhere and the image
+does not change.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import pickle
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import distributed
+import numpy as np
+
+from embree_rt.camera import CameraFrame, camera_frame
+from embree_rt.errors import InputError
+from embree_rt.film import Film
+from embree_rt.integrator import DEFAULT_BATCH_SIZE, RenderStats, batch_ranges
+from embree_rt.scene.model import Camera, Scene
+from embree_rt.scene.random_field import FieldPlan
+
+# How long a render waits with no worker at all (lost, or not yet joined) before giving up.
+NO_WORKERS_TIMEOUT_S = 30.0
+# How often the client looks at the cluster (workers present, progress) while it waits.
+POLL_S = 0.25
+
+
+class ClusterError(InputError):
+    """The cluster cannot do the work: unreachable, every worker lost, a worker killed by the
+    tasks. Reported as one line (exit code 2): the user's deployment, not embree_rt, is at fault.
+    """
+
+
+class WorkerSceneError(InputError):
+    """A worker could not load the scene (a file it cannot read at that path, say). One message
+    argument, so that it pickles back to the client whole."""
+
+
+# -- how a scene reaches the workers ---------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SceneFile:
+    """A scene file, by absolute path: each worker loads it itself."""
+
+    path: str
+
+    def load(self) -> Scene:
+        from embree_rt.scene import load_scene
+
+        return load_scene(self.path)
+
+    def digest(self) -> bytes:
+        """The path and the file's bytes (files the scene names are not hashed: replace a scene
+        file's data files under a running cluster and give the scene file a new name)."""
+        return self.path.encode() + b"\0" + Path(self.path).read_bytes()
+
+
+@dataclass(frozen=True)
+class FieldRecipe:
+    """A random field, by its parameters: each worker generates it (bit-identical everywhere,
+    see ``scene.random_field``) instead of receiving 20 bytes a sphere."""
+
+    plan: FieldPlan
+
+    def load(self) -> Scene:
+        from embree_rt.scene.random_field import add_field_spheres, field_scene
+
+        scene = field_scene(self.plan)
+        add_field_spheres(scene, self.plan)
+        return scene
+
+    def digest(self) -> bytes:
+        return repr(self.plan).encode()
+
+
+SceneSource = SceneFile | FieldRecipe
+
+
+def scene_digest(scene: Scene) -> bytes:
+    """A digest of everything in ``scene``: its sphere arrays hashed in place (no copy of a
+    hundred million spheres), the rest pickled."""
+    digest = hashlib.sha256()
+    for array in (scene.sphere_centers, scene.sphere_radii, scene.sphere_materials):
+        array = np.ascontiguousarray(array)
+        digest.update(f"{array.dtype.str}{array.shape}".encode())
+        digest.update(memoryview(array).cast("B"))
+    empty = replace(
+        scene,
+        sphere_centers=scene.sphere_centers[:0],
+        sphere_radii=scene.sphere_radii[:0],
+        sphere_materials=scene.sphere_materials[:0],
+    )
+    digest.update(pickle.dumps(empty, protocol=pickle.HIGHEST_PROTOCOL))
+    return digest.digest()
+
+
+def scene_key(source: SceneSource | Scene, spheres: str) -> str:
+    """The name a scene's renderer goes by on the workers: a hash of the scene and how its
+    spheres enter the BVH."""
+    body = scene_digest(source) if isinstance(source, Scene) else source.digest()
+    kind = type(source).__name__.encode()
+    return hashlib.sha256(kind + b"\0" + spheres.encode() + b"\0" + body).hexdigest()[:16]
+
+
+def plugin_name(key: str) -> str:
+    return f"embree-rt-scene-{key}"
+
+
+# -- on the workers --------------------------------------------------------------------------
+
+
+class SceneRendererPlugin(distributed.WorkerPlugin):
+    """Holds one scene's ``Renderer`` on a worker, built on the first batch that needs it (in a
+    task thread, not the worker's event loop) and closed when the plugin is removed.
+
+    ``builds`` counts the builds on this worker (one, however many batches and frames)."""
+
+    def __init__(self, key: str, spheres: str) -> None:
+        self.key = key
+        self.spheres = spheres
+
+    def setup(self, worker: distributed.Worker) -> None:
+        self._lock = threading.Lock()
+        self.renderer = None
+        self.builds = 0
+        self.build_s = 0.0
+
+    def teardown(self, worker: distributed.Worker) -> None:
+        if self.renderer is not None:
+            self.renderer.close()
+            self.renderer = None
+
+    def renderer_for(self, source: SceneSource | Scene):
+        """The renderer, built from ``source`` (a ``SceneSource``, or the scattered ``Scene``
+        itself) the first time."""
+        from embree_rt.integrator import Renderer
+
+        with self._lock:
+            if self.renderer is None:
+                started = time.perf_counter()
+                try:
+                    scene = source if isinstance(source, Scene) else source.load()
+                except InputError as error:
+                    raise WorkerSceneError(f"worker cannot load the scene: {error}") from None
+                # One thread: the worker runs as many batches side by side as it has threads.
+                self.renderer = Renderer(scene, spheres=self.spheres, threads=1)
+                self.builds += 1
+                self.build_s = time.perf_counter() - started
+            return self.renderer
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """What a batch task returns: its block's pixels ``[first, first + count)``, their (3, count)
+    float64 ``sums``, and ray counts by kind."""
+
+    first: int
+    count: int
+    sums: np.ndarray
+    rays: dict[str, int]
+
+
+def render_batch(
+    key: str,
+    source: SceneSource | Scene,
+    frame: CameraFrame,
+    spp: int,
+    seed: int,
+    max_depth: int,
+    start: int,
+    count: int,
+) -> BatchResult:
+    """The Dask task: camera samples ``[start, start + count)`` of ``frame`` on this worker's
+    renderer for scene ``key``. Pure: the same arguments give the same bits on any worker."""
+    worker = distributed.get_worker()
+    plugin = worker.plugins.get(plugin_name(key))
+    if plugin is None:  # released (ClusterRenderer.release) while another render still ran
+        raise ClusterError(f"worker {worker.address} holds no renderer for scene {key}")
+    work = plugin.renderer_for(source).trace_batch(frame, spp, seed, max_depth, start, count)
+    return BatchResult(work.block.first, work.block.count, work.block.sums, dict(work.rays))
+
+
+# -- on the client ---------------------------------------------------------------------------
+
+
+@dataclass
+class Settings:
+    """Image size, samples, depth and seed of a render (a scene's ``render`` table, overridden)."""
+
+    width: int
+    height: int
+    spp: int
+    max_depth: int
+    seed: int
+
+    @staticmethod
+    def of(scene: Scene, **overrides: int | None) -> Settings:
+        values = {k: getattr(scene.render, k) for k in ("width", "height", "spp", "max_depth")}
+        values["seed"] = scene.render.seed
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        return Settings(**values)
+
+
+@dataclass
+class ClusterProgress:
+    """What the client knows mid-render: samples done of ``total``, rays traced, seconds since
+    the start, and the workers present."""
+
+    done: int = 0
+    total: int = 0
+    rays: int = 0
+    elapsed_s: float = 0.0
+    workers: int = 0
+    frames_done: int = 0
+
+    @property
+    def rays_per_s(self) -> float:
+        return self.rays / self.elapsed_s if self.elapsed_s > 0 else 0.0
+
+
+@dataclass
+class _Frame:
+    """One image in flight: its label, its film and the batches not yet added."""
+
+    label: object
+    film: Film
+    pending: int
+
+
+class ClusterRenderer:
+    """Renders one scene on ``client``'s cluster: frames (one camera each) share the workers'
+    renderers; ``render_frames`` keeps a few frames in flight so no worker idles between them.
+
+    ``scene`` is a ``Scene`` (scattered to every worker once), a ``SceneFile``/``FieldRecipe``
+    (sent as such), or a path to a scene file (a ``SceneFile``).
+    """
+
+    def __init__(
+        self,
+        scene: Scene | SceneSource | str | os.PathLike,
+        client: distributed.Client,
+        *,
+        spheres: str = "analytic",
+        batch_size: int = DEFAULT_BATCH_SIZE,
+        no_workers_timeout_s: float = NO_WORKERS_TIMEOUT_S,
+    ) -> None:
+        if batch_size < 1:
+            raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
+        if isinstance(scene, str | os.PathLike):
+            scene = SceneFile(str(Path(scene).resolve()))
+        self.client = client
+        self.batch_size = int(batch_size)
+        self.no_workers_timeout_s = no_workers_timeout_s
+        self.key = scene_key(scene, spheres)
+        self.stats = RenderStats()
+        self.bytes_returned = 0
+        name = plugin_name(self.key)
+        # Another renderer of the same scene may have registered it: share its workers' BVHs.
+        self.registered = not client.run_on_scheduler(_has_worker_plugin, name=name)
+        if self.registered:
+            client.register_plugin(SceneRendererPlugin(self.key, spheres), name=name)
+        if isinstance(scene, Scene):
+            # Once to every worker now; a worker that joins later fetches it from a peer once.
+            self.source = client.scatter(scene, broadcast=True, hash=False)
+        else:
+            self.source = scene
+
+    def release(self) -> None:
+        """Free the workers' renderers of this scene (and the scattered scene), if this
+        renderer registered them: a long-lived cluster otherwise keeps every scene's BVH."""
+        if self.registered:
+            self.client.unregister_worker_plugin(plugin_name(self.key))
+            self.registered = False
+        self.source = None
+
+    def builds(self) -> dict[str, int]:
+        """Renderer builds per worker address (each worker that has taken a batch: 1)."""
+        return self.client.run(_plugin_builds, name=plugin_name(self.key))
+
+    def render(self, settings: Settings, camera: Camera, progress=None) -> np.ndarray:
+        """One (height, width, 3) float32 linear image seen by ``camera``."""
+        images = []
+        self.render_frames(settings, [(0, camera)], lambda _, image: images.append(image), progress)
+        return images[0]
+
+    def render_frames(
+        self,
+        settings: Settings,
+        cameras: Sequence[tuple[object, Camera]],
+        on_frame: Callable[[object, np.ndarray], None],
+        progress: Callable[[ClusterProgress], None] | None = None,
+    ) -> None:
+        """Render each ``(label, camera)`` and call ``on_frame(label, image)`` as each finishes
+        (in any order). On any exception, Ctrl-C included, the batches not done are cancelled."""
+        frames = [(label, camera_frame(camera, settings.width, settings.height))
+                  for label, camera in cameras]  # fmt: skip
+        total = settings.width * settings.height * settings.spp
+        state = ClusterProgress(total=total * len(frames))
+        workers = self._wait_for_workers(state)
+        threads = sum(workers.values())
+        batches = batch_ranges(total, self.batch_size, settings.spp, threads)
+        # The next frame's batches are queued while the last of this one's run, so no worker
+        # waits between frames; no more than that (memory: a film per frame in flight).
+        queued = 4 * threads
+        queue = iter(frames)
+        in_flight: dict[distributed.Future, _Frame] = {}
+        began = time.perf_counter()
+
+        submitted = 0
+
+        def top_up() -> None:
+            """Submit frames until ``queued`` batches are in flight or none are left."""
+            nonlocal submitted
+            while len(in_flight) < queued and (item := next(queue, None)) is not None:
+                submit(*item)
+                submitted += 1
+
+        def submit(label: object, frame: CameraFrame) -> None:
+            image = _Frame(label, Film(settings.width, settings.height), len(batches))
+            n = len(batches)
+            # One graph for the frame's batches; earlier frames first.
+            futures = self.client.map(
+                render_batch, [self.key] * n, [self.source] * n, [frame] * n,
+                [settings.spp] * n, [settings.seed] * n, [settings.max_depth] * n,
+                [start for start, _ in batches], [count for _, count in batches],
+                pure=False, priority=-submitted,
+            )  # fmt: skip
+            in_flight.update(dict.fromkeys(futures, image))
+
+        try:
+            top_up()
+            last_check = 0.0
+            while in_flight:
+                done = self._wait_some(list(in_flight))
+                now = time.perf_counter()
+                if now - last_check > 1.0 or not done:
+                    state.workers = len(self._wait_for_workers(state))
+                    last_check = now
+                # All finished batches' results in one round trip, not one each.
+                for future, result in zip(done, _results(self.client, done), strict=True):
+                    image = in_flight.pop(future)
+                    future.release()
+                    image.film.add_block(result)  # a BatchResult reads as a FilmBlock
+                    self.bytes_returned += result.sums.nbytes
+                    for kind, n in result.rays.items():
+                        self.stats.rays[kind] += n
+                    state.done += result.count * settings.spp
+                    state.rays += sum(result.rays.values())
+                    image.pending -= 1
+                    if image.pending == 0:
+                        on_frame(image.label, image.film.image(settings.spp))
+                        state.frames_done += 1
+                top_up()
+                state.elapsed_s = self.stats.render_s = time.perf_counter() - began
+                if progress is not None:
+                    progress(state)
+        finally:
+            if in_flight:
+                self.client.cancel(list(in_flight), force=True)
+
+    def _wait_some(self, futures: list) -> list:
+        """Futures among ``futures`` that have finished, waiting at most ``POLL_S`` for one."""
+        try:
+            done, _ = distributed.wait(futures, timeout=POLL_S, return_when="FIRST_COMPLETED")
+        except distributed.TimeoutError:
+            return []
+        return list(done)
+
+    def _wait_for_workers(self, state: ClusterProgress) -> dict[str, int]:
+        """The workers' thread counts by address, waiting up to ``no_workers_timeout_s`` while
+        there are none; then ``ClusterError``."""
+        deadline = time.perf_counter() + self.no_workers_timeout_s
+        while True:
+            workers = self.client.nthreads()
+            if workers:
+                return workers
+            if time.perf_counter() > deadline:
+                lost = " (all lost mid-render)" if state.done else ""
+                raise ClusterError(
+                    f"{self.client.scheduler.address}: the cluster has no workers{lost} "
+                    f"after waiting {self.no_workers_timeout_s:g} s"
+                )
+            time.sleep(POLL_S)
+
+
+def _results(client: distributed.Client, futures: list) -> list[BatchResult]:
+    """The futures' results; a task that killed workers one after another is the cluster's
+    problem (out of memory, say), not a bug."""
+    if not futures:
+        return []
+    try:
+        return client.gather(futures)
+    except distributed.client.FutureCancelledError as error:
+        raise ClusterError(f"a batch was cancelled on the cluster: {error}") from None
+    except distributed.scheduler.KilledWorker as error:
+        raise ClusterError(
+            f"batches killed the workers that ran them ({error}); is their memory too small "
+            "for the scene?"
+        ) from None
+
+
+def _has_worker_plugin(dask_scheduler, name: str) -> bool:
+    return name in dask_scheduler.worker_plugins
+
+
+def _plugin_builds(dask_worker, name: str) -> int:
+    plugin = dask_worker.plugins.get(name)
+    return 0 if plugin is None else plugin.builds
+
+
+def render(
+    scene: Scene | SceneSource | str | os.PathLike,
+    client: distributed.Client,
+    *,
+    width: int | None = None,
+    height: int | None = None,
+    spp: int | None = None,
+    max_depth: int | None = None,
+    seed: int | None = None,
+    camera: Camera | None = None,
+    spheres: str = "analytic",
+    batch_size: int = DEFAULT_BATCH_SIZE,
+    quiet: bool = True,
+    stats: RenderStats | None = None,
+) -> np.ndarray:
+    """``embree_rt.render`` on ``client``'s cluster: the same (height, width, 3) float32 image,
+    bit for bit. ``scene`` is a ``Scene`` (scattered once to every worker) or the path of a scene
+    file every worker can read. Arguments left as None come from the scene's ``render`` table.
+    The workers' renderers are freed afterwards; for several images or frames of one scene use
+    a ``ClusterRenderer``, which builds once per worker for all of them.
+    """
+    local = scene if isinstance(scene, Scene) else _local_view(scene)
+    settings = Settings.of(local, width=width, height=height, spp=spp, max_depth=max_depth,
+                           seed=seed)  # fmt: skip
+    renderer = ClusterRenderer(scene, client, spheres=spheres, batch_size=batch_size)
+    try:
+        with progress_bar(settings.width * settings.height * settings.spp, quiet) as show:
+            image = renderer.render(settings, local.camera if camera is None else camera, show)
+    finally:
+        renderer.release()  # one image: nothing to keep (a ClusterRenderer keeps its BVHs)
+    if stats is not None:
+        stats.rays = dict(renderer.stats.rays)
+        stats.render_s = renderer.stats.render_s
+    return image
+
+
+def _local_view(source: SceneSource | str | os.PathLike) -> Scene:
+    """The scene as the client needs it: its camera and render settings (and, for a file,
+    the file checked before any worker reads it)."""
+    from embree_rt.scene import load_scene
+    from embree_rt.scene.random_field import field_scene
+
+    if isinstance(source, FieldRecipe):
+        return field_scene(source.plan)
+    return load_scene(source.path if isinstance(source, SceneFile) else source)
+
+
+@contextmanager
+def progress_bar(total: int, quiet: bool) -> Iterator[Callable[[ClusterProgress], None] | None]:
+    """A tqdm bar on stderr (a terminal, not quiet) showing samples, rays/s and workers."""
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, unit="sample", unit_scale=True, file=sys.stderr)
+
+    def show(state: ClusterProgress) -> None:
+        bar.update(state.done - bar.n)
+        bar.set_postfix_str(
+            f"{state.rays_per_s / 1e6:.1f} Mrays/s, {state.workers} workers", refresh=False
+        )
+
+    try:
+        yield show
+    finally:
+        bar.close()
+
+
+# -- clusters for the command ----------------------------------------------------------------
+
+
+@contextmanager
+def connect(
+    cluster: str | None, scheduler: str | None, *, timeout_s: float | None = None
+) -> Iterator[distributed.Client]:
+    """A client on ``--cluster local:N`` (a ``LocalCluster`` of N worker processes of one thread
+    each, closed afterwards) or on the running scheduler at ``--scheduler ADDRESS``, tried for
+    ``timeout_s`` (default Dask's ``distributed.comm.timeouts.connect``, 30 s unless configured,
+    e.g. ``DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT=5s``). Bad values and unreachable
+    schedulers are ``InputError``s naming the flag."""
+    if cluster is not None:
+        count = _local_worker_count(cluster)
+        # No memory limit: the BVH is memory Dask does not manage, and a limit would have the
+        # nanny kill a worker for holding a big scene.
+        with distributed.LocalCluster(
+            n_workers=count, threads_per_worker=1, processes=True, dashboard_address=None,
+            memory_limit=0, silence_logs=logging.ERROR,
+        ) as local, distributed.Client(local) as client:  # fmt: skip
+            yield client
+        return
+    try:
+        timeout = {} if timeout_s is None else {"timeout": timeout_s}
+        client = distributed.Client(scheduler, **timeout)
+    except (OSError, TimeoutError, ValueError) as error:
+        raise ClusterError(f"--scheduler: {scheduler}: cannot connect: {error}") from None
+    with client:
+        yield client
+
+
+def _local_worker_count(text: str) -> int:
+    kind, _, count = text.partition(":")
+    if kind != "local" or not count.isdigit() or int(count) < 1:
+        raise InputError(f"--cluster: expected local:N with N >= 1 workers, got {text!r}")
+    return int(count)

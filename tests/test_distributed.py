@@ -1,0 +1,316 @@
+"""Rendering on a Dask cluster: the same image as local, bit for bit.
+
+Why bitwise equality holds here (and on every ISA, as both sides run on this one machine): the
+cluster computes the very batches ``batch_ranges`` cuts, each by ``Renderer.trace_batch`` on the
+same scene, in processes on the same CPU, so Embree picks the same kernels and every float
+operation is the same; each pixel's sum is formed inside one batch's ``FilmBlock`` (a batch holds
+whole pixels), in ray order, and added once onto the film's zero, so the order in which blocks
+arrive cannot change a bit. The local render's own image does not depend on its batch size or
+thread count (``test_render_images``), so the cluster's batches need not match its split.
+Across machines with different instruction sets this is not promised (see README).
+
+One ``LocalCluster`` of 2 worker processes (1 thread each) serves the module and is always shut
+down; every wait is bounded.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+distributed = pytest.importorskip("distributed")  # the test extra installs it: CI runs these
+
+import embree_rt as rt  # noqa: E402
+from embree_rt import distributed as rd  # noqa: E402
+from embree_rt.scene.animation import Animation, camera_at  # noqa: E402
+from embree_rt.scene.random_field import plan_field  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = ROOT / "scenes"
+# Small images cut in small batches: dozens of tasks, so both workers take part.
+SMALL = {"width": 96, "height": 54, "spp": 2}
+SMALL_BATCH = 96 * 2 * 6  # six rows of pixels a task: about a dozen tasks an image
+TIMEOUT_S = 120
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+        memory_limit=0, silence_logs=50,
+    ) as local, distributed.Client(local) as client:  # fmt: skip
+        client.wait_for_workers(2, timeout=TIMEOUT_S)
+        yield local, client
+
+
+def bounded(function, *args, **kwargs):
+    """``function(*args, **kwargs)`` in a thread, failing the test past ``TIMEOUT_S``."""
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        return pool.submit(function, *args, **kwargs).result(timeout=TIMEOUT_S)
+
+
+def local_image(scene: rt.Scene, camera: rt.Camera | None = None, **settings) -> np.ndarray:
+    if camera is not None:
+        scene = replace(scene, camera=camera)
+    return rt.render(scene, **{**SMALL, **settings})
+
+
+@pytest.mark.parametrize(
+    ("name", "as_path"),
+    [("showcase", True), ("three_spheres", False), ("mesh_and_spheres", False)],
+)
+def test_cluster_image_is_bitwise_the_local_image(cluster, name: str, as_path: bool) -> None:
+    _, client = cluster
+    path = SCENES / f"{name}.toml"
+    scene = rt.load_scene(path)
+    source = path if as_path else scene  # a file travels as its path, a Scene is scattered
+    image = bounded(rd.render, source, client, batch_size=SMALL_BATCH, **SMALL)
+    expected = local_image(scene)
+    assert image.dtype == np.float32 and image.shape == expected.shape
+    assert np.array_equal(image, expected)
+    # render() freed the workers' renderers of the scene. (A lambda: pickled by value, where a
+    # function of this module would be looked up, in vain, by name on the workers.)
+    name = rd.plugin_name(rd.scene_key(rd.SceneFile(str(path)) if as_path else scene, "analytic"))
+    held = client.run(lambda dask_worker, name=name: name in dask_worker.plugins)
+    assert held and not any(held.values())
+
+
+def test_random_field_of_1e5_spheres_is_bitwise_the_local_image(cluster) -> None:
+    _, client = cluster
+    plan = plan_field(100_000, seed=3)
+    # The workers generate the field from its parameters; the client renders it locally.
+    renderer = rd.ClusterRenderer(rd.FieldRecipe(plan), client, batch_size=4096)
+    scene = rt.random_field(100_000, seed=3)
+    settings = rd.Settings(width=128, height=72, spp=1, max_depth=6, seed=0)
+    image = bounded(renderer.render, settings, scene.camera)
+    expected = rt.render(scene, width=128, height=72, spp=1, max_depth=6, seed=0)
+    assert np.array_equal(image, expected)
+    assert renderer.stats.rays["primary"] == 128 * 72
+
+
+def test_scene_is_scattered_once_and_built_once_per_worker(cluster) -> None:
+    _, client = cluster
+    scene = rt.load_scene(SCENES / "three_spheres.toml")
+    scene.render.seed = 11  # a scene no other test has used: its own key, its own builds
+    renderer = rd.ClusterRenderer(scene, client, batch_size=SMALL_BATCH)
+    holders = client.who_has(renderer.source)[renderer.source.key]
+    assert len(holders) == 2  # broadcast: on both workers before any task runs
+    settings = rd.Settings(max_depth=6, seed=11, **SMALL)
+    cameras = [(f, camera_at(scene.camera, Animation(3, orbit=30.0), f)) for f in range(3)]
+    images = {}
+    bounded(renderer.render_frames, settings, cameras, images.__setitem__)
+    assert sorted(images) == [0, 1, 2]
+    # Three frames of a dozen batches each, spread over both workers: one build on each.
+    assert renderer.builds() == dict.fromkeys(client.nthreads(), 1)
+    assert renderer.key != rd.ClusterRenderer(rt.load_scene(SCENES / "three_spheres.toml"),
+                                              client).key  # fmt: skip
+
+
+def test_animation_frames_equal_frames_rendered_one_by_one_locally(cluster) -> None:
+    _, client = cluster
+    scene = rt.load_scene(SCENES / "showcase.toml")
+    animation = Animation(4, orbit=90.0)
+    frames = [0, 3, 1]
+    cameras = [(f, camera_at(scene.camera, animation, f)) for f in frames]
+    renderer = rd.ClusterRenderer(SCENES / "showcase.toml", client, batch_size=SMALL_BATCH)
+    images = {}
+    bounded(renderer.render_frames, rd.Settings(max_depth=6, seed=0, **SMALL), cameras,
+            images.__setitem__)  # fmt: skip
+    assert sorted(images) == sorted(frames)
+    for f, camera in cameras:
+        assert np.array_equal(images[f], local_image(scene, camera)), f"frame {f}"
+    assert not np.array_equal(images[0], images[3])  # the camera did move
+
+
+def test_a_worker_that_joins_late_takes_part(cluster) -> None:
+    local, client = cluster
+    scene = rt.load_scene(SCENES / "three_spheres.toml")
+    scene.render.seed = 5
+    # Plugin registered and scene scattered while there are 2 workers.
+    renderer = rd.ClusterRenderer(scene, client, batch_size=96 * 2 * 2)
+    before = set(client.nthreads())
+    local.scale(3)
+    try:
+        client.wait_for_workers(3, timeout=TIMEOUT_S)
+        (late,) = set(client.nthreads()) - before
+        image = bounded(renderer.render, rd.Settings(max_depth=6, seed=5, **SMALL), scene.camera)
+        assert renderer.builds()[late] == 1  # it got the plugin and the scene, and rendered
+        assert np.array_equal(image, local_image(scene, seed=5))
+    finally:
+        local.scale(2)
+        deadline = time.monotonic() + TIMEOUT_S
+        while len(client.nthreads()) > 2 and time.monotonic() < deadline:
+            time.sleep(0.1)
+
+
+def test_a_worker_that_cannot_load_the_scene_is_bad_input(cluster, tmp_path: Path) -> None:
+    _, client = cluster
+    spheres = tmp_path / "many.npz"
+    np.savez(spheres, centers=np.zeros((1, 3)), radii=np.ones(1))
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text(f'[[sphere_arrays]]\nfile = "{spheres.name}"\n', encoding="utf-8")
+    renderer = rd.ClusterRenderer(scene_file, client)
+    spheres.unlink()  # as on a worker whose file system lacks the data file
+    settings = rd.Settings(width=8, height=8, spp=1, max_depth=1, seed=0)
+    with pytest.raises(rd.WorkerSceneError, match=r"sphere_arrays\[0\]\.file: .*no such file"):
+        bounded(renderer.render, settings, rt.Camera())
+
+
+def test_a_worker_killed_mid_render_leaves_the_image_unchanged(cluster) -> None:
+    # Last of the cluster's tests: the worker's nanny restarts it while the module closes.
+    _, client = cluster
+    scene = rt.load_scene(SCENES / "three_spheres.toml")
+    renderer = rd.ClusterRenderer(scene, client, batch_size=96 * 2 * 2)  # 27 tasks of 2 rows
+    victim = sorted(client.nthreads())[0]
+    pid = client.run(os.getpid, workers=[victim])[victim]
+    killed = threading.Event()
+
+    def kill_once(state: rd.ClusterProgress) -> None:
+        if state.done and not killed.is_set():
+            killed.set()
+            # The worker process dies at once; its nanny starts a new one, which has to load
+            # the scene again. The batches it held run elsewhere.
+            os.kill(pid, signal.SIGKILL)
+
+    settings = rd.Settings(max_depth=6, seed=0, **SMALL)
+    image = bounded(renderer.render, settings, scene.camera, kill_once)
+    assert killed.is_set()
+    assert np.array_equal(image, local_image(scene))
+
+
+def test_a_cluster_without_workers_is_an_error_not_a_hang() -> None:
+    class NoWorkers:  # a client whose cluster has lost every worker
+        scheduler = type("Scheduler", (), {"address": "tcp://10.0.0.1:8786"})()
+
+        def nthreads(self):
+            return {}
+
+    renderer = rd.ClusterRenderer.__new__(rd.ClusterRenderer)
+    renderer.client, renderer.no_workers_timeout_s = NoWorkers(), 0.3
+    started = time.monotonic()
+    with pytest.raises(rd.ClusterError, match=r"no workers \(all lost mid-render\)"):
+        renderer._wait_for_workers(rd.ClusterProgress(done=5))
+    assert time.monotonic() - started < 5
+
+
+# -- the command against `dask scheduler` / `dask worker` ------------------------------------
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def run_cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "embree_rt", *args], capture_output=True, text=True,
+        timeout=TIMEOUT_S, cwd=ROOT, env={**os.environ, **(env or {})},
+    )  # fmt: skip
+
+
+def stop(process: subprocess.Popen) -> None:
+    """End a process group this test started (the dask command and its worker children)."""
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGTERM)
+        try:
+            process.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+
+
+ORBIT = "\n[animation]\nframes = 6\norbit = 60.0\n"
+
+
+def test_command_on_dask_scheduler_and_worker_processes(tmp_path: Path) -> None:
+    address = f"tcp://127.0.0.1:{free_port()}"
+    bin_dir = Path(sys.executable).parent
+    started = []
+    try:
+        started.append(subprocess.Popen(
+            [bin_dir / "dask", "scheduler", "--host", "127.0.0.1", "--port",
+             address.rsplit(":", 1)[1], "--no-dashboard"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+        ))  # fmt: skip
+        started.append(subprocess.Popen(
+            [bin_dir / "dask", "worker", address, "--nthreads", "1", "--nworkers", "1",
+             "--memory-limit", "0", "--no-dashboard", "--host", "127.0.0.1"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+        ))  # fmt: skip
+        with distributed.Client(address, timeout=TIMEOUT_S) as client:
+            client.wait_for_workers(1, timeout=TIMEOUT_S)
+        # An animated scene: the command's frame files, rendered on the cluster.
+        scene_file = tmp_path / "orbit.toml"
+        scene_file.write_text((SCENES / "three_spheres.toml").read_text() + ORBIT)
+        pattern = str(tmp_path / "f{frame}.npy")
+        flags = ["--width", "64", "--height", "36", "--spp", "2", "--frames", "2:4"]
+        result = run_cli("render", str(scene_file), "-o", pattern, *flags, "--scheduler", address)
+        assert result.returncode == 0, result.stderr
+        assert "on 1 Dask worker " in result.stderr
+        assert sorted(p.name for p in tmp_path.glob("*.npy")) == ["f2.npy", "f3.npy"]
+        scene = rt.load_scene(scene_file)
+        for f in (2, 3):
+            camera = camera_at(scene.camera, scene.animation, f)
+            expected = rt.render(replace(scene, camera=camera), width=64, height=36, spp=2)
+            assert np.array_equal(np.load(tmp_path / f"f{f}.npy"), expected), f"frame {f}"
+    finally:
+        for process in reversed(started):
+            stop(process)
+
+
+def test_ctrl_c_on_a_local_cluster_exits_130_and_writes_nothing(tmp_path: Path) -> None:
+    import psutil  # distributed's own dependency
+
+    output = tmp_path / "out.png"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "embree_rt", "random", "--count", "1000", "-o", str(output),
+         "--width", "1920", "--height", "1080", "--spp", "64", "--quiet", "--cluster", "local:1"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        # Until the worker process has worked a while: the render is under way.
+        deadline = time.monotonic() + TIMEOUT_S
+        while time.monotonic() < deadline and process.poll() is None:
+            children = psutil.Process(process.pid).children(recursive=True)
+            busy = sum(sum(c.cpu_times()[:2]) for c in children if c.is_running())
+            if len(children) >= 1 and busy > 2.5:
+                break
+            time.sleep(0.2)
+        assert process.poll() is None, "the render ended before it could be interrupted"
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_command_with_an_unreachable_scheduler_fails_in_one_line(tmp_path: Path) -> None:
+    output = tmp_path / "out.png"
+    address = f"tcp://127.0.0.1:{free_port()}"  # nothing listens there
+    started = time.monotonic()
+    # Dask's own setting bounds the attempt (default 30 s).
+    result = run_cli("render", "scenes/three_spheres.toml", "-o", str(output), "--width", "8",
+                     "--height", "8", "--scheduler", address,
+                     env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "2s"})  # fmt: skip
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("embree-rt: error: --scheduler: "), lines
+    assert address in lines[0] and "Traceback" not in result.stderr
+    assert not output.exists()
+    assert time.monotonic() - started < 60
