@@ -233,7 +233,7 @@ class RayMeshIntersector:
             rows = slice(first, stop)
             # Embree from the local frame's tnear (inclusive, a little short of ours): which
             # hits count as at the origin is decided below in float64.
-            t, prim, u, v, cos, count, _more = scene.bvh.all_hits(
+            _t, prim, u, v, cos, count, _more = scene.bvh.all_hits(
                 local_origins[rows], local_directions[rows],
                 (near[rows] * scene.scale * 0.5).astype(np.float32), np.inf, room,
             )  # fmt: skip
@@ -299,7 +299,8 @@ class RayMeshIntersector:
             rays, tris, distance, ranks = rays[keep], tris[keep], distance[keep], _ranks(rays[keep])
             if not multiple_hits:
                 first = ranks == 0
-                rays, tris, distance, ranks = rays[first], tris[first], distance[first], ranks[first]
+                rays, tris, distance = rays[first], tris[first], distance[first]
+                ranks = ranks[first]
         order = np.lexsort((rays, ranks))
         rays, tris, distance = rays[order], tris[order], distance[order]
         if return_locations:
@@ -318,13 +319,13 @@ class RayMeshIntersector:
         return locations, index_ray, index_tri
 
     def intersects_first(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
-        """(n,) int64: the first triangle each ray hits, -1 for none (on an edge, the lowest
-        index of the triangles there)."""
+        """(n,) int32 (as trimesh's embree backend): the first triangle each ray hits, -1 for
+        none (on an edge, the lowest index of the triangles there)."""
         origins, _ = _as_rays(ray_origins, ray_directions)
         index_tri, index_ray = self.intersects_id(
             ray_origins, ray_directions, multiple_hits=False, tnear=tnear
         )
-        first = np.full(len(origins), -1, dtype=np.int64)
+        first = np.full(len(origins), -1, dtype=np.int32)
         first[index_ray] = index_tri
         return first
 

@@ -233,11 +233,15 @@ def _sort_hits(count, t, prim, u, v, cos):
         tk, pk, uk, vk, ck = t[i], prim[i], u[i], v[i], cos[i]
         j = i - 1
         while j >= 0 and (t[j] > tk or (t[j] == tk and prim[j] > pk)):
-            t[j + 1], prim[j + 1], u[j + 1], v[j + 1], cos[j + 1] = t[j], prim[j], u[j], v[j], cos[j]
+            t[j + 1], prim[j + 1], u[j + 1] = t[j], prim[j], u[j]
+            v[j + 1], cos[j + 1] = v[j], cos[j]
             j -= 1
         t[j + 1], prim[j + 1], u[j + 1], v[j + 1], cos[j + 1] = tk, pk, uk, vk, ck
 
 
+# The chunk bodies are functions of their own, called from the prange loops as kernels.py's are:
+# written inline in the loop body, numba's parallel lowering lost the stores into the scratch row
+# that Embree reads through its address (measured: every ray went out with zero fields).
 @njit(nogil=True, cache=True)
 def _all_hits_chunk(scene, filter_address, words, first, stop, origins, directions, tnear, tfar,
                     t, prim, u, v, cos, count, more):  # fmt: skip
@@ -352,11 +356,12 @@ def crossing_parity(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Parity of each ray's surface crossings in ``t >= 0``, and whether it can be trusted.
 
-    ``origins``, ``directions`` (n, 3) float32, ``edge_band`` (primitives,) float32. Returns ``odd`` (n,) bool (an odd number of
-    distinct triangles hit) and ``clear`` (n,) bool: no hit lies within ``edge_band[prim]``
-    (barycentric) of its triangle's edge, none meets its triangle at |cos| <= ``graze``, and at
-    most ``capacity`` triangles were hit — where any of that fails, the count may be off by
-    an edge or vertex counted twice or not at all, and the caller should ask another direction.
+    ``origins``, ``directions`` (n, 3) float32, ``edge_band`` (primitives,) float32. Returns
+    ``odd`` (n,) bool (an odd number of distinct triangles hit) and ``clear`` (n,) bool: no hit
+    lies within ``edge_band[prim]`` (barycentric) of its triangle's edge, none meets its
+    triangle at |cos| <= ``graze``, and at most ``capacity`` triangles were hit — where any of
+    that fails, the count may be off by an edge or vertex counted twice or not at all, and the
+    caller should ask another direction.
     """
     n = len(origins)
     odd = np.zeros(n, bool)
