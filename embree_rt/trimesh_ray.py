@@ -67,7 +67,9 @@ _EPS32 = float(np.finfo(np.float32).eps)
 # involved; these multiples leave a wide margin.
 _BAND_ULPS = 64.0
 _TNEAR_ULPS = 16.0
-_BLOCK_HITS = 1 << 21  # rays x max_hits traced per call, bounding memory
+# Rays traced per call, and rays x room for hits: bounded memory, reused from block to block.
+_BLOCK_RAYS = 1 << 16
+_BLOCK_HITS = 1 << 21
 
 
 class _LocalScene:
@@ -87,6 +89,7 @@ class _LocalScene:
         self.triangles = np.asarray(mesh.triangles, dtype=np.float64)
         self.normals = np.asarray(mesh.face_normals, dtype=np.float64)
         self.faces = faces
+        self.vertices = vertices
         self.face_count = len(faces)
         triangles32 = local[faces].astype(np.float64)
         self.min_altitude = _min_altitudes(triangles32)
@@ -100,9 +103,8 @@ class _LocalScene:
         """Faces around each vertex position, CSR: (canonical faces (k, 3), starts (m + 1,),
         faces (3k,)); vertices at the same position count as one (unmerged STL meshes)."""
         if self._fans is None:
-            vertices = self.triangles.reshape(-1, 3)
-            _, canonical = np.unique(vertices, axis=0, return_inverse=True)
-            canonical = canonical.reshape(-1, 3)
+            _, position = np.unique(self.vertices, axis=0, return_inverse=True)
+            canonical = position.reshape(-1)[self.faces]
             flat = canonical.reshape(-1)
             order = np.argsort(flat, kind="stable")
             starts = np.searchsorted(flat[order], np.arange(flat.max() + 2 if len(flat) else 1))
@@ -172,8 +174,13 @@ def _neighbourhood(scene, rays, tris):
     owner = np.repeat(np.repeat(rays, 3), lengths)
     offsets = np.arange(lengths.sum()) - np.repeat(np.cumsum(lengths) - lengths, lengths)
     neighbours = fan_faces[np.repeat(starts[corners], lengths) + offsets]
-    pairs = np.unique(np.stack([owner, neighbours], axis=1), axis=0)
-    return pairs[:, 0], pairs[:, 1]
+    return _unique_pairs(owner, neighbours, scene.face_count)
+
+
+def _unique_pairs(rays: np.ndarray, tris: np.ndarray, face_count: int):
+    """(ray, triangle) pairs (k,) int64, each once, sorted by ray then triangle."""
+    keys = np.unique(rays * max(face_count, 1) + tris)
+    return keys // max(face_count, 1), keys % max(face_count, 1)
 
 
 class RayMeshIntersector:
@@ -222,52 +229,106 @@ class RayMeshIntersector:
         local_origins = scene.to_local(origins)
         local_directions = directions.astype(np.float32)
         near, inclusive = self._resolve_tnear(scene, local_origins, tnear)
+        magnitude = np.maximum(np.abs(local_origins).max(axis=1), scene.extent)
         capacity = max(1, int(max_hits))
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
         # pairs, so that the nearest `capacity` survive
         room = capacity + 4
-        block = max(1, _BLOCK_HITS // room)
-        rays_parts, tris_parts = [], []
+        block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
+        buffers = None
+        clean_rays, clean_tris, messy_rays, messy_tris = [], [], [], []
         for first in range(0, n, block):
-            stop = min(n, first + block)
-            rows = slice(first, stop)
+            rows = slice(first, min(n, first + block))
             # Embree from the local frame's tnear (inclusive, a little short of ours): which
             # hits count as at the origin is decided below in float64.
-            _t, prim, u, v, cos, count, _more = scene.bvh.all_hits(
+            result = scene.bvh.all_hits(
                 local_origins[rows], local_directions[rows],
-                (near[rows] * scene.scale * 0.5).astype(np.float32), np.inf, room,
+                (near[rows] * scene.scale * 0.5).astype(np.float32), np.inf, room, out=buffers,
             )  # fmt: skip
-            keep = np.arange(room)[None, :] < count[:, None]
-            ray_of, slot = np.nonzero(keep)
+            buffers = buffers or result
+            _t, prim, u, v, cos, count, _more = result
+            # row-major: by ray, then in the kernel's (t, prim) order
+            ray_of, slot = np.nonzero(np.arange(room)[None, :] < count[:, None])
             tris = prim[ray_of, slot].astype(np.int64)
-            ray_of = ray_of + first
-            u, v, cos = u[keep], v[keep], cos[keep]
-            magnitude = np.maximum(np.abs(local_origins[ray_of]).max(axis=1), scene.extent)
-            band = _edge_band(scene, tris, magnitude)
+            u, v, cos = u[ray_of, slot], v[ray_of, slot], cos[ray_of, slot]
+            ray_of += first
+            band = _edge_band(scene, tris, magnitude[ray_of])
             suspect = (np.minimum(np.minimum(u, v), 1 - u - v) <= band) | (cos <= _GRAZE_COS)
-            rays_parts.append(ray_of[~suspect])
-            tris_parts.append(tris[~suspect])
-            if suspect.any():
-                # Decide hits near an edge, a vertex or along a face in float64 as ray_triangle
-                # does, against all the triangles around them.
-                pair_rays, pair_tris = _neighbourhood(scene, ray_of[suspect], tris[suspect])
-                hit, _ = _float64_hits(scene, origins, directions, pair_rays, pair_tris)
-                rays_parts.append(pair_rays[hit])
-                tris_parts.append(pair_tris[hit])
-        rays = np.concatenate(rays_parts) if rays_parts else np.zeros(0, np.int64)
-        tris = np.concatenate(tris_parts) if tris_parts else np.zeros(0, np.int64)
-        if len(rays):
-            pairs = np.unique(np.stack([rays, tris], axis=1), axis=0)
-            rays, tris = pairs[:, 0], pairs[:, 1]
-        distance, cos = _plane_distance(scene, origins, directions, rays, tris)
-        ahead = (distance >= near[rays]) if inclusive else (distance > near[rays])
-        keep = ahead & (cos > _PARALLEL_COS)
-        rays, tris, distance = rays[keep], tris[keep], distance[keep]
-        order = np.lexsort((tris, distance, rays))
-        rays, tris, distance = rays[order], tris[order], distance[order]
+            if not suspect.any():
+                clean_rays.append(ray_of)
+                clean_tris.append(tris)
+                continue
+            messy = np.zeros(n, bool)
+            messy[ray_of[suspect]] = True
+            in_messy = messy[ray_of]
+            clean_rays.append(ray_of[~in_messy])
+            clean_tris.append(tris[~in_messy])
+            messy_rays.append(ray_of[in_messy & ~suspect])
+            messy_tris.append(tris[in_messy & ~suspect])
+            # Hits near an edge, a vertex or along a face: decided in float64 as ray_triangle
+            # decides them, against all the triangles around them.
+            pair_rays, pair_tris = _neighbourhood(scene, ray_of[suspect], tris[suspect])
+            hit, _ = _float64_hits(scene, origins, directions, pair_rays, pair_tris)
+            messy_rays.append(pair_rays[hit])
+            messy_tris.append(pair_tris[hit])
+        parts = []
+        for ray_parts, tri_parts, settled in ((clean_rays, clean_tris, True),
+                                              (messy_rays, messy_tris, False)):  # fmt: skip
+            rays = np.concatenate(ray_parts) if ray_parts else np.zeros(0, np.int64)
+            tris = np.concatenate(tri_parts) if tri_parts else np.zeros(0, np.int64)
+            if not settled:
+                rays, tris = _unique_pairs(rays, tris, scene.face_count)
+            distance, cos = _plane_distance(scene, origins, directions, rays, tris)
+            ahead = (distance >= near[rays]) if inclusive else (distance > near[rays])
+            keep = ahead & (cos > _PARALLEL_COS)
+            rays, tris, distance = rays[keep], tris[keep], distance[keep]
+            backwards = (rays[1:] == rays[:-1]) & (distance[1:] < distance[:-1])
+            if not settled or backwards.any():  # float64 may order what float32 tied
+                order = np.lexsort((tris, distance, rays))
+                rays, tris, distance = rays[order], tris[order], distance[order]
+            parts.append((rays, tris, distance))
+        rays, tris, distance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
+        if len(parts[1][0]):
+            order = np.argsort(rays, kind="stable")
+            rays, tris, distance = rays[order], tris[order], distance[order]
         ranks = _ranks(rays)
         within = ranks < capacity
         return rays[within], tris[within], distance[within], ranks[within]
+
+    def _first_hits(self, origins, directions, tnear, need_distance=True):
+        """Every ray's nearest hit: (rays, triangles, distances, ranks) (k,) by ray. Embree's
+        nearest-hit query (packets, pruned traversal) answers rays whose hit lies clear of
+        edges, of grazing and of the origin; the others go through ``_hits``."""
+        scene = self._scene
+        local_origins = scene.to_local(origins)
+        local_directions = directions.astype(np.float32)
+        near, _ = self._resolve_tnear(scene, local_origins, tnear)
+        near_local = near * scene.scale
+        hits = scene.bvh.intersect(local_origins, local_directions,
+                                   (near_local * 0.5).astype(np.float32), np.inf)  # fmt: skip
+        rows = np.flatnonzero(hits.prim_id >= 0)
+        tris = hits.prim_id[rows].astype(np.int64)
+        u, v = hits.u[rows], hits.v[rows]
+        normal = hits.normal[rows]
+        cos = np.abs(np.einsum("ij,ij->i", normal, local_directions[rows])) / np.maximum(
+            np.linalg.norm(normal, axis=1), np.finfo(np.float32).tiny
+        )
+        magnitude = np.maximum(np.abs(local_origins[rows]).max(axis=1), scene.extent)
+        suspect = ((np.minimum(np.minimum(u, v), 1 - u - v) <= _edge_band(scene, tris, magnitude))
+                   | (cos <= _GRAZE_COS) | (hits.t[rows] <= 4 * near_local[rows]))  # fmt: skip
+        rays, tris = rows[~suspect], tris[~suspect]
+        distance = (_plane_distance(scene, origins, directions, rays, tris)[0] if need_distance
+                    else np.zeros(len(rays)))  # fmt: skip
+        if suspect.any():
+            again = rows[suspect]
+            near_again = near[again] if tnear is not None else None
+            more = self._hits(origins[again], directions[again], 1, near_again)
+            rays = np.concatenate([rays, again[more[0]]])
+            tris = np.concatenate([tris, more[1]])
+            distance = np.concatenate([distance, more[2]])
+            order = np.argsort(rays, kind="stable")
+            rays, tris, distance = rays[order], tris[order], distance[order]
+        return rays, tris, distance, np.zeros(len(rays), np.int64)
 
     def intersects_id(
         self,
@@ -291,9 +352,11 @@ class RayMeshIntersector:
         (an edge, a vertex) is reported once.
         """
         origins, directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, distance, ranks = self._hits(
-            origins, directions, max_hits if multiple_hits else 1, tnear
-        )
+        if multiple_hits:
+            rays, tris, distance, ranks = self._hits(origins, directions, max_hits, tnear)
+        else:
+            rays, tris, distance, ranks = self._first_hits(origins, directions, tnear,
+                                                           need_distance=return_locations)
         if return_locations:
             keep = _one_per_point(self._scene, rays, tris, distance)
             rays, tris, distance, ranks = rays[keep], tris[keep], distance[keep], _ranks(rays[keep])

@@ -407,6 +407,7 @@ class BVH:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
         capacity: int = 16,
+        out: tuple[np.ndarray, ...] | None = None,
     ) -> tuple[np.ndarray, ...]:
         """Up to ``capacity`` nearest hits of each ray, each primitive once (a ``filters=True``
         BVH of one geometry, no instances): see ``multihit.all_hits`` for what it returns."""
@@ -414,7 +415,7 @@ class BVH:
         self._require_filters()
         with _query_lock:
             return multihit.all_hits(self._live_scene(), origins, directions, tnear, tfar,
-                                     int(capacity), self.threads)  # fmt: skip
+                                     int(capacity), self.threads, out)  # fmt: skip
 
     def crossing_parity(
         self, origins: np.ndarray, directions: np.ndarray, edge_band: np.ndarray, graze: float

@@ -311,6 +311,14 @@ def _crossing_parity(scene, filter_address, origins, directions, capacity, edge_
                       origins, directions, capacity, edge_band, graze, odd, clear)  # fmt: skip
 
 
+def new_hit_buffers(n: int, capacity: int) -> tuple[np.ndarray, ...]:
+    """Empty (t, prim, u, v, cos, count, more) arrays for ``all_hits`` of n rays."""
+    shape = (n, capacity)
+    return (np.empty(shape, np.float32), np.empty(shape, np.int32), np.empty(shape, np.float32),
+            np.empty(shape, np.float32), np.empty(shape, np.float32), np.empty(n, np.int64),
+            np.empty(n, bool))  # fmt: skip
+
+
 def all_hits(
     scene: int,
     origins: np.ndarray,
@@ -319,6 +327,7 @@ def all_hits(
     tfar: np.ndarray,
     capacity: int,
     threads: int,
+    out: tuple[np.ndarray, ...] | None = None,
 ) -> tuple[np.ndarray, ...]:
     """Up to ``capacity`` nearest hits of each ray, each primitive once, sorted by (t, prim).
 
@@ -328,16 +337,14 @@ def all_hits(
     (n, capacity) int32, ``u``, ``v`` (n, capacity) float32 barycentrics (weights of the
     triangle's second and third vertex), ``cos`` (n, capacity) float32 |cos| of the angle
     between ray and geometric normal, ``count`` (n,) int64 hits kept (row entries past it are
-    undefined), ``more`` (n,) bool: the ray has more hits than ``capacity``.
+    undefined), ``more`` (n,) bool: the ray has more hits than ``capacity``. ``out``: arrays of
+    at least those shapes to fill (their leading n rows are returned), so that a caller tracing
+    block after block reuses memory that is already mapped.
     """
     n = len(origins)
-    t = np.empty((n, capacity), np.float32)
-    prim = np.empty((n, capacity), np.int32)
-    u = np.empty((n, capacity), np.float32)
-    v = np.empty((n, capacity), np.float32)
-    cos = np.empty((n, capacity), np.float32)
-    count = np.zeros(n, np.int64)
-    more = np.zeros(n, bool)
+    if out is None or len(out[0]) < n or out[0].shape[1] != capacity:
+        out = new_hit_buffers(n, capacity)
+    t, prim, u, v, cos, count, more = (array[:n] for array in out)
     if n:
         numba.set_num_threads(threads)
         _all_hits(scene, FILTER_ADDRESS, origins, directions, tnear, tfar, t, prim, u, v, cos,
