@@ -65,10 +65,11 @@ _GRAZE_COS = 1e-3
 _EPS32 = float(np.finfo(np.float32).eps)
 # Embree's float32 barycentrics and distances err by a few ulps of the largest coordinate
 # involved; these multiples leave a wide margin.
-_BAND_ULPS = 64.0
+_BAND_ULPS = 8.0
 _TNEAR_ULPS = 16.0
 # Rays traced per call, and rays x room for hits: bounded memory, reused from block to block.
 _BLOCK_RAYS = 1 << 16
+_FIRST_ROOM = 8
 _BLOCK_HITS = 1 << 21
 
 
@@ -91,8 +92,7 @@ class _LocalScene:
         self.faces = faces
         self.vertices = vertices
         self.face_count = len(faces)
-        triangles32 = local[faces].astype(np.float64)
-        self.min_altitude = _min_altitudes(triangles32)
+        self.min_altitude = _min_altitudes(self.triangles, np.asarray(mesh.area_faces)) * scale
         self._fans: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def to_local(self, points: np.ndarray) -> np.ndarray:
@@ -112,14 +112,15 @@ class _LocalScene:
         return self._fans
 
 
-def _min_altitudes(triangles: np.ndarray) -> np.ndarray:
-    """(k,) smallest altitude of each of (k, 3, 3) triangles (0 for degenerate ones)."""
-    edges = np.stack([triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 1],
-                      triangles[:, 0] - triangles[:, 2]], axis=1)  # fmt: skip
-    doubled_area = np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
-    longest = np.linalg.norm(edges, axis=2).max(axis=1)
+def _min_altitudes(triangles: np.ndarray, areas: np.ndarray) -> np.ndarray:
+    """(k,) smallest altitude of each of (k, 3, 3) triangles of ``areas`` (k,) (0 for
+    degenerate ones): twice the area over the longest side."""
+    longest = np.zeros(len(triangles))
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        side = triangles[:, b] - triangles[:, a]
+        longest = np.maximum(longest, np.sqrt(np.einsum("ij,ij->i", side, side)))
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(longest > 0, doubled_area / np.where(longest > 0, longest, 1), 0.0)
+        return np.where(longest > 0, 2 * areas / np.where(longest > 0, longest, 1), 0.0)
 
 
 def _edge_band(scene: _LocalScene, faces: np.ndarray, magnitude: np.ndarray) -> np.ndarray:
@@ -234,23 +235,33 @@ class RayMeshIntersector:
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
         # pairs, so that the nearest `capacity` survive
         room = capacity + 4
-        block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
+        # Most rays hit a few triangles: trace with a little room first and again, with all of
+        # it, only the rays that overflowed (so the hit arrays stay small).
+        first_room = min(room, _FIRST_ROOM)
+        block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
         buffers = None
         clean_rays, clean_tris, messy_rays, messy_tris = [], [], [], []
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
             # Embree from the local frame's tnear (inclusive, a little short of ours): which
             # hits count as at the origin is decided below in float64.
-            result = scene.bvh.all_hits(
-                local_origins[rows], local_directions[rows],
-                (near[rows] * scene.scale * 0.5).astype(np.float32), np.inf, room, out=buffers,
-            )  # fmt: skip
+            block_origins, block_directions = local_origins[rows], local_directions[rows]
+            block_near = (near[rows] * scene.scale * 0.5).astype(np.float32)
+            result = scene.bvh.all_hits(block_origins, block_directions, block_near, np.inf,
+                                        first_room, out=buffers)  # fmt: skip
             buffers = buffers or result
-            _t, prim, u, v, cos, count, _more = result
-            # row-major: by ray, then in the kernel's (t, prim) order
-            ray_of, slot = np.nonzero(np.arange(room)[None, :] < count[:, None])
-            tris = prim[ray_of, slot].astype(np.int64)
-            u, v, cos = u[ray_of, slot], v[ray_of, slot], cos[ray_of, slot]
+            ray_of, tris, u, v, cos = _compact(result)
+            overflow = np.flatnonzero(result[6]) if room > first_room else np.zeros(0, int)
+            if len(overflow):
+                retraced = scene.bvh.all_hits(block_origins[overflow], block_directions[overflow],
+                                              block_near[overflow], np.inf, room)  # fmt: skip
+                again = _compact(retraced)
+                kept = ~result[6][ray_of]
+                merged = [np.concatenate([x[kept], y]) for x, y in
+                          zip((ray_of, tris, u, v, cos), (overflow[again[0]], *again[1:]),
+                              strict=True)]  # fmt: skip
+                order = np.argsort(merged[0], kind="stable")
+                ray_of, tris, u, v, cos = (x[order] for x in merged)
             ray_of += first
             band = _edge_band(scene, tris, magnitude[ray_of])
             suspect = (np.minimum(np.minimum(u, v), 1 - u - v) <= band) | (cos <= _GRAZE_COS)
@@ -364,7 +375,7 @@ class RayMeshIntersector:
                 first = ranks == 0
                 rays, tris, distance = rays[first], tris[first], distance[first]
                 ranks = ranks[first]
-        order = np.lexsort((rays, ranks))
+        order = np.argsort(ranks, kind="stable")  # rays are sorted: depth by depth, by ray
         rays, tris, distance = rays[order], tris[order], distance[order]
         if return_locations:
             locations = origins[rays] + directions[rays] * distance[:, None]
@@ -452,6 +463,15 @@ class RayMeshIntersector:
         return RayMeshIntersector(geometry=self.mesh, scale_to_box=self._scale_to_box)
 
 
+def _compact(result: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """``BVH.all_hits``' (n, room) arrays as (k,) hits by ray, then in the kernel's (t, prim)
+    order: (ray int64, triangle int64, u, v, cos float32)."""
+    _t, prim, u, v, cos, count, _more = result
+    ray_of, slot = np.nonzero(np.arange(prim.shape[1])[None, :] < count[:, None])
+    return ray_of, prim[ray_of, slot].astype(np.int64), u[ray_of, slot], v[ray_of, slot], cos[
+        ray_of, slot]
+
+
 def _ranks(rays: np.ndarray) -> np.ndarray:
     """(k,) position of each hit within its ray, for hits sorted by ray."""
     if not len(rays):
@@ -468,15 +488,16 @@ def _one_per_point(scene: _LocalScene, rays, tris, distance) -> np.ndarray:
     keep = np.ones(len(rays), bool)
     if len(rays) < 2:
         return keep
-    canonical = scene.fans()[0]
-    same_ray = rays[1:] == rays[:-1]
-    a, b = canonical[tris[:-1]], canonical[tris[1:]]
-    share = (a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
     size = scene.extent / scene.scale
     close = np.abs(distance[1:] - distance[:-1]) <= 1e3 * np.finfo(np.float64).eps * (
         np.abs(distance[1:]) + size
     )
-    keep[1:] = ~(same_ray & share & close)
+    pairs = np.flatnonzero(close & (rays[1:] == rays[:-1]))
+    if len(pairs):
+        canonical = scene.fans()[0]
+        a, b = canonical[tris[pairs]], canonical[tris[pairs + 1]]
+        share = (a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
+        keep[pairs[share] + 1] = False
     return keep
 
 
