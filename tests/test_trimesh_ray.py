@@ -173,6 +173,13 @@ def test_edge_and_vertex_hits_count_as_ray_triangle_counts_them(scale):
         _, loc_ray, _ = ours.intersects_location(origins, directions)
         points = np.bincount(loc_ray, minlength=len(origins))
         assert (points[hit_rays] == 2).all()
+        # first hits on an edge or vertex name the lowest-index triangle there (Embree's own
+        # nearest-hit query names any of them: these rays go through the exact path)
+        first = ours.intersects_first(origins, directions)
+        for r in hit_rays:
+            rows = np.flatnonzero(ref_ray == r)
+            nearest = ref_distance[rows] <= ref_distance[rows].min() + 1e-9 * mesh.scale
+            assert first[r] == ref_tri[rows][nearest].min()
 
 
 def test_rays_along_faces_and_edges_count_as_ray_triangle():
