@@ -359,8 +359,8 @@ class RayMeshIntersector:
         ``return_locations`` also ``locations`` (m, 3) float64.
 
         ``ray_origins``, ``ray_directions`` (n, 3) float (directions need not be unit);
-        ``multiple_hits``: every hit along each ray (up to its nearest ``max_hits``) or only the
-        first; ``tnear`` (scalar or (n,), world units): report hits at distance >= tnear; by
+        ``multiple_hits``: every hit along each ray (up to its nearest ``max_hits``; 100 by
+        default, as in trimesh 5's embree backend) or only the first; ``tnear`` (scalar or (n,), world units): report hits at distance >= tnear; by
         default hits beyond a few float32 ulps of the origin, so a ray starting on a surface
         does not hit it. Order: all first hits by ray, then all second hits, ... (as trimesh's
         embree backend). With ``return_locations`` a point where a ray meets several triangles
@@ -393,11 +393,11 @@ class RayMeshIntersector:
     def intersects_first(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
         """(n,) int32 (as trimesh's embree backend): the first triangle each ray hits, -1 for
         none (on an edge, the lowest index of the triangles there)."""
-        origins, _ = _as_rays(ray_origins, ray_directions)
         index_tri, index_ray = self.intersects_id(
             ray_origins, ray_directions, multiple_hits=False, tnear=tnear
         )
-        first = np.full(len(origins), -1, dtype=np.int32)
+        count = len(np.asarray(ray_origins).reshape(-1, 3))
+        first = np.full(count, -1, dtype=np.int32)
         first[index_ray] = index_tri
         return first
 
