@@ -362,9 +362,10 @@ class RayMeshIntersector:
         ``multiple_hits``: every hit along each ray (up to its nearest ``max_hits``; 100 by
         default, as in trimesh 5's embree backend) or only the first; ``tnear`` (scalar or
         (n,), world units): report hits at distance >= tnear; by default hits beyond a few
-        float32 ulps of the origin, so a ray starting on a surface does not hit it. Order: all first hits by ray, then all second hits, ... (as trimesh's
-        embree backend). With ``return_locations`` a point where a ray meets several triangles
-        (an edge, a vertex) is reported once.
+        float32 ulps of the origin, so a ray starting on a surface does not hit it. Order: all
+        first hits by ray, then all second hits, ... (as trimesh's embree backend). With
+        ``return_locations`` a point where a ray meets several triangles (an edge, a vertex) is
+        reported once.
         """
         origins, directions = _as_rays(ray_origins, ray_directions)
         if multiple_hits:
