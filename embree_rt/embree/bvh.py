@@ -11,7 +11,7 @@ import numba
 import numpy as np
 
 from embree_rt.embree import device as device_module
-from embree_rt.embree import instance_arrays, kernels, library, records, user_spheres
+from embree_rt.embree import instance_arrays, kernels, library, multihit, records, user_spheres
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
     as_points,
@@ -101,8 +101,10 @@ class BVH:
     many rays go to Embree in one call: 1 (single rays) or a packet of 4, 8 or 16 (default: the
     widest this CPU runs natively, see ``native_lanes``). ``build_quality`` is Embree's: "low",
     "medium" (Embree's default) or "high"; ``compact`` asks Embree for its compact (less memory)
-    structures. Release the Embree objects with ``close()`` or a ``with`` block; a finalizer does
-    it otherwise.
+    structures. ``robust`` selects Embree's watertight triangle test (no ray slips between two
+    triangles sharing an edge); ``filters`` enables ``all_hits`` and ``crossing_parity`` (every
+    hit along a ray, ``multihit``). Release the Embree objects with ``close()`` or a ``with``
+    block; a finalizer does it otherwise.
     """
 
     def __init__(
@@ -112,6 +114,8 @@ class BVH:
         *,
         build_quality: str = "medium",
         compact: bool = False,
+        robust: bool = False,
+        filters: bool = False,
     ) -> None:
         if threads is not None and (int(threads) != threads or threads < 1):
             raise ValueError(f"threads: must be a positive integer, got {threads!r}")
@@ -131,8 +135,11 @@ class BVH:
         )
         self._build_quality = library.BUILD_QUALITY[build_quality]
         self._lib.rtcSetSceneBuildQuality(self._scene, self._build_quality)
-        if compact:
-            self._lib.rtcSetSceneFlags(self._scene, library.SCENE_FLAG_COMPACT)
+        flags = (library.SCENE_FLAG_COMPACT * compact | multihit.SCENE_FLAG_ROBUST * robust
+                 | multihit.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS * filters)  # fmt: skip
+        if flags:
+            self._lib.rtcSetSceneFlags(self._scene, flags)
+        self.filters = bool(filters)
         self._device.check("setting the scene's build quality and flags")
         self._committed = False
         self._children: list[BVH] = []
@@ -569,6 +576,40 @@ class BVH:
             records.block_by_plane(origins.T, directions.T, tnear, tfar, np.float32(plane_y),
                                    blocked)  # fmt: skip
         return blocked
+
+    def all_hits(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        tnear: float | np.ndarray = 0.0,
+        tfar: float | np.ndarray = np.inf,
+        capacity: int = 16,
+        out: tuple[np.ndarray, ...] | None = None,
+    ) -> tuple[np.ndarray, ...]:
+        """Up to ``capacity`` nearest hits of each ray, each primitive once (a ``filters=True``
+        BVH of one geometry, no instances): see ``multihit.all_hits`` for what it returns."""
+        origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
+        self._require_filters()
+        with _query_lock:
+            return multihit.all_hits(self._live_scene(), origins, directions, tnear, tfar,
+                                     int(capacity), self.threads, out)  # fmt: skip
+
+    def crossing_parity(
+        self, origins: np.ndarray, directions: np.ndarray, edge_band: np.ndarray, graze: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) bool parity of each ray's crossings and (n,) bool whether it is clear of edges
+        and grazing hits (a ``filters=True`` BVH): see ``multihit.crossing_parity``."""
+        origins, directions, _, _ = self._query_inputs(origins, directions, 0.0, np.inf)
+        self._require_filters()
+        if np.shape(edge_band) != (self.primitive_count,):
+            raise ValueError(f"edge_band: expected shape ({self.primitive_count},)")
+        with _query_lock:
+            return multihit.crossing_parity(self._live_scene(), origins, directions, edge_band,
+                                            graze, self.threads)  # fmt: skip
+
+    def _require_filters(self) -> None:
+        if not self.filters:
+            raise RuntimeError("build the BVH with filters=True to collect every hit")
 
     def _normals_to_world(self, hits: Hits) -> None:
         # Embree reports an instance hit's normal in the instanced object's own space.

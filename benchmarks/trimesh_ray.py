@@ -1,0 +1,124 @@
+"""embree_rt.trimesh_ray against trimesh's own ray backends, taking turns; prints JSON.
+
+Meshes: a subdivided sphere (icosphere, 1.3e6 triangles), the project's torus asset (trimesh
+ships no models, so no featuretype mesh; ``assets/torus.obj``) and a 1e5-triangle scan-like
+mesh (a noisy height field). Queries: first hit (``intersects_first``) and multi-hit
+(``intersects_location``, all hits) of rays from a sphere around the mesh toward random points
+in its box, and ``contains_points`` of random points in the box. Backends: ours (2 threads),
+trimesh's ``ray_pyembree`` (embreex, one thread) and, on a small sample, its pure-NumPy
+``ray_triangle``. Each turn runs every backend once on the same inputs; rows report the median
+rate over turns and ``vs_embreex``, the median over turns of our rate ÷ embreex's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from trimesh.ray import ray_pyembree, ray_triangle
+
+from embree_rt.trimesh_ray import RayMeshIntersector
+
+ASSETS = Path(__file__).resolve().parent.parent / "assets"
+
+
+def scan_like(triangles: int, seed: int = 0) -> trimesh.Trimesh:
+    """A height field with noise: a laser-scan-like open surface of about ``triangles``."""
+    side = int(np.sqrt(triangles / 2)) + 1
+    rng = np.random.default_rng(seed)
+    x, y = np.meshgrid(np.linspace(0, 10, side), np.linspace(0, 10, side), indexing="ij")
+    z = np.sin(x) * np.cos(y) + 0.02 * rng.normal(size=x.shape)
+    vertices = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    index = np.arange(side * side).reshape(side, side)
+    a, b, c, d = index[:-1, :-1], index[1:, :-1], index[1:, 1:], index[:-1, 1:]
+    faces = np.vstack([np.column_stack([a.ravel(), b.ravel(), c.ravel()]),
+                       np.column_stack([a.ravel(), c.ravel(), d.ravel()])])  # fmt: skip
+    return trimesh.Trimesh(vertices, faces, process=False)
+
+
+def rays(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    center, size = mesh.bounds.mean(axis=0), mesh.scale
+    start = rng.normal(size=(n, 3))
+    origins = center + 2 * size * start / np.linalg.norm(start, axis=1)[:, None]
+    return origins, rng.uniform(mesh.bounds[0], mesh.bounds[1], (n, 3)) - origins
+
+
+def timed(function, *args) -> float:
+    start = time.perf_counter()
+    function(*args)
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--rays", type=int, default=200_000)
+    parser.add_argument("--reference-rays", type=int, default=2_000)
+    parser.add_argument("--turns", type=int, default=3)
+    args = parser.parse_args()
+    meshes = {
+        "icosphere_1.3M": trimesh.creation.icosphere(subdivisions=8),
+        "torus_asset": trimesh.load(ASSETS / "torus.obj", force="mesh"),
+        "scan_like_1e5": scan_like(100_000),
+    }
+    rows = []
+    for name, mesh in meshes.items():
+        origins, directions = rays(mesh, args.rays, seed=1)
+        points = np.random.default_rng(2).uniform(mesh.bounds[0], mesh.bounds[1], (args.rays, 3))
+        # ray_triangle's r-tree hands it every triangle in each ray's bounding box (most of a
+        # sphere's for a ray through it): its memory grows as rays x triangles
+        reference_rays = max(3, min(args.reference_rays, 4_000_000 // len(mesh.faces)))
+        small = slice(0, reference_rays)
+        backends = {
+            "embree_rt": RayMeshIntersector(mesh),
+            "embreex": ray_pyembree.RayMeshIntersector(mesh),
+            "ray_triangle": ray_triangle.RayMeshIntersector(mesh),
+        }
+        start = time.perf_counter()
+        backends["embree_rt"].intersects_first(origins[:10], directions[:10])
+        build_ours = time.perf_counter() - start
+        start = time.perf_counter()
+        backends["embreex"].intersects_first(origins[:10], directions[:10])
+        build_embreex = time.perf_counter() - start
+        backends["ray_triangle"].intersects_first(origins[:10], directions[:10])
+        o, d, p = origins, directions, points
+        queries = {
+            "first_hit": lambda b, s, o=o, d=d: b.intersects_first(o[s], d[s]),
+            "multi_hit": lambda b, s, o=o, d=d: b.intersects_location(o[s], d[s]),
+            "contains_points": lambda b, s, p=p: b.contains_points(p[s]),
+        }
+        for query, run in queries.items():
+            rates: dict[str, list[float]] = {key: [] for key in backends}
+            for _ in range(args.turns):
+                for key, backend in backends.items():
+                    rows_used = small if key == "ray_triangle" else slice(None)
+                    count = reference_rays if key == "ray_triangle" else args.rays
+                    rates[key].append(count / timed(run, backend, rows_used))
+            ratios = [ours / theirs for ours, theirs in zip(rates["embree_rt"], rates["embreex"],
+                                                           strict=True)]  # fmt: skip
+            hits = {}
+            if query == "multi_hit":
+                ours_hits = len(backends["embree_rt"].intersects_location(origins, directions)[1])
+                theirs = len(backends["embreex"].intersects_location(origins, directions)[1])
+                hits = {"hits_embree_rt": ours_hits, "hits_embreex": theirs}
+            rows.append({
+                "mesh": name, "triangles": len(mesh.faces), "query": query,
+                "rays": args.rays, "ray_triangle_rays": reference_rays,
+                **{f"{key}_krays_s": round(float(np.median(v)) / 1e3, 1)
+                   for key, v in rates.items()},
+                "vs_embreex": round(float(np.median(ratios)), 2),
+                "vs_ray_triangle": round(float(np.median(rates["embree_rt"]))
+                                         / float(np.median(rates["ray_triangle"])), 1),
+                "build_s_embree_rt": round(build_ours, 3),
+                "build_s_embreex": round(build_embreex, 3),
+                **hits,
+            })  # fmt: skip
+            print(json.dumps(rows[-1]), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,429 @@
+"""Every hit along a ray, each primitive exactly once, in one Embree traversal.
+
+How: each ray is traced once with ``rtcIntersect1`` and an *argument filter* (Embree 4's
+``RTCIntersectArguments.filter`` with ``RTC_RAY_QUERY_FLAG_INVOKE_ARGUMENT_FILTER``, on a scene
+built with ``RTC_SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS``), a numba ``@cfunc``. Embree calls it
+for every triangle its intersection test accepts in ``[tnear, tfar]``; the filter records the
+hit (distance, primitive, barycentrics, cosine to the normal) in the ray's own buffer and
+*rejects* it, so the traversal goes on and visits every primitive the ray crosses. A primitive
+already recorded is skipped (Embree may report one twice: spatial splits put a triangle in
+several leaves). When the buffer is full, a nearer hit replaces the farthest kept one, so the
+buffer ends with the ``capacity`` nearest hits and a flag saying more exist.
+
+Why not re-casting from the last hit: a new query from ``tnear = t_last`` must exclude what was
+already reported *at* that distance without excluding an unreported triangle at the same
+distance (an edge shared by two triangles), and an offset past the hit misses or repeats hits
+whenever it is too large or too small for the coordinates' float32 spacing (trimesh's
+``ray_pyembree`` doubles its offset until it clears). One traversal that sees every accepted
+triangle once has no distance rule at all: each hit is found once, at any scale.
+
+The per-ray state travels in the ray query context: Embree passes the ``RTCRayQueryContext*``
+of the query to the filter untouched, so the context here is a larger block that starts with
+Embree's own context (``instID[0]``, ``instPrimID[0]``: 8 bytes in this build) and continues
+with our words (``CONTEXT_*``, from byte 16).
+
+Layouts (Embree 4.4 headers; proved by tests/test_multihit_layout.py):
+
+- ``RTCIntersectArguments`` (rtcore_scene.h): {flags u32 @0, feature_mask u32 @4, context* @8,
+  filter @16, intersect @24, [minWidthDistanceFactor f32 @32 if RTC_MIN_WIDTH]}: 40 bytes.
+- ``RTCFilterFunctionNArguments`` (rtcore_common.h): {int* valid @0, geometryUserPtr @8,
+  context* @16, RTCRayN* @24, RTCHitN* @32, N u32 @40}.
+- ``RTCRayN`` / ``RTCHitN`` (rtcore_ray.h): structure of arrays, field k of lane i at 4-byte word
+  k·N + i; the hit distance of the candidate is the ray's ``tfar`` (word 8); the hit's fields
+  are Ng xyz (0–2), u (3), v (4), primID (5), geomID (6), instID (7), instPrimID (8).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numba import carray, cfunc, njit, prange, types
+
+from embree_rt.embree.kernels import (
+    HIT_GEOM_ID,
+    HIT_INST_ID,
+    INVALID_ID,
+    RAY_DIR,
+    RAY_FLAGS,
+    RAY_ID,
+    RAY_MASK,
+    RAY_ORG,
+    RAY_TFAR,
+    RAY_TIME,
+    RAY_TNEAR,
+    rtc_intersect1,
+)
+from embree_rt.embree.user_spheres import _floats, _ints, _words32, _words64
+
+# rtcore_common.h / rtcore_scene.h
+RAY_QUERY_FLAG_INVOKE_ARGUMENT_FILTER = 1 << 1
+FEATURE_FLAG_ALL = 0xFFFFFFFF
+SCENE_FLAG_ROBUST = 1 << 2
+SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS = 1 << 3
+
+# RTCIntersectArguments in 8-byte words
+ARGS_FLAGS = 0  # flags | feature_mask << 32
+ARGS_CONTEXT = 1
+ARGS_FILTER = 2
+ARGS_INTERSECT = 3
+ARGS_WORDS = 6  # 40 bytes, rounded up
+
+# RTCFilterFunctionNArguments in 8-byte words
+FILTER_VALID = 0
+FILTER_CONTEXT = 2
+FILTER_RAY = 3
+FILTER_HIT = 4
+FILTER_N = 5
+
+# RTCHitN fields (4-byte words, times N)
+HITN_NG = 0
+HITN_U = 3
+HITN_V = 4
+HITN_PRIM_ID = 5
+
+# Our query context, in 8-byte words: Embree's RTCRayQueryContext in word 0, then ours.
+CONTEXT_EMBREE = 0
+CONTEXT_COUNT = 2  # hits recorded so far
+CONTEXT_CAPACITY = 3  # room in the buffers
+CONTEXT_MORE = 4  # 1 when a hit had to be dropped (more than `capacity` exist)
+CONTEXT_T = 5  # addresses of the ray's buffers: t float32, prim int32, u, v, cos float32
+CONTEXT_PRIM = 6
+CONTEXT_U = 7
+CONTEXT_V = 8
+CONTEXT_COS = 9
+CONTEXT_WORDS = 10
+
+# One scratch row per parallel chunk: RTCRayHit (96 bytes, 16-aligned) + arguments + context.
+_RAYHIT_WORDS64 = 12
+_SCRATCH_WORDS = 2 * (2 + _RAYHIT_WORDS64 + ARGS_WORDS + CONTEXT_WORDS)  # 4-byte words
+CHUNK = 64  # rays per parallel iteration
+
+_FILTER_SIGNATURE = types.void(types.uintp)
+
+
+@cfunc(_FILTER_SIGNATURE, nopython=True, cache=True)
+def _record_and_reject(address):
+    """Argument filter: record each candidate hit in the context's buffers, then reject it."""
+    args = carray(_words64(address), 6)
+    n = np.int64(args[FILTER_N] & 0xFFFFFFFF)
+    valid = carray(_ints(args[FILTER_VALID]), n)
+    context = carray(_words64(args[FILTER_CONTEXT]), CONTEXT_WORDS)
+    ray = carray(_floats(args[FILTER_RAY]), 12 * n)
+    hit = carray(_floats(args[FILTER_HIT]), 9 * n)
+    hit_words = carray(_words32(args[FILTER_HIT]), 9 * n)
+    capacity = np.int64(context[CONTEXT_CAPACITY])
+    t_buffer = carray(_floats(context[CONTEXT_T]), capacity)
+    prim_buffer = carray(_ints(context[CONTEXT_PRIM]), capacity)
+    u_buffer = carray(_floats(context[CONTEXT_U]), capacity)
+    v_buffer = carray(_floats(context[CONTEXT_V]), capacity)
+    cos_buffer = carray(_floats(context[CONTEXT_COS]), capacity)
+    for lane in range(n):
+        if valid[lane] == 0:
+            continue
+        valid[lane] = 0  # reject: Embree restores tfar and traverses on
+        t = ray[RAY_TFAR * n + lane]
+        prim = np.int32(hit_words[HITN_PRIM_ID * n + lane])
+        count = np.int64(context[CONTEXT_COUNT])
+        seen = False
+        for k in range(count):
+            if prim_buffer[k] == prim:
+                seen = True
+                break
+        if seen:
+            continue
+        slot = count
+        if count == capacity:
+            context[CONTEXT_MORE] = 1
+            slot = np.int64(0)
+            for k in range(1, count):
+                if t_buffer[k] > t_buffer[slot]:
+                    slot = k
+            if capacity == 0 or not t < t_buffer[slot]:
+                continue
+        else:
+            context[CONTEXT_COUNT] = count + 1
+        gx = hit[(HITN_NG + 0) * n + lane]
+        gy = hit[(HITN_NG + 1) * n + lane]
+        gz = hit[(HITN_NG + 2) * n + lane]
+        dx = ray[(RAY_DIR + 0) * n + lane]
+        dy = ray[(RAY_DIR + 1) * n + lane]
+        dz = ray[(RAY_DIR + 2) * n + lane]
+        norms = math.sqrt((gx * gx + gy * gy + gz * gz) * (dx * dx + dy * dy + dz * dz))
+        t_buffer[slot] = t
+        prim_buffer[slot] = prim
+        u_buffer[slot] = hit[HITN_U * n + lane]
+        v_buffer[slot] = hit[HITN_V * n + lane]
+        cos_buffer[slot] = abs(gx * dx + gy * dy + gz * dz) / norms if norms > 0 else 0.0
+
+
+FILTER_ADDRESS = _record_and_reject.address
+
+
+@njit(inline="always")
+def _aligned16(words) -> int:
+    """Index of the first 16-byte-aligned 4-byte word of ``words``."""
+    return ((16 - (words.ctypes.data & 15)) & 15) >> 2
+
+
+@njit(inline="always")
+def _put64(words, k, value):
+    """Store a 64-bit value at 4-byte words k, k + 1 (little-endian)."""
+    words[k] = np.uint32(value & 0xFFFFFFFF)
+    words[k + 1] = np.uint32((value >> 32) & 0xFFFFFFFF)
+
+
+@njit(inline="always")
+def _prepare_scratch(words, filter_address):
+    """Lay out RTCRayHit, RTCIntersectArguments and our context in ``words`` (a uint32 row:
+    the same element type as the kernels' packets, which numba's parallel loops handle);
+    returns the 4-byte word offsets of the three."""
+    rayhit = _aligned16(words)
+    args = rayhit + 2 * _RAYHIT_WORDS64
+    context = args + 2 * ARGS_WORDS
+    base = np.uint64(words.ctypes.data)
+    for k in range(2 * (ARGS_WORDS + CONTEXT_WORDS)):
+        words[args + k] = 0
+    words[args] = RAY_QUERY_FLAG_INVOKE_ARGUMENT_FILTER  # flags
+    words[args + 1] = FEATURE_FLAG_ALL  # feature_mask
+    _put64(words, args + 2 * ARGS_CONTEXT, base + np.uint64(4 * context))
+    _put64(words, args + 2 * ARGS_FILTER, np.uint64(filter_address))
+    # rtcInitRayQueryContext: instID[0] = instPrimID[0] = RTC_INVALID_GEOMETRY_ID
+    words[context] = INVALID_ID
+    words[context + 1] = INVALID_ID
+    return rayhit, args, context
+
+
+@njit(inline="always")
+def _trace_one(scene, words, rayhit, args, context, origin, direction, tnear, tfar, buffers,
+               capacity):  # fmt: skip
+    """Trace one ray, recording its hits in the (capacity,) buffers at the addresses
+    ``buffers`` (t, prim, u, v, cos); returns (count, more)."""
+    floats = words.view(np.float32)
+    b = rayhit
+    floats[b + RAY_ORG] = origin[0]
+    floats[b + RAY_ORG + 1] = origin[1]
+    floats[b + RAY_ORG + 2] = origin[2]
+    floats[b + RAY_TNEAR] = tnear
+    floats[b + RAY_DIR] = direction[0]
+    floats[b + RAY_DIR + 1] = direction[1]
+    floats[b + RAY_DIR + 2] = direction[2]
+    floats[b + RAY_TIME] = 0.0
+    floats[b + RAY_TFAR] = tfar
+    words[b + RAY_MASK] = 0xFFFFFFFF
+    words[b + RAY_ID] = 0
+    words[b + RAY_FLAGS] = 0
+    words[b + HIT_GEOM_ID] = INVALID_ID
+    words[b + HIT_INST_ID] = INVALID_ID
+    _put64(words, context + 2 * CONTEXT_COUNT, 0)
+    _put64(words, context + 2 * CONTEXT_CAPACITY, capacity)
+    _put64(words, context + 2 * CONTEXT_MORE, 0)
+    for k in range(5):
+        _put64(words, context + 2 * (CONTEXT_T + k), buffers[k])
+    base = words.ctypes.data
+    rtc_intersect1(scene, base + 4 * rayhit, base + 4 * args)
+    return np.int64(words[context + 2 * CONTEXT_COUNT]), words[context + 2 * CONTEXT_MORE] != 0
+
+
+@njit(inline="always")
+def _sort_hits(count, t, prim, u, v, cos):
+    """Insertion sort of one ray's hits by (t, prim): few hits a ray, already nearly sorted."""
+    for i in range(1, count):
+        tk, pk, uk, vk, ck = t[i], prim[i], u[i], v[i], cos[i]
+        j = i - 1
+        while j >= 0 and (t[j] > tk or (t[j] == tk and prim[j] > pk)):
+            t[j + 1], prim[j + 1], u[j + 1] = t[j], prim[j], u[j]
+            v[j + 1], cos[j + 1] = v[j], cos[j]
+            j -= 1
+        t[j + 1], prim[j + 1], u[j + 1], v[j + 1], cos[j + 1] = tk, pk, uk, vk, ck
+
+
+# The chunk bodies are functions of their own, called from the prange loops as kernels.py's are:
+# written inline in the loop body, numba's parallel lowering lost the stores into the scratch row
+# that Embree reads through its address (measured: every ray went out with zero fields).
+@njit(nogil=True, cache=True)
+def _all_hits_chunk(scene, filter_address, words, first, stop, origins, directions, tnear, tfar,
+                    t, prim, u, v, cos, count, more):  # fmt: skip
+    capacity = t.shape[1]
+    rayhit, args, context = _prepare_scratch(words, filter_address)
+    buffers = np.empty(5, np.uint64)
+    for i in range(first, stop):
+        # the addresses of row i of each (n, capacity) output
+        buffers[0] = t.ctypes.data + 4 * i * capacity
+        buffers[1] = prim.ctypes.data + 4 * i * capacity
+        buffers[2] = u.ctypes.data + 4 * i * capacity
+        buffers[3] = v.ctypes.data + 4 * i * capacity
+        buffers[4] = cos.ctypes.data + 4 * i * capacity
+        found, dropped = _trace_one(scene, words, rayhit, args, context, origins[i],
+                                    directions[i], tnear[i], tfar[i], buffers,
+                                    capacity)  # fmt: skip
+        _sort_hits(found, t[i], prim[i], u[i], v[i], cos[i])
+        count[i] = found
+        more[i] = dropped
+
+
+@njit(parallel=True, nogil=True, cache=True)
+def _all_hits(scene, filter_address, origins, directions, tnear, tfar, t, prim, u, v, cos, count,
+              more):  # fmt: skip
+    n = origins.shape[0]
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
+    for c in prange(n_chunks):
+        _all_hits_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
+                        origins, directions, tnear, tfar, t, prim, u, v, cos, count,
+                        more)  # fmt: skip
+
+
+@njit(nogil=True, cache=True)
+def _parity_chunk(scene, filter_address, words, first, stop, origins, directions, capacity,
+                  edge_band, graze, odd, clear):  # fmt: skip
+    rayhit, args, context = _prepare_scratch(words, filter_address)
+    hits = np.empty((4, capacity), np.float32)
+    prims = np.empty(capacity, np.int32)
+    t, u, v, cos = hits[0], hits[1], hits[2], hits[3]
+    buffers = np.empty(5, np.uint64)
+    buffers[0] = t.ctypes.data
+    buffers[1] = prims.ctypes.data
+    buffers[2] = u.ctypes.data
+    buffers[3] = v.ctypes.data
+    buffers[4] = cos.ctypes.data
+    for i in range(first, stop):
+        found, dropped = _trace_one(scene, words, rayhit, args, context, origins[i],
+                                    directions[i], 0.0, np.inf, buffers, capacity)  # fmt: skip
+        ok = not dropped
+        for k in range(found):
+            band = edge_band[prims[k]]
+            if min(u[k], v[k], 1.0 - u[k] - v[k]) <= band or cos[k] <= graze:
+                ok = False
+        odd[i] = (found & 1) == 1
+        clear[i] = ok
+
+
+@njit(parallel=True, nogil=True, cache=True)
+def _crossing_parity(scene, filter_address, origins, directions, capacity, edge_band, graze,
+                     odd, clear):  # fmt: skip
+    n = origins.shape[0]
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
+    for c in prange(n_chunks):
+        _parity_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
+                      origins, directions, capacity, edge_band, graze, odd, clear)  # fmt: skip
+
+
+def new_hit_buffers(n: int, capacity: int) -> tuple[np.ndarray, ...]:
+    """Empty (t, prim, u, v, cos, count, more) arrays for ``all_hits`` of n rays."""
+    shape = (n, capacity)
+    return (np.empty(shape, np.float32), np.empty(shape, np.int32), np.empty(shape, np.float32),
+            np.empty(shape, np.float32), np.empty(shape, np.float32), np.empty(n, np.int64),
+            np.empty(n, bool))  # fmt: skip
+
+
+def all_hits(
+    scene: int,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    tnear: np.ndarray,
+    tfar: np.ndarray,
+    capacity: int,
+    threads: int,
+    out: tuple[np.ndarray, ...] | None = None,
+) -> tuple[np.ndarray, ...]:
+    """Up to ``capacity`` nearest hits of each ray, each primitive once, sorted by (t, prim).
+
+    ``scene`` is a committed Embree scene built with ``SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS``
+    (``BVH(filters=True)``); ``origins``, ``directions`` (n, 3) float32, ``tnear``, ``tfar``
+    (n,) float32 (hits with tnear <= t <= tfar). Returns ``t`` (n, capacity) float32, ``prim``
+    (n, capacity) int32, ``u``, ``v`` (n, capacity) float32 barycentrics (weights of the
+    triangle's second and third vertex), ``cos`` (n, capacity) float32 |cos| of the angle
+    between ray and geometric normal, ``count`` (n,) int64 hits kept (row entries past it are
+    undefined), ``more`` (n,) bool: the ray has more hits than ``capacity``. ``out``: arrays of
+    at least those shapes to fill (their leading n rows are returned), so that a caller tracing
+    block after block reuses memory that is already mapped.
+    """
+    n = len(origins)
+    if out is None or len(out[0]) < n or out[0].shape[1] != capacity:
+        out = new_hit_buffers(n, capacity)
+    t, prim, u, v, cos, count, more = (array[:n] for array in out)
+    if n:
+        numba.set_num_threads(threads)
+        _all_hits(scene, FILTER_ADDRESS, origins, directions, tnear, tfar, t, prim, u, v, cos,
+                  count, more)  # fmt: skip
+    return t, prim, u, v, cos, count, more
+
+
+def crossing_parity(
+    scene: int,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    edge_band: np.ndarray,
+    graze: float,
+    threads: int,
+    capacity: int = 256,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Parity of each ray's surface crossings in ``t >= 0``, and whether it can be trusted.
+
+    ``origins``, ``directions`` (n, 3) float32, ``edge_band`` (primitives,) float32. Returns
+    ``odd`` (n,) bool (an odd number of distinct triangles hit) and ``clear`` (n,) bool: no hit
+    lies within ``edge_band[prim]`` (barycentric) of its triangle's edge, none meets its
+    triangle at |cos| <= ``graze``, and at most ``capacity`` triangles were hit — where any of
+    that fails, the count may be off by an edge or vertex counted twice or not at all, and the
+    caller should ask another direction.
+    """
+    n = len(origins)
+    odd = np.zeros(n, bool)
+    clear = np.zeros(n, bool)
+    if n:
+        numba.set_num_threads(threads)
+        _crossing_parity(scene, FILTER_ADDRESS, origins, directions, capacity,
+                         np.ascontiguousarray(edge_band, np.float32), np.float32(graze), odd,
+                         clear)  # fmt: skip
+    return odd, clear
+
+
+@njit(nogil=True, cache=True)  # serial: a few ns a ray, and no threading layer to share
+def _classify_nearest(t, prim, normal, u, v, directions, magnitude, altitude, band_ulps, graze,
+                      near, near_factor, suspect):  # fmt: skip
+    eps = np.float64(np.finfo(np.float32).eps)
+    for i in range(t.shape[0]):
+        p = prim[i]
+        if p < 0:
+            suspect[i] = False
+            continue
+        gx, gy, gz = np.float64(normal[i, 0]), np.float64(normal[i, 1]), np.float64(normal[i, 2])
+        dx, dy, dz = (np.float64(directions[i, 0]), np.float64(directions[i, 1]),
+                      np.float64(directions[i, 2]))  # fmt: skip
+        norms = math.sqrt((gx * gx + gy * gy + gz * gz) * (dx * dx + dy * dy + dz * dz))
+        cos = abs(gx * dx + gy * dy + gz * dz) / norms if norms > 0 else 0.0
+        ui, vi = np.float64(u[i]), np.float64(v[i])
+        edge = min(ui, vi, 1.0 - ui - vi)
+        band = band_ulps * eps * magnitude[i] / altitude[p] if altitude[p] > 0 else np.inf
+        suspect[i] = edge <= band or cos <= graze or t[i] <= near_factor * near[i]
+
+
+def classify_nearest(
+    hits_t: np.ndarray,
+    prim: np.ndarray,
+    normal: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    directions: np.ndarray,
+    magnitude: np.ndarray,
+    altitude: np.ndarray,
+    band_ulps: float,
+    graze: float,
+    near: np.ndarray,
+    near_factor: float,
+) -> np.ndarray:
+    """(n,) bool: which nearest hits (``BVH.intersect``'s t, prim_id, normal, u, v, all (n,) or
+    (n, 3)) Embree's float32 may have got wrong: within ``band_ulps`` float32 ulps of
+    ``magnitude`` (n,) float64 of an edge, in barycentric terms (``altitude`` (primitives,)
+    float64: each triangle's smallest altitude), at |cos| <= ``graze`` to the normal, or at
+    t <= ``near_factor`` · ``near`` (n,) float64. Misses are not suspect. ``directions`` (n, 3)
+    float32 as traced."""
+    suspect = np.zeros(len(hits_t), bool)
+    if len(hits_t):
+        _classify_nearest(hits_t, prim, normal, u, v, directions, magnitude,
+                          np.ascontiguousarray(altitude, np.float64), float(band_ulps),
+                          float(graze), near, float(near_factor), suspect)  # fmt: skip
+    return suspect

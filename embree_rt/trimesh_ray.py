@@ -1,0 +1,543 @@
+"""embree_rt's BVH behind trimesh's ray API: ``mesh.ray = RayMeshIntersector(mesh)``.
+
+The same methods, arguments, return values, dtypes and hit order as
+``trimesh.ray.ray_pyembree.RayMeshIntersector``, traced on all cores, with multiple hits that
+are exact at any scale. ``install()`` makes every new ``trimesh.Trimesh`` use it.
+
+How each hit is found exactly once: every ray is traced *once* with an Embree intersection
+filter that records every triangle Embree's watertight test accepts and rejects it, so the
+traversal continues to the end of the ray (``embree_rt.embree.multihit``). There is no second
+query from the last hit, so no offset to choose and no distance rule that could drop or repeat
+a hit: a triangle is reported at most once per ray whatever the scale, and the watertight
+(``RTC_SCENE_FLAG_ROBUST``) test lets no ray slip between two triangles sharing an edge.
+
+Conventions, those of trimesh's pure-NumPy ``ray_triangle``:
+
+- A ray through an edge or a vertex hits every triangle there that ``ray_triangle``'s float64
+  test accepts (barycentrics within ``tol.zero`` of the triangle): ``intersects_id`` returns each
+  of them, as ``ray_triangle`` does. Embree's float32 test may accept one or both near an edge,
+  so every Embree hit within float32 reach of an edge (``_edge_band``), or grazing its triangle,
+  is decided again in float64 against the triangles around it (those sharing a vertex position
+  with it) by ``ray_triangle``'s own formulas. Triangles meeting only at T-junctions (no
+  shared vertex position) are not looked up.
+- A ray meeting a triangle at |cos| <= 1e-5 (in its plane, to float64 precision) does not hit
+  it, as ``trimesh.intersections.planes_lines`` rules.
+- ``intersects_location`` (and ``intersects_id(..., return_locations=True)``) reports each
+  point once: hits of one ray at the same point on triangles sharing a vertex count once (the
+  lowest face index), as ``ray_triangle`` merges equal locations — but scale-free, where
+  ``ray_triangle`` rounds locations to 1e-8 absolute (so it merges edge hits at unit scale and
+  not at 1e8).
+- Where ``ray_triangle`` keeps hits up to 1e-6 (absolute) *behind* the origin, a ray here hits
+  only what lies ahead of its origin by more than float32 resolution (``tnear``, see
+  ``intersects_id``): a ray starting on a surface does not hit that surface again. Pass
+  ``tnear=0.0`` to include hits at the origin.
+- ``max_hits`` keeps each ray's nearest hits (``ray_pyembree`` keeps the first it found).
+
+Hits come in ``ray_pyembree``'s order: every ray's first hit (rays ascending), then every
+ray's second hit, and so on. Distances and locations are float64, from the ray's origin and
+the hit triangle's plane, as trimesh computes them.
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+
+import numpy as np
+import trimesh
+from trimesh import caching, util
+from trimesh.constants import tol
+
+from embree_rt.embree import BVH, multihit
+
+# trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
+# near an edge or along a face to trust their parity.
+_CONTAINS_DIRECTIONS = np.array([
+    [0.4395064455, 0.617598629942, 0.652231566745],
+    [-0.5773502691896258, 0.7071067811865476, -0.4082482904638631],
+    [0.8017837257372732, -0.2672612419124244, -0.5345224838248488],
+])  # fmt: skip
+# trimesh.intersections.planes_lines: a ray and a plane with |cos| at most this do not meet.
+_PARALLEL_COS = 1e-5
+# Hits at a smaller |cos| (float32) are decided again in float64: near _PARALLEL_COS, Embree's
+# float32 cosine may fall on either side.
+_GRAZE_COS = 1e-3
+_EPS32 = float(np.finfo(np.float32).eps)
+# Embree's float32 barycentrics and distances err by a few ulps of the largest coordinate
+# involved; these multiples leave a wide margin.
+_BAND_ULPS = 8.0
+_TNEAR_ULPS = 16.0
+# Rays traced per call, and rays x room for hits: bounded memory, reused from block to block.
+_BLOCK_RAYS = 1 << 16
+_FIRST_ROOM = 8
+_BLOCK_HITS = 1 << 21
+
+
+class _LocalScene:
+    """The mesh in Embree: vertices shifted to the bounding box's corner and scaled by ``scale``
+    (float64, then rounded to float32 once), the BVH, and what the float64 refinement needs."""
+
+    def __init__(self, mesh: trimesh.Trimesh, scale: float) -> None:
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        self.origin = vertices.min(axis=0) if len(vertices) else np.zeros(3)
+        self.scale = float(scale)
+        local = ((vertices - self.origin) * self.scale).astype(np.float32)
+        self.extent = float(np.abs(local).max()) if len(local) else 0.0
+        # single rays: trimesh's queries are rarely coherent, and packets of incoherent rays
+        # traced 10-15% slower here
+        self.bvh = BVH(lanes=1, robust=True, filters=True)
+        self.bvh.add_triangles(local, faces)
+        self.bvh.commit()
+        self.triangles = np.asarray(mesh.triangles, dtype=np.float64)
+        self.normals = np.asarray(mesh.face_normals, dtype=np.float64)
+        self.faces = faces
+        self.vertices = vertices
+        self.face_count = len(faces)
+        self.min_altitude = _min_altitudes(self.triangles, np.asarray(mesh.area_faces)) * scale
+        self._fans: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def to_local(self, points: np.ndarray) -> np.ndarray:
+        """(n, 3) float64 world points → (n, 3) float32 in the BVH's frame."""
+        return ((points - self.origin) * self.scale).astype(np.float32)
+
+    def fans(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Faces around each vertex position, CSR: (canonical faces (k, 3), starts (m + 1,),
+        faces (3k,)); vertices at the same position count as one (unmerged STL meshes)."""
+        if self._fans is None:
+            _, position = np.unique(self.vertices, axis=0, return_inverse=True)
+            canonical = position.reshape(-1)[self.faces]
+            flat = canonical.reshape(-1)
+            order = np.argsort(flat, kind="stable")
+            starts = np.searchsorted(flat[order], np.arange(flat.max() + 2 if len(flat) else 1))
+            self._fans = (canonical, starts, order // 3)
+        return self._fans
+
+
+def _min_altitudes(triangles: np.ndarray, areas: np.ndarray) -> np.ndarray:
+    """(k,) smallest altitude of each of (k, 3, 3) triangles of ``areas`` (k,) (0 for
+    degenerate ones): twice the area over the longest side."""
+    longest = np.zeros(len(triangles))
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        side = triangles[:, b] - triangles[:, a]
+        longest = np.maximum(longest, np.sqrt(np.einsum("ij,ij->i", side, side)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(longest > 0, 2 * areas / np.where(longest > 0, longest, 1), 0.0)
+
+
+def _edge_band(scene: _LocalScene, faces: np.ndarray, magnitude: np.ndarray) -> np.ndarray:
+    """Barycentric distance from an edge within which Embree's float32 answer for ``faces``
+    (k,) may be wrong, for rays whose coordinates reach ``magnitude`` (k,) in the local frame."""
+    with np.errstate(divide="ignore"):
+        return _BAND_ULPS * _EPS32 * magnitude / scene.min_altitude[faces]
+
+
+def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
+    origins = np.array(ray_origins, dtype=np.float64)
+    directions = np.array(ray_directions, dtype=np.float64)
+    if origins.shape != directions.shape:
+        raise ValueError("Ray origin and direction don't match!")
+    if origins.ndim != 2 or (len(origins) and origins.shape[1] != 3):
+        raise ValueError(f"rays: expected shape (n, 3), got {origins.shape}")
+    origins = origins.reshape(-1, 3)
+    return origins, util.unitize(directions.reshape(-1, 3))
+
+
+def _plane_distance(scene, origins, directions, rays, tris):
+    """float64 distance along each ray to its triangle's plane, and |cos| of the angle between
+    ray and normal, trimesh's planes_lines formula."""
+    normals = scene.normals[tris]
+    toward = np.einsum("ij,ij->i", scene.triangles[tris, 0] - origins[rays], normals)
+    along = np.einsum("ij,ij->i", directions[rays], normals)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        distance = toward / along
+    return distance, np.abs(along)
+
+
+def _float64_hits(scene, origins, directions, rays, tris):
+    """ray_triangle's test of rays (k,) against triangles (k,): (k,) bool hit and (k,) float64
+    distance (``trimesh.triangles.points_to_barycentric`` within ``tol.zero``)."""
+    distance, cos = _plane_distance(scene, origins, directions, rays, tris)
+    meets = cos > _PARALLEL_COS
+    hit = np.zeros(len(rays), bool)
+    if meets.any():
+        rows = np.flatnonzero(meets)
+        points = origins[rays[rows]] + directions[rays[rows]] * distance[rows, None]
+        barycentric = trimesh.triangles.points_to_barycentric(scene.triangles[tris[rows]], points)
+        hit[rows] = ((barycentric > -tol.zero) & (barycentric < 1 + tol.zero)).all(axis=1)
+    return hit, distance
+
+
+def _neighbourhood(scene, rays, tris):
+    """(ray, triangle) pairs: each suspect hit's triangle and every triangle sharing a vertex
+    position with it, unique."""
+    canonical, starts, fan_faces = scene.fans()
+    corners = canonical[tris].reshape(-1)
+    lengths = starts[corners + 1] - starts[corners]
+    owner = np.repeat(np.repeat(rays, 3), lengths)
+    offsets = np.arange(lengths.sum()) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    neighbours = fan_faces[np.repeat(starts[corners], lengths) + offsets]
+    return _unique_pairs(owner, neighbours, scene.face_count)
+
+
+def _unique_pairs(rays: np.ndarray, tris: np.ndarray, face_count: int):
+    """(ray, triangle) pairs (k,) int64, each once, sorted by ray then triangle."""
+    keys = np.unique(rays * max(face_count, 1) + tris)
+    return keys // max(face_count, 1), keys % max(face_count, 1)
+
+
+class RayMeshIntersector:
+    """Ray queries on a ``trimesh.Trimesh`` through embree_rt's BVH (see the module docstring).
+
+    ``scale_to_box``: as trimesh's, move and scale the mesh to a box about 100 units wide before
+    rounding it to Embree's float32, so huge and tiny meshes keep their precision.
+    """
+
+    def __init__(self, geometry: trimesh.Trimesh, scale_to_box: bool = True) -> None:
+        self.mesh = geometry
+        self._scale_to_box = scale_to_box
+        self._cache = caching.Cache(id_function=self.mesh.__hash__)
+
+    @property
+    def _scale(self) -> float:
+        if self._scale_to_box:
+            return 100.0 / self.mesh.scale
+        return 1.0
+
+    @caching.cache_decorator
+    def _scene(self) -> _LocalScene:
+        return _LocalScene(self.mesh, self._scale)
+
+    # -- queries ------------------------------------------------------------------------------
+
+    @staticmethod
+    def _resolve_tnear(scene, local_origins, tnear):
+        """(near (n,) float64 world distance, inclusive, magnitude (n,) float64): hits count
+        at distance > near (>= when ``tnear`` is given, ``inclusive``); by default near is a
+        few float32 ulps of ``magnitude``, each ray's largest local coordinate (its origin's or
+        the mesh's)."""
+        magnitude = np.maximum(np.abs(local_origins).max(axis=1), scene.extent).astype(np.float64)
+        if tnear is None:
+            return _TNEAR_ULPS * _EPS32 * magnitude / scene.scale, False, magnitude
+        near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(local_origins),))
+        if not np.isfinite(near).all() or (near < 0).any():
+            raise ValueError("tnear: must be finite and >= 0")
+        return near, True, magnitude
+
+    def _hits(self, origins, directions, max_hits, tnear, one_per_point=False):
+        """Every ray's nearest ``max_hits`` hits: (rays, triangles, distances, ranks) (k,),
+        sorted by ray, then distance, then triangle; with ``one_per_point``, the hits of a ray
+        at one point (an edge, a vertex) as one, the lowest-index triangle there."""
+        scene = self._scene
+        n = len(origins)
+        local_origins = scene.to_local(origins)
+        local_directions = directions.astype(np.float32)
+        near, inclusive, magnitude = self._resolve_tnear(scene, local_origins, tnear)
+        capacity = max(1, int(max_hits))
+        # room for hits the float64 rules below drop (at the origin, along a face) and for edge
+        # pairs, so that the nearest `capacity` survive
+        room = capacity + 4
+        # Most rays hit a few triangles: trace with a little room first and again, with all of
+        # it, only the rays that overflowed (so the hit arrays stay small).
+        first_room = min(room, _FIRST_ROOM)
+        block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
+        buffers = None
+        clean_rays, clean_tris, messy_rays, messy_tris = [], [], [], []
+        for first in range(0, n, block):
+            rows = slice(first, min(n, first + block))
+            # Embree from the local frame's tnear (inclusive, a little short of ours): which
+            # hits count as at the origin is decided below in float64.
+            block_origins, block_directions = local_origins[rows], local_directions[rows]
+            block_near = (near[rows] * scene.scale * 0.5).astype(np.float32)
+            result = scene.bvh.all_hits(block_origins, block_directions, block_near, np.inf,
+                                        first_room, out=buffers)  # fmt: skip
+            buffers = buffers or result
+            ray_of, tris, u, v, cos = _compact(result)
+            overflow = np.flatnonzero(result[6]) if room > first_room else np.zeros(0, int)
+            if len(overflow):
+                retraced = scene.bvh.all_hits(block_origins[overflow], block_directions[overflow],
+                                              block_near[overflow], np.inf, room)  # fmt: skip
+                again = _compact(retraced)
+                kept = ~result[6][ray_of]
+                merged = [np.concatenate([x[kept], y]) for x, y in
+                          zip((ray_of, tris, u, v, cos), (overflow[again[0]], *again[1:]),
+                              strict=True)]  # fmt: skip
+                order = np.argsort(merged[0], kind="stable")
+                ray_of, tris, u, v, cos = (x[order] for x in merged)
+            ray_of += first
+            band = _edge_band(scene, tris, magnitude[ray_of])
+            suspect = (np.minimum(np.minimum(u, v), 1 - u - v) <= band) | (cos <= _GRAZE_COS)
+            if not suspect.any():
+                clean_rays.append(ray_of)
+                clean_tris.append(tris)
+                continue
+            messy = np.zeros(n, bool)
+            messy[ray_of[suspect]] = True
+            in_messy = messy[ray_of]
+            clean_rays.append(ray_of[~in_messy])
+            clean_tris.append(tris[~in_messy])
+            messy_rays.append(ray_of[in_messy & ~suspect])
+            messy_tris.append(tris[in_messy & ~suspect])
+            # Hits near an edge, a vertex or along a face: decided in float64 as ray_triangle
+            # decides them, against all the triangles around them.
+            pair_rays, pair_tris = _neighbourhood(scene, ray_of[suspect], tris[suspect])
+            hit, _ = _float64_hits(scene, origins, directions, pair_rays, pair_tris)
+            messy_rays.append(pair_rays[hit])
+            messy_tris.append(pair_tris[hit])
+        parts = []
+        for ray_parts, tri_parts, settled in ((clean_rays, clean_tris, True),
+                                              (messy_rays, messy_tris, False)):  # fmt: skip
+            rays = np.concatenate(ray_parts) if ray_parts else np.zeros(0, np.int64)
+            tris = np.concatenate(tri_parts) if tri_parts else np.zeros(0, np.int64)
+            if not settled:
+                rays, tris = _unique_pairs(rays, tris, scene.face_count)
+            distance, cos = _plane_distance(scene, origins, directions, rays, tris)
+            ahead = (distance >= near[rays]) if inclusive else (distance > near[rays])
+            keep = ahead & (cos > _PARALLEL_COS)
+            rays, tris, distance = rays[keep], tris[keep], distance[keep]
+            backwards = (rays[1:] == rays[:-1]) & (distance[1:] < distance[:-1])
+            if not settled or backwards.any():  # float64 may order what float32 tied
+                order = np.lexsort((tris, distance, rays))
+                rays, tris, distance = rays[order], tris[order], distance[order]
+            parts.append((rays, tris, distance))
+        rays, tris, distance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
+        if len(parts[1][0]):
+            order = np.argsort(rays, kind="stable")
+            rays, tris, distance = rays[order], tris[order], distance[order]
+        if one_per_point:
+            keep = _one_per_point(scene, rays, tris, distance)
+            rays, tris, distance = rays[keep], tris[keep], distance[keep]
+        ranks = _ranks(rays)
+        within = ranks < capacity
+        return rays[within], tris[within], distance[within], ranks[within]
+
+    def _first_hits(self, origins, directions, tnear, need_distance=True):
+        """Every ray's nearest hit: (rays, triangles, distances, ranks) (k,) by ray. Embree's
+        nearest-hit query (pruned traversal) answers rays whose hit lies clear of edges, of
+        grazing and of the origin (``multihit.classify_nearest``); the others go through
+        ``_hits``."""
+        scene = self._scene
+        local_origins = scene.to_local(origins)
+        local_directions = directions.astype(np.float32)
+        near, _, magnitude = self._resolve_tnear(scene, local_origins, tnear)
+        near_local = near * scene.scale
+        hits = scene.bvh.intersect(local_origins, local_directions,
+                                   (near_local * 0.5).astype(np.float32), np.inf)  # fmt: skip
+        flagged = multihit.classify_nearest(
+            hits.t, hits.prim_id, hits.normal, hits.u, hits.v, local_directions,
+            magnitude, scene.min_altitude, _BAND_ULPS, _GRAZE_COS,
+            near_local, 4.0,
+        )  # fmt: skip
+        rows = np.flatnonzero(hits.prim_id >= 0)
+        tris = hits.prim_id[rows].astype(np.int64)
+        suspect = flagged[rows]
+        rays, tris = rows[~suspect], tris[~suspect]
+        distance = (_plane_distance(scene, origins, directions, rays, tris)[0] if need_distance
+                    else np.zeros(len(rays)))  # fmt: skip
+        if suspect.any():
+            again = rows[suspect]
+            near_again = near[again] if tnear is not None else None
+            more = self._hits(origins[again], directions[again], 1, near_again, True)
+            rays = np.concatenate([rays, again[more[0]]])
+            tris = np.concatenate([tris, more[1]])
+            distance = np.concatenate([distance, more[2]])
+            order = np.argsort(rays, kind="stable")
+            rays, tris, distance = rays[order], tris[order], distance[order]
+        return rays, tris, distance, np.zeros(len(rays), np.int64)
+
+    def intersects_id(
+        self,
+        ray_origins,
+        ray_directions,
+        multiple_hits: bool = True,
+        max_hits: int = 100,
+        return_locations: bool = False,
+        *,
+        tnear=None,
+    ):
+        """Triangles hit by rays: ``(index_tri, index_ray)`` (m,) int64, and with
+        ``return_locations`` also ``locations`` (m, 3) float64.
+
+        ``ray_origins``, ``ray_directions`` (n, 3) float (directions need not be unit);
+        ``multiple_hits``: every hit along each ray (up to its nearest ``max_hits``; 100 by
+        default, as in trimesh 5's embree backend) or only the first; ``tnear`` (scalar or
+        (n,), world units): report hits at distance >= tnear; by default hits beyond a few
+        float32 ulps of the origin, so a ray starting on a surface does not hit it. Order: all
+        first hits by ray, then all second hits, ... (as trimesh's embree backend). With
+        ``return_locations`` a point where a ray meets several triangles (an edge, a vertex) is
+        reported once.
+        """
+        origins, directions = _as_rays(ray_origins, ray_directions)
+        if multiple_hits:
+            rays, tris, distance, ranks = self._hits(origins, directions, max_hits, tnear,
+                                                     one_per_point=return_locations)
+        else:
+            rays, tris, distance, ranks = self._first_hits(origins, directions, tnear,
+                                                           need_distance=return_locations)
+        order = np.argsort(ranks, kind="stable")  # rays are sorted: depth by depth, by ray
+        rays, tris, distance = rays[order], tris[order], distance[order]
+        if return_locations:
+            locations = origins[rays] + directions[rays] * distance[:, None]
+            return tris, rays, locations
+        return tris, rays
+
+    def intersects_location(self, ray_origins, ray_directions, multiple_hits: bool = True,
+                            *, tnear=None):  # fmt: skip
+        """Where rays hit: ``(locations (m, 3) float64, index_ray (m,) int64, index_tri (m,)
+        int64)``, each point once (see ``intersects_id``)."""
+        index_tri, index_ray, locations = self.intersects_id(
+            ray_origins, ray_directions, multiple_hits=multiple_hits, return_locations=True,
+            tnear=tnear,
+        )  # fmt: skip
+        return locations, index_ray, index_tri
+
+    def intersects_first(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
+        """(n,) int32 (as trimesh's embree backend): the first triangle each ray hits, -1 for
+        none (on an edge, the lowest index of the triangles there)."""
+        index_tri, index_ray = self.intersects_id(
+            ray_origins, ray_directions, multiple_hits=False, tnear=tnear
+        )
+        count = len(np.asarray(ray_origins).reshape(-1, 3))
+        first = np.full(count, -1, dtype=np.int32)
+        first[index_ray] = index_tri
+        return first
+
+    def intersects_any(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
+        """(n,) bool: whether each ray hits the mesh."""
+        return self.intersects_first(ray_origins, ray_directions, tnear=tnear) != -1
+
+    def contains_points(self, points) -> np.ndarray:
+        """(n,) bool: which of ``points`` (n, 3) lie inside the (closed) mesh.
+
+        The parity of the exact count of triangles a ray crosses, on one ray a point; a ray that
+        passes within float32 reach of an edge or along a face (whose count could be off by one)
+        is cast again in another direction, up to three, and a point none of whose rays is
+        clear takes the majority of the three parities. Points outside the bounding box are
+        outside; on the surface, either answer may come.
+        """
+        points = np.asanyarray(points, dtype=np.float64)
+        if not util.is_shape(points, (-1, 3)):
+            raise ValueError("points must be (n,3)")
+        contains = np.zeros(len(points), dtype=bool)
+        if self.mesh.bounds is None:
+            return contains
+        candidates = np.flatnonzero(trimesh.bounds.contains(self.mesh.bounds, points))
+        if not len(candidates):
+            return contains
+        scene = self._scene
+        local = scene.to_local(points[candidates])
+        band = _edge_band(scene, np.arange(scene.face_count), np.full(scene.face_count,
+                                                                      2 * scene.extent))
+        votes = np.zeros(len(candidates), np.int64)
+        pending = np.arange(len(candidates))
+        for k, direction in enumerate(_CONTAINS_DIRECTIONS):
+            directions = np.tile(direction.astype(np.float32), (len(pending), 1))
+            odd, clear = scene.bvh.crossing_parity(local[pending], directions, band,
+                                                   _GRAZE_COS)  # fmt: skip
+            last = k == len(_CONTAINS_DIRECTIONS) - 1
+            votes[pending] += odd
+            settled = clear | last
+            answer = odd if not last else np.where(clear, odd, votes[pending] >= 2)
+            contains[candidates[pending[settled]]] = answer[settled]
+            pending = pending[~settled]
+            if not len(pending):
+                break
+        return contains
+
+    # -- pickling and copying, as trimesh's ------------------------------------------------------
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state.pop("_cache", None)  # the BVH is rebuilt on first use
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._cache = caching.Cache(id_function=self.mesh.__hash__)
+
+    def __deepcopy__(self, *args) -> RayMeshIntersector:
+        return self.__copy__()
+
+    def __copy__(self, *args) -> RayMeshIntersector:
+        return RayMeshIntersector(geometry=self.mesh, scale_to_box=self._scale_to_box)
+
+
+def _compact(result: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """``BVH.all_hits``' (n, room) arrays as (k,) hits by ray, then in the kernel's (t, prim)
+    order: (ray int64, triangle int64, u, v, cos float32)."""
+    _t, prim, u, v, cos, count, _more = result
+    ray_of, slot = np.nonzero(np.arange(prim.shape[1])[None, :] < count[:, None])
+    return ray_of, prim[ray_of, slot].astype(np.int64), u[ray_of, slot], v[ray_of, slot], cos[
+        ray_of, slot]
+
+
+def _ranks(rays: np.ndarray) -> np.ndarray:
+    """(k,) position of each hit within its ray, for hits sorted by ray."""
+    if not len(rays):
+        return np.zeros(0, np.int64)
+    starts = np.flatnonzero(np.r_[True, rays[1:] != rays[:-1]])
+    lengths = np.diff(np.r_[starts, len(rays)])
+    return np.arange(len(rays)) - np.repeat(starts, lengths)
+
+
+def _one_per_point(scene: _LocalScene, rays, tris, distance) -> np.ndarray:
+    """(k,) bool keeping one hit per point, for hits sorted by ray, then distance: runs of
+    consecutive hits of a ray on triangles sharing a vertex position, at distances equal to
+    within float64 rounding of the mesh's size, are one point; the lowest triangle index of a
+    run stands for it."""
+    keep = np.ones(len(rays), bool)
+    if len(rays) < 2:
+        return keep
+    size = scene.extent / scene.scale
+    close = np.abs(distance[1:] - distance[:-1]) <= 1e3 * np.finfo(np.float64).eps * (
+        np.abs(distance[1:]) + size
+    )
+    pairs = np.flatnonzero(close & (rays[1:] == rays[:-1]))
+    if not len(pairs):
+        return keep
+    canonical = scene.fans()[0]
+    a, b = canonical[tris[pairs]], canonical[tris[pairs + 1]]
+    joined = pairs[(a[:, :, None] == b[:, None, :]).any(axis=(1, 2))] + 1
+    if not len(joined):
+        return keep
+    run = np.cumsum(np.r_[True, np.isin(np.arange(1, len(rays)), joined, invert=True)]) - 1
+    in_runs = np.flatnonzero(np.isin(run, run[joined]))
+    keep[in_runs] = False
+    order = in_runs[np.lexsort((tris[in_runs], run[in_runs]))]
+    first_of_run = np.r_[True, run[order][1:] != run[order][:-1]]
+    keep[order[first_of_run]] = True
+    return keep
+
+
+# -- opting in for every new Trimesh --------------------------------------------------------------
+
+_original_init = None
+
+
+def install() -> None:
+    """Make every ``trimesh.Trimesh`` created from now on use this intersector (where trimesh
+    would have used its embree backend: ``use_embree=True``, its default). ``uninstall()``
+    undoes it."""
+    global _original_init
+    if _original_init is not None:
+        return
+    original = trimesh.Trimesh.__init__
+    signature = inspect.signature(original)
+
+    @functools.wraps(original)
+    def __init__(self, *args, **kwargs):  # noqa: N807
+        original(self, *args, **kwargs)
+        bound = signature.bind(self, *args, **kwargs)
+        if bound.arguments.get("use_embree", True):
+            self.ray = RayMeshIntersector(self)
+
+    _original_init = original
+    trimesh.Trimesh.__init__ = __init__
+
+
+def uninstall() -> None:
+    """Undo ``install()``: new meshes get trimesh's own ray backend again."""
+    global _original_init
+    if _original_init is not None:
+        trimesh.Trimesh.__init__ = _original_init
+        _original_init = None

@@ -1,0 +1,363 @@
+"""embree_rt.trimesh_ray against trimesh's pure-NumPy ray_triangle (float64, every candidate
+triangle tested) and against closed-form hit counts, at scales from 1e-4 to 1e8."""
+
+from __future__ import annotations
+
+import copy
+import pickle
+
+import numpy as np
+import pytest
+import trimesh
+from trimesh.constants import tol
+from trimesh.ray import ray_pyembree, ray_triangle
+
+from embree_rt import trimesh_ray
+from embree_rt.trimesh_ray import RayMeshIntersector
+
+pytest.importorskip("rtree")  # ray_triangle's broad phase; in the project's test extras
+
+
+def _meshes() -> dict[str, trimesh.Trimesh]:
+    return {
+        "icosphere": trimesh.creation.icosphere(subdivisions=3),
+        "box": trimesh.creation.box(),
+        "torus": trimesh.creation.torus(1.0, 0.3, major_sections=24, minor_sections=12),
+        "capsule": trimesh.creation.capsule(height=1.0, radius=0.4),
+    }
+
+
+def _placed(mesh: trimesh.Trimesh, scale: float, offset: float) -> trimesh.Trimesh:
+    placed = mesh.copy()
+    placed.apply_scale(scale)
+    placed.apply_translation([offset, -0.5 * offset, 0.25 * offset])
+    return placed
+
+
+def _outside_rays(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rays from a sphere three times the mesh's size toward random points in its box: no
+    origin near a surface, where ray_triangle's absolute 1e-6 'behind the origin' rule differs."""
+    rng = np.random.default_rng(seed)
+    center, size = mesh.bounds.mean(axis=0), mesh.scale
+    start = rng.normal(size=(n, 3))
+    origins = center + 3 * size * start / np.linalg.norm(start, axis=1)[:, None]
+    targets = rng.uniform(mesh.bounds[0], mesh.bounds[1], (n, 3))
+    return origins, targets - origins
+
+
+def _pairs(index_tri, index_ray) -> set[tuple[int, int]]:
+    return set(zip(np.asarray(index_ray).tolist(), np.asarray(index_tri).tolist(), strict=True))
+
+
+def _narrow_phase(mesh: trimesh.Trimesh, origins, directions):
+    """ray_triangle's own float64 test (trimesh.intersections.planes_lines, then barycentrics
+    within tol.zero) of every ray against every triangle, with no broad phase: ray_triangle's
+    r-tree query pads and clips ray boxes by 1e-5 *absolute*, which drops grazing hits on a
+    mesh 1e-4 across. Returns (index_tri, index_ray, distance) of hits ahead of the origin."""
+    directions = directions / np.linalg.norm(directions, axis=1)[:, None]
+    ray, tri = np.meshgrid(np.arange(len(origins)), np.arange(len(mesh.faces)), indexing="ij")
+    ray, tri = ray.ravel(), tri.ravel()
+    location, valid, distance = trimesh.intersections.planes_lines(
+        mesh.triangles[tri, 0], mesh.face_normals[tri], origins[ray], directions[ray],
+        return_distance=True,
+    )  # fmt: skip
+    ray, tri = ray[valid], tri[valid]
+    barycentric = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], location)
+    hit = ((barycentric > -tol.zero) & (barycentric < 1 + tol.zero)).all(axis=1) & (distance > 0)
+    return tri[hit], ray[hit], distance[hit]
+
+
+SCALES = [(1e-4, 0.0), (1.0, 0.0), (1e8, 0.0), (1.0, 1e6)]
+
+
+@pytest.mark.parametrize("name", list(_meshes()))
+@pytest.mark.parametrize(("scale", "offset"), SCALES)
+def test_every_hit_matches_ray_triangle(name, scale, offset):
+    mesh = _placed(_meshes()[name], scale, offset)
+    origins, directions = _outside_rays(mesh, 300, seed=len(name))
+    ours = RayMeshIntersector(mesh)
+    ref_tri, ref_ray, ref_distance = _narrow_phase(mesh, origins, directions)
+    tri, ray = ours.intersects_id(origins, directions)
+    assert _pairs(tri, ray) == _pairs(ref_tri, ref_ray)
+    assert len(_pairs(tri, ray)) == len(tri)  # no (ray, triangle) twice
+    if scale == 1.0 and offset == 0.0:  # where ray_triangle's absolute tolerances fit
+        reference = ray_triangle.RayMeshIntersector(mesh)
+        assert _pairs(tri, ray) == _pairs(*reference.intersects_id(origins, directions))
+        np.testing.assert_array_equal(ours.intersects_first(origins, directions),
+                                      reference.intersects_first(origins, directions))
+    # first hits: the nearest, the lowest triangle index among equals
+    expected_first = np.full(len(origins), -1)
+    for r in np.unique(ref_ray):
+        rows = np.flatnonzero(ref_ray == r)
+        nearest = rows[ref_distance[rows] == ref_distance[rows].min()]
+        expected_first[r] = ref_tri[nearest].min()
+    first = ours.intersects_first(origins, directions)
+    # a ray whose nearest two triangles lie within float64 rounding may name either
+    differ = np.flatnonzero(first != expected_first)
+    for r in differ:
+        rows = np.flatnonzero(ref_ray == r)
+        assert first[r] in ref_tri[rows]
+        distance = ref_distance[rows][ref_tri[rows] == first[r]][0]
+        assert distance - ref_distance[rows].min() <= 1e-12 * (mesh.scale + abs(offset))
+    assert len(differ) <= 2
+    np.testing.assert_array_equal(ours.intersects_any(origins, directions), first >= 0)
+    locations, loc_ray, loc_tri = ours.intersects_location(origins, directions)
+    assert set(loc_ray.tolist()) == set(ref_ray.tolist())
+    # float64 locations on the triangle's own plane, as trimesh computes them
+    on_plane = np.einsum("ij,ij->i", locations - mesh.triangles[loc_tri, 0],
+                         mesh.face_normals[loc_tri])  # fmt: skip
+    assert np.abs(on_plane).max(initial=0) <= 1e-9 * (mesh.scale + abs(offset))
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1e-2, 1.0, 1e4, 1e8])
+@pytest.mark.parametrize("name", ["icosphere", "box"])
+def test_lines_through_a_convex_solid_hit_it_twice(name, scale):
+    """mikedh/trimesh#457, #1180, #242, #2504: re-cast offsets duplicate or miss hits at small
+    and large scales. A line through a convex solid meets its surface at exactly 2 points."""
+    mesh = _placed(_meshes()[name], scale, 0.0)
+    rng = np.random.default_rng(3)
+    inside = mesh.bounds.mean(axis=0) + 0.3 * mesh.scale * rng.uniform(-1, 1, (500, 3)) / 3
+    directions = rng.normal(size=(500, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    origins = inside - 4 * mesh.scale * directions
+    ours = RayMeshIntersector(mesh)
+    _, index_ray, _ = ours.intersects_location(origins, directions)
+    assert np.bincount(index_ray, minlength=500).tolist() == [2] * 500
+    # and from inside, looking either way: exactly one
+    _, index_ray, _ = ours.intersects_location(np.vstack([inside, inside]),
+                                               np.vstack([directions, -directions]))  # fmt: skip
+    assert np.bincount(index_ray, minlength=1000).tolist() == [1] * 1000
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e8])
+def test_edge_and_vertex_hits_count_as_ray_triangle_counts_them(scale):
+    """Rays straight through edges and vertices: intersects_id reports every triangle there
+    (as ray_triangle does), intersects_location each point once.
+
+    Known limit: Embree's float32 test (robust mode too) has holes about one float32 ulp of the
+    ray's coordinates wide at vertices (measured: a ray 300 units out, aimed at an icosphere
+    vertex, misses all six triangles there within ~3e-5 of it). A ray aimed exactly at a vertex
+    may therefore miss it; the test allows that on at most 2% of the rays, and only at vertices.
+    """
+    box = _placed(trimesh.creation.box(), scale, 0.0)
+    sphere = _placed(trimesh.creation.icosphere(subdivisions=2), scale, 0.0)
+    for mesh in (box, sphere):
+        # through every vertex and every edge midpoint, from outside, along the radius
+        edges = mesh.vertices[mesh.edges_unique].mean(axis=1)
+        targets = np.vstack([mesh.vertices, edges])
+        center = mesh.bounds.mean(axis=0)
+        directions = center - targets
+        directions /= np.linalg.norm(directions, axis=1)[:, None]
+        directions = directions + 1e-3 * np.array([0.31, 0.17, -0.23])  # not through the centre
+        origins = targets - 3 * mesh.scale * directions
+        ours = RayMeshIntersector(mesh)
+        tri, ray = ours.intersects_id(origins, directions)
+        ref_tri, ref_ray, ref_distance = _narrow_phase(mesh, origins, directions)
+        found, expected = _pairs(tri, ray), _pairs(ref_tri, ref_ray)
+        assert found <= expected
+        missed_rays = {r for r, _ in expected - found}
+        assert len(missed_rays) <= 0.02 * len(origins)
+        for r, t in expected - found:  # only ever at a vertex
+            unit = directions[r] / np.linalg.norm(directions[r])
+            distance = ref_distance[(ref_ray == r) & (ref_tri == t)][0]
+            point = origins[r] + unit * distance
+            nearest = np.linalg.norm(mesh.vertices[mesh.faces[t]] - point, axis=1).min()
+            assert nearest <= 1e-6 * mesh.scale
+        if scale == 1.0:
+            reference = ray_triangle.RayMeshIntersector(mesh)
+            assert expected == _pairs(*reference.intersects_id(origins, directions))
+        # every targeted vertex or edge was hit on more than one triangle
+        counts = np.bincount(ray, minlength=len(origins))
+        hit_rays = np.setdiff1d(np.arange(len(origins)), list(missed_rays))
+        assert (counts[hit_rays] >= 3).all()
+        _, loc_ray, _ = ours.intersects_location(origins, directions)
+        points = np.bincount(loc_ray, minlength=len(origins))
+        assert (points[hit_rays] == 2).all()
+        # first hits on an edge or vertex name the lowest-index triangle there (Embree's own
+        # nearest-hit query names any of them: these rays go through the exact path)
+        first = ours.intersects_first(origins, directions)
+        for r in hit_rays:
+            rows = np.flatnonzero(ref_ray == r)
+            nearest = ref_distance[rows] <= ref_distance[rows].min() + 1e-9 * mesh.scale
+            assert first[r] == ref_tri[rows][nearest].min()
+
+
+def test_rays_along_faces_and_edges_count_as_ray_triangle():
+    """Colinear cases: a ray in the plane of a face (it meets that face at |cos| = 0, which
+    trimesh's planes_lines does not count) and a ray along an edge of the box."""
+    box = trimesh.creation.box()  # [-0.5, 0.5]^3
+    origins = np.array([[-2.0, 0.5, 0.3], [-2.0, 0.5, 0.5], [0.3, -2.0, -0.5], [-2.0, 0.2, 0.1]])
+    directions = np.array([[1.0, 0, 0], [1.0, 0, 0], [0, 1.0, 0], [1.0, 0, 0]])
+    ours = RayMeshIntersector(box)
+    reference = ray_triangle.RayMeshIntersector(box)
+    tri, ray = ours.intersects_id(origins, directions)
+    assert _pairs(tri, ray) == _pairs(*reference.intersects_id(origins, directions))
+    assert np.bincount(ray, minlength=4)[3] == 2  # the control ray: in one side, out the other
+    # no face the rays run along is ever reported
+    along = np.abs(np.einsum("ij,ij->i", box.face_normals[tri], directions[ray])) <= 1e-5
+    assert not along.any()
+
+
+def test_rays_starting_on_a_surface_do_not_hit_it_again():
+    mesh = _placed(trimesh.creation.icosphere(subdivisions=3), 1e8, 0.0)
+    ours = RayMeshIntersector(mesh)
+    origins, directions = _outside_rays(mesh, 300, seed=5)
+    locations, index_ray, index_tri = ours.intersects_location(
+        origins, directions, multiple_hits=False
+    )
+    again_tri, again_ray = ours.intersects_id(locations, directions[index_ray])
+    assert not (_pairs(again_tri, again_ray) & _pairs(index_tri, np.arange(len(index_ray))))
+    # the far side of the sphere is what's left: one more hit each (or none on a grazing ray)
+    assert np.bincount(again_ray, minlength=len(index_ray)).max() <= 2
+    assert len(set(again_ray.tolist())) >= 0.95 * len(index_ray)
+    # asked for, with tnear = 0, the surface it starts on may come back
+    near_tri, near_ray = ours.intersects_id(locations, directions[index_ray], tnear=0.0)
+    assert _pairs(again_tri, again_ray) <= _pairs(near_tri, near_ray)
+
+
+def test_max_hits_keeps_the_nearest_hits_in_trimesh_order():
+    """Ten parallel sheets (2 triangles each): 10 hits; max_hits keeps the nearest, and hits
+    come depth by depth (every ray's first, then every ray's second ...), as trimesh's embree
+    backend returns them."""
+    corners = np.array([[-2.0, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]])
+    vertices = np.vstack([corners + np.array([0, 0, z]) for z in range(10)])
+    faces = np.vstack([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * z for z in range(10)])
+    mesh = trimesh.Trimesh(vertices, faces)
+    origins = np.array([[0.1, 0.2, -1.0], [0.3, -0.4, -1.0], [0.5, 0.3, 20.0]])
+    directions = np.array([[0, 0, 1.0], [0.01, 0, 1.0], [0, 0, -1.0]])
+    ours = RayMeshIntersector(mesh)
+    tri, ray, locations = ours.intersects_id(origins, directions, max_hits=4,
+                                             return_locations=True)  # fmt: skip
+    assert ray.tolist() == [0, 1, 2] * 4
+    z = locations[:, 2].reshape(4, 3)
+    assert (np.diff(z[:, :2], axis=0) > 0).all() and (np.diff(z[:, 2]) < 0).all()
+    all_tri, all_ray = ours.intersects_id(origins, directions)
+    assert np.bincount(all_ray).tolist() == [10, 10, 10]
+    assert len(all_tri) == 30
+    assert tri.dtype == np.int64 and ray.dtype == np.int64 and locations.dtype == np.float64
+
+
+def test_order_and_dtypes_match_trimeshs_embree_backend():
+    """Where trimesh's own embree backend is right (unit scale, no edge on the rays), the very
+    same arrays, in the same order and dtypes."""
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    origins, directions = _outside_rays(mesh, 200, seed=11)
+    ours = RayMeshIntersector(mesh)
+    theirs = ray_pyembree.RayMeshIntersector(mesh)
+    for multiple in (True, False):
+        a = ours.intersects_id(origins, directions, multiple_hits=multiple)
+        b = theirs.intersects_id(origins, directions, multiple_hits=multiple)
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+            assert x.dtype == y.dtype
+        a = ours.intersects_location(origins, directions, multiple_hits=multiple)
+        b = theirs.intersects_location(origins, directions, multiple_hits=multiple)
+        np.testing.assert_allclose(a[0], b[0], atol=1e-9)
+        np.testing.assert_array_equal(a[1], b[1])
+        np.testing.assert_array_equal(a[2], b[2])
+    first = ours.intersects_first(origins, directions)
+    np.testing.assert_array_equal(first, theirs.intersects_first(origins, directions))
+    assert first.dtype == theirs.intersects_first(origins, directions).dtype
+    assert ours.intersects_any(origins, directions).dtype == bool
+    with pytest.raises(ValueError, match="don't match"):
+        ours.intersects_id(origins, directions[:-1])
+
+
+def _shell_with_cavity(offset: float, scale: float) -> trimesh.Trimesh:
+    outer = trimesh.creation.box(extents=(2, 2, 2))
+    inner = trimesh.creation.icosphere(subdivisions=2, radius=0.6)
+    inner.invert()
+    mesh = trimesh.util.concatenate([outer, inner])
+    mesh.apply_scale(scale)
+    mesh.apply_translation([offset, offset, -offset])
+    return mesh
+
+
+@pytest.mark.parametrize(("offset", "scale"), [(0.0, 1.0), (1e7, 1.0), (0.0, 1e-4), (0.0, 1e8)])
+def test_contains_points_with_a_cavity(offset, scale):
+    """A box with a spherical cavity: inside iff in the box and out of the sphere (closed form;
+    points within 1e-3 of either surface left out)."""
+    mesh = _shell_with_cavity(offset, scale)
+    center = np.array([offset, offset, -offset])
+    rng = np.random.default_rng(2)
+    local = rng.uniform(-1.3, 1.3, (4000, 3))
+    inner_radius = np.cos(np.pi / 5) * 0.6  # the icosphere lies between this and 0.6
+    radius = np.linalg.norm(local, axis=1)
+    box_gap = np.abs(np.abs(local).max(axis=1) - 1.0)
+    clear = (box_gap > 1e-3) & ((radius < inner_radius - 1e-3) | (radius > 0.6 + 1e-3))
+    local = local[clear]
+    truth = (np.abs(local).max(axis=1) < 1.0) & (np.linalg.norm(local, axis=1) > 0.6)
+    points = center + scale * local
+    ours = RayMeshIntersector(mesh)
+    np.testing.assert_array_equal(ours.contains_points(points), truth)
+
+
+def test_contains_points_on_rays_through_edges_and_vertices():
+    """Points whose first ray passes exactly through vertices and edges of a box (the default
+    direction's line through the point hits a corner): the tie-breaking directions decide."""
+    box = trimesh.creation.box()
+    direction = np.array([0.4395064455, 0.617598629942, 0.652231566745])
+    corners = box.vertices[box.vertices @ direction > 0]
+    edges = box.vertices[box.edges_unique].mean(axis=1)
+    edges = edges[edges @ direction > 0]
+    targets = np.vstack([corners, edges])
+    inside = targets - 0.1 * direction  # just inside, looking at the corner or edge
+    outside = targets + 0.1 * direction
+    keep = np.abs(outside).max(axis=1) < 0.5  # outside points still in the box are not outside
+    points = np.vstack([inside, outside[~keep]])
+    truth = np.abs(points).max(axis=1) < 0.5
+    ours = RayMeshIntersector(box)
+    np.testing.assert_array_equal(ours.contains_points(points), truth)
+    reference = ray_triangle.RayMeshIntersector(box)
+    np.testing.assert_array_equal(reference.contains_points(points), truth)
+
+
+def test_pickle_and_copy_rebuild_lazily():
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    ours = RayMeshIntersector(mesh, scale_to_box=False)
+    origins, directions = _outside_rays(mesh, 50, seed=1)
+    expected = ours.intersects_id(origins, directions)
+    for other in (pickle.loads(pickle.dumps(ours)), copy.copy(ours), copy.deepcopy(ours)):
+        assert "_scene" not in other._cache.cache
+        assert other._scale_to_box is False
+        for x, y in zip(other.intersects_id(origins, directions), expected, strict=True):
+            np.testing.assert_array_equal(x, y)
+    # an edited mesh is traced as it is now
+    mesh.apply_translation([0.5, 0, 0])
+    moved = ours.intersects_id(origins, directions)
+    fresh = RayMeshIntersector(mesh, scale_to_box=False).intersects_id(origins, directions)
+    assert _pairs(*moved) == _pairs(*fresh) != _pairs(*expected)
+
+
+def test_install_makes_new_meshes_use_it():
+    try:
+        trimesh_ray.install()
+        mesh = trimesh.creation.box()
+        assert isinstance(mesh.ray, RayMeshIntersector)
+        assert not isinstance(trimesh.Trimesh(mesh.vertices, mesh.faces, use_embree=False).ray,
+                              RayMeshIntersector)  # fmt: skip
+        assert mesh.contains([[0, 0, 0], [2, 0, 0]]).tolist() == [True, False]
+    finally:
+        trimesh_ray.uninstall()
+    assert not isinstance(trimesh.creation.box().ray, RayMeshIntersector)
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1.0, 1e8])
+@pytest.mark.parametrize("gap", [0.0, 3e-7, 3e-6])
+def test_close_and_coincident_sheets_each_hit_once(scale, gap):
+    """Three sheets ``gap`` apart (relative to the mesh's size; 0: coincident faces) and one
+    more far away: every line through them hits 4 sheets, as ray_triangle counts. (trimesh
+    5.2's embree backend steps past each hit by 1e-6 of the mesh's size and finds 2 here
+    whenever the gap is below that: measured at every scale.)"""
+    corners = np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
+    vertices = np.vstack([corners + np.array([0, 0, k * gap]) for k in range(3)]
+                         + [corners + np.array([0, 0, 1.0])]) * scale  # fmt: skip
+    faces = np.vstack([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * k for k in range(4)])
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    rng = np.random.default_rng(0)
+    origins = np.column_stack([rng.uniform(-0.9, 0.9, (300, 2)), np.full(300, -1.0)]) * scale
+    directions = np.tile([0.01, 0.02, 1.0], (300, 1))
+    ours = RayMeshIntersector(mesh)
+    tri, ray = ours.intersects_id(origins, directions)
+    assert np.bincount(ray, minlength=300).tolist() == [4] * 300
+    assert _pairs(tri, ray) == _pairs(*_narrow_phase(mesh, origins, directions)[:2])
