@@ -54,8 +54,19 @@ library; on Debian 12: ``apt-get install libllvm19`` and
 script when unset and the file exists). Without Mitsuba, or when its llvm variant cannot load,
 the JSON says so and why, and the embree_rt side is still measured.
 
+With ``--instances N ...`` it also compares instancing (issue 12), for each N: the spheres of
+the N-sphere field replaced by copies of one 320-triangle icosphere (scaled to each radius,
+turned about y at random), beside the same ground quad. embree_rt: one instance array,
+``BVH.add_instances``; Mitsuba: a ``shapegroup`` holding the mesh (a temporary ``.ply``) and one
+``instance`` per copy, as its documentation describes. Reported: each side's build (our
+matrices to a committed BVH; Mitsuba's ``load_dict`` of the scene), the bare primary queries
+on the pixel-centre rays in turns, and how many rays agree (both miss, or both hit within a
+distance tolerance). Mitsuba builds a scene description per copy in Python, so its build time
+grows fastest; pick N accordingly (1e5 takes Mitsuba about 15 s here).
+
     python benchmarks/versus_mitsuba.py                          # 1e3, 1e5, 1e6 spheres
     python benchmarks/versus_mitsuba.py --counts 1000 --repeat 3 --images /tmp/versus
+    python benchmarks/versus_mitsuba.py --counts --instances 1000 10000 100000
 
 Prints one JSON object on stdout; progress on stderr.
 """
@@ -618,6 +629,111 @@ def bench_count(count: int, args, mi, dr) -> dict:
     return row
 
 
+# -- instancing (issue 12) ------------------------------------------------------------------------
+
+
+ICOSPHERE_SUBDIVISIONS = 2  # 320 triangles
+
+
+def instance_placements(count: int, seed: int) -> tuple[np.ndarray, float]:
+    """(count, 4, 4) float64 placements of a unit icosphere at the spheres of the ``count``-
+    sphere field (scaled to each radius, turned about y at random) and the field's S."""
+    centers, radii, side = sphere_field(count, seed)
+    angle = np.random.default_rng(seed + 7).uniform(0.0, 2.0 * np.pi, count)
+    cos, sin = np.cos(angle) * radii, np.sin(angle) * radii
+    transforms = np.zeros((count, 4, 4))
+    transforms[:, 0, 0], transforms[:, 0, 2] = cos, sin
+    transforms[:, 1, 1] = radii
+    transforms[:, 2, 0], transforms[:, 2, 2] = -sin, cos
+    transforms[:, :3, 3] = centers
+    transforms[:, 3, 3] = 1.0
+    return transforms, side
+
+
+def bench_instances(count: int, args, mi, dr, directory: Path) -> dict:
+    import trimesh
+
+    def progress(message: str) -> None:
+        log(f"[{count:>8} instances] {message}")
+
+    transforms, side = instance_placements(count, args.seed)
+    ico = trimesh.creation.icosphere(subdivisions=ICOSPHERE_SUBDIVISIONS)
+    ground_vertices, ground_faces = ground_quad(side)
+    origins, directions = pixel_centre_rays(camera(side), WIDTH, HEIGHT)
+    row: dict = {"instances": count, "triangles_per_copy": len(ico.faces)}
+
+    def build_ours() -> BVH:
+        child = BVH()
+        child.add_triangles(ico.vertices, ico.faces)
+        child.commit()
+        bvh = BVH()
+        bvh.add_triangles(ground_vertices, ground_faces)
+        bvh.add_instances(child, transforms)
+        bvh.commit()
+        bvh.child = child  # kept alive with the scene
+        return bvh
+
+    build_s, bvh = seconds(build_ours)
+    row["embree_rt_build_s"] = round(build_s, 3)
+    theirs = None
+    if mi is not None:
+        mesh_path = directory / "icosphere.ply"
+        ico.export(mesh_path)
+        h = GROUND_HALF_SIZE * side
+        transform = mi.ScalarTransform4f()
+
+        def build_theirs():
+            scene = {
+                "type": "scene",
+                "ground": {"type": "rectangle",
+                           "to_world": transform.rotate([1, 0, 0], -90).scale(h)},
+                "copies": {"type": "shapegroup",
+                           "mesh": {"type": "ply", "filename": str(mesh_path)}},
+            }  # fmt: skip
+            for i, matrix in enumerate(transforms):
+                scene[f"copy_{i}"] = {
+                    "type": "instance",
+                    "shapegroup": {"type": "ref", "id": "copies"},
+                    "to_world": mi.ScalarTransform4f(matrix),
+                }
+            return mi.load_dict(scene)
+
+        their_build_s, theirs = seconds(build_theirs)
+        row["mitsuba_build_s"] = round(their_build_s, 3)
+        row["build_speed_vs_mitsuba"] = round(their_build_s / build_s, 1)
+    progress(f"built: {row}")
+    with bvh:
+        hits = bvh.intersect(origins, directions)  # warms the kernels
+        intersect_theirs = None
+        if theirs is not None:
+            primary = mitsuba_rays(mi, dr, origins, directions)
+
+            def intersect_theirs():
+                found = theirs.ray_intersect_preliminary(primary, coherent=True)
+                dr.eval(found.t)
+                dr.sync_thread()
+                return found
+
+            their_t = np.array(intersect_theirs().t, np.float64)
+            our_t = hits.t.astype(np.float64)
+            both_miss = ~np.isfinite(our_t) & ~np.isfinite(their_t)
+            tolerance = 1e-4 * (1.0 + np.where(np.isfinite(our_t), our_t, 0.0))
+            with np.errstate(invalid="ignore"):
+                both_hit = np.abs(our_t - their_t) <= tolerance
+            row["agreement"] = {
+                "hit_fraction": float(np.isfinite(our_t).mean()),
+                "mitsuba_hit_fraction": float(np.isfinite(their_t).mean()),
+                "same_answer_fraction": float((both_miss | both_hit).mean()),
+            }
+        ours_s, theirs_s = in_turns(
+            lambda: bvh.intersect(origins, directions), intersect_theirs, args.repeat
+        )
+        row["primary"] = {"rays": len(origins), **summary(ours_s, theirs_s, len(origins))}
+        bvh.child.close()
+    progress(f"primary rays: {row['primary']}")
+    return row
+
+
 # -- output ---------------------------------------------------------------------------------------
 
 
@@ -651,7 +767,11 @@ def versions() -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
-        "--counts", type=lambda s: int(float(s)), nargs="+", default=[1_000, 100_000, 1_000_000]
+        "--counts", type=lambda s: int(float(s)), nargs="*", default=[1_000, 100_000, 1_000_000]
+    )
+    parser.add_argument(
+        "--instances", type=lambda s: int(float(s)), nargs="*", default=[],
+        help="also compare instancing at these counts (a shapegroup and instances in Mitsuba)",
     )
     parser.add_argument("--repeat", type=int, default=5, help="timed pairs per measurement")
     parser.add_argument("--seed", type=int, default=0)
@@ -680,6 +800,13 @@ def main(argv: list[str] | None = None) -> None:
         },
         "results": [bench_count(count, args, mi, dr) for count in args.counts],
     }
+    if args.instances:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as directory:
+            result["instances"] = [
+                bench_instances(count, args, mi, dr, Path(directory)) for count in args.instances
+            ]
     result["seconds"] = round(time.perf_counter() - started, 1)
     result["machine"]["load_average_end"] = list(os.getloadavg())
     print(json.dumps(result, indent=1))
