@@ -33,9 +33,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import carray, njit, prange, types
-from numba.extending import intrinsic
+from numba import carray, njit, prange
 
+from embree_rt.embree import pointers
 from embree_rt.embree.kernels import (
     CHUNK,
     HIT_GEOM_ID,
@@ -64,22 +64,9 @@ ARRAY_LABELS = 4
 ARRAY_COLUMNS = 5
 
 
-def _pointer_intrinsic(element):
-    pointer_type = types.CPointer(element)
-
-    @intrinsic
-    def as_pointer(typingctx, address):
-        def codegen(context, builder, signature, args):
-            return builder.inttoptr(args[0], context.get_value_type(pointer_type))
-
-        return pointer_type(types.uint64), codegen
-
-    return as_pointer
-
-
-_float_pointer = _pointer_intrinsic(types.float32)
-_uint_pointer = _pointer_intrinsic(types.uint32)
-_int_pointer = _pointer_intrinsic(types.int32)
+_float_pointer = pointers.floats
+_uint_pointer = pointers.words32
+_int_pointer = pointers.ints
 
 
 # -- queries ----------------------------------------------------------------------------------

@@ -34,8 +34,8 @@ import math
 
 import numpy as np
 from numba import carray, cfunc, njit, types
-from numba.extending import intrinsic
 
+from embree_rt.embree import pointers
 from embree_rt.embree.kernels import (
     HIT_GEOM_ID,
     HIT_INST_ID,
@@ -53,23 +53,10 @@ from embree_rt.embree.kernels import (
 _CALLBACK = types.void(types.uintp)
 
 
-def _pointer_intrinsic(element):
-    pointer_type = types.CPointer(element)
-
-    @intrinsic
-    def as_pointer(typingctx, address):
-        def codegen(context, builder, signature, args):
-            return builder.inttoptr(args[0], context.get_value_type(pointer_type))
-
-        return pointer_type(types.uintp), codegen
-
-    return as_pointer
-
-
-_words64 = _pointer_intrinsic(types.uint64)
-_words32 = _pointer_intrinsic(types.uint32)
-_floats = _pointer_intrinsic(types.float32)
-_ints = _pointer_intrinsic(types.int32)
+_words64 = pointers.words64
+_words32 = pointers.words32
+_floats = pointers.floats
+_ints = pointers.ints
 
 
 @cfunc(_CALLBACK, nopython=True, cache=True)
