@@ -26,8 +26,9 @@ import time
 import distributed
 
 from embree_rt import distributed as rd
+from embree_rt.batches import batch_ranges
 from embree_rt.camera import camera_frame
-from embree_rt.integrator import DEFAULT_BATCH_SIZE, Renderer, batch_ranges
+from embree_rt.integrator import DEFAULT_BATCH_SIZE, Renderer
 from embree_rt.scene import random_field
 from embree_rt.scene.random_field import plan_field
 
@@ -59,10 +60,7 @@ def main() -> None:
         clusters = {}
         try:
             for workers in (1, 2):
-                cluster = distributed.LocalCluster(
-                    n_workers=workers, threads_per_worker=1, processes=True,
-                    dashboard_address=None, memory_limit=0, silence_logs=50,
-                )  # fmt: skip
+                cluster = rd.local_cluster(workers, silence_logs=50)
                 client = distributed.Client(cluster)
                 client.wait_for_workers(workers)
                 renderer = rd.ClusterRenderer(recipe, client, batch_size=args.batch_size)

@@ -18,8 +18,9 @@ from embree_rt import (
     preset,
     random_field,
 )
+from embree_rt.batches import batch_ranges
 from embree_rt.embree import BVH
-from embree_rt.integrator import batch_ranges, render
+from embree_rt.integrator import render
 
 
 def pixel_of(camera: Camera, point, width: int, height: int) -> tuple[int, int]:
