@@ -153,10 +153,10 @@ def render_aovs(
         # The integrator's own stages, not copies of them: the normal it shades with, turned
         # to the side the ray came from, and the colour it lights.
         if "normal" in flat:
-            normal, _, _ = renderer._facing_the_ray(surfaces.incoming, surfaces)
+            normal, _, _ = renderer.facing_the_ray(surfaces.incoming, surfaces)
             fill_vectors("normal", batch, hit, normal)
         if "albedo" in flat:
-            fill_vectors("albedo", batch, hit, renderer._surface_color(surfaces))
+            fill_vectors("albedo", batch, hit, renderer.surface_color(surfaces))
         if "material_id" in flat:
             flat["material_id"][hit] = surfaces.material
         if "object_id" in flat:

@@ -266,8 +266,8 @@ class Renderer:
         """Light the ``surfaces`` that ``rays`` (directions, pixels, weights; no origins) hit,
         into ``work``; returns their reflection and refraction children."""
         d = rays.directions
-        normal, face_normal, entering = self._facing_the_ray(d, surfaces)
-        color = self._surface_color(surfaces)
+        normal, face_normal, entering = self.facing_the_ray(d, surfaces)
+        color = self.surface_color(surfaces)
         offset = surface_offset(surfaces.scale)
         outside = surfaces.position + face_normal * offset
         material = surfaces.material
@@ -290,7 +290,7 @@ class Renderer:
     # -- the stages of shading --------------------------------------------------------------
 
     @staticmethod
-    def _facing_the_ray(d: np.ndarray, surfaces: SurfaceHits):
+    def facing_the_ray(d: np.ndarray, surfaces: SurfaceHits):
         """Shading and geometric normals (3, k) turned to the side the ray arrived on, and (k,)
         bool whether the ray enters the object (a ray leaving a closed object is inside)."""
         entering = shading.dot(d, surfaces.face_normal) < 0
@@ -299,7 +299,7 @@ class Renderer:
         face_normal = normal if surfaces.flat else surfaces.face_normal * side
         return normal, face_normal, entering
 
-    def _surface_color(self, surfaces: SurfaceHits) -> np.ndarray:
+    def surface_color(self, surfaces: SurfaceHits) -> np.ndarray:
         """(3, k) float32 colour of each hit: its material's, the checker's on the floor."""
         color = np.take(self.material_color, surfaces.material, axis=1)
         if surfaces.colored is not None:  # mesh looks: textures, vertex colours per hit
