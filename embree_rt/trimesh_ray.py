@@ -49,6 +49,7 @@ from trimesh import caching, util
 from trimesh.constants import tol
 
 from embree_rt.embree import BVH
+from embree_rt.embree.multihit import compact_hits
 from embree_rt.embree.plane_distances import plane_distances
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
@@ -262,12 +263,12 @@ class RayMeshIntersector:
             result = scene.bvh.all_hits(block_origins, block_directions, block_near, np.inf,
                                         first_room, out=buffers)  # fmt: skip
             buffers = buffers or result
-            ray_of, tris, u, v, cos = _compact(result)
+            ray_of, tris, u, v, cos = compact_hits(result)
             overflow = np.flatnonzero(result[6]) if room > first_room else np.zeros(0, int)
             if len(overflow):
                 retraced = scene.bvh.all_hits(block_origins[overflow], block_directions[overflow],
                                               block_near[overflow], np.inf, room)  # fmt: skip
-                again = _compact(retraced)
+                again = compact_hits(retraced)
                 kept = ~result[6][ray_of]
                 merged = [np.concatenate([x[kept], y]) for x, y in
                           zip((ray_of, tris, u, v, cos), (overflow[again[0]], *again[1:]),
@@ -464,15 +465,6 @@ class RayMeshIntersector:
 
     def __copy__(self, *args) -> RayMeshIntersector:
         return RayMeshIntersector(geometry=self.mesh, scale_to_box=self._scale_to_box)
-
-
-def _compact(result: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
-    """``BVH.all_hits``' (n, room) arrays as (k,) hits by ray, then in the kernel's (t, prim)
-    order: (ray int64, triangle int64, u, v, cos float32)."""
-    _t, prim, u, v, cos, count, _more = result
-    ray_of, slot = np.nonzero(np.arange(prim.shape[1])[None, :] < count[:, None])
-    return ray_of, prim[ray_of, slot].astype(np.int64), u[ray_of, slot], v[ray_of, slot], cos[
-        ray_of, slot]
 
 
 def _ranks(rays: np.ndarray) -> np.ndarray:
