@@ -14,7 +14,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
+
+# ray_triangle's NumPy calls wake OpenBLAS's worker threads, which then busy-wait on the other
+# core for a while: the backend timed next (ours, on two threads) lost that core (measured:
+# first hits on the height field 33 ms alone, 52-56 ms right after ray_triangle). One BLAS
+# thread removes that artefact; embreex and ray_triangle are single-threaded anyway.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from pathlib import Path
 
 import numpy as np

@@ -48,7 +48,9 @@ import trimesh
 from trimesh import caching, util
 from trimesh.constants import tol
 
-from embree_rt.embree import BVH, multihit
+from embree_rt.embree import BVH
+from embree_rt.embree.multihit import compact_hits
+from embree_rt.embree.plane_distances import plane_distances
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
 # near an edge or along a face to trust their parity.
@@ -90,11 +92,18 @@ class _LocalScene:
         self.bvh.add_triangles(local, faces)
         self.bvh.commit()
         self.triangles = np.asarray(mesh.triangles, dtype=np.float64)
-        self.normals = np.asarray(mesh.face_normals, dtype=np.float64)
+        self.normals = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
+        self.first_vertices = np.ascontiguousarray(self.triangles[:, 0])
         self.faces = faces
         self.vertices = vertices
         self.face_count = len(faces)
         self.min_altitude = _min_altitudes(self.triangles, np.asarray(mesh.area_faces)) * scale
+        # 0 when any triangle is degenerate: then every hit's own altitude is looked up
+        self.floor_altitude = float(self.min_altitude.min()) if self.face_count else 0.0
+        # contains_points' rays reach twice the mesh's extent
+        self.contains_band = _edge_band(self, np.arange(self.face_count),
+                                        np.full(self.face_count, 2 * self.extent)
+                                        ).astype(np.float32)  # fmt: skip
         self._fans: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def to_local(self, points: np.ndarray) -> np.ndarray:
@@ -132,26 +141,28 @@ def _edge_band(scene: _LocalScene, faces: np.ndarray, magnitude: np.ndarray) -> 
         return _BAND_ULPS * _EPS32 * magnitude / scene.min_altitude[faces]
 
 
-def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
-    origins = np.array(ray_origins, dtype=np.float64)
-    directions = np.array(ray_directions, dtype=np.float64)
+def _ray_arrays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
+    """Rays as given, (n, 3) float64 origins and directions (not copied when they already
+    are; not unit)."""
+    origins = np.asarray(ray_origins, dtype=np.float64)
+    directions = np.asarray(ray_directions, dtype=np.float64)
     if origins.shape != directions.shape:
         raise ValueError("Ray origin and direction don't match!")
     if origins.ndim != 2 or (len(origins) and origins.shape[1] != 3):
         raise ValueError(f"rays: expected shape (n, 3), got {origins.shape}")
-    origins = origins.reshape(-1, 3)
-    return origins, util.unitize(directions.reshape(-1, 3))
+    return origins.reshape(-1, 3), directions.reshape(-1, 3)
+
+
+def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) float64 origins and unit directions (trimesh's ``unitize``)."""
+    origins, directions = _ray_arrays(ray_origins, ray_directions)
+    return origins, util.unitize(directions)
 
 
 def _plane_distance(scene, origins, directions, rays, tris):
     """float64 distance along each ray to its triangle's plane, and |cos| of the angle between
-    ray and normal, trimesh's planes_lines formula."""
-    normals = scene.normals[tris]
-    toward = np.einsum("ij,ij->i", scene.triangles[tris, 0] - origins[rays], normals)
-    along = np.einsum("ij,ij->i", directions[rays], normals)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        distance = toward / along
-    return distance, np.abs(along)
+    ray and normal, trimesh's planes_lines formula (compiled: ``plane_distances``)."""
+    return plane_distances(scene.first_vertices, scene.normals, origins, directions, rays, tris)
 
 
 def _float64_hits(scene, origins, directions, rays, tris):
@@ -252,12 +263,12 @@ class RayMeshIntersector:
             result = scene.bvh.all_hits(block_origins, block_directions, block_near, np.inf,
                                         first_room, out=buffers)  # fmt: skip
             buffers = buffers or result
-            ray_of, tris, u, v, cos = _compact(result)
+            ray_of, tris, u, v, cos = compact_hits(result)
             overflow = np.flatnonzero(result[6]) if room > first_room else np.zeros(0, int)
             if len(overflow):
                 retraced = scene.bvh.all_hits(block_origins[overflow], block_directions[overflow],
                                               block_near[overflow], np.inf, room)  # fmt: skip
-                again = _compact(retraced)
+                again = compact_hits(retraced)
                 kept = ~result[6][ray_of]
                 merged = [np.concatenate([x[kept], y]) for x, y in
                           zip((ray_of, tris, u, v, cos), (overflow[again[0]], *again[1:]),
@@ -311,39 +322,32 @@ class RayMeshIntersector:
         within = ranks < capacity
         return rays[within], tris[within], distance[within], ranks[within]
 
-    def _first_hits(self, origins, directions, tnear, need_distance=True):
-        """Every ray's nearest hit: (rays, triangles, distances, ranks) (k,) by ray. Embree's
-        nearest-hit query (pruned traversal) answers rays whose hit lies clear of edges, of
-        grazing and of the origin (``multihit.classify_nearest``); the others go through
-        ``_hits``."""
+    def _first_hits(self, origins, directions, tnear) -> np.ndarray:
+        """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
+        float64 (directions not necessarily unit) hits, -1 for none. Embree's nearest-hit query
+        answers, in one compiled pass with the frame change, every ray whose hit lies clear of
+        edges, of grazing and of the origin (``BVH.screened_nearest``); the others (under 1% on
+        the benchmark's meshes) go through ``_hits``, which decides them in float64."""
         scene = self._scene
-        local_origins = scene.to_local(origins)
-        local_directions = directions.astype(np.float32)
-        near, _, magnitude = self._resolve_tnear(scene, local_origins, tnear)
-        near_local = near * scene.scale
-        hits = scene.bvh.intersect(local_origins, local_directions,
-                                   (near_local * 0.5).astype(np.float32), np.inf)  # fmt: skip
-        flagged = multihit.classify_nearest(
-            hits.t, hits.prim_id, hits.normal, hits.u, hits.v, local_directions,
-            magnitude, scene.min_altitude, _BAND_ULPS, _GRAZE_COS,
-            near_local, 4.0,
+        near = None
+        if tnear is not None:
+            near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(origins),))
+            if not np.isfinite(near).all() or (near < 0).any():
+                raise ValueError("tnear: must be finite and >= 0")
+        prim, suspect = scene.bvh.screened_nearest(
+            origins, directions, shift=scene.origin, scale=scene.scale, extent=scene.extent,
+            near=near, near_ulps=_TNEAR_ULPS, altitude=scene.min_altitude,
+            floor_altitude=scene.floor_altitude, band_ulps=_BAND_ULPS, graze=_GRAZE_COS,
+            near_factor=4.0,
         )  # fmt: skip
-        rows = np.flatnonzero(hits.prim_id >= 0)
-        tris = hits.prim_id[rows].astype(np.int64)
-        suspect = flagged[rows]
-        rays, tris = rows[~suspect], tris[~suspect]
-        distance = (_plane_distance(scene, origins, directions, rays, tris)[0] if need_distance
-                    else np.zeros(len(rays)))  # fmt: skip
-        if suspect.any():
-            again = rows[suspect]
-            near_again = near[again] if tnear is not None else None
-            more = self._hits(origins[again], directions[again], 1, near_again, True)
-            rays = np.concatenate([rays, again[more[0]]])
-            tris = np.concatenate([tris, more[1]])
-            distance = np.concatenate([distance, more[2]])
-            order = np.argsort(rays, kind="stable")
-            rays, tris, distance = rays[order], tris[order], distance[order]
-        return rays, tris, distance, np.zeros(len(rays), np.int64)
+        first = prim.astype(np.int64)
+        again = np.flatnonzero(suspect)
+        if len(again):
+            more = self._hits(origins[again], util.unitize(directions[again]), 1,
+                              None if near is None else near[again], True)  # fmt: skip
+            first[again] = -1
+            first[again[more[0]]] = more[1]
+        return first
 
     def intersects_id(
         self,
@@ -367,13 +371,20 @@ class RayMeshIntersector:
         ``return_locations`` a point where a ray meets several triangles (an edge, a vertex) is
         reported once.
         """
+        if not multiple_hits:
+            origins, given_directions = _ray_arrays(ray_origins, ray_directions)
+            first = self._first_hits(origins, given_directions, tnear)
+            rays = np.flatnonzero(first >= 0)
+            tris = first[rays]
+            if not return_locations:
+                return tris, rays
+            directions = util.unitize(given_directions[rays])
+            distance = _plane_distance(self._scene, origins[rays], directions,
+                                       np.arange(len(rays)), tris)[0]  # fmt: skip
+            return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions = _as_rays(ray_origins, ray_directions)
-        if multiple_hits:
-            rays, tris, distance, ranks = self._hits(origins, directions, max_hits, tnear,
-                                                     one_per_point=return_locations)
-        else:
-            rays, tris, distance, ranks = self._first_hits(origins, directions, tnear,
-                                                           need_distance=return_locations)
+        rays, tris, distance, ranks = self._hits(origins, directions, max_hits, tnear,
+                                                 one_per_point=return_locations)
         order = np.argsort(ranks, kind="stable")  # rays are sorted: depth by depth, by ray
         rays, tris, distance = rays[order], tris[order], distance[order]
         if return_locations:
@@ -394,13 +405,8 @@ class RayMeshIntersector:
     def intersects_first(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
         """(n,) int32 (as trimesh's embree backend): the first triangle each ray hits, -1 for
         none (on an edge, the lowest index of the triangles there)."""
-        index_tri, index_ray = self.intersects_id(
-            ray_origins, ray_directions, multiple_hits=False, tnear=tnear
-        )
-        count = len(np.asarray(ray_origins).reshape(-1, 3))
-        first = np.full(count, -1, dtype=np.int32)
-        first[index_ray] = index_tri
-        return first
+        origins, directions = _ray_arrays(ray_origins, ray_directions)
+        return self._first_hits(origins, directions, tnear).astype(np.int32)
 
     def intersects_any(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
         """(n,) bool: whether each ray hits the mesh."""
@@ -426,8 +432,7 @@ class RayMeshIntersector:
             return contains
         scene = self._scene
         local = scene.to_local(points[candidates])
-        band = _edge_band(scene, np.arange(scene.face_count), np.full(scene.face_count,
-                                                                      2 * scene.extent))
+        band = scene.contains_band
         votes = np.zeros(len(candidates), np.int64)
         pending = np.arange(len(candidates))
         for k, direction in enumerate(_CONTAINS_DIRECTIONS):
@@ -460,15 +465,6 @@ class RayMeshIntersector:
 
     def __copy__(self, *args) -> RayMeshIntersector:
         return RayMeshIntersector(geometry=self.mesh, scale_to_box=self._scale_to_box)
-
-
-def _compact(result: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
-    """``BVH.all_hits``' (n, room) arrays as (k,) hits by ray, then in the kernel's (t, prim)
-    order: (ray int64, triangle int64, u, v, cos float32)."""
-    _t, prim, u, v, cos, count, _more = result
-    ray_of, slot = np.nonzero(np.arange(prim.shape[1])[None, :] < count[:, None])
-    return ray_of, prim[ray_of, slot].astype(np.int64), u[ray_of, slot], v[ray_of, slot], cos[
-        ray_of, slot]
 
 
 def _ranks(rays: np.ndarray) -> np.ndarray:

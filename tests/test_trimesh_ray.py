@@ -361,3 +361,40 @@ def test_close_and_coincident_sheets_each_hit_once(scale, gap):
     tri, ray = ours.intersects_id(origins, directions)
     assert np.bincount(ray, minlength=300).tolist() == [4] * 300
     assert _pairs(tri, ray) == _pairs(*_narrow_phase(mesh, origins, directions)[:2])
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1.0, 1e8])
+def test_first_hits_with_slivers_and_degenerate_faces_match_ray_triangle(scale):
+    """intersects_first screens Embree's float32 hits in its compiled pass against a mesh-wide
+    band first and reads a triangle's own altitude only for hits inside it; a sliver (tiny
+    altitude: a wide band) or a degenerate face (no altitude) makes every hit take that second
+    step. Rays through edge midpoints and random rays must still name ray_triangle's nearest
+    triangle (the lowest index on an edge)."""
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    far = np.array([[5.0, 0, 0], [6.0, 0, 0], [5.5, 1e-5, 0], [5.0, 2, 0], [5.5, 2, 0],
+                    [6.0, 2, 0]])  # fmt: skip
+    faces = np.vstack([sphere.faces, len(sphere.vertices) + np.array([[0, 1, 2], [3, 4, 5]])])
+    mesh = trimesh.Trimesh(np.vstack([sphere.vertices, far]) * scale, faces, process=False)
+    edges = mesh.vertices[sphere.edges_unique].mean(axis=1)
+    directions = -edges / np.linalg.norm(edges, axis=1)[:, None]
+    directions = directions + 1e-3 * np.array([0.31, 0.17, -0.23])  # not through the centre
+    origins = edges - 3 * mesh.scale * directions
+    random_origins, random_directions = _outside_rays(mesh, 300, seed=5)
+    origins = np.vstack([origins, random_origins])
+    directions = np.vstack([directions, random_directions])
+    first = RayMeshIntersector(mesh).intersects_first(origins, directions)
+    ref_tri, ref_ray, ref_distance = _narrow_phase(mesh, origins, directions)
+    expected = np.full(len(origins), -1)
+    for r in np.unique(ref_ray):
+        rows = np.flatnonzero(ref_ray == r)
+        nearest = ref_distance[rows] <= ref_distance[rows].min() + 1e-9 * mesh.scale
+        expected[r] = ref_tri[rows][nearest].min()
+    assert (expected[: len(edges)] >= 0).all()  # every edge ray hits, on two triangles
+    np.testing.assert_array_equal(first, expected)
+
+
+def test_non_finite_rays_are_refused_naming_the_row():
+    ours = RayMeshIntersector(trimesh.creation.box())
+    origins = np.array([[-2.0, 0.1, 0.2], [np.nan, 0.0, 0.0]])
+    with pytest.raises(ValueError, match="origins: row 1 is not finite"):
+        ours.intersects_first(origins, np.array([[1.0, 0, 0], [1.0, 0, 0]]))

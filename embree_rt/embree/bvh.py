@@ -11,7 +11,15 @@ import numba
 import numpy as np
 
 from embree_rt.embree import device as device_module
-from embree_rt.embree import instance_arrays, kernels, library, multihit, records, user_spheres
+from embree_rt.embree import (
+    instance_arrays,
+    kernels,
+    library,
+    multihit,
+    records,
+    screened_nearest,
+    user_spheres,
+)
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
     as_points,
@@ -606,6 +614,25 @@ class BVH:
         with _query_lock:
             return multihit.crossing_parity(self._live_scene(), origins, directions, edge_band,
                                             graze, self.threads)  # fmt: skip
+
+    def screened_nearest(self, origins: np.ndarray, directions: np.ndarray,
+                         **screen) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """Nearest hits of float64 rays, moved to this BVH's frame and screened for float32
+        doubt in the same compiled pass: ``(prim (n,) int32, suspect (n,) bool)``; ``screen``
+        is ``screened_nearest.screened_nearest``'s keywords after ``directions``. A BVH of one
+        triangle geometry, no instances."""
+        if not self._committed:
+            raise RuntimeError("commit() the BVH before querying it")
+        _prepare_kernels()
+        with _query_lock:
+            prim, suspect, finite = screened_nearest.screened_nearest(
+                self._live_scene(), self.lanes, self.threads, origins, directions, **screen
+            )
+        if not finite:
+            as_points(origins, "origins")  # raises, naming the first bad row
+            as_points(directions, "directions")
+            raise ValueError("rays: not finite in the BVH's frame (coordinates too large)")
+        return prim, suspect
 
     def _require_filters(self) -> None:
         if not self.filters:

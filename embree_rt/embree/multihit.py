@@ -381,49 +381,26 @@ def crossing_parity(
     return odd, clear
 
 
-@njit(nogil=True, cache=True)  # serial: a few ns a ray, and no threading layer to share
-def _classify_nearest(t, prim, normal, u, v, directions, magnitude, altitude, band_ulps, graze,
-                      near, near_factor, suspect):  # fmt: skip
-    eps = np.float64(np.finfo(np.float32).eps)
-    for i in range(t.shape[0]):
-        p = prim[i]
-        if p < 0:
-            suspect[i] = False
-            continue
-        gx, gy, gz = np.float64(normal[i, 0]), np.float64(normal[i, 1]), np.float64(normal[i, 2])
-        dx, dy, dz = (np.float64(directions[i, 0]), np.float64(directions[i, 1]),
-                      np.float64(directions[i, 2]))  # fmt: skip
-        norms = math.sqrt((gx * gx + gy * gy + gz * gz) * (dx * dx + dy * dy + dz * dz))
-        cos = abs(gx * dx + gy * dy + gz * dz) / norms if norms > 0 else 0.0
-        ui, vi = np.float64(u[i]), np.float64(v[i])
-        edge = min(ui, vi, 1.0 - ui - vi)
-        band = band_ulps * eps * magnitude[i] / altitude[p] if altitude[p] > 0 else np.inf
-        suspect[i] = edge <= band or cos <= graze or t[i] <= near_factor * near[i]
+@njit(nogil=True, cache=True)  # serial: a copy, and no threading layer to share
+def _compact_hits(prim, u, v, cos, count, ray_of, tris, u_out, v_out, cos_out):
+    k = 0
+    for i in range(count.shape[0]):
+        for j in range(count[i]):
+            ray_of[k] = i
+            tris[k] = prim[i, j]
+            u_out[k] = u[i, j]
+            v_out[k] = v[i, j]
+            cos_out[k] = cos[i, j]
+            k += 1
 
 
-def classify_nearest(
-    hits_t: np.ndarray,
-    prim: np.ndarray,
-    normal: np.ndarray,
-    u: np.ndarray,
-    v: np.ndarray,
-    directions: np.ndarray,
-    magnitude: np.ndarray,
-    altitude: np.ndarray,
-    band_ulps: float,
-    graze: float,
-    near: np.ndarray,
-    near_factor: float,
-) -> np.ndarray:
-    """(n,) bool: which nearest hits (``BVH.intersect``'s t, prim_id, normal, u, v, all (n,) or
-    (n, 3)) Embree's float32 may have got wrong: within ``band_ulps`` float32 ulps of
-    ``magnitude`` (n,) float64 of an edge, in barycentric terms (``altitude`` (primitives,)
-    float64: each triangle's smallest altitude), at |cos| <= ``graze`` to the normal, or at
-    t <= ``near_factor`` · ``near`` (n,) float64. Misses are not suspect. ``directions`` (n, 3)
-    float32 as traced."""
-    suspect = np.zeros(len(hits_t), bool)
-    if len(hits_t):
-        _classify_nearest(hits_t, prim, normal, u, v, directions, magnitude,
-                          np.ascontiguousarray(altitude, np.float64), float(band_ulps),
-                          float(graze), near, float(near_factor), suspect)  # fmt: skip
-    return suspect
+def compact_hits(result: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """``all_hits``' (n, capacity) arrays as (k,) hits by ray, each ray's in the kernel's
+    (t, prim) order: (ray int64, triangle int64, u, v, cos float32)."""
+    _t, prim, u, v, cos, count, _more = result
+    total = int(count.sum())
+    out = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total, np.float32),
+           np.empty(total, np.float32), np.empty(total, np.float32))  # fmt: skip
+    if total:
+        _compact_hits(prim, u, v, cos, count, *out)
+    return out
