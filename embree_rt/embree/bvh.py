@@ -431,27 +431,14 @@ class BVH:
             u=np.empty(n, np.float32),
             v=np.empty(n, np.float32),
         )
-        if self._array_table is not None:  # the loop that also copies out instPrimID
-            hits.inst_prim_id = np.empty(n, np.int32)
-            if n:
-                arguments = (
-                    self._live_scene(), self.lanes, origins, directions, tnear, tfar, hits.t,
-                    hits.normal, hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
-                    hits.inst_prim_id,
-                )  # fmt: skip
-                if self.threads == 1:
-                    instance_arrays.intersect_serial(*arguments)
-                else:
-                    with _query_lock:
-                        numba.set_num_threads(self.threads)
-                        instance_arrays.intersect(*arguments)
-            return hits
-        hits.inst_prim_id = np.full(n, -1, np.int32)
+        # Only instance arrays have copy numbers to copy out; otherwise every hit's is -1.
+        copies = self._array_table is not None
+        hits.inst_prim_id = np.empty(n, np.int32) if copies else np.full(n, -1, np.int32)
         if n:
             arguments = (
                 self._live_scene(), self.lanes, origins, directions, tnear, tfar, hits.t,
-                hits.normal,
-                hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
+                hits.normal, hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
+                hits.inst_prim_id if copies else None,
             )  # fmt: skip
             if self.threads == 1:
                 kernels.intersect_serial(*arguments)

@@ -33,28 +33,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import carray, njit, prange
+from numba import carray, njit
 
 from embree_rt.embree import pointers
-from embree_rt.embree.kernels import (
-    CHUNK,
-    HIT_GEOM_ID,
-    HIT_INST_ID,
-    HIT_INST_PRIM_ID,
-    HIT_NG,
-    HIT_PRIM_ID,
-    HIT_U,
-    HIT_V,
-    INVALID_ID,
-    PACKET_ALIGN,
-    PACKET_FIELDS,
-    RAY_TFAR,
-    SCRATCH_WORDS,
-    _aligned_word,
-    _fill_packet,
-    _intersect_packet,
-    _store_miss,
-)
 
 ARRAY_TRANSFORMS = 0
 ARRAY_COUNT = 1
@@ -67,61 +48,6 @@ ARRAY_COLUMNS = 5
 _float_pointer = pointers.floats
 _uint_pointer = pointers.words32
 _int_pointer = pointers.ints
-
-
-# -- queries ----------------------------------------------------------------------------------
-
-
-@njit(inline="always")
-def _intersect_chunk(scene, lanes, words, first_ray, stop, origins, directions, tnear, tfar, t,
-                     normal, u, v, prim, geom, inst, inst_prim):  # fmt: skip
-    floats = words.view(np.float32)
-    b = _aligned_word(words, PACKET_ALIGN)
-    address = words.ctypes.data + 4 * b
-    valid_address = address + 4 * PACKET_FIELDS * lanes
-    for first in range(first_ray, stop, lanes):
-        count = min(lanes, stop - first)
-        _fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar)
-        _intersect_packet(lanes, valid_address, scene, address)
-        for lane in range(count):
-            i = first + lane
-            if words[b + HIT_GEOM_ID * lanes + lane] == INVALID_ID:
-                _store_miss(i, t, normal, u, v, prim, geom, inst)
-                inst_prim[i] = -1
-            else:
-                t[i] = floats[b + RAY_TFAR * lanes + lane]
-                prim[i] = np.int32(words[b + HIT_PRIM_ID * lanes + lane])
-                geom[i] = np.int32(words[b + HIT_GEOM_ID * lanes + lane])
-                inst[i] = np.int32(words[b + HIT_INST_ID * lanes + lane])
-                inst_prim[i] = np.int32(words[b + HIT_INST_PRIM_ID * lanes + lane])
-                normal[i, 0] = floats[b + HIT_NG * lanes + lane]
-                normal[i, 1] = floats[b + (HIT_NG + 1) * lanes + lane]
-                normal[i, 2] = floats[b + (HIT_NG + 2) * lanes + lane]
-                u[i] = floats[b + HIT_U * lanes + lane]
-                v[i] = floats[b + HIT_V * lanes + lane]
-
-
-@njit(parallel=True, nogil=True, cache=True)
-def intersect(scene, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
-              inst_prim):  # fmt: skip
-    """``kernels.intersect`` that also writes ``inst_prim`` (n,) int32, Embree's instPrimID[0]
-    (-1 on a miss)."""
-    n = origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
-        _intersect_chunk(scene, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), origins,
-                         directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
-                         inst_prim)  # fmt: skip
-
-
-@njit(nogil=True, cache=True)
-def intersect_serial(scene, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim, geom,
-                     inst, inst_prim):  # fmt: skip
-    """``kernels.intersect_serial`` that also writes ``inst_prim``, as ``intersect``."""
-    scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _intersect_chunk(scene, lanes, scratch, 0, origins.shape[0], origins, directions, tnear, tfar,
-                     t, normal, u, v, prim, geom, inst, inst_prim)  # fmt: skip
 
 
 # -- normals ----------------------------------------------------------------------------------

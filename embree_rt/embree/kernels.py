@@ -138,7 +138,9 @@ def _occluded_packet(lanes, valid_address, scene, address):
 
 @njit(inline="always")
 def _intersect_chunk(scene, lanes, words, first_ray, stop, origins, directions, tnear, tfar, t,
-                     normal, u, v, prim, geom, inst):  # fmt: skip
+                     normal, u, v, prim, geom, inst, inst_prim):  # fmt: skip
+    # inst_prim: (n,) int32 for Embree's instPrimID[0] (instance arrays), or None; numba
+    # compiles the None case apart, with the test pruned: the plain loop pays nothing for it.
     floats = words.view(np.float32)
     b = _aligned_word(words, PACKET_ALIGN)
     address = words.ctypes.data + 4 * b
@@ -151,11 +153,15 @@ def _intersect_chunk(scene, lanes, words, first_ray, stop, origins, directions, 
             i = first + lane
             if words[b + HIT_GEOM_ID * lanes + lane] == INVALID_ID:
                 _store_miss(i, t, normal, u, v, prim, geom, inst)
+                if inst_prim is not None:
+                    inst_prim[i] = -1
             else:
                 t[i] = floats[b + RAY_TFAR * lanes + lane]
                 prim[i] = np.int32(words[b + HIT_PRIM_ID * lanes + lane])
                 geom[i] = np.int32(words[b + HIT_GEOM_ID * lanes + lane])
                 inst[i] = np.int32(words[b + HIT_INST_ID * lanes + lane])
+                if inst_prim is not None:
+                    inst_prim[i] = np.int32(words[b + HIT_INST_PRIM_ID * lanes + lane])
                 normal[i, 0] = floats[b + HIT_NG * lanes + lane]
                 normal[i, 1] = floats[b + (HIT_NG + 1) * lanes + lane]
                 normal[i, 2] = floats[b + (HIT_NG + 2) * lanes + lane]
@@ -180,25 +186,28 @@ def _occluded_chunk(scene, lanes, words, first_ray, stop, origins, directions, t
 
 # Drivers: the parallel ones spread chunks over numba's threads; the serial ones run in the
 # calling thread with no threading layer at all, so several Python threads may call them at once.
-# ``lanes`` is 1 (rtcIntersect1 on an RTCRayHit) or a packet width, 4, 8 or 16.
+# ``lanes`` is 1 (rtcIntersect1 on an RTCRayHit) or a packet width, 4, 8 or 16; ``inst_prim``
+# an (n,) int32 array for the hits' instance-array copy numbers, or None.
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def intersect(scene, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst):
+def intersect(scene, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
+              inst_prim):  # fmt: skip
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
         _intersect_chunk(scene, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), origins,
-                         directions, tnear, tfar, t, normal, u, v, prim, geom, inst)  # fmt: skip
+                         directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
+                         inst_prim)  # fmt: skip
 
 
 @njit(nogil=True, cache=True)
 def intersect_serial(scene, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim, geom,
-                     inst):  # fmt: skip
+                     inst, inst_prim):  # fmt: skip
     scratch = np.empty(SCRATCH_WORDS, np.uint32)
     _intersect_chunk(scene, lanes, scratch, 0, origins.shape[0], origins, directions, tnear, tfar,
-                     t, normal, u, v, prim, geom, inst)  # fmt: skip
+                     t, normal, u, v, prim, geom, inst, inst_prim)  # fmt: skip
 
 
 @njit(parallel=True, nogil=True, cache=True)

@@ -67,7 +67,7 @@ def _screened_chunk(scene, lanes, words, first, stop, origins, directions, shift
             local_directions[i, 1] = 0.0
             local_directions[i, 2] = 0.0
     _intersect_chunk(scene, lanes, words, first, stop, local_origins, local_directions, tnear,
-                     tfar, t, normal, u, v, prim, geom, inst)  # fmt: skip
+                     tfar, t, normal, u, v, prim, geom, inst, None)  # fmt: skip
     floor_band_scale = band_ulps * _EPS32 / floor_altitude if floor_altitude > 0 else np.inf
     for i in range(first, stop):
         p = prim[i]
