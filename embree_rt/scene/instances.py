@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from embree_rt.scene.archives import read_archive
 from embree_rt.transforms import affine_array_problem
 
 if TYPE_CHECKING:
@@ -82,15 +83,7 @@ def read_placements(
     or ids, checked by ``material_problem(materials, n)``, which returns a problem or None),
     or None. Every problem is raised as ``fail("problem")``: the file is checked in full
     before anything is built from it."""
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            arrays = {name: archive[name] for name in archive.files}
-    except FileNotFoundError:
-        raise fail("no such file") from None
-    except AttributeError:  # np.load gave a plain array: a .npy, not an archive
-        raise fail("expected an .npz archive of arrays") from None
-    except Exception as error:  # a corrupt zip, pickled object arrays, a directory...
-        raise fail(f"cannot read .npz: {error}") from None
+    arrays = read_archive(path, fail)
     known = {"transforms", "positions", "rotations", "scales", "materials"}
     if unknown := sorted(set(arrays) - known):
         raise fail(f"unknown array {unknown[0]!r} (known: {', '.join(sorted(known))})")

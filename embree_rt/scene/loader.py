@@ -18,6 +18,7 @@ import numpy as np
 
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
+from embree_rt.scene.archives import read_archive
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
 from embree_rt.scene.model import (
@@ -385,15 +386,7 @@ class SceneReader:
         def fail(problem: str) -> SceneError:
             return SceneError(self.path, entry.key, f"{path}: {problem}")
 
-        try:
-            with np.load(path, allow_pickle=False) as archive:
-                arrays = {name: archive[name] for name in archive.files}
-        except FileNotFoundError:
-            raise fail("no such file") from None
-        except AttributeError:  # np.load gave a plain array: a .npy, not an archive
-            raise fail("expected an .npz archive of arrays") from None
-        except Exception as error:  # a corrupt zip, pickled object arrays, a directory...
-            raise fail(f"cannot read .npz: {error}") from None
+        arrays = read_archive(path, fail)
         for required in ("centers", "radii"):
             if required not in arrays:
                 raise fail(f"missing array {required!r} (has: {', '.join(arrays) or 'none'})")
