@@ -8,6 +8,15 @@ in its box, and ``contains_points`` of random points in the box. Backends: ours 
 trimesh's ``ray_pyembree`` (embreex, one thread) and, on a small sample, its pure-NumPy
 ``ray_triangle``. Each turn runs every backend once on the same inputs; rows report the median
 rate over turns and ``vs_embreex``, the median over turns of our rate ÷ embreex's.
+
+``--ceiling``: instead, what bounds the first-hit query. The same rays, already in the BVH's
+local frame (float32, unit directions, as ``RayMeshIntersector`` makes them), through the bare
+nearest-hit query of our BVH (``BVH.intersect``: no screening, no frame change, no float64
+refinement) on 1 and 2 threads, with Embree's watertight test (``robust``, what
+``RayMeshIntersector`` builds) and without, beside embreex's own ``EmbreeScene.run`` on the same
+local rays (one thread) and trimesh's embreex ``intersects_first`` (the benchmark's baseline),
+and our ``intersects_first``; each taken once a turn. ``*_vs_trimesh_embreex`` is the median
+over turns of a rate ÷ trimesh's embreex ``intersects_first`` in the same turn.
 """
 
 from __future__ import annotations
@@ -28,6 +37,7 @@ import numpy as np
 import trimesh
 from trimesh.ray import ray_pyembree, ray_triangle
 
+from embree_rt.embree import BVH
 from embree_rt.trimesh_ray import RayMeshIntersector
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
@@ -61,17 +71,62 @@ def timed(function, *args) -> float:
     return time.perf_counter() - start
 
 
+def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
+    """One mesh's row of first-hit rates of the bare queries (see the module docstring)."""
+    origins, directions = rays(mesh, n, seed=1)
+    ours = RayMeshIntersector(mesh)
+    ours.intersects_first(origins[:10], directions[:10])
+    scene = ours._scene  # the local frame and faces exactly as the intersector has them
+    local_origins = scene.to_local(origins)
+    local_directions = trimesh.util.unitize(directions).astype(np.float32)
+    local_vertices = scene.to_local(np.asarray(mesh.vertices, np.float64))
+    theirs = ray_pyembree.RayMeshIntersector(mesh)
+    theirs.intersects_first(origins[:10], directions[:10])
+    runs = {
+        "trimesh_embreex": lambda: theirs.intersects_first(origins, directions),
+        "embreex_bare": lambda: theirs._scene.scene.run(local_origins, local_directions),
+        "embree_rt_first_hit": lambda: ours.intersects_first(origins, directions),
+    }
+    for robust in (True, False):
+        for threads in (1, 2):
+            bvh = BVH(threads=threads, lanes=1, robust=robust)
+            bvh.add_triangles(local_vertices, scene.faces)
+            bvh.commit()
+            bvh.intersect(local_origins[:10], local_directions[:10])
+            key = f"bare_{'robust' if robust else 'plain'}_{threads}t"
+            runs[key] = lambda bvh=bvh: bvh.intersect(local_origins, local_directions)
+    rates: dict[str, list[float]] = {key: [] for key in runs}
+    for _ in range(turns):
+        for key, run in runs.items():
+            rates[key].append(n / timed(run))
+    baseline = rates["trimesh_embreex"]
+    return {
+        "mesh": name, "triangles": len(mesh.faces), "rays": n, "turns": turns,
+        "load_average": round(os.getloadavg()[0], 2),
+        **{f"{key}_krays_s": round(float(np.median(v)) / 1e3, 1) for key, v in rates.items()},
+        **{f"{key}_vs_trimesh_embreex": round(float(np.median(
+            [rate / base for rate, base in zip(v, baseline, strict=True)])), 2)
+           for key, v in rates.items() if key != "trimesh_embreex"},
+    }  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--rays", type=int, default=200_000)
     parser.add_argument("--reference-rays", type=int, default=2_000)
     parser.add_argument("--turns", type=int, default=3)
+    parser.add_argument("--ceiling", action="store_true",
+                        help="bare nearest-hit rates instead (see the docstring)")
     args = parser.parse_args()
     meshes = {
         "icosphere_1.3M": trimesh.creation.icosphere(subdivisions=8),
         "torus_asset": trimesh.load(ASSETS / "torus.obj", force="mesh"),
         "scan_like_1e5": scan_like(100_000),
     }
+    if args.ceiling:
+        for name, mesh in meshes.items():
+            print(json.dumps(ceiling(name, mesh, args.rays, args.turns)), flush=True)
+        return
     rows = []
     for name, mesh in meshes.items():
         origins, directions = rays(mesh, args.rays, seed=1)
