@@ -73,6 +73,7 @@ _TNEAR_ULPS = 16.0
 _BLOCK_RAYS = 1 << 16
 _FIRST_ROOM = 8
 _BLOCK_HITS = 1 << 21
+_REORDER_FACES = 1 << 15
 
 
 class _LocalScene:
@@ -86,6 +87,11 @@ class _LocalScene:
         self.scale = float(scale)
         local = ((vertices - self.origin) * self.scale).astype(np.float32)
         self.extent = float(np.abs(local).max()) if len(local) else 0.0
+        # Rays are traced in the order of where they enter the mesh's box (ray_order) on meshes
+        # whose BVH outgrows the caches: 1.4-1.6x the rate on 1e5 and 1.3e6 triangles; on a
+        # small mesh (2,304 triangles) the sort cost more than the order saved.
+        self.bounds = (np.array([vertices.min(axis=0), vertices.max(axis=0)])
+                       if len(faces) >= _REORDER_FACES else None)  # fmt: skip
         # single rays: trimesh's queries are rarely coherent, and packets of incoherent rays
         # traced 10-15% slower here
         self.bvh = BVH(lanes=1, robust=True, filters=True)
@@ -350,9 +356,9 @@ class RayMeshIntersector:
                 raise ValueError("tnear: must be finite and >= 0")
         prim, suspect = scene.bvh.screened_nearest(
             origins, directions, shift=scene.origin, scale=scene.scale, extent=scene.extent,
-            near=near, near_ulps=_TNEAR_ULPS, altitude=scene.min_altitude,
-            floor_altitude=scene.floor_altitude, band_ulps=_BAND_ULPS, graze=_GRAZE_COS,
-            near_factor=4.0,
+            bounds=scene.bounds, near=near, near_ulps=_TNEAR_ULPS,
+            altitude=scene.min_altitude, floor_altitude=scene.floor_altitude, band_ulps=_BAND_ULPS,
+            graze=_GRAZE_COS, near_factor=4.0,
         )  # fmt: skip
         first = prim.astype(np.int64)
         again = np.flatnonzero(suspect)

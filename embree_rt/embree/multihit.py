@@ -56,6 +56,7 @@ from embree_rt.embree.kernels import (
     rtc_intersect1,
 )
 from embree_rt.embree.user_spheres import _floats, _ints, _words32, _words64
+from embree_rt.embree.work_split import threads_for
 
 # rtcore_common.h / rtcore_scene.h
 RAY_QUERY_FLAG_INVOKE_ARGUMENT_FILTER = 1 << 1
@@ -346,7 +347,7 @@ def all_hits(
         out = new_hit_buffers(n, capacity)
     t, prim, u, v, cos, count, more = (array[:n] for array in out)
     if n:
-        numba.set_num_threads(threads)
+        numba.set_num_threads(threads_for(n, threads))
         _all_hits(scene, FILTER_ADDRESS, origins, directions, tnear, tfar, t, prim, u, v, cos,
                   count, more)  # fmt: skip
     return t, prim, u, v, cos, count, more
@@ -374,7 +375,7 @@ def crossing_parity(
     odd = np.zeros(n, bool)
     clear = np.zeros(n, bool)
     if n:
-        numba.set_num_threads(threads)
+        numba.set_num_threads(threads_for(n, threads))
         _crossing_parity(scene, FILTER_ADDRESS, origins, directions, capacity,
                          np.ascontiguousarray(edge_band, np.float32), np.float32(graze), odd,
                          clear)  # fmt: skip

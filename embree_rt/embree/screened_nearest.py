@@ -8,6 +8,11 @@ the clear hits as they are and decide the suspect ones again (in float64, agains
 around them). Doing the frame change, the query and the screening in one pass spares the
 NumPy temporaries of each step, which cost more than the query itself for small meshes.
 
+Given the mesh's box, the rays are traced in the order of where they enter it
+(``ray_order``): the frame pass also keys each ray, a radix sort orders the keys, a gather
+pass copies the local rays into that order, the trace and screening run over them, and a last
+pass puts the answers back in the caller's order.
+
 The band: Embree's float32 barycentrics err by a few ulps of the largest coordinate involved
 (``magnitude``: the ray's origin's or the mesh's) over the triangle's smallest altitude, so a hit
 is suspect when ``min(u, v, 1 - u - v) <= band_ulps * eps32 * magnitude / altitude[prim]``.
@@ -25,6 +30,8 @@ import numpy as np
 from numba import njit, prange
 
 from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, _intersect_chunk
+from embree_rt.embree.ray_order import box_cells, entry_key, radix_order
+from embree_rt.embree.work_split import threads_for
 
 _EPS32 = np.float64(np.finfo(np.float32).eps)
 # trimesh.util.unitize leaves vectors no longer than this as they are
@@ -32,42 +39,63 @@ _UNIT_THRESHOLD = 1e-12
 
 
 @njit(nogil=True, cache=True)
-def _screened_chunk(scene, lanes, words, first, stop, origins, directions, shift, scale, extent,
-                    near_world, near_ulps, altitude, floor_altitude, band_ulps, graze,
-                    near_factor, local_origins, local_directions, tnear, tfar, t, normal, u, v,
-                    prim, geom, inst, origin_limit, suspect, bad):  # fmt: skip
-    # the local frame, as trimesh_ray._LocalScene.to_local and trimesh.util.unitize compute it
+def _frame_chunk(first, stop, origins, directions, shift, scale, extent, near_world, near_ulps,
+                 near_factor, lower, upper, cells_per_unit, rays, limits, keys,
+                 bad):  # fmt: skip
+    # the local frame, as trimesh_ray._LocalScene.to_local and trimesh.util.unitize compute it:
+    # rays[i] = local origin, unit direction (float32), limits[i] = Embree's tnear, the
+    # screening's origin limit; and with keys, ray i's tracing-order key
     given = near_world.shape[0] > 0
     for i in range(first, stop):
         magnitude = extent
         finite = True
         for k in range(3):
             local = np.float32((origins[i, k] - shift[k]) * scale)
-            local_origins[i, k] = local
+            rays[i, k] = local
             finite = finite and math.isfinite(local)
             magnitude = max(magnitude, abs(np.float64(local)))
         dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
         norm = math.sqrt(dx * dx + dy * dy + dz * dz)
         reciprocal = 1.0 / norm if norm > _UNIT_THRESHOLD else 1.0
-        local_directions[i, 0] = np.float32(dx * reciprocal)
-        local_directions[i, 1] = np.float32(dy * reciprocal)
-        local_directions[i, 2] = np.float32(dz * reciprocal)
+        rays[i, 3] = np.float32(dx * reciprocal)
+        rays[i, 4] = np.float32(dy * reciprocal)
+        rays[i, 5] = np.float32(dz * reciprocal)
         near = near_world[i] * scale if given else near_ulps * _EPS32 * magnitude
         # Embree from a little short of tnear: which hits count as at the origin is decided
         # in float64 by the caller for the suspect ones
-        tnear[i] = np.float32(near * 0.5)
-        tfar[i] = np.inf
-        origin_limit[i] = near_factor * near
+        limits[i, 0] = np.float32(near * 0.5)
+        limits[i, 1] = near_factor * near
         if not (finite and math.isfinite(norm) and math.isfinite(near)):
             bad[0] = True
-            local_origins[i, 0] = 0.0  # a harmless ray: the caller raises
-            local_origins[i, 1] = 0.0
-            local_origins[i, 2] = 0.0
-            local_directions[i, 0] = 0.0
-            local_directions[i, 1] = 0.0
-            local_directions[i, 2] = 0.0
-    _intersect_chunk(scene, lanes, words, first, stop, local_origins, local_directions, tnear,
-                     tfar, t, normal, u, v, prim, geom, inst, None)  # fmt: skip
+            for k in range(6):  # a harmless ray: the caller raises
+                rays[i, k] = 0.0
+        if keys.shape[0]:
+            keys[i] = entry_key(origins[i], directions[i], lower, upper, cells_per_unit)
+
+
+@njit(nogil=True, cache=True)
+def _gather_chunk(first, stop, order, rays, limits, ordered_rays, ordered_limits):
+    # ray order[j] to position j. A pass of its own, over rows the frame pass has just written:
+    # read from the trace loop, between Embree calls (which evict them), or straight from the
+    # caller's float64 arrays, these scattered reads cost more than the order saved.
+    for j in range(first, stop):
+        i = order[j]
+        for k in range(6):
+            ordered_rays[j, k] = rays[i, k]
+        ordered_limits[j, 0] = limits[i, 0]
+        ordered_limits[j, 1] = limits[i, 1]
+
+
+@njit(nogil=True, cache=True)
+def _trace_chunk(scene, lanes, words, first, stop, origins, directions, limits, extent,
+                 altitude, floor_altitude, band_ulps, graze, tnear, tfar, t, normal, u, v, prim,
+                 geom, inst, suspect):  # fmt: skip
+    # local rays first .. stop: origins, directions (n, 3) float32, limits (n, 2) float64
+    for i in range(first, stop):
+        tnear[i] = np.float32(limits[i, 0])
+        tfar[i] = np.inf
+    _intersect_chunk(scene, lanes, words, first, stop, origins, directions, tnear, tfar, t,
+                     normal, u, v, prim, geom, inst, None)  # fmt: skip
     floor_band_scale = band_ulps * _EPS32 / floor_altitude if floor_altitude > 0 else np.inf
     for i in range(first, stop):
         p = prim[i]
@@ -75,46 +103,73 @@ def _screened_chunk(scene, lanes, words, first, stop, origins, directions, shift
             suspect[i] = False
             continue
         gx, gy, gz = np.float64(normal[i, 0]), np.float64(normal[i, 1]), np.float64(normal[i, 2])
-        dx = np.float64(local_directions[i, 0])
-        dy = np.float64(local_directions[i, 1])
-        dz = np.float64(local_directions[i, 2])
+        dx = np.float64(directions[i, 0])
+        dy = np.float64(directions[i, 1])
+        dz = np.float64(directions[i, 2])
         norms = math.sqrt((gx * gx + gy * gy + gz * gz) * (dx * dx + dy * dy + dz * dz))
         cos = abs(gx * dx + gy * dy + gz * dz) / norms if norms > 0 else 0.0
         ui, vi = np.float64(u[i]), np.float64(v[i])
         edge = min(ui, vi, 1.0 - ui - vi)
         magnitude = extent
         for k in range(3):
-            magnitude = max(magnitude, abs(np.float64(local_origins[i, k])))
+            magnitude = max(magnitude, abs(np.float64(origins[i, k])))
         near_edge = edge <= floor_band_scale * magnitude
         if near_edge:  # only now read this triangle's own altitude
             own = altitude[p]
             near_edge = own <= 0 or edge <= band_ulps * _EPS32 * magnitude / own
-        suspect[i] = near_edge or cos <= graze or t[i] <= origin_limit[i]
+        suspect[i] = near_edge or cos <= graze or t[i] <= limits[i, 1]
+
+
+@njit(nogil=True, cache=True)
+def _scatter_chunk(first, stop, order, ordered_prim, ordered_suspect, prim, suspect):
+    for j in range(first, stop):
+        prim[order[j]] = ordered_prim[j]
+        suspect[order[j]] = ordered_suspect[j]
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _screened(scene, lanes, origins, directions, shift, scale, extent, near_world, near_ulps,
-              altitude, floor_altitude, band_ulps, graze, near_factor, prim, suspect, bad):
+def _screened(scene, lanes, origins, directions, shift, scale, extent, reorder, lower, upper,
+              cells_per_unit, near_world, near_ulps, altitude, floor_altitude, band_ulps, graze,
+              near_factor, prim, suspect, bad):  # fmt: skip
     n = origins.shape[0]
-    local_origins = np.empty((n, 3), np.float32)
-    local_directions = np.empty((n, 3), np.float32)
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    rays = np.empty((n, 6), np.float32)
+    limits = np.empty((n, 2), np.float64)
+    keys = np.empty(n if reorder else 0, np.uint32)
+    for c in prange(n_chunks):
+        _frame_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), origins, directions, shift, scale,
+                     extent, near_world, near_ulps, near_factor, lower, upper, cells_per_unit,
+                     rays, limits, keys, bad)  # fmt: skip
+    if reorder:
+        order = radix_order(keys)
+        ordered_rays = np.empty((n, 6), np.float32)
+        ordered_limits = np.empty((n, 2), np.float64)
+        for c in prange(n_chunks):
+            _gather_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, rays, limits, ordered_rays,
+                          ordered_limits)  # fmt: skip
+    else:
+        order = np.arange(0)
+        ordered_rays, ordered_limits = rays, limits
     tnear = np.empty(n, np.float32)
     tfar = np.empty(n, np.float32)
     t = np.empty(n, np.float32)
     normal = np.empty((n, 3), np.float32)
     u = np.empty(n, np.float32)
     v = np.empty(n, np.float32)
+    ordered_prim = np.empty(n, np.int32) if reorder else prim
+    ordered_suspect = np.empty(n, np.bool_) if reorder else suspect
     geom = np.empty(n, np.int32)
     inst = np.empty(n, np.int32)
-    origin_limit = np.empty(n, np.float64)
-    n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _screened_chunk(scene, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), origins,
-                        directions, shift, scale, extent, near_world, near_ulps, altitude,
-                        floor_altitude, band_ulps, graze, near_factor, local_origins,
-                        local_directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
-                        origin_limit, suspect, bad)  # fmt: skip
+        _trace_chunk(scene, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
+                     ordered_rays[:, :3], ordered_rays[:, 3:], ordered_limits, extent, altitude,
+                     floor_altitude, band_ulps, graze, tnear, tfar, t, normal, u, v,
+                     ordered_prim, geom, inst, ordered_suspect)  # fmt: skip
+    if reorder:
+        for c in prange(n_chunks):
+            _scatter_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, ordered_prim,
+                           ordered_suspect, prim, suspect)  # fmt: skip
 
 
 def screened_nearest(
@@ -126,6 +181,7 @@ def screened_nearest(
     shift: np.ndarray,
     scale: float,
     extent: float,
+    bounds: np.ndarray | None,
     near: np.ndarray | None,
     near_ulps: float,
     altitude: np.ndarray,
@@ -138,25 +194,35 @@ def screened_nearest(
 
     ``origins``, ``directions`` (n, 3) float64 world rays (directions need not be unit);
     ``shift`` (3,) float64 and ``scale``: the local frame is ``(p - shift) * scale`` in float64,
-    rounded to float32; ``extent``: the mesh's largest local coordinate; ``near`` (n,) float64
-    world distances, or None for ``near_ulps`` float32 ulps of each ray's magnitude: Embree
-    looks from half of it, and a hit within ``near_factor`` times it is suspect; ``altitude``
+    rounded to float32; ``extent``: the mesh's largest local coordinate; ``bounds``: (2, 3)
+    float64 world box (the mesh's) to trace the rays in the order of where they enter it
+    (``ray_order``; the answers are the same, see below), or None for the given order;
+    ``near`` (n,) float64 world distances, or None for ``near_ulps`` float32 ulps of each ray's
+    magnitude: Embree looks from half of it, and a hit within ``near_factor`` times it is
+    suspect; ``altitude``
     (primitives,) float64 smallest altitude of each triangle in the local frame (0 for a
     degenerate one: always suspect), ``floor_altitude`` its smallest value (so 0 when any
     triangle is degenerate); ``graze``: hits at |cos| <= it are suspect.
 
     Returns ``prim`` (n,) int32 (-1 for a miss, never suspect), ``suspect`` (n,) bool and
     ``finite``: False when some ray had a non-finite coordinate (its answer is meaningless).
+
+    Reordering cannot change an answer: every ray is traced on its own (``lanes`` 1: one
+    ``rtcIntersect1`` call, whose result is a function of that ray's fields and the committed,
+    immutable BVH alone), and the frame change and screening of ray i read only row i. So with
+    ``bounds`` or without, each ray goes through the same arithmetic on the same bits.
     """
     n = len(origins)
     prim = np.empty(n, np.int32)
     suspect = np.empty(n, bool)
     bad = np.zeros(1, bool)
+    lower, upper = np.zeros((2, 3)) if bounds is None else np.asarray(bounds, np.float64)
     if n:
-        numba.set_num_threads(threads)
+        numba.set_num_threads(threads_for(n, threads))
         _screened(scene, lanes, np.ascontiguousarray(origins, np.float64),
                   np.ascontiguousarray(directions, np.float64),
                   np.ascontiguousarray(shift, np.float64), float(scale), float(extent),
+                  bounds is not None, lower, upper, box_cells(lower, upper),
                   np.zeros(0) if near is None else np.ascontiguousarray(near, np.float64),
                   float(near_ulps), np.ascontiguousarray(altitude, np.float64),
                   float(floor_altitude), float(band_ulps), float(graze), float(near_factor), prim,

@@ -1,0 +1,102 @@
+"""A coherent tracing order for batches of incoherent rays: a Morton code of where each ray
+enters the mesh's bounding box, and a radix sort of those codes.
+
+Why: a ray's traversal reads the BVH nodes and triangles around where it goes, and on a big
+mesh (a million triangles: a BVH of ~100 MB) those reads miss every cache level when
+consecutive rays go to unrelated places. Traced in the order of where they enter the box,
+consecutive rays mostly meet the same part of the mesh, so the nodes and triangles one ray
+fetched are still in cache for the next. Measured on a 1.3M-triangle icosphere and a 1e5-triangle
+height field with trimesh's benchmark rays (from a sphere around the mesh toward random points
+in it), one thread: 1.4-1.6x the random order's rate; the ray's origin alone gave 1.1x, origin
+and direction together 1.15-1.4x (the entry point is the nearest cheap stand-in for where the
+ray hits, and ordering by the true hit point gave 1.8x).
+
+The order changes nothing in any ray's answer: each ray is still one single-ray query of an
+immutable BVH, whose result depends on that ray alone (see the callers).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_BITS = 10  # per axis: a 30-bit code
+_CELLS = (1 << _BITS) - 1
+_DIGIT_BITS = 10  # radix sort: three passes of 1024 buckets
+_DIGITS = 3
+
+
+@njit(inline="always")
+def _spread(x):
+    """The low 10 bits of ``x`` moved to every third bit (bit k to bit 3k)."""
+    x &= 0x3FF
+    x = (x | (x << 16)) & 0x030000FF
+    x = (x | (x << 8)) & 0x0300F00F
+    x = (x | (x << 4)) & 0x030C30C3
+    x = (x | (x << 2)) & 0x09249249
+    return x
+
+
+@njit(inline="always")
+def entry_key(origin, direction, lower, upper, cells_per_unit):
+    """uint32 Morton code of where the ray ``origin``, ``direction`` ((3,) float64 rows) enters
+    the box ``lower`` .. ``upper`` ((3,) float64), on a grid of 1024 cells an axis
+    (``cells_per_unit`` (3,): 1023 / the box's size, 0 along a flat axis); a ray starting inside
+    is keyed by its origin, one that misses by its origin clamped to the box."""
+    near, far = 0.0, math.inf
+    for k in range(3):
+        d = direction[k]
+        if d == 0.0:
+            if origin[k] < lower[k] or origin[k] > upper[k]:
+                far = -1.0  # parallel to this slab and outside it
+        else:
+            reciprocal = 1.0 / d
+            t0 = (lower[k] - origin[k]) * reciprocal
+            t1 = (upper[k] - origin[k]) * reciprocal
+            near = max(near, min(t0, t1))
+            far = min(far, max(t0, t1))
+    step = near if near <= far else 0.0
+    code = np.uint32(0)
+    for k in range(3):
+        cell = (origin[k] + step * direction[k] - lower[k]) * cells_per_unit[k]
+        cell = min(max(cell, 0.0), float(_CELLS))  # also maps nan (a non-finite ray) to 0
+        code |= np.uint32(_spread(np.uint32(cell))) << np.uint32(k)
+    return code
+
+
+def box_cells(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """(3,) float64 grid cells per unit length along each axis of the box ``lower`` ..
+    ``upper`` for ``entry_key`` (0 along an axis where the box is flat)."""
+    size = np.asarray(upper, np.float64) - np.asarray(lower, np.float64)
+    with np.errstate(divide="ignore"):
+        return np.where(size > 0, _CELLS / np.where(size > 0, size, 1.0), 0.0)
+
+
+@njit(nogil=True, cache=True)
+def radix_order(keys):
+    """(n,) int64 stable ascending order of (n,) uint32 ``keys`` below 2**30 (LSD radix sort,
+    serial: about 1 ms for 1e5 keys, a third of ``np.argsort``'s time here)."""
+    n = keys.shape[0]
+    order = np.arange(n)
+    spare = np.empty(n, np.int64)
+    counts = np.empty(1 << _DIGIT_BITS, np.int64)
+    mask = np.uint32((1 << _DIGIT_BITS) - 1)
+    for digit in range(_DIGITS):
+        shift = np.uint32(digit * _DIGIT_BITS)
+        counts[:] = 0
+        for i in range(n):
+            counts[(keys[i] >> shift) & mask] += 1
+        total = 0
+        for b in range(counts.shape[0]):
+            count = counts[b]
+            counts[b] = total
+            total += count
+        for i in range(n):
+            j = order[i]
+            b = (keys[j] >> shift) & mask
+            spare[counts[b]] = j
+            counts[b] += 1
+        order, spare = spare, order
+    return order
