@@ -49,8 +49,11 @@ from trimesh import caching, util
 from trimesh.constants import tol
 
 from embree_rt.embree import BVH
+from embree_rt.embree.depth_order import depth_major
+from embree_rt.embree.local_frame import local_rays
 from embree_rt.embree.multihit import compact_hits
 from embree_rt.embree.plane_distances import plane_distances
+from embree_rt.embree.settled_hits import settled_hits
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
 # near an edge or along a face to trust their parity.
@@ -242,18 +245,16 @@ class RayMeshIntersector:
     # -- queries ------------------------------------------------------------------------------
 
     @staticmethod
-    def _resolve_tnear(scene, local_origins, tnear):
-        """(near (n,) float64 world distance, inclusive, magnitude (n,) float64): hits count
-        at distance > near (>= when ``tnear`` is given, ``inclusive``); by default near is a
-        few float32 ulps of ``magnitude``, each ray's largest local coordinate (its origin's or
-        the mesh's)."""
-        magnitude = np.maximum(np.abs(local_origins).max(axis=1), scene.extent).astype(np.float64)
+    def _resolve_tnear(scene, magnitude, tnear):
+        """(near (n,) float64 world distance, inclusive): hits count at distance > near (>=
+        when ``tnear`` is given, ``inclusive``); by default near is a few float32 ulps of
+        ``magnitude`` (n,), each ray's largest local coordinate (its origin's or the mesh's)."""
         if tnear is None:
-            return _TNEAR_ULPS * _EPS32 * magnitude / scene.scale, False, magnitude
-        near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(local_origins),))
+            return _TNEAR_ULPS * _EPS32 * magnitude / scene.scale, False
+        near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(magnitude),))
         if not np.isfinite(near).all() or (near < 0).any():
             raise ValueError("tnear: must be finite and >= 0")
-        return near, True, magnitude
+        return near, True
 
     def _hits(self, origins, directions, max_hits, tnear, one_per_point=False):
         """Every ray's nearest ``max_hits`` hits: (rays, triangles, distances, ranks) (k,),
@@ -261,9 +262,9 @@ class RayMeshIntersector:
         at one point (an edge, a vertex) as one, the lowest-index triangle there."""
         scene = self._scene
         n = len(origins)
-        local_origins = scene.to_local(origins)
-        local_directions = directions.astype(np.float32)
-        near, inclusive, magnitude = self._resolve_tnear(scene, local_origins, tnear)
+        local_origins, local_directions, magnitude = local_rays(origins, directions, scene.origin,
+                                                                scene.scale, scene.extent)
+        near, inclusive = self._resolve_tnear(scene, magnitude, tnear)
         capacity = max(1, int(max_hits))
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
         # pairs, so that the nearest `capacity` survive
@@ -273,35 +274,37 @@ class RayMeshIntersector:
         first_room = min(room, _FIRST_ROOM)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
         buffers = None
-        clean_rays, clean_tris, messy_rays, messy_tris = [], [], [], []
+        settled_parts, pending_parts = [], []
+        band_scale = _BAND_ULPS * _EPS32
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
             # Embree from the local frame's tnear (inclusive, a little short of ours): which
             # hits count as at the origin is decided below in float64.
-            block_origins, block_directions = local_origins[rows], local_directions[rows]
             block_near = (near[rows] * scene.scale * 0.5).astype(np.float32)
-            result = scene.bvh.all_hits(block_origins, block_directions, block_near, np.inf,
-                                        first_room, out=buffers)  # fmt: skip
+            result = scene.bvh.all_hits(local_origins[rows], local_directions[rows], block_near,
+                                        np.inf, first_room, out=buffers)  # fmt: skip
             buffers = buffers or result
+            # rays clear of edges and grazing settled in one compiled pass; the others (and
+            # those that overflowed `first_room`) traced again below
+            rays, tris, distance, messy = settled_hits(
+                result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
+                directions[rows], scene.first_vertices, scene.normals, scene.min_altitude,
+                band_scale, _GRAZE_COS, _PARALLEL_COS,
+            )  # fmt: skip
+            settled_parts.append((rays + first, tris, distance))
+            pending_parts.append(first + np.flatnonzero(messy))
+        pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
+        clean_rays, clean_tris, messy_rays, messy_tris = [], [], [], []
+        block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
+        for first in range(0, len(pending), block):
+            which = pending[first:first + block]
+            block_near = (near[which] * scene.scale * 0.5).astype(np.float32)
+            result = scene.bvh.all_hits(local_origins[which], local_directions[which],
+                                        block_near, np.inf, room)  # fmt: skip
             ray_of, tris, u, v, cos = compact_hits(result)
-            overflow = np.flatnonzero(result[6]) if room > first_room else np.zeros(0, int)
-            if len(overflow):
-                retraced = scene.bvh.all_hits(block_origins[overflow], block_directions[overflow],
-                                              block_near[overflow], np.inf, room)  # fmt: skip
-                again = compact_hits(retraced)
-                kept = ~result[6][ray_of]
-                merged = [np.concatenate([x[kept], y]) for x, y in
-                          zip((ray_of, tris, u, v, cos), (overflow[again[0]], *again[1:]),
-                              strict=True)]  # fmt: skip
-                order = np.argsort(merged[0], kind="stable")
-                ray_of, tris, u, v, cos = (x[order] for x in merged)
-            ray_of += first
+            ray_of = which[ray_of]
             band = _edge_band(scene, tris, magnitude[ray_of])
             suspect = (np.minimum(np.minimum(u, v), 1 - u - v) <= band) | (cos <= _GRAZE_COS)
-            if not suspect.any():
-                clean_rays.append(ray_of)
-                clean_tris.append(tris)
-                continue
             messy = np.zeros(n, bool)
             messy[ray_of[suspect]] = True
             in_messy = messy[ray_of]
@@ -315,7 +318,7 @@ class RayMeshIntersector:
             hit, _ = _float64_hits(scene, origins, directions, pair_rays, pair_tris)
             messy_rays.append(pair_rays[hit])
             messy_tris.append(pair_tris[hit])
-        parts = []
+        parts = settled_parts
         for ray_parts, tri_parts, settled in ((clean_rays, clean_tris, True),
                                               (messy_rays, messy_tris, False)):  # fmt: skip
             rays = np.concatenate(ray_parts) if ray_parts else np.zeros(0, np.int64)
@@ -332,7 +335,7 @@ class RayMeshIntersector:
                 rays, tris, distance = rays[order], tris[order], distance[order]
             parts.append((rays, tris, distance))
         rays, tris, distance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
-        if len(parts[1][0]):
+        if len(pending):  # runs sorted by ray, merged (timsort finds the runs)
             order = np.argsort(rays, kind="stable")
             rays, tris, distance = rays[order], tris[order], distance[order]
         if one_per_point:
@@ -405,10 +408,10 @@ class RayMeshIntersector:
         origins, directions = _as_rays(ray_origins, ray_directions)
         rays, tris, distance, ranks = self._hits(origins, directions, max_hits, tnear,
                                                  one_per_point=return_locations)
-        order = np.argsort(ranks, kind="stable")  # rays are sorted: depth by depth, by ray
-        rays, tris, distance = rays[order], tris[order], distance[order]
+        # rays are sorted: depth by depth, by ray
+        rays, tris, locations = depth_major(rays, tris, distance, ranks, origins, directions,
+                                            return_locations)  # fmt: skip
         if return_locations:
-            locations = origins[rays] + directions[rays] * distance[:, None]
             return tris, rays, locations
         return tris, rays
 

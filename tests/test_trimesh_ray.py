@@ -413,3 +413,42 @@ def test_vertex_positions_are_grouped_as_numpy_unique_groups_them() -> None:
     _, expected = np.unique(vertices, axis=0, return_inverse=True)
     np.testing.assert_array_equal(ids, expected.reshape(-1))
     assert len(set(ids[:10])) == 1
+
+
+def test_settled_overflowing_and_edge_rays_in_one_batch_match_ray_triangle():
+    """One batch mixing the multi-hit query's three routes: rays clear of edges (settled in the
+    compiled pass), rays through edge midpoints (decided in float64 with their neighbours) and
+    rays through ten sheets (more hits than the first trace has room for: traced again). Every
+    (ray, triangle) pair must be ray_triangle's, each ray's hits nearest first, depth-major."""
+    corners = np.array([[-2.0, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]])
+    sheets = trimesh.Trimesh(np.vstack([corners + np.array([0, 0, z]) for z in range(10)]),
+                             np.vstack([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * z
+                                        for z in range(10)]))  # fmt: skip
+    ball = trimesh.creation.icosphere(subdivisions=2)
+    ball.apply_translation([6.0, 0.0, 4.0])
+    mesh = trimesh.util.concatenate([sheets, ball])
+    midpoints = ball.vertices[ball.edges_unique[:60]].mean(axis=1)
+    toward_edges = midpoints - ball.centroid + [0.013, -0.007, 0.011]  # not through the centre
+    random_origins, random_directions = _outside_rays(ball, 200, seed=9)
+    origins = np.vstack([[[0.1, 0.2, -1.0], [0.3, -0.4, -1.0], [0.5, 0.3, 20.0]],
+                         midpoints - 3 * toward_edges, random_origins])  # fmt: skip
+    directions = np.vstack([[[0, 0, 1.0], [0.01, 0, 1.0], [0, 0, -1.0]], toward_edges,
+                            random_directions])  # fmt: skip
+    ours = RayMeshIntersector(mesh)
+    _, ray, locations = ours.intersects_id(origins, directions, return_locations=True)
+    ref_tri, ref_ray, _ = _narrow_phase(mesh, origins, directions)
+    assert np.bincount(ray, minlength=len(origins))[:3].tolist() == [10, 10, 10]
+    tri_all, ray_all = ours.intersects_id(origins, directions)
+    assert _pairs(tri_all, ray_all) == _pairs(ref_tri, ref_ray)
+    ranks = np.zeros(len(ray), int)
+    seen = np.zeros(len(origins), int)
+    for k, r in enumerate(ray):
+        ranks[k] = seen[r]
+        seen[r] += 1
+    assert (np.diff(ranks) >= 0).all()
+    same_rank = np.diff(ranks) == 0
+    assert (np.diff(ray)[same_rank] > 0).all()
+    distance = np.einsum("ij,ij->i", locations - origins[ray],
+                         directions[ray] / np.linalg.norm(directions[ray], axis=1)[:, None])
+    for r in range(len(origins)):
+        assert (np.diff(distance[ray == r]) > 0).all()

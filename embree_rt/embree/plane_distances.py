@@ -13,17 +13,23 @@ import numpy as np
 from numba import njit
 
 
+@njit(inline="always", error_model="numpy")
+def plane_distance(first_vertices, normals, origins, directions, r, f):
+    """(distance, |cos|) float64 of ray ``r`` to triangle ``f``'s plane (see ``plane_distances``);
+    the one copy of this arithmetic, which ``settled_hits`` also runs."""
+    toward = ((first_vertices[f, 0] - origins[r, 0]) * normals[f, 0]
+              + (first_vertices[f, 1] - origins[r, 1]) * normals[f, 1]
+              + (first_vertices[f, 2] - origins[r, 2]) * normals[f, 2])  # fmt: skip
+    along = (directions[r, 0] * normals[f, 0] + directions[r, 1] * normals[f, 1]
+             + directions[r, 2] * normals[f, 2])  # fmt: skip
+    return toward / along, abs(along)  # ±inf or nan along the plane, as NumPy gives
+
+
 @njit(nogil=True, cache=True, error_model="numpy")
 def _plane_distances(first_vertices, normals, origins, directions, rays, tris, distance, cos):
     for k in range(rays.shape[0]):
-        r, f = rays[k], tris[k]
-        toward = ((first_vertices[f, 0] - origins[r, 0]) * normals[f, 0]
-                  + (first_vertices[f, 1] - origins[r, 1]) * normals[f, 1]
-                  + (first_vertices[f, 2] - origins[r, 2]) * normals[f, 2])  # fmt: skip
-        along = (directions[r, 0] * normals[f, 0] + directions[r, 1] * normals[f, 1]
-                 + directions[r, 2] * normals[f, 2])  # fmt: skip
-        distance[k] = toward / along  # ±inf or nan along the plane, as NumPy gives
-        cos[k] = abs(along)
+        distance[k], cos[k] = plane_distance(first_vertices, normals, origins, directions,
+                                             rays[k], tris[k])  # fmt: skip
 
 
 def plane_distances(

@@ -1,0 +1,106 @@
+"""The multi-hit query's common case in one compiled pass: rays whose every hit is clear of
+edges and grazing angles, turned from ``multihit.all_hits``' buffers into final hits.
+
+For such a ray Embree's float32 answer needs no second look: each hit's distance is taken in
+float64 from the ray's origin to the triangle's plane (``plane_distances.plane_distance``, as
+trimesh computes it), hits at the origin or along a face are dropped, and the rest are sorted by
+(distance, triangle). A ray with a hit within ``band_scale * magnitude / altitude`` (barycentric)
+of an edge, at |cos| <= ``graze``, or that overflowed its buffer (when a retrace with more room
+follows) is *messy*: left to the caller's float64 path. In NumPy this pass was a dozen passes
+and gathers over every hit, more than the traversal itself on small meshes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from embree_rt.embree.plane_distances import plane_distance
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, inclusive, origins,
+            directions, first_vertices, normals, altitude, band_scale, graze, parallel_cos,
+            messy, out_rays, out_tris, out_distance):  # fmt: skip
+    k = 0
+    one = np.float32(1.0)
+    for i in range(count.shape[0]):
+        found = count[i]
+        bad = retrace_more and more[i]
+        for j in range(found):
+            if bad:
+                break
+            p = prim[i, j]
+            # float32, as the NumPy screening of the same buffers computes it
+            edge = min(min(u[i, j], v[i, j]), one - u[i, j] - v[i, j])
+            own = altitude[p]
+            bad = own <= 0 or edge <= band_scale * magnitude[i] / own or cos[i, j] <= graze
+        messy[i] = bad
+        if bad:
+            continue
+        start = k
+        for j in range(found):
+            p = prim[i, j]
+            distance, along = plane_distance(first_vertices, normals, origins, directions, i, p)
+            ahead = distance >= near[i] if inclusive else distance > near[i]
+            if not (ahead and along > parallel_cos):
+                continue
+            # insertion by (distance, triangle): float64 may order what float32 tied
+            m = k
+            while m > start and (out_distance[m - 1] > distance
+                                 or (out_distance[m - 1] == distance and out_tris[m - 1] > p)):
+                out_distance[m] = out_distance[m - 1]
+                out_tris[m] = out_tris[m - 1]
+                m -= 1
+            out_distance[m] = distance
+            out_tris[m] = p
+            out_rays[k] = i
+            k += 1
+    return k
+
+
+def settled_hits(
+    result: tuple[np.ndarray, ...],
+    retrace_more: bool,
+    magnitude: np.ndarray,
+    near: np.ndarray,
+    inclusive: bool,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    first_vertices: np.ndarray,
+    normals: np.ndarray,
+    altitude: np.ndarray,
+    band_scale: float,
+    graze: float,
+    parallel_cos: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Final hits of the clear rays of one ``all_hits`` block, and which rays are messy.
+
+    ``result``: ``all_hits``' (t, prim, u, v, cos, count, more) for n rays; ``retrace_more``:
+    rays with ``more`` set are messy (the caller traces them again with more room);
+    ``magnitude`` (n,) float64 largest local coordinate of each ray, ``near`` (n,) float64 world
+    distance hits must lie beyond (``inclusive``: at or beyond); ``origins``, ``directions``
+    (n, 3) float64 world rays (unit directions); ``first_vertices``, ``normals`` (triangles, 3)
+    float64; ``altitude`` (triangles,) float64 smallest local altitude (0: degenerate, always
+    messy); ``band_scale``: edge band per unit of magnitude / altitude; ``graze``, ``parallel_cos``:
+    the messy and the dropping |cos|.
+
+    Returns ``rays`` (k,) int64 (0 .. n - 1, ascending), ``tris`` (k,) int64, ``distance`` (k,)
+    float64 sorted by (distance, triangle) within each ray, and ``messy`` (n,) bool.
+    """
+    _t, prim, u, v, cos, count, more = result
+    n = len(count)
+    total = int(count.sum())
+    rays, tris = np.empty(total, np.int64), np.empty(total, np.int64)
+    distance = np.empty(total, np.float64)
+    messy = np.zeros(n, bool)
+    if n:
+        kept = _settle(_t, prim, u, v, cos, count, more, bool(retrace_more),
+                       np.ascontiguousarray(magnitude, np.float64),
+                       np.ascontiguousarray(near, np.float64), bool(inclusive),
+                       np.ascontiguousarray(origins, np.float64),
+                       np.ascontiguousarray(directions, np.float64), first_vertices, normals,
+                       altitude, float(band_scale), np.float32(graze), float(parallel_cos), messy,
+                       rays, tris, distance)  # fmt: skip
+        rays, tris, distance = rays[:kept], tris[:kept], distance[:kept]
+    return rays, tris, distance, messy
