@@ -13,10 +13,12 @@ rate over turns and ``vs_embreex``, the median over turns of our rate ÷ embreex
 local frame (float32, unit directions, as ``RayMeshIntersector`` makes them), through the bare
 nearest-hit query of our BVH (``BVH.intersect``: no screening, no frame change, no float64
 refinement) on 1 and 2 threads, with Embree's watertight test (``robust``, what
-``RayMeshIntersector`` builds) and without, beside embreex's own ``EmbreeScene.run`` on the same
-local rays (one thread) and trimesh's embreex ``intersects_first`` (the benchmark's baseline),
-and our ``intersects_first``; each taken once a turn. ``*_vs_trimesh_embreex`` is the median
-over turns of a rate ÷ trimesh's embreex ``intersects_first`` in the same turn.
+``RayMeshIntersector`` builds) and without, and (``*_entry_ordered``) on the rays sorted by
+where they enter the mesh's box, the order ``intersects_first`` traces them in on big meshes;
+beside embreex's own ``EmbreeScene.run`` on the same local rays (one thread), trimesh's
+embreex ``intersects_first`` (the benchmark's baseline) and our ``intersects_first``; each
+taken once a turn. ``*_vs_trimesh_embreex`` is the median over turns of a rate ÷ trimesh's
+embreex ``intersects_first`` in the same turn.
 """
 
 from __future__ import annotations
@@ -71,6 +73,25 @@ def timed(function, *args) -> float:
     return time.perf_counter() - start
 
 
+def entry_order(origins: np.ndarray, directions: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """(n,) order of rays (n, 3) by a Morton code of where each enters the box [0, box]: NumPy's
+    version of the order ``RayMeshIntersector`` traces first hits in on big meshes
+    (``embree_rt.embree.ray_order``), to time the bare query on rays so ordered."""
+    o, d = origins.astype(np.float64), directions.astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0, t1 = (0.0 - o) / d, (box - o) / d
+        near = np.nanmax(np.minimum(t0, t1), axis=1).clip(0)
+        far = np.nanmin(np.maximum(t0, t1), axis=1)
+        step = np.where(near <= far, near, 0.0)
+        cells = np.clip((o + step[:, None] * d) / np.where(box > 0, box, 1), 0, 1) * 1023
+    code = np.zeros(len(o), np.uint64)
+    for axis in range(3):
+        cell = cells[:, axis].astype(np.uint64)
+        for bit in range(10):
+            code |= ((cell >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    return np.argsort(code, kind="stable")
+
+
 def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
     """One mesh's row of first-hit rates of the bare queries (see the module docstring)."""
     origins, directions = rays(mesh, n, seed=1)
@@ -87,6 +108,9 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
         "embreex_bare": lambda: theirs._scene.scene.run(local_origins, local_directions),
         "embree_rt_first_hit": lambda: ours.intersects_first(origins, directions),
     }
+    order = entry_order(local_origins, local_directions, local_vertices.max(axis=0))
+    ordered_origins = np.ascontiguousarray(local_origins[order])
+    ordered_directions = np.ascontiguousarray(local_directions[order])
     for robust in (True, False):
         for threads in (1, 2):
             bvh = BVH(threads=threads, lanes=1, robust=robust)
@@ -95,6 +119,9 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
             bvh.intersect(local_origins[:10], local_directions[:10])
             key = f"bare_{'robust' if robust else 'plain'}_{threads}t"
             runs[key] = lambda bvh=bvh: bvh.intersect(local_origins, local_directions)
+            if robust:
+                runs[f"{key}_entry_ordered"] = lambda bvh=bvh: bvh.intersect(ordered_origins,
+                                                                             ordered_directions)
     rates: dict[str, list[float]] = {key: [] for key in runs}
     for _ in range(turns):
         for key, run in runs.items():
