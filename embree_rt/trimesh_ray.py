@@ -274,7 +274,7 @@ class RayMeshIntersector:
         first_room = min(room, _FIRST_ROOM)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
         buffers = None
-        settled_parts, pending_parts = [], []
+        settled_parts, pending_parts, kept_parts = [], [], []
         band_scale = _BAND_ULPS * _EPS32
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
@@ -284,23 +284,29 @@ class RayMeshIntersector:
             result = scene.bvh.all_hits(local_origins[rows], local_directions[rows], block_near,
                                         np.inf, first_room, out=buffers)  # fmt: skip
             buffers = buffers or result
-            # rays clear of edges and grazing settled in one compiled pass; the others (and
-            # those that overflowed `first_room`) traced again below
+            # rays clear of edges and grazing settled in one compiled pass; the others go to the
+            # float64 path below, those that overflowed `first_room` traced again first
             rays, tris, distance, messy = settled_hits(
                 result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
                 directions[rows], scene.first_vertices, scene.normals, scene.min_altitude,
                 band_scale, _GRAZE_COS, _PARALLEL_COS,
             )  # fmt: skip
             settled_parts.append((rays + first, tris, distance))
-            pending_parts.append(first + np.flatnonzero(messy))
+            messy_rows = np.flatnonzero(messy)
+            if room == first_room and len(messy_rows):  # these hits are complete: kept
+                kept_parts.append((first + messy_rows, [x[messy_rows] for x in result]))
+            else:
+                pending_parts.append(first + messy_rows)
         pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
-        clean_rays, clean_tris, messy_rays, messy_tris = [], [], [], []
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
         for first in range(0, len(pending), block):
             which = pending[first:first + block]
             block_near = (near[which] * scene.scale * 0.5).astype(np.float32)
-            result = scene.bvh.all_hits(local_origins[which], local_directions[which],
-                                        block_near, np.inf, room)  # fmt: skip
+            kept_parts.append((which, scene.bvh.all_hits(local_origins[which],
+                                                         local_directions[which], block_near,
+                                                         np.inf, room)))  # fmt: skip
+        clean_rays, clean_tris, messy_rays, messy_tris = [], [], [], []
+        for which, result in kept_parts:
             ray_of, tris, u, v, cos = compact_hits(result)
             ray_of = which[ray_of]
             band = _edge_band(scene, tris, magnitude[ray_of])
@@ -335,7 +341,7 @@ class RayMeshIntersector:
                 rays, tris, distance = rays[order], tris[order], distance[order]
             parts.append((rays, tris, distance))
         rays, tris, distance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
-        if len(pending):  # runs sorted by ray, merged (timsort finds the runs)
+        if kept_parts:  # runs sorted by ray, merged (timsort finds the runs)
             order = np.argsort(rays, kind="stable")
             rays, tris, distance = rays[order], tris[order], distance[order]
         if one_per_point:
