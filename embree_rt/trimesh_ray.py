@@ -101,8 +101,10 @@ class _LocalScene:
         self.bvh.add_triangles(local, faces)
         self.bvh.commit()
         self.triangles = np.asarray(mesh.triangles, dtype=np.float64)
-        self.normals = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
-        self.first_vertices = np.ascontiguousarray(self.triangles[:, 0])
+        # each triangle's first vertex and unit normal side by side in one (k, 6) table: the
+        # float64 distance of a hit reads both, and on a big mesh each read is a cache miss
+        planes = np.hstack([self.triangles[:, 0], np.asarray(mesh.face_normals, np.float64)])
+        self.first_vertices, self.normals = planes[:, :3], planes[:, 3:]
         self.faces = faces
         self.vertices = vertices
         self.face_count = len(faces)
@@ -289,7 +291,7 @@ class RayMeshIntersector:
             rays, tris, distance, messy = settled_hits(
                 result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
                 directions[rows], scene.first_vertices, scene.normals, scene.min_altitude,
-                band_scale, _GRAZE_COS, _PARALLEL_COS,
+                scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS,
             )  # fmt: skip
             settled_parts.append((rays + first, tris, distance))
             messy_rows = np.flatnonzero(messy)

@@ -20,10 +20,11 @@ from embree_rt.embree.plane_distances import plane_distance
 
 @njit(nogil=True, cache=True, error_model="numpy")
 def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, inclusive, origins,
-            directions, first_vertices, normals, altitude, band_scale, graze, parallel_cos,
-            messy, out_rays, out_tris, out_distance):  # fmt: skip
+            directions, first_vertices, normals, altitude, floor_altitude, band_scale, graze,
+            parallel_cos, messy, out_rays, out_tris, out_distance):  # fmt: skip
     k = 0
     one = np.float32(1.0)
+    floor_scale = band_scale / floor_altitude if floor_altitude > 0 else np.inf
     for i in range(count.shape[0]):
         found = count[i]
         bad = retrace_more and more[i]
@@ -33,8 +34,12 @@ def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, incl
             p = prim[i, j]
             # float32, as the NumPy screening of the same buffers computes it
             edge = min(min(u[i, j], v[i, j]), one - u[i, j] - v[i, j])
-            own = altitude[p]
-            bad = own <= 0 or edge <= band_scale * magnitude[i] / own or cos[i, j] <= graze
+            bad = cos[i, j] <= graze
+            # the triangle's own altitude (a cache miss on a big mesh) only for hits inside the
+            # mesh-wide band, which is at least as wide: the same answer
+            if not bad and edge <= floor_scale * magnitude[i]:
+                own = altitude[p]
+                bad = own <= 0 or edge <= band_scale * magnitude[i] / own
         messy[i] = bad
         if bad:
             continue
@@ -70,6 +75,7 @@ def settled_hits(
     first_vertices: np.ndarray,
     normals: np.ndarray,
     altitude: np.ndarray,
+    floor_altitude: float,
     band_scale: float,
     graze: float,
     parallel_cos: float,
@@ -82,8 +88,8 @@ def settled_hits(
     distance hits must lie beyond (``inclusive``: at or beyond); ``origins``, ``directions``
     (n, 3) float64 world rays (unit directions); ``first_vertices``, ``normals`` (triangles, 3)
     float64; ``altitude`` (triangles,) float64 smallest local altitude (0: degenerate, always
-    messy); ``band_scale``: edge band per unit of magnitude / altitude; ``graze``, ``parallel_cos``:
-    the messy and the dropping |cos|.
+    messy), ``floor_altitude`` its minimum; ``band_scale``: edge band per unit of magnitude /
+    altitude; ``graze``, ``parallel_cos``: the messy and the dropping |cos|.
 
     Returns ``rays`` (k,) int64 (0 .. n - 1, ascending), ``tris`` (k,) int64, ``distance`` (k,)
     float64 sorted by (distance, triangle) within each ray, and ``messy`` (n,) bool.
@@ -100,7 +106,7 @@ def settled_hits(
                        np.ascontiguousarray(near, np.float64), bool(inclusive),
                        np.ascontiguousarray(origins, np.float64),
                        np.ascontiguousarray(directions, np.float64), first_vertices, normals,
-                       altitude, float(band_scale), np.float32(graze), float(parallel_cos), messy,
-                       rays, tris, distance)  # fmt: skip
+                       altitude, float(floor_altitude), float(band_scale), np.float32(graze),
+                       float(parallel_cos), messy, rays, tris, distance)  # fmt: skip
         rays, tris, distance = rays[:kept], tris[:kept], distance[:kept]
     return rays, tris, distance, messy
