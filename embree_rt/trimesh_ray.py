@@ -357,8 +357,10 @@ class RayMeshIntersector:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
         float64 (directions not necessarily unit) hits, -1 for none. Embree's nearest-hit query
         answers, in one compiled pass with the frame change, every ray whose hit lies clear of
-        edges, of grazing and of the origin (``BVH.screened_nearest``); the others (under 1% on
-        the benchmark's meshes) go through ``_hits``, which decides them in float64."""
+        edges, of grazing and of the origin (``BVH.screened_nearest``; on big meshes in the order
+        of where the rays enter the mesh's box, which changes no answer, see
+        ``embree_rt.embree.screened_nearest``); the others (under 1% on the benchmark's meshes)
+        go through ``_hits``, which decides them in float64."""
         scene = self._scene
         near = None
         if tnear is not None:
