@@ -18,7 +18,9 @@ where they enter the mesh's box, the order ``intersects_first`` traces them in o
 beside embreex's own ``EmbreeScene.run`` on the same local rays (one thread), trimesh's
 embreex ``intersects_first`` (the benchmark's baseline) and our ``intersects_first``; each
 taken once a turn. ``*_vs_trimesh_embreex`` is the median over turns of a rate ÷ trimesh's
-embreex ``intersects_first`` in the same turn.
+embreex ``intersects_first`` in the same turn. And all hits: our ``intersects_location`` and
+the bare traversal with the recording filter (``BVH.all_hits``, 8 hits of room, 2 threads),
+each ÷ trimesh's embreex ``intersects_location``.
 """
 
 from __future__ import annotations
@@ -122,18 +124,30 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
             if robust:
                 runs[f"{key}_entry_ordered"] = lambda bvh=bvh: bvh.intersect(ordered_origins,
                                                                              ordered_directions)
+    # all hits: the bare traversal with the recording filter, as RayMeshIntersector's scene
+    # holds it (8 hits of room a ray, as its first trace), beside trimesh's embreex
+    runs["all_hits_trimesh_embreex"] = lambda: theirs.intersects_location(origins, directions)
+    runs["all_hits_embree_rt"] = lambda: ours.intersects_location(origins, directions)
+    runs["all_hits_bare_2t"] = lambda: scene.bvh.all_hits(local_origins, local_directions, 0.0,
+                                                          np.inf, 8)  # fmt: skip
     rates: dict[str, list[float]] = {key: [] for key in runs}
     for _ in range(turns):
         for key, run in runs.items():
             rates[key].append(n / timed(run))
     baseline = rates["trimesh_embreex"]
+    versus_all = {f"{key}_vs_trimesh_embreex": round(float(np.median(
+        [rate / base for rate, base in zip(rates[key], rates["all_hits_trimesh_embreex"],
+                                           strict=True)])), 2)
+        for key in ("all_hits_embree_rt", "all_hits_bare_2t")}  # fmt: skip
     return {
         "mesh": name, "triangles": len(mesh.faces), "rays": n, "turns": turns,
         "load_average": round(os.getloadavg()[0], 2),
         **{f"{key}_krays_s": round(float(np.median(v)) / 1e3, 1) for key, v in rates.items()},
         **{f"{key}_vs_trimesh_embreex": round(float(np.median(
             [rate / base for rate, base in zip(v, baseline, strict=True)])), 2)
-           for key, v in rates.items() if key != "trimesh_embreex"},
+           for key, v in rates.items()
+           if key != "trimesh_embreex" and not key.startswith("all_hits")},
+        **versus_all,
     }  # fmt: skip
 
 
