@@ -7,9 +7,10 @@ consecutive rays go to unrelated places. Traced in the order of where they enter
 consecutive rays mostly meet the same part of the mesh, so the nodes and triangles one ray
 fetched are still in cache for the next. Measured on a 1.3M-triangle icosphere and a 1e5-triangle
 height field with trimesh's benchmark rays (from a sphere around the mesh toward random points
-in it), one thread: 1.4-1.6x the random order's rate; the ray's origin alone gave 1.1x, origin
+in it), one thread: 1.25-1.6x the random order's rate; the ray's origin alone gave 1.1x, origin
 and direction together 1.15-1.4x (the entry point is the nearest cheap stand-in for where the
-ray hits, and ordering by the true hit point gave 1.8x).
+ray hits, and ordering by the true hit point gave 1.8x). On a 2,304-triangle mesh, whose BVH
+fits in cache, 1.08x: less than the sort costs.
 
 The order changes nothing in any ray's answer: each ray is still one single-ray query of an
 immutable BVH, whose result depends on that ray alone (see the callers).
