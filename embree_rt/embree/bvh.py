@@ -247,7 +247,9 @@ class BVH:
             self._device.check("rtcNewGeometry(USER)")
             # Stored in spatial order, for the callbacks' memory traffic (spatial_order); the
             # callbacks report each sphere by its index among the spheres given.
-            packed, order, slot = spatial_order.store_in_spatial_order(centers, radii)
+            packed, order, slot, in_order = spatial_order.store_in_spatial_order(centers, radii)
+            if in_order:
+                slot = _IDENTITY_SLOTS
             # Embree reads these through the user pointer for as long as the BVH lives.
             user_data = np.array([packed.ctypes.data, order.ctypes.data], np.uint64)
             self._sphere_user_data.append((user_data, order))

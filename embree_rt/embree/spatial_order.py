@@ -92,17 +92,20 @@ def store_in_spatial_order(centers, radii):
     """Spheres ``centers`` (n, 3), ``radii`` (n,) float32 as user geometry stores them.
 
     Returns the (n, 4) float32 (x, y, z, r) buffer in Morton order, ``order`` (n,) int32 (the
-    index of the sphere in each slot) and ``slot`` (n,) int32 (the slot of each sphere).
+    index of the sphere in each slot), ``slot`` (n,) int32 (the slot of each sphere) and
+    whether the spheres came in that order already (``order`` is the identity).
     """
     order = spatial_order(centers)
     n = len(order)
     packed = np.empty((max(n, 1), 4), np.float32)[:n]
     slot = np.empty(n, np.int32)
+    in_order = True
     for k in range(n):
         i = order[k]
+        in_order &= i == k
         packed[k, 0] = centers[i, 0]
         packed[k, 1] = centers[i, 1]
         packed[k, 2] = centers[i, 2]
         packed[k, 3] = radii[i]
         slot[i] = k
-    return packed, order, slot
+    return packed, order, slot, in_order
