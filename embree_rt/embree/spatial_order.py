@@ -69,6 +69,13 @@ def spatial_order(centers):
     codes = morton_codes(centers)
     n = len(codes)
     order = np.arange(n).astype(np.int32)
+    ordered = True
+    for i in range(1, n):
+        if codes[i] < codes[i - 1]:
+            ordered = False
+            break
+    if ordered:  # spheres already in Morton order (SceneGeometry hands them over so)
+        return order
     scratch = np.empty(n, np.int32)
     buckets = 1 << _DIGIT_BITS
     mask = buckets - 1
