@@ -134,7 +134,6 @@ def _unpack(address):
 @cfunc(_CALLBACK, nopython=True, cache=True)
 def _intersect(address):
     args, n, user, slot, valid, cx, cy, cz, r = _unpack(address)
-    prim = carray(_ints(user[1] + 4 * slot), 1)[0]
     geom_id = args[5] >> 32
     context = carray(_words32(args[3]), 2)
     floats = carray(_floats(args[4]), 21 * n)
@@ -155,7 +154,8 @@ def _intersect(address):
         )
         floats[HIT_U * n + lane] = 0.0
         floats[HIT_V * n + lane] = 0.0
-        words[HIT_PRIM_ID * n + lane] = prim
+        # read only on a hit: most calls are misses, and this is one more cache line
+        words[HIT_PRIM_ID * n + lane] = carray(_ints(user[1] + 4 * slot), 1)[0]
         words[HIT_GEOM_ID * n + lane] = geom_id
         words[HIT_INST_ID * n + lane] = context[0]
         words[HIT_INST_PRIM_ID * n + lane] = context[1]
