@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.embree import BVH, HitLabels, spatial_order
+from embree_rt.embree import BVH, HitLabels, spheres_in_spatial_order
 from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_normals
 from embree_rt.scene.model import MeshObject, Scene
 
@@ -206,11 +206,11 @@ class SceneGeometry:
             # from all over the materials and the BVH's sphere tables when their hits are
             # recorded; in Morton order (the order the BVH stores user spheres in) they are
             # neighbours there too. Point spheres are copied into Embree's leaves: no need.
-            order = spatial_order(centers)
+            order, centers, radii, labels = spheres_in_spatial_order(
+                centers, radii, self.sphere_materials
+            )
             if np.any(order != np.arange(len(order))):
-                self.sphere_index = order
-                centers, radii = centers[order], radii[order]
-                self._sphere_labels = self.sphere_materials[order]
+                self.sphere_index, self._sphere_labels = order, labels
         self.sphere_geom_id = self.bvh.add_spheres(centers, radii, kind=kind)
 
     def scene_sphere(self, prim_id: np.ndarray) -> np.ndarray:
