@@ -1,9 +1,9 @@
 """Analytic spheres as Embree user geometry, with bounds / intersect / occluded callbacks that
 numba compiles to machine code (``@cfunc``): Embree calls them with no Python and no GIL.
 
-On this machine they trace 1.5–3× faster than Embree's own ``SPHERE_POINT`` primitive (see
-DESIGN.md), because Embree's point spheres pay for features (ray masks, filters, curves'
-shared code paths) that plain spheres do not need.
+On this machine they trace 1.3–1.9× faster than Embree's own ``SPHERE_POINT`` primitive
+(README, "Traversal alone"), because Embree's point spheres pay for features (ray masks,
+filters, curves' shared code paths) that plain spheres do not need.
 
 The callbacks receive one pointer to an Embree argument struct (Embree 4,
 ``rtcore_geometry.h``), read here as 64-bit words:
