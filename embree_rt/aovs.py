@@ -36,7 +36,7 @@ from embree_rt.camera import camera_frame, pixel_center_rays
 from embree_rt.columns import scatter
 
 if TYPE_CHECKING:
-    from embree_rt.geometry import SurfaceHits
+    from embree_rt.geometry import SceneGeometry, SurfaceHits
     from embree_rt.integrator import Renderer
     from embree_rt.scene.model import Scene
 
@@ -90,18 +90,20 @@ def aov_bytes(width: int, height: int, names: tuple[str, ...]) -> int:
 # -- ids --------------------------------------------------------------------------------------
 
 
-def hit_object_ids(surfaces: SurfaceHits, object_start: np.ndarray) -> np.ndarray:
+def hit_object_ids(surfaces: SurfaceHits, geometry: SceneGeometry) -> np.ndarray:
     """(k,) int32 object id of each of the k ``surfaces`` (floor hits first): ``FLOOR_ID`` on
-    the floor, the sphere's index on the sphere set (no instance), and on an instance its
-    geometry's first id from ``object_start`` (``SceneGeometry.object_start``, by top-level
-    geometry id) plus the copy's number in an instance array."""
+    the floor, the sphere's index in the scene on the sphere set (no instance), and on an
+    instance its geometry's first id from ``geometry.object_start`` (by top-level geometry id)
+    plus the copy's number in an instance array."""
+    object_start = geometry.object_start
     ids = np.empty(len(surfaces), np.int32)
     ids[: surfaces.floor_count] = FLOOR_ID
     rest = slice(surfaces.floor_count, None)
     inst = surfaces.inst_id[rest]
     copy = np.maximum(surfaces.inst_prim_id[rest], 0)
     ids[rest] = np.where(
-        inst >= 0, np.take(object_start, np.maximum(inst, 0)) + copy, surfaces.prim_id[rest]
+        inst >= 0, np.take(object_start, np.maximum(inst, 0)) + copy,
+        geometry.scene_sphere(np.where(inst >= 0, 0, surfaces.prim_id[rest])),
     )
     return ids
 
@@ -160,7 +162,7 @@ def render_aovs(
         if "material_id" in flat:
             flat["material_id"][hit] = surfaces.material
         if "object_id" in flat:
-            flat["object_id"][hit] = hit_object_ids(surfaces, renderer.geometry.object_start)
+            flat["object_id"][hit] = hit_object_ids(surfaces, renderer.geometry)
 
     workers = renderer.workers
     batches = batch_ranges(width * height, renderer.batch_size, 1, workers)

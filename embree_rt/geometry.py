@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.embree import BVH, HitLabels
+from embree_rt.embree import BVH, HitLabels, spheres_in_spatial_order
 from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_normals
 from embree_rt.scene.model import MeshObject, Scene
 
@@ -111,6 +111,10 @@ class SceneGeometry:
         # int32 as the scene holds them: no N-sized copies (1e8 spheres are 0.4 GB of them)
         self.sphere_materials = np.asarray(scene.sphere_materials, np.int32)
         self.sphere_geom_id = -1
+        # The scene's index of each sphere the BVH holds, None when they are in the scene's
+        # order; and the BVH's spheres' materials, in the BVH's order.
+        self.sphere_index: np.ndarray | None = None
+        self._sphere_labels = self.sphere_materials
         self.floor = scene.floor
         # The floor's material comes after the scene's own in the renderer's material table.
         self.floor_material = len(scene.materials)
@@ -136,11 +140,7 @@ class SceneGeometry:
         try:
             if len(self.sphere_radii):
                 if spheres in ("analytic", "point"):
-                    self.sphere_geom_id = self.bvh.add_spheres(
-                        self.sphere_centers,
-                        self.sphere_radii,
-                        kind=sphere_kind(len(self.sphere_radii), spheres),
-                    )
+                    self._add_analytic_spheres(sphere_kind(len(self.sphere_radii), spheres))
                 else:
                     self._add_tessellated_spheres()
             self._add_meshes(scene)
@@ -198,6 +198,24 @@ class SceneGeometry:
         self.triangle_count += int(placed)
         self.instance_count += len(transforms)
         return geom_id
+
+    def _add_analytic_spheres(self, kind: str) -> None:
+        centers, radii = self.sphere_centers, self.sphere_radii
+        if kind == "user":
+            # In the scene's own order, the spheres a ray meets one after another would be read
+            # from all over the materials and the BVH's sphere tables when their hits are
+            # recorded; in Morton order (the order the BVH stores user spheres in) they are
+            # neighbours there too. Point spheres are copied into Embree's leaves: no need.
+            order, centers, radii, labels = spheres_in_spatial_order(
+                centers, radii, self.sphere_materials
+            )
+            if np.any(order != np.arange(len(order))):
+                self.sphere_index, self._sphere_labels = order, labels
+        self.sphere_geom_id = self.bvh.add_spheres(centers, radii, kind=kind)
+
+    def scene_sphere(self, prim_id: np.ndarray) -> np.ndarray:
+        """(k,) int32 the scene's index of each of the BVH's spheres ``prim_id`` (k,) int."""
+        return prim_id if self.sphere_index is None else self.sphere_index[prim_id]
 
     def _add_tessellated_spheres(self) -> None:
         from trimesh.creation import icosphere
@@ -278,7 +296,7 @@ class SceneGeometry:
             geometry_label=self.instance_material.astype(np.int64),
             geometry_scale=self.instance_scale,
             sphere_geom_id=self.sphere_geom_id,
-            sphere_label=self.sphere_materials,
+            sphere_label=self._sphere_labels,
             plane_y=None if self.floor is None else float(self.floor.height),
             plane_label=self.floor_material,
             instance_labels=instance_labels,

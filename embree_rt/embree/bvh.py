@@ -18,6 +18,7 @@ from embree_rt.embree import (
     multihit,
     records,
     screened_nearest,
+    spatial_order,
     user_spheres,
 )
 from embree_rt.embree.records import HitLabels, HitRecords
@@ -59,7 +60,8 @@ class Hits:
 
 
 SPHERE_KINDS = ("user", "point")
-_NO_SPHERES = np.zeros((0, 4), np.float32)
+_NO_SPHERES = (np.zeros((0, 4), np.float32), np.zeros(0, np.int32))
+_IDENTITY_SLOTS = np.zeros(0, np.int32)
 _NO_LABELS = np.zeros(0, np.int32)
 
 _kernel_lock = threading.Lock()
@@ -151,9 +153,12 @@ class BVH:
         self._device.check("setting the scene's build quality and flags")
         self._committed = False
         self._children: list[BVH] = []
-        # (n, 4) float32 (x, y, z, r) of each sphere set by geometry id; Embree reads the user
-        # geometry's through its user pointer, so they live as long as the BVH.
-        self._sphere_buffers: dict[int, np.ndarray] = {}
+        # Each sphere set by geometry id: its (n, 4) float32 (x, y, z, r) as stored and the
+        # (n,) int32 slot where sphere i is stored (empty: sphere i is in slot i).
+        self._sphere_buffers: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        # The user-geometry spheres' user data (two addresses) and storage order, kept alive
+        # here for as long as Embree may call the callbacks.
+        self._sphere_user_data: list[tuple[np.ndarray, np.ndarray]] = []
         # Inverse-transpose of each instance's linear part, by geometry id, for world normals.
         self._normal_matrices: dict[int, np.ndarray] = {}
         self._normal_matrix_array: np.ndarray | None = None
@@ -234,14 +239,23 @@ class BVH:
             packed = np.ctypeslib.as_array(
                 (ctypes.c_float * (4 * count)).from_address(pointer)
             ).reshape(count, 4) if count else np.zeros((0, 4), np.float32)
+            packed[:, :3] = centers
+            packed[:, 3] = radii
+            slot = _IDENTITY_SLOTS
         else:
             geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_USER)
             self._device.check("rtcNewGeometry(USER)")
-            # Embree reads this buffer through the user pointer for as long as the BVH lives.
-            packed = np.empty((max(count, 1), 4), np.float32)[:count]
+            # Stored in spatial order, for the callbacks' memory traffic (spatial_order); the
+            # callbacks report each sphere by its index among the spheres given.
+            packed, order, slot, in_order = spatial_order.store_in_spatial_order(centers, radii)
+            if in_order:
+                slot = _IDENTITY_SLOTS
+            # Embree reads these through the user pointer for as long as the BVH lives.
+            user_data = np.array([packed.ctypes.data, order.ctypes.data], np.uint64)
+            self._sphere_user_data.append((user_data, order))
             lib = self._lib
             lib.rtcSetGeometryUserPrimitiveCount(geometry, count)
-            lib.rtcSetGeometryUserData(geometry, packed.ctypes.data)
+            lib.rtcSetGeometryUserData(geometry, user_data.ctypes.data)
             lib.rtcSetGeometryBoundsFunction(geometry, user_spheres.BOUNDS_CALLBACK, None)
             lib.rtcSetGeometryIntersectFunction(geometry, user_spheres.INTERSECT_CALLBACK)
             lib.rtcSetGeometryOccludedFunction(geometry, user_spheres.OCCLUDED_CALLBACK)
@@ -249,14 +263,12 @@ class BVH:
             # same "low" makes that Embree's Morton builder.
             lib.rtcSetGeometryBuildQuality(geometry, self._build_quality)
             self._device.check("setting up user-geometry spheres")
-        packed[:, :3] = centers
-        packed[:, 3] = radii
         self.primitive_count += count
         if count:
             reach = float((np.abs(centers).max(axis=1) + radii).max())
             self.coordinate_bound = max(self.coordinate_bound, reach)
         geom_id = self._attach(geometry, "adding spheres")
-        self._sphere_buffers[geom_id] = packed
+        self._sphere_buffers[geom_id] = (packed, slot)
         return geom_id
 
     def add_triangles(self, vertices: np.ndarray, faces: np.ndarray) -> int:
@@ -482,14 +494,14 @@ class BVH:
         directions = np.ascontiguousarray(directions, np.float32)
         rows, columns, near, far = self._query_inputs(origins.T, directions.T, tnear, tfar)
         hits = self._raw_hits(rows, columns, near, far)
-        spheres = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
+        spheres, sphere_slot = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
         sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
         has_plane = labels.plane_y is not None
         fields = records.build_records(
             origins, directions, near, far, hits.t, hits.geom_id, hits.prim_id, hits.inst_id,
             hits.normal, hits.u, hits.v, has_plane,
             np.float32(labels.plane_y if has_plane else 0.0), int(labels.plane_label),
-            int(labels.sphere_geom_id) if len(spheres) else -1, spheres,
+            int(labels.sphere_geom_id) if len(spheres) else -1, spheres, sphere_slot,
             np.asarray(sphere_label, np.int32), np.asarray(labels.geometry_label, np.int64),
             np.asarray(labels.geometry_scale, np.float32), self._normal_matrix_array,
         )  # fmt: skip

@@ -98,15 +98,16 @@ def plane_crossing(oy, dy, tnear, tfar, plane_y):
 
 @njit(nogil=True, cache=True)
 def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, ng, u, v,
-                  has_plane, plane_y, plane_label, sphere_geom, spheres, sphere_label,
+                  has_plane, plane_y, plane_label, sphere_geom, spheres, sphere_slot, sphere_label,
                   geometry_label, geometry_scale, normal_matrix):  # fmt: skip
     """The compiled pass behind ``BVH.intersect_records``: classify, count, then fill.
 
     Inputs per ray: ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32
     and the raw hits ``t`` (n,) float32, ``geom``, ``prim``, ``inst`` (n,) int32, ``ng`` (n, 3)
     float32 object-space normal, ``u``, ``v`` (n,) float32. ``spheres`` (m, 4) float32 is the
-    sphere set's (x, y, z, r) buffer, ``normal_matrix`` (g, 3, 3) float32 the inverse-transpose
-    of each instance's linear part (identity elsewhere).
+    sphere set's (x, y, z, r) buffer as the BVH stores it, sphere p in slot ``sphere_slot[p]``
+    ((m,) int32; empty when slot p holds sphere p), ``normal_matrix`` (g, 3, 3) float32 the
+    inverse-transpose of each instance's linear part (identity elsewhere).
     """
     n = origins.shape[1]
     kind = np.empty(n, np.uint8)
@@ -171,10 +172,11 @@ def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, ng, u, 
         out_inst[j] = inst[i]
         if k == SPHERE:
             p = prim[i]
-            cx = np.float64(spheres[p, 0])
-            cy = np.float64(spheres[p, 1])
-            cz = np.float64(spheres[p, 2])
-            r = np.float64(spheres[p, 3])
+            s = sphere_slot[p] if len(sphere_slot) else p
+            cx = np.float64(spheres[s, 0])
+            cy = np.float64(spheres[s, 1])
+            cz = np.float64(spheres[s, 2])
+            r = np.float64(spheres[s, 3])
             # The normal from the hit point; the point re-projected onto the sphere removes the
             # rounding error along the ray.
             ox = origins[0, i] + np.float64(ti) * dx - cx

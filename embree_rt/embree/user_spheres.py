@@ -1,9 +1,9 @@
 """Analytic spheres as Embree user geometry, with bounds / intersect / occluded callbacks that
 numba compiles to machine code (``@cfunc``): Embree calls them with no Python and no GIL.
 
-On this machine they trace 1.5–3× faster than Embree's own ``SPHERE_POINT`` primitive (see
-DESIGN.md), because Embree's point spheres pay for features (ray masks, filters, curves'
-shared code paths) that plain spheres do not need.
+On this machine they trace 1.3–1.9× faster than Embree's own ``SPHERE_POINT`` primitive
+(README, "Traversal alone"), because Embree's point spheres pay for features (ray masks,
+filters, curves' shared code paths) that plain spheres do not need.
 
 The callbacks receive one pointer to an Embree argument struct (Embree 4,
 ``rtcore_geometry.h``), read here as 64-bit words:
@@ -18,7 +18,10 @@ The callbacks receive one pointer to an Embree argument struct (Embree 4,
 - ``RTCRayQueryContext`` starts with instID[0], then instPrimID[0] (this Embree is built with
   one instance level and instance arrays).
 
-The user pointer is the address of the BVH's (n, 4) float32 buffer of (x, y, z, radius).
+The user pointer is the address of two 64-bit words: the BVH's (n, 4) float32 buffer of
+(x, y, z, radius), stored in spatial order (``spatial_order``), and the (n,) int32 index of each
+stored sphere among the spheres given, which the intersect callback reports as the primID: the
+storage order never shows outside the callbacks.
 
 The quadratic is the numerically robust form of Ray Tracing Gems, chapter 7, evaluated in
 float64: the discriminant comes from the ray's perpendicular offset from the centre (no
@@ -63,7 +66,7 @@ _ints = pointers.ints
 def _bounds(address):
     args = carray(_words64(address), 3)
     prim = args[1] & 0xFFFFFFFF
-    sphere = carray(_floats(args[0] + 16 * prim), 4)
+    sphere = carray(_floats(carray(_words64(args[0]), 2)[0] + 16 * prim), 4)
     box = carray(_floats(args[2]), 8)
     r = sphere[3]
     box[0] = sphere[0] - r
@@ -116,19 +119,21 @@ def _nearest_root(floats, n, lane, cx, cy, cz, r):
 @njit(inline="always")
 def _unpack(address):
     """The fields of an RTCIntersect/OccludedFunctionNArguments both callbacks read: the 64-bit
-    words, the lane count N, the primitive, the valid mask (N,) and the sphere as float64."""
+    words, the lane count N, the user data's two words, the stored sphere's slot, the valid
+    mask (N,) and the sphere as float64."""
     args = carray(_words64(address), 6)
     n = args[5] & 0xFFFFFFFF
-    prim = args[2] & 0xFFFFFFFF
+    slot = args[2] & 0xFFFFFFFF
     valid = carray(_ints(args[0]), n)
-    sphere = carray(_floats(args[1] + 16 * prim), 4)
-    return (args, n, prim, valid, np.float64(sphere[0]), np.float64(sphere[1]),
+    user = carray(_words64(args[1]), 2)
+    sphere = carray(_floats(user[0] + 16 * slot), 4)
+    return (args, n, user, slot, valid, np.float64(sphere[0]), np.float64(sphere[1]),
             np.float64(sphere[2]), np.float64(sphere[3]))  # fmt: skip
 
 
 @cfunc(_CALLBACK, nopython=True, cache=True)
 def _intersect(address):
-    args, n, prim, valid, cx, cy, cz, r = _unpack(address)
+    args, n, user, slot, valid, cx, cy, cz, r = _unpack(address)
     geom_id = args[5] >> 32
     context = carray(_words32(args[3]), 2)
     floats = carray(_floats(args[4]), 21 * n)
@@ -149,7 +154,8 @@ def _intersect(address):
         )
         floats[HIT_U * n + lane] = 0.0
         floats[HIT_V * n + lane] = 0.0
-        words[HIT_PRIM_ID * n + lane] = prim
+        # read only on a hit: most calls are misses, and this is one more cache line
+        words[HIT_PRIM_ID * n + lane] = carray(_ints(user[1] + 4 * slot), 1)[0]
         words[HIT_GEOM_ID * n + lane] = geom_id
         words[HIT_INST_ID * n + lane] = context[0]
         words[HIT_INST_PRIM_ID * n + lane] = context[1]
@@ -157,7 +163,7 @@ def _intersect(address):
 
 @cfunc(_CALLBACK, nopython=True, cache=True)
 def _occluded(address):
-    args, n, _, valid, cx, cy, cz, r = _unpack(address)
+    args, n, _, _, valid, cx, cy, cz, r = _unpack(address)
     floats = carray(_floats(args[4]), 12 * n)
     for lane in range(n):
         if valid[lane] == 0:
