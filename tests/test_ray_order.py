@@ -1,6 +1,7 @@
 """Rays traced in a coherent order (embree_rt.embree.ray_order) get the answers they get in the
-order given: the radix sort against NumPy's stable argsort, and first hits traced sorted
-against first hits traced as given, on meshes where many hits are suspect (edges, grazing)."""
+order given: the radix sort (embree_rt.embree.morton) against NumPy's stable argsort, and first
+hits traced sorted against first hits traced as given, on meshes where many hits are suspect
+(edges, grazing)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ import trimesh
 from numba import njit
 
 from embree_rt import trimesh_ray
-from embree_rt.embree.ray_order import box_cells, entry_key, radix_order
+from embree_rt.embree.morton import radix_order
+from embree_rt.embree.ray_order import box_cells, entry_key
 from embree_rt.trimesh_ray import RayMeshIntersector
 
 

@@ -1,5 +1,5 @@
 """A coherent tracing order for batches of incoherent rays: a Morton code of where each ray
-enters the mesh's bounding box, and a radix sort of those codes.
+enters the mesh's bounding box (``morton.spread_bits``), sorted by ``morton.radix_order``.
 
 Why: a ray's traversal reads the BVH nodes and triangles around where it goes, and on a big
 mesh (a million triangles: a BVH of ~100 MB) those reads miss every cache level when
@@ -23,21 +23,7 @@ import math
 import numpy as np
 from numba import njit
 
-_BITS = 10  # per axis: a 30-bit code
-_CELLS = (1 << _BITS) - 1
-_DIGIT_BITS = 10  # radix sort: three passes of 1024 buckets
-_DIGITS = 3
-
-
-@njit(inline="always")
-def _spread(x):
-    """The low 10 bits of ``x`` moved to every third bit (bit k to bit 3k)."""
-    x &= 0x3FF
-    x = (x | (x << 16)) & 0x030000FF
-    x = (x | (x << 8)) & 0x0300F00F
-    x = (x | (x << 4)) & 0x030C30C3
-    x = (x | (x << 2)) & 0x09249249
-    return x
+from embree_rt.embree.morton import CELLS, spread_bits
 
 
 @njit(inline="always")
@@ -62,8 +48,8 @@ def entry_key(origin, direction, lower, upper, cells_per_unit):
     code = np.uint32(0)
     for k in range(3):
         cell = (origin[k] + step * direction[k] - lower[k]) * cells_per_unit[k]
-        cell = min(max(cell, 0.0), float(_CELLS))  # also maps nan (a non-finite ray) to 0
-        code |= np.uint32(_spread(np.uint32(cell))) << np.uint32(k)
+        cell = min(max(cell, 0.0), float(CELLS))  # also maps nan (a non-finite ray) to 0
+        code |= np.uint32(spread_bits(np.uint32(cell))) << np.uint32(k)
     return code
 
 
@@ -72,32 +58,4 @@ def box_cells(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     ``upper`` for ``entry_key`` (0 along an axis where the box is flat)."""
     size = np.asarray(upper, np.float64) - np.asarray(lower, np.float64)
     with np.errstate(divide="ignore"):
-        return np.where(size > 0, _CELLS / np.where(size > 0, size, 1.0), 0.0)
-
-
-@njit(nogil=True, cache=True)
-def radix_order(keys):
-    """(n,) int64 stable ascending order of (n,) uint32 ``keys`` below 2**30 (LSD radix sort,
-    serial: about 1 ms for 1e5 keys, a third of ``np.argsort``'s time here)."""
-    n = keys.shape[0]
-    order = np.arange(n)
-    spare = np.empty(n, np.int64)
-    counts = np.empty(1 << _DIGIT_BITS, np.int64)
-    mask = np.uint32((1 << _DIGIT_BITS) - 1)
-    for digit in range(_DIGITS):
-        shift = np.uint32(digit * _DIGIT_BITS)
-        counts[:] = 0
-        for i in range(n):
-            counts[(keys[i] >> shift) & mask] += 1
-        total = 0
-        for b in range(counts.shape[0]):
-            count = counts[b]
-            counts[b] = total
-            total += count
-        for i in range(n):
-            j = order[i]
-            b = (keys[j] >> shift) & mask
-            spare[counts[b]] = j
-            counts[b] += 1
-        order, spare = spare, order
-    return order
+        return np.where(size > 0, CELLS / np.where(size > 0, size, 1.0), 0.0)

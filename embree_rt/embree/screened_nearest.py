@@ -30,7 +30,8 @@ import numpy as np
 from numba import njit, prange
 
 from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, _intersect_chunk
-from embree_rt.embree.ray_order import box_cells, entry_key, radix_order
+from embree_rt.embree.morton import radix_order
+from embree_rt.embree.ray_order import box_cells, entry_key
 from embree_rt.embree.work_split import threads_for
 
 _EPS32 = np.float64(np.finfo(np.float32).eps)
