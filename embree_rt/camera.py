@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from embree_rt.sampling import uniform
+from embree_rt.sampling import uniform_pair
 from embree_rt.scene.model import Camera, camera_problem
 
 
@@ -118,7 +118,7 @@ def primary_rays(
 
     Sample i belongs to pixel ``i // spp`` (row-major, row 0 at the top, column 0 at the left)
     and is sample ``s = i % spp`` of it, placed in cell ``strata(spp)[2][s]`` of the pixel's
-    jitter grid and jittered inside it by ``sampling.uniform(seed, i, 0 and 1)``, so any split
+    jitter grid and jittered inside it by ``sampling.uniform_pair(seed, i, 0)``, so any split
     of the indices into batches yields the same rays. Returns origins (3, count) float32, unit
     directions (3, count) float32 (one ray per column) and pixel (count,) int64.
     """
@@ -137,11 +137,10 @@ def sample_rays(
     nx, ny, cells = strata(spp)
     # Floor division and remainder by a scalar, not np.divmod: NumPy divides by a constant
     # through libdivide only in these two (13x faster here).
-    pixel = index // spp
+    pixel = index // spp if spp > 1 else index
     row = pixel // frame.width
     col = pixel % frame.width
-    jitter_x = uniform(seed, index, 0)
-    jitter_y = uniform(seed, index, 1)
+    jitter_x, jitter_y = uniform_pair(seed, index, 0)
     if spp > 1:
         cell = cells[index % spp]
         cell_y, cell_x = cell // nx, cell % nx
@@ -170,12 +169,15 @@ def _rays_through(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rays from the eye through the image points at (n,) float64 ``column``, ``row`` (in
     pixels, from the top left corner), for ``primary_rays`` and ``pixel_center_rays``."""
-    # Position in [0, 1) across the image, left to right and top to bottom, in float64: the
-    # jitter must survive being added to a column number in the thousands.
-    x = column / frame.width
-    y = row / frame.height
-    screen_x = ((2.0 * x - 1.0) * frame.half_width).astype(np.float32)
-    screen_y = ((1.0 - 2.0 * y) * frame.half_height).astype(np.float32)
+    # Screen coordinates, x = (2 column / width - 1) half_width and y = (1 - 2 row / height)
+    # half_height, in float64: the jitter must survive being added to a column number in the
+    # thousands.
+    screen_x = (column * (2.0 * frame.half_width / frame.width) - frame.half_width).astype(
+        np.float32
+    )
+    screen_y = (frame.half_height - row * (2.0 * frame.half_height / frame.height)).astype(
+        np.float32
+    )
     u, v, w = (axis.astype(np.float32)[:, None] for axis in (frame.u, frame.v, frame.w))
     directions = u * screen_x + v * screen_y - w  # (3, count) float32
     directions /= np.sqrt(directions[0] ** 2 + directions[1] ** 2 + directions[2] ** 2)

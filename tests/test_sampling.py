@@ -102,3 +102,22 @@ def test_any_integer_seed_works_and_index_must_be_integer() -> None:
         uniform(0, np.arange(4, dtype=np.float64), 0)
     with pytest.raises(ValueError, match="dimension"):
         uniform(0, index, -1)
+
+
+def test_the_pair_from_one_hash_is_jointly_uniform_and_uncorrelated() -> None:
+    from embree_rt.sampling import uniform_pair
+
+    index = np.arange(N, dtype=np.int64)
+    x, y = uniform_pair(3, index, 0)
+    assert x.dtype == y.dtype == np.float32
+    assert min(x.min(), y.min()) >= 0.0 and max(x.max(), y.max()) < 1.0
+    # the first value is uniform's own stream; the second is a different one
+    np.testing.assert_array_equal(x, uniform(3, index, 0))
+    assert np.mean(x == y) < 1e-3
+    assert abs(np.corrcoef(x, y)[0, 1]) < 5 / np.sqrt(N)
+    cells = (x * 16).astype(int) * 16 + (y * 16).astype(int)
+    counts = np.bincount(cells, minlength=256)
+    chi2 = ((counts - N / 256) ** 2 / (N / 256)).sum()
+    assert chi2 < stats.chi2.ppf(1 - 1e-6, 255)
+    scaled = y.astype(np.float64) * 2.0**24  # on the 24-bit grid, as uniform's values are
+    np.testing.assert_array_equal(scaled, np.floor(scaled))
