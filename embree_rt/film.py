@@ -85,8 +85,10 @@ class FilmBlock:
         """Sum the samples added so far into the block's pixels. The renderer calls it in the
         thread that traced the batch: the thread adding blocks to the film then only adds."""
         if self._pixels:
-            local = np.concatenate(self._pixels) - self.first
-            rgb = np.concatenate(self._rgb, axis=1)
+            # (concatenating a single part would only copy it)
+            pixels = self._pixels[0] if len(self._pixels) == 1 else np.concatenate(self._pixels)
+            rgb = self._rgb[0] if len(self._rgb) == 1 else np.concatenate(self._rgb, axis=1)
+            local = pixels - self.first
             self._pixels.clear()
             self._rgb.clear()
             for channel in range(3):
