@@ -127,6 +127,53 @@ def primary_rays(
     return sample_rays(frame, spp, seed, np.arange(start, start + count, dtype=np.int64))
 
 
+# Camera rays are traced in tiles of TILE_WIDTH x TILE_HEIGHT pixels: one 8-ray packet then
+# covers a 4x2 block instead of 8 pixels of one row, and on the 1e6-sphere field Embree traced
+# such packets 1.18x faster (1e5: the same speed).
+TILE_WIDTH = 4
+TILE_HEIGHT = 2
+
+
+def tiled_samples(frame: CameraFrame, spp: int, start: int, count: int) -> np.ndarray:
+    """(count,) int64: the global sample indices ``[start, start + count)`` (whole pixels, as
+    ``batch_ranges`` cuts them) reordered pixel by pixel into tiles of ``TILE_WIDTH`` x
+    ``TILE_HEIGHT`` pixels: tiles left to right along each pair of rows, inside a tile row-major,
+    each pixel's samples together in sample order.
+
+    The order is the global tile order restricted to these pixels, so any two samples keep the
+    same relative order however the image is cut into batches: the film sums each pixel's
+    samples in the same order whatever the batch size.
+    """
+    size = f"{frame.width}x{frame.height}"
+    _check_range(start, count, frame.width * frame.height * spp, "samples", f"{size} at {spp} spp")
+    if start % spp or count % spp:
+        raise ValueError(f"samples {start}..{start + count} do not cover whole pixels at {spp} spp")
+    first, stop = start // spp, (start + count) // spp
+    if stop == first:
+        return np.zeros(0, np.int64)
+    width = frame.width
+    top = first // width // TILE_HEIGHT * TILE_HEIGHT
+    pairs = ((stop - 1) // width - top) // TILE_HEIGHT + 1
+    tiles_across = -(-width // TILE_WIDTH)
+    # pixel numbers as (row pair, tile, row in tile, column in tile), one row pair a line
+    row = np.arange(top, top + pairs * TILE_HEIGHT, dtype=np.int64).reshape(-1, 1, TILE_HEIGHT, 1)
+    column = (np.arange(tiles_across, dtype=np.int64).reshape(1, -1, 1, 1) * TILE_WIDTH
+              + np.arange(TILE_WIDTH, dtype=np.int64).reshape(1, 1, 1, -1))  # fmt: skip
+    lines = (row * width + column).reshape(pairs, -1)
+    if width % TILE_WIDTH:  # the last tile of a row reaches past the image: drop those
+        inside = np.broadcast_to(column < width, (1, tiles_across, TILE_HEIGHT, TILE_WIDTH))
+        lines = lines[:, inside.ravel()]
+    # only the first and the last row pair can hold pixels outside the batch
+    head = lines[0][(lines[0] >= first) & (lines[0] < stop)]
+    if pairs == 1:
+        pixel = head
+    else:
+        pixel = np.concatenate([head, lines[1:-1].ravel(), lines[-1][lines[-1] < stop]])
+    if spp == 1:
+        return pixel
+    return (pixel[:, None] * spp + np.arange(spp, dtype=np.int64)).ravel()
+
+
 def sample_rays(
     frame: CameraFrame, spp: int, seed: int, index: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ import numpy as np
 
 from embree_rt import budget, shading
 from embree_rt.batches import batch_ranges, ordered_results
-from embree_rt.camera import CameraFrame, camera_frame, primary_rays, sample_rays
+from embree_rt.camera import CameraFrame, camera_frame, sample_rays, tiled_samples
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
@@ -232,7 +232,9 @@ class Renderer:
         A pure function of its arguments and the scene, so any process holding the same scene
         computes the same block (``embree_rt.distributed`` runs it on Dask workers)."""
         work = BatchWork(FilmBlock(start // spp, count // spp))
-        origins, directions, pixel = primary_rays(frame, spp, seed, start, count)
+        origins, directions, pixel = sample_rays(
+            frame, spp, seed, tiled_samples(frame, spp, start, count)
+        )
         rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
         work.rays["primary"] += count
         self._trace(rays, work, max_depth)

@@ -319,3 +319,33 @@ def test_nearly_degenerate_but_valid_cameras_still_work() -> None:
         fx, fy = column - pixel % width, row - pixel // width
         assert np.all((fx > -1e-3) & (fx < 1 + 1e-3)), camera
         assert np.all((fy > -1e-3) & (fy < 1 + 1e-3)), camera
+
+
+def test_batches_trace_their_samples_in_tiles_of_four_by_two_pixels() -> None:
+    from embree_rt.camera import TILE_HEIGHT, TILE_WIDTH, tiled_samples
+
+    width, height, spp = 10, 7, 3  # a width the tiles do not divide, an odd height
+    frame = camera_frame(Camera(position=(0, 0, 0), look_at=(0, 0, -1)), width, height)
+    total = width * height * spp
+    whole = tiled_samples(frame, spp, 0, total)
+    assert np.array_equal(np.sort(whole), np.arange(total))
+    pixel = whole[::spp] // spp
+    # each pixel's samples together, in sample order
+    assert np.array_equal(whole.reshape(-1, spp), pixel[:, None] * spp + np.arange(spp))
+    # the first tile: columns 0-3 of rows 0 and 1, row by row
+    first = [0, 1, 2, 3, width, width + 1, width + 2, width + 3]
+    assert pixel[: TILE_WIDTH * TILE_HEIGHT].tolist() == first
+    # pixels of one tile are consecutive: tile numbers never decrease along the order
+    row, column = pixel // width, pixel % width
+    tile = (row // TILE_HEIGHT) * width + column // TILE_WIDTH
+    assert np.all(np.diff(tile) >= 0)
+    # any cut into batches of whole pixels keeps the same relative order
+    rank = np.empty(total, np.int64)
+    rank[whole] = np.arange(total)
+    for bounds in ([0, 9, 31, 70], [0, 1, 2, 69, 70], [0, 35, 70]):
+        for a, b in itertools.pairwise(bounds):
+            part = tiled_samples(frame, spp, a * spp, (b - a) * spp)
+            assert np.array_equal(np.sort(part), np.arange(a * spp, b * spp))
+            assert np.all(np.diff(rank[part]) > 0)
+    with pytest.raises(ValueError, match="whole pixels"):
+        tiled_samples(frame, spp, 1, spp)
