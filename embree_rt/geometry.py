@@ -206,10 +206,10 @@ class SceneGeometry:
             # from all over the materials and the BVH's sphere tables when their hits are
             # recorded; in Morton order (the order the BVH stores user spheres in) they are
             # neighbours there too. Point spheres are copied into Embree's leaves: no need.
-            order, centers, radii, labels = spheres_in_spatial_order(
+            order, centers, radii, labels, in_order = spheres_in_spatial_order(
                 centers, radii, self.sphere_materials
             )
-            if np.any(order != np.arange(len(order))):
+            if not in_order:
                 self.sphere_index, self._sphere_labels = order, labels
         self.sphere_geom_id = self.bvh.add_spheres(centers, radii, kind=kind)
 

@@ -295,14 +295,18 @@ class BVH:
             self.coordinate_bound = max(self.coordinate_bound, float(np.abs(vertices).max()))
         return self._attach(geometry, "adding triangles")
 
+    def _check_instanceable(self, child: object, argument: str) -> None:
+        """Raise unless ``child`` is a committed BVH other than this one."""
+        if not isinstance(child, BVH):
+            raise TypeError(f"{argument}: expected a BVH, got {type(child).__name__}")
+        if child is self:
+            raise ValueError(f"{argument}: a BVH cannot instance itself")
+        if not child._committed:
+            raise ValueError(f"{argument}: commit each child BVH before instancing it")
+
     def add_instance(self, other: BVH, transform: np.ndarray) -> int:
         """Place the committed BVH ``other`` by a (4, 4) affine ``transform`` (object → world)."""
-        if not isinstance(other, BVH):
-            raise TypeError(f"other: expected a BVH, got {type(other).__name__}")
-        if other is self:
-            raise ValueError("other: a BVH cannot instance itself")
-        if not other._committed:
-            raise ValueError("other: commit the instanced BVH before adding an instance of it")
+        self._check_instanceable(other, "other")
         matrix = as_transform(transform, "transform")
         self._live_scene()
         geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_INSTANCE)
@@ -336,12 +340,7 @@ class BVH:
         if not children:
             raise ValueError("children: expected at least one BVH")
         for child in children:
-            if not isinstance(child, BVH):
-                raise TypeError(f"children: expected BVHs, got {type(child).__name__}")
-            if child is self:
-                raise ValueError("children: a BVH cannot instance itself")
-            if not child._committed:
-                raise ValueError("children: commit each child BVH before instancing it")
+            self._check_instanceable(child, "children")
         problem = affine_array_problem(transforms)
         if problem is not None:
             row, text = problem

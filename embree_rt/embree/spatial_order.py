@@ -85,18 +85,21 @@ def store_in_spatial_order(centers, radii):
 def spheres_in_spatial_order(centers, radii, labels):
     """Spheres ``centers`` (n, 3), ``radii`` (n,) float32 and their ``labels`` (n,) int32 put
     in Morton order, for a caller that keeps its own tables in the BVH's order. Returns
-    ``order`` (n,) int32 (see ``spatial_order``) and the three arrays gathered in that order
-    (one compiled pass: NumPy's row gathers take 2-4x as long)."""
+    ``order`` (n,) int32 (see ``spatial_order``), the three arrays gathered in that order (one
+    compiled pass: NumPy's row gathers take 2-4x as long) and whether they came in that order
+    already (``order`` is the identity)."""
     order = spatial_order(centers)
     n = len(order)
     out_centers = np.empty((n, 3), np.float32)
     out_radii = np.empty(n, np.float32)
     out_labels = np.empty(n, np.int32)
+    in_order = True
     for k in range(n):
         i = order[k]
+        in_order &= i == k
         out_centers[k, 0] = centers[i, 0]
         out_centers[k, 1] = centers[i, 1]
         out_centers[k, 2] = centers[i, 2]
         out_radii[k] = radii[i]
         out_labels[k] = labels[i]
-    return order, out_centers, out_radii, out_labels
+    return order, out_centers, out_radii, out_labels, in_order
