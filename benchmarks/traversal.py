@@ -12,13 +12,15 @@ For each count it builds the spheres twice beside the same ground triangles, as 
 ``SPHERE_POINT`` (``add_spheres(kind="point")``) and as user geometry with compiled callbacks
 (``kind="user"``), on 1 thread and on 2 (``BVH(threads=...)``), and times ``intersect`` and
 ``occluded`` taking turns (point, user, point, user, ... ``--repeat`` turns) on the very same
-rays. Shadow rays are made once, from the native spheres' primary hits, and given to both. Each
-row reports the median Mrays/s; user rows carry ``vs_point_primary`` / ``vs_point_shadow``, the
-median over turns of the per-turn speed ratio user / point (a turn's two runs sit side by side
-in time, so the ratio survives a noisy machine), and ``vs_point_primary_cpu_time`` /
-``vs_point_shadow_cpu_time``, the same from the process's CPU time: on a machine shared with
-other work, time spent descheduled adds the same seconds to both kinds and pulls the wall-clock
-ratio toward 1; CPU time leaves it out. ``build_s`` is add + commit.
+rays. Primary rays are traced as the renderer traces camera rays, with Embree's coherent query
+flag, for both kinds. Shadow rays are made once, from the native spheres' primary hits, and
+given to both. Each row reports the median Mrays/s; user rows carry ``vs_point_primary`` /
+``vs_point_shadow``, the median over turns of the per-turn speed ratio user / point (a turn's
+two runs sit side by side in time, so the ratio survives a noisy machine), and
+``vs_point_primary_cpu_time`` / ``vs_point_shadow_cpu_time``, the same from the process's CPU
+time: on a machine shared with other work, time spent descheduled adds the same seconds to both
+kinds and pulls the wall-clock ratio toward 1; CPU time leaves it out. ``build_s`` is add +
+commit.
 
 Accuracy: on ``--sample`` random pixels, a float64 brute force over every sphere and the ground
 (candidates from a grid over the sphere centres, swept along each ray's path through the slab
@@ -316,7 +318,7 @@ def time_in_turns(bvhs: dict, primary: tuple, shadow: tuple, repeat: int) -> dic
     CPU seconds (``primary_cpu_s``, ``shadow_cpu_s``: all threads; time spent descheduled on a
     busy machine does not count) and the last answers (``hits``, ``blocked``)."""
     queries = {
-        "primary": lambda bvh: bvh.intersect(*primary),
+        "primary": lambda bvh: bvh.intersect(*primary, coherent=True),
         "shadow": lambda bvh: bvh.occluded(shadow[0], shadow[1], 0.0, shadow[2]),
     }
     runs = {kind: {f"{q}{unit}": [] for q in queries for unit in ("_s", "_cpu_s")} for kind in bvhs}

@@ -23,8 +23,9 @@ close together keep a ratio fair while the load drifts):
   light (the origins of ``traversal.shadow_rays``, unit directions, tfar the distance).
   Mitsuba: ``scene.ray_intersect_preliminary(rays, coherent=True)`` (as its integrator calls
   it for camera rays; t, primitive and shape index evaluated) and ``scene.ray_test(rays)``.
-  embree_rt: ``BVH.intersect`` and ``BVH.occluded`` on a BVH of ``add_spheres`` plus the
-  ground as two triangles, all threads.
+  embree_rt: ``BVH.intersect(..., coherent=True)`` (as the renderer calls it for camera rays)
+  and ``BVH.occluded`` on a BVH of ``add_spheres`` plus the ground as two triangles, all
+  threads.
 - ``agreement``: fraction of primary rays that hit, the fraction on which both name the same
   object (the same sphere, the ground, or nothing), the shadowed fraction, and whether the hit
   fractions agree within ``HIT_FRACTION_TOLERANCE``. ``primary_vs_float64`` says, on a sample,
@@ -606,7 +607,12 @@ def bench_count(count: int, args, mi, dr) -> dict:
             agreement["mitsuba_render_coverage"] = float(theirs_image[..., 3].mean())
         traversal = {}
         for kind, ours, theirs_call, rays in (
-            ("primary", lambda: bvh.intersect(origins, directions), intersect_theirs, len(origins)),
+            (
+                "primary",
+                lambda: bvh.intersect(origins, directions, coherent=True),
+                intersect_theirs,
+                len(origins),
+            ),
             (
                 "shadow",
                 lambda: bvh.occluded(s_origins, s_directions, 0.0, s_tfar),

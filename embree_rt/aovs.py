@@ -147,7 +147,7 @@ def render_aovs(
 
     def run(batch: tuple[int, int]) -> None:
         origins, directions, pixel = pixel_center_rays(frame, *batch)
-        rows, surfaces = renderer.geometry.intersect_compact(origins, directions)
+        rows, surfaces = renderer.geometry.intersect_compact(origins, directions, coherent=True)
         hit = pixel[rows]
         if "depth" in flat:
             # The rays start at the camera position with unit directions: t is the distance.

@@ -244,7 +244,9 @@ class Renderer:
     def _trace(self, rays: RayBatch, work: BatchWork, max_depth: int) -> None:
         depth = 0
         while len(rays):
-            rows, surfaces = self.geometry.intersect_compact(rays.origins, rays.directions)
+            rows, surfaces = self.geometry.intersect_compact(
+                rays.origins, rays.directions, coherent=depth == 0
+            )
             if len(rows) < len(rays):
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False

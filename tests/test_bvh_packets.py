@@ -29,20 +29,41 @@ def _scene(kind: str) -> tuple[BVH, int]:
     return bvh, mesh_gid
 
 
+def _rays(pattern: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """origins, unit directions (n, 3) and tfar (n,), float32: "random" rays from anywhere in
+    the scene, or "camera" rays from one eye through a grid, in rows (coherent packets)."""
+    n = 4099  # not a multiple of 8 or of the chunk size: the last packet is partly idle
+    rng = np.random.default_rng(4)
+    if pattern == "random":
+        origins = rng.uniform(-7, 7, (n, 3))
+        directions = rng.normal(size=(n, 3))
+        tfar = rng.uniform(1, 12, n)
+    else:
+        pixel = np.arange(n)
+        x, y = pixel % 64 / 64 - 0.5, pixel // 64 / 64 - 0.5
+        origins = np.broadcast_to([0.0, 2.0, -16.0], (n, 3))
+        directions = np.stack([x, y - 0.05, np.ones(n)], axis=1)
+        tfar = np.full(n, 40.0)
+    directions = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    return float32_exact(origins), float32_exact(directions), float32_exact(tfar)
+
+
 @pytest.mark.parametrize("kind", SPHERE_KINDS)
 @pytest.mark.parametrize("lanes", [4, 8, 16])
-def test_packet_and_single_ray_queries_agree(lanes: int, kind: str) -> None:
-    rng = np.random.default_rng(4)
-    n = 4099  # not a multiple of 8 or of the chunk size: the last packet is partly idle
-    origins = float32_exact(rng.uniform(-7, 7, (n, 3)))
-    directions = rng.normal(size=(n, 3))
-    directions = float32_exact(directions / np.linalg.norm(directions, axis=1, keepdims=True))
-    tfar = float32_exact(rng.uniform(1, 12, n))
+@pytest.mark.parametrize(("pattern", "coherent"), [("random", False), ("random", True),
+                                                   ("camera", True)])  # fmt: skip
+def test_packet_and_single_ray_queries_agree(
+    lanes: int, kind: str, pattern: str, coherent: bool
+) -> None:
+    # Embree's coherent query takes another traversal (a frustum per packet): it must find
+    # what the plain one finds, also when the rays are not coherent at all.
+    origins, directions, tfar = _rays(pattern)
+    n = len(origins)
     bvh, mesh_gid = _scene(kind)
     with bvh:
         bvh.lanes = lanes
-        packet_hits = bvh.intersect(origins, directions, 0.0, tfar)
-        packet_blocked = bvh.occluded(origins, directions, 0.0, tfar)
+        packet_hits = bvh.intersect(origins, directions, 0.0, tfar, coherent=coherent)
+        packet_blocked = bvh.occluded(origins, directions, 0.0, tfar, coherent=coherent)
         bvh.lanes = 1
         single_hits = bvh.intersect(origins, directions, 0.0, tfar)
         single_blocked = bvh.occluded(origins, directions, 0.0, tfar)

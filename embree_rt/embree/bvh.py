@@ -430,7 +430,7 @@ class BVH:
         _prepare_kernels()
         return origins, directions, tnear, tfar
 
-    def _raw_hits(self, origins, directions, tnear, tfar) -> Hits:
+    def _raw_hits(self, origins, directions, tnear, tfar, coherent=False) -> Hits:
         """Embree's answers as it gives them (normals in object space) for validated rays."""
         n = len(origins)
         hits = Hits(
@@ -447,9 +447,9 @@ class BVH:
         hits.inst_prim_id = np.empty(n, np.int32) if copies else np.full(n, -1, np.int32)
         if n:
             arguments = (
-                self._live_scene(), self.lanes, origins, directions, tnear, tfar, hits.t,
-                hits.normal, hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id,
-                hits.inst_prim_id if copies else None,
+                self._live_scene(), kernels.query_arguments(coherent), self.lanes, origins,
+                directions, tnear, tfar, hits.t, hits.normal, hits.u, hits.v, hits.prim_id,
+                hits.geom_id, hits.inst_id, hits.inst_prim_id if copies else None,
             )  # fmt: skip
             if self.threads == 1:
                 kernels.intersect_serial(*arguments)
@@ -465,13 +465,14 @@ class BVH:
         directions: np.ndarray,
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
+        coherent: bool = False,
     ) -> Hits:
         """Nearest hit of each ray ``origins + t * directions`` with ``tnear <= t <= tfar``.
 
         ``origins``, ``directions`` (n, 3); ``tnear``, ``tfar`` scalars or (n,).
         """
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
-        hits = self._raw_hits(origins, directions, tnear, tfar)
+        hits = self._raw_hits(origins, directions, tnear, tfar, coherent)
         self._normals_to_world(hits)
         if self._array_table is not None:
             instance_arrays.hits_to_world(hits.inst_id, hits.inst_prim_id, hits.normal,
@@ -485,6 +486,7 @@ class BVH:
         labels: HitLabels,
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
+        coherent: bool = False,
     ) -> HitRecords:
         """The nearest hits of rays given as columns, ``origins``, ``directions`` (3, n), with
         ``labels``' ground plane, as ``HitRecords``: only the rays that hit, grouped by kind,
@@ -492,7 +494,7 @@ class BVH:
         origins = np.ascontiguousarray(origins, np.float32)
         directions = np.ascontiguousarray(directions, np.float32)
         rows, columns, near, far = self._query_inputs(origins.T, directions.T, tnear, tfar)
-        hits = self._raw_hits(rows, columns, near, far)
+        hits = self._raw_hits(rows, columns, near, far, coherent)
         spheres, sphere_slot = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
         sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
         has_plane = labels.plane_y is not None
@@ -565,13 +567,15 @@ class BVH:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
         plane_y: float | None = None,
+        coherent: bool = False,
     ) -> np.ndarray:
         """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``; with
         ``plane_y``, the ground plane y = plane_y too. ``origins``, ``directions`` (n, 3)."""
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         blocked = np.zeros(len(origins), bool)
         if len(origins):
-            arguments = (self._live_scene(), self.lanes, origins, directions, tnear, tfar, blocked)
+            arguments = (self._live_scene(), kernels.query_arguments(coherent), self.lanes,
+                         origins, directions, tnear, tfar, blocked)  # fmt: skip
             if self.threads == 1:
                 kernels.occluded_serial(*arguments)
             else:

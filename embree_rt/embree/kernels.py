@@ -42,6 +42,23 @@ PACKET_ALIGN = 64
 LANE_CHOICES = (1, 4, 8, 16)
 
 INVALID_ID = library.INVALID_ID
+
+# RTCIntersectArguments and RTCOccludedArguments share one layout (rtcore_scene.h): flags u32,
+# feature_mask u32, context*, filter, intersect/occluded[, minWidthDistanceFactor f32]: 40 bytes.
+RAY_QUERY_FLAG_COHERENT = 1 << 16  # rtcore_common.h
+FEATURE_FLAG_ALL = 0xFFFFFFFF
+# Coherent queries: with this flag Embree traces a packet whose rays share an octant by
+# testing each node against the packet's frustum first (its "fast coherent code path"), and
+# switches to single rays later; context and callbacks stay NULL, so it is otherwise a plain
+# query. Read-only, so every thread may pass the same block.
+_COHERENT_ARGUMENTS = np.zeros(5, np.uint64)
+_COHERENT_ARGUMENTS[0] = RAY_QUERY_FLAG_COHERENT | FEATURE_FLAG_ALL << 32
+
+
+def query_arguments(coherent: bool) -> int:
+    """The address of the query arguments the kernels pass to Embree: 0 (Embree's defaults,
+    tuned for incoherent rays) or the coherent block above."""
+    return _COHERENT_ARGUMENTS.ctypes.data if coherent else 0
 # packet + alignment slack + valid mask, for the widest packet
 SCRATCH_WORDS = PACKET_FIELDS * MAX_LANES + PACKET_ALIGN // 4 + MAX_LANES
 CHUNK = 256  # rays per parallel iteration: small enough to balance, large enough to amortise
@@ -113,32 +130,32 @@ def _fill_packet(words, floats, b, lanes, first, count, origins, directions, tne
 
 
 @njit(inline="always")
-def _intersect_packet(lanes, valid_address, scene, address):
+def _intersect_packet(lanes, valid_address, scene, address, query):
     if lanes == 8:
-        rtc_intersect8(valid_address, scene, address, 0)
+        rtc_intersect8(valid_address, scene, address, query)
     elif lanes == 16:
-        rtc_intersect16(valid_address, scene, address, 0)
+        rtc_intersect16(valid_address, scene, address, query)
     elif lanes == 4:
-        rtc_intersect4(valid_address, scene, address, 0)
+        rtc_intersect4(valid_address, scene, address, query)
     else:
-        rtc_intersect1(scene, address, 0)
+        rtc_intersect1(scene, address, query)
 
 
 @njit(inline="always")
-def _occluded_packet(lanes, valid_address, scene, address):
+def _occluded_packet(lanes, valid_address, scene, address, query):
     if lanes == 8:
-        rtc_occluded8(valid_address, scene, address, 0)
+        rtc_occluded8(valid_address, scene, address, query)
     elif lanes == 16:
-        rtc_occluded16(valid_address, scene, address, 0)
+        rtc_occluded16(valid_address, scene, address, query)
     elif lanes == 4:
-        rtc_occluded4(valid_address, scene, address, 0)
+        rtc_occluded4(valid_address, scene, address, query)
     else:
-        rtc_occluded1(scene, address, 0)
+        rtc_occluded1(scene, address, query)
 
 
 @njit(inline="always")
-def _intersect_chunk(scene, lanes, words, first_ray, stop, origins, directions, tnear, tfar, t,
-                     normal, u, v, prim, geom, inst, inst_prim):  # fmt: skip
+def _intersect_chunk(scene, query, lanes, words, first_ray, stop, origins, directions, tnear,
+                     tfar, t, normal, u, v, prim, geom, inst, inst_prim):  # fmt: skip
     # inst_prim: (n,) int32 for Embree's instPrimID[0] (instance arrays), or None; numba
     # compiles the None case apart, with the test pruned: the plain loop pays nothing for it.
     floats = words.view(np.float32)
@@ -148,7 +165,7 @@ def _intersect_chunk(scene, lanes, words, first_ray, stop, origins, directions, 
     for first in range(first_ray, stop, lanes):
         count = min(lanes, stop - first)
         _fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar)
-        _intersect_packet(lanes, valid_address, scene, address)
+        _intersect_packet(lanes, valid_address, scene, address, query)
         for lane in range(count):
             i = first + lane
             if words[b + HIT_GEOM_ID * lanes + lane] == INVALID_ID:
@@ -170,7 +187,7 @@ def _intersect_chunk(scene, lanes, words, first_ray, stop, origins, directions, 
 
 
 @njit(inline="always")
-def _occluded_chunk(scene, lanes, words, first_ray, stop, origins, directions, tnear, tfar,
+def _occluded_chunk(scene, query, lanes, words, first_ray, stop, origins, directions, tnear, tfar,
                     blocked):  # fmt: skip
     floats = words.view(np.float32)
     b = _aligned_word(words, PACKET_ALIGN)
@@ -179,49 +196,50 @@ def _occluded_chunk(scene, lanes, words, first_ray, stop, origins, directions, t
     for first in range(first_ray, stop, lanes):
         count = min(lanes, stop - first)
         _fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar)
-        _occluded_packet(lanes, valid_address, scene, address)
+        _occluded_packet(lanes, valid_address, scene, address, query)
         for lane in range(count):
             blocked[first + lane] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
 
 # Drivers: the parallel ones spread chunks over numba's threads; the serial ones run in the
 # calling thread with no threading layer at all, so several Python threads may call them at once.
-# ``lanes`` is 1 (rtcIntersect1 on an RTCRayHit) or a packet width, 4, 8 or 16; ``inst_prim``
+# ``query`` is the address of the query arguments (``query_arguments``) or 0; ``lanes`` is 1
+# (rtcIntersect1 on an RTCRayHit) or a packet width, 4, 8 or 16; ``inst_prim``
 # an (n,) int32 array for the hits' instance-array copy numbers, or None.
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def intersect(scene, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
-              inst_prim):  # fmt: skip
+def intersect(scene, query, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim, geom,
+              inst, inst_prim):  # fmt: skip
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _intersect_chunk(scene, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), origins,
-                         directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
+        _intersect_chunk(scene, query, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
+                         origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
                          inst_prim)  # fmt: skip
 
 
 @njit(nogil=True, cache=True)
-def intersect_serial(scene, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim, geom,
-                     inst, inst_prim):  # fmt: skip
+def intersect_serial(scene, query, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim,
+                     geom, inst, inst_prim):  # fmt: skip
     scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _intersect_chunk(scene, lanes, scratch, 0, origins.shape[0], origins, directions, tnear, tfar,
-                     t, normal, u, v, prim, geom, inst, inst_prim)  # fmt: skip
+    _intersect_chunk(scene, query, lanes, scratch, 0, origins.shape[0], origins, directions, tnear,
+                     tfar, t, normal, u, v, prim, geom, inst, inst_prim)  # fmt: skip
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def occluded(scene, lanes, origins, directions, tnear, tfar, blocked):
+def occluded(scene, query, lanes, origins, directions, tnear, tfar, blocked):
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _occluded_chunk(scene, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), origins,
-                        directions, tnear, tfar, blocked)  # fmt: skip
+        _occluded_chunk(scene, query, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
+                        origins, directions, tnear, tfar, blocked)  # fmt: skip
 
 
 @njit(nogil=True, cache=True)
-def occluded_serial(scene, lanes, origins, directions, tnear, tfar, blocked):
+def occluded_serial(scene, query, lanes, origins, directions, tnear, tfar, blocked):
     scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _occluded_chunk(scene, lanes, scratch, 0, origins.shape[0], origins, directions, tnear, tfar,
-                    blocked)  # fmt: skip
+    _occluded_chunk(scene, query, lanes, scratch, 0, origins.shape[0], origins, directions, tnear,
+                    tfar, blocked)  # fmt: skip

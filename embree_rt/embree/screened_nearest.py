@@ -95,7 +95,7 @@ def _trace_chunk(scene, lanes, words, first, stop, origins, directions, limits, 
     for i in range(first, stop):
         tnear[i] = np.float32(limits[i, 0])
         tfar[i] = np.inf
-    _intersect_chunk(scene, lanes, words, first, stop, origins, directions, tnear, tfar, t,
+    _intersect_chunk(scene, 0, lanes, words, first, stop, origins, directions, tnear, tfar, t,
                      normal, u, v, prim, geom, inst, None)  # fmt: skip
     floor_band_scale = band_ulps * _EPS32 / floor_altitude if floor_altitude > 0 else np.inf
     for i in range(first, stop):
