@@ -75,9 +75,22 @@ class SceneFile:
         return load_scene(self.path)
 
     def digest(self) -> bytes:
-        """The path and the file's bytes (files the scene names are not hashed: replace a scene
-        file's data files under a running cluster and give the scene file a new name)."""
-        return self.path.encode() + b"\0" + Path(self.path).read_bytes()
+        """The path, the file's bytes, and the path, size and modification time of each data
+        file it names: a sphere array or mesh replaced under a running cluster makes a new key,
+        so the workers load the scene again instead of rendering the old one. (Files a mesh
+        names in turn, an OBJ's materials and textures, are not stamped.)"""
+        from embree_rt.scene.loader import SceneReader, read_document
+
+        path = Path(self.path)
+        parts = [self.path.encode(), path.read_bytes()]
+        for named in SceneReader(path, read_document(path)).named_files():
+            try:
+                stat = named.stat()
+            except OSError:  # the workers report what they cannot read, naming the key
+                parts.append(f"{named}: missing".encode())
+                continue
+            parts.append(f"{named}: {stat.st_size} bytes, {stat.st_mtime_ns} ns".encode())
+        return b"\0".join(parts)
 
 
 @dataclass(frozen=True)

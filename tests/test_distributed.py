@@ -171,6 +171,35 @@ def test_a_worker_that_cannot_load_the_scene_is_bad_input(cluster, tmp_path: Pat
         bounded(renderer.render, settings, rt.Camera())
 
 
+def test_a_data_file_replaced_under_a_live_renderer_is_loaded_again(cluster, tmp_path) -> None:
+    # Renderers of one scene share the workers' BVH while any of them lives: a scene file whose
+    # sphere array was rewritten is another scene, and must not be rendered from the old BVH.
+    _, client = cluster
+    spheres = tmp_path / "spheres.npz"
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text(
+        f'[[sphere_arrays]]\nfile = "{spheres.name}"\n[camera]\nposition = [0, 1, -6]\n',
+        encoding="utf-8",
+    )
+    settings = rd.Settings(width=32, height=24, spp=1, max_depth=1, seed=0)
+    np.savez(spheres, centers=[[-1.0, 1.0, 0.0]], radii=[1.0])
+    first = rd.ClusterRenderer(scene_file, client, batch_size=32)  # a task a row
+    try:
+        old = bounded(first.render, settings, rt.load_scene(scene_file).camera)
+        assert sorted(first.builds().values()) == [1, 1]  # both workers hold the old scene
+        np.savez(spheres, centers=[[1.0, 1.0, 0.0], [-1.5, 0.5, 1.0]], radii=[1.0, 0.5])
+        second = rd.ClusterRenderer(scene_file, client, batch_size=32)
+        try:
+            new = bounded(second.render, settings, rt.load_scene(scene_file).camera)
+        finally:
+            second.release()
+    finally:
+        first.release()
+    expected = local_image(rt.load_scene(scene_file), width=32, height=24, spp=1, max_depth=1)
+    assert not np.array_equal(old, expected)  # the two scenes do look different
+    assert np.array_equal(new, expected)
+
+
 def test_a_worker_killed_mid_render_leaves_the_image_unchanged(cluster) -> None:
     # Last of the cluster's tests: the worker's nanny restarts it while the module closes.
     _, client = cluster

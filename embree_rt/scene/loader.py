@@ -147,6 +147,15 @@ class SceneReader:
         self.instances = [self._instances(t) for t in root.tables("instances")]
         root.finish()
 
+    def named_files(self) -> list[Path]:
+        """The data files the scene names (sphere arrays, meshes, instance placements), in the
+        order it names them, each once: what step 2 of ``build`` reads."""
+        paths = [entry.path for entry in self.sphere_arrays]
+        paths += [entry.path for entry in self.meshes]
+        for entry in self.instances:
+            paths += [entry.path, entry.placements_path]
+        return list(dict.fromkeys(paths))
+
     def build(self) -> Scene:
         scene = self.scene
         # Step 2: the files the scene names, each checked before anything is generated.
