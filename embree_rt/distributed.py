@@ -35,6 +35,7 @@ import dask
 import distributed
 import numpy as np
 
+from embree_rt import budget
 from embree_rt.batches import batch_ranges
 from embree_rt.camera import CameraFrame, camera_frame
 from embree_rt.errors import InputError
@@ -170,14 +171,18 @@ class SceneRendererPlugin(distributed.WorkerPlugin):
 
     def renderer_for(self, source: SceneSource | Scene):
         """The renderer, built from ``source`` (a ``SceneSource``, or the scattered ``Scene``
-        itself) the first time."""
+        itself) the first time. A scene too big for this worker's memory is refused before it is
+        generated or built (``budget``, as a local render is), not left to kill the worker."""
         from embree_rt.integrator import Renderer
 
         with self._lock:
             if self.renderer is None:
                 started = time.perf_counter()
                 try:
+                    if isinstance(source, FieldRecipe):
+                        self._require_memory(source.plan.count, budget.field_bytes)
                     scene = source if isinstance(source, Scene) else source.load()
+                    self._require_memory(len(scene.sphere_radii))
                 except InputError as error:
                     raise WorkerSceneError(f"worker cannot load the scene: {error}") from None
                 # One thread: the worker runs as many batches side by side as it has threads.
@@ -185,6 +190,21 @@ class SceneRendererPlugin(distributed.WorkerPlugin):
                 self.builds += 1
                 self.build_s = time.perf_counter() - started
             return self.renderer
+
+    def _require_memory(self, count: int, scene_bytes: Callable[[int], int] | None = None) -> None:
+        """Raise ``MemoryBudgetError`` unless this machine can hold the BVH of ``count``
+        spheres (and, with ``scene_bytes``, the scene's own arrays, not made yet)."""
+        from embree_rt.geometry import sphere_kind
+
+        needs = {
+            "spheres": (
+                budget.geometry_bytes(count, sphere_kind(count, self.spheres)),
+                f"the BVH of {count:,} spheres",
+            )
+        }
+        if scene_bytes is not None:
+            needs["field"] = (scene_bytes(count), f"a field of {count:,} spheres")
+        budget.require(needs)
 
 
 @dataclass(frozen=True)

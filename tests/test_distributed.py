@@ -32,6 +32,7 @@ import pytest
 distributed = pytest.importorskip("distributed")  # the test extra installs it: CI runs these
 
 import embree_rt as rt  # noqa: E402
+from embree_rt import budget  # noqa: E402
 from embree_rt import distributed as rd  # noqa: E402
 from embree_rt.scene.animation import Animation, camera_at  # noqa: E402
 from embree_rt.scene.random_field import plan_field  # noqa: E402
@@ -198,6 +199,24 @@ def test_a_data_file_replaced_under_a_live_renderer_is_loaded_again(cluster, tmp
     expected = local_image(rt.load_scene(scene_file), width=32, height=24, spp=1, max_depth=1)
     assert not np.array_equal(old, expected)  # the two scenes do look different
     assert np.array_equal(new, expected)
+
+
+@pytest.mark.parametrize("as_recipe", [True, False])
+def test_a_scene_too_big_for_a_worker_is_refused_before_it_is_built(monkeypatch, as_recipe) -> None:
+    # The worker's own check (its plugin, in this process): with 1 MB available, a field of
+    # 1e4 spheres is refused before it is generated, and a scattered scene before its BVH.
+    plan = plan_field(10_000, seed=0)
+    monkeypatch.setattr(budget, "available_memory", lambda: 1 << 20)
+    plugin = rd.SceneRendererPlugin("key", "analytic")
+    plugin.setup(None)
+    made = []
+    monkeypatch.setattr(rd.FieldRecipe, "load", lambda self: made.append(self))
+    source = rd.FieldRecipe(plan) if as_recipe else rt.load_scene(SCENES / "three_spheres.toml")
+    if not as_recipe:
+        monkeypatch.setattr(budget, "GEOMETRY_BYTES_PER_SPHERE", {"user": 1 << 20, "point": 0})
+    with pytest.raises(rd.WorkerSceneError, match=r"spheres would need ~.* GB of memory"):
+        plugin.renderer_for(source)
+    assert plugin.renderer is None and made == []
 
 
 def test_a_worker_killed_mid_render_leaves_the_image_unchanged(cluster) -> None:
