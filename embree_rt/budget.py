@@ -26,8 +26,9 @@ FIELD_RING_BYTES = 20 << 20
 # scene's 20 included (user geometry in spatial order in a 4-wide tree, 1e6 -> 8e6: 171);
 # instanced icospheres (``--spheres mesh``, one Embree instance array:
 # float64 placements while they are made, float32 ones in Embree, its BVH), 2e5 -> 2e6 spheres,
-# by 286 (``--instance MESH``, the same array: 308).
-GEOMETRY_BYTES_PER_SPHERE = {"user": 152, "point": 51, "mesh": 270}
+# by 286 (``--instance MESH``, the same array: 308; both take the larger figure, so neither
+# is let through short of memory).
+GEOMETRY_BYTES_PER_SPHERE = {"user": 152, "point": 51, "mesh": 310}
 # Per pixel: the film's float64 sums (24 bytes), the float32 image, the tone mapping's float32
 # temporaries and the encoder's bytes. 1920x1080 -> 7680x4320 at 1 spp grew by 75-87 bytes a
 # pixel for a PNG (66 for a .npy), when the film still made a transposed copy of the image (12
