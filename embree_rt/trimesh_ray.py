@@ -50,7 +50,7 @@ from trimesh.constants import tol
 
 from embree_rt.embree import BVH
 from embree_rt.embree.depth_order import depth_major
-from embree_rt.embree.local_frame import local_rays
+from embree_rt.embree.local_frame import local_rays, ordered_local_rays
 from embree_rt.embree.multihit import compact_hits
 from embree_rt.embree.plane_distances import plane_distances
 from embree_rt.embree.settled_hits import settled_hits
@@ -258,14 +258,28 @@ class RayMeshIntersector:
             raise ValueError("tnear: must be finite and >= 0")
         return near, True
 
-    def _hits(self, origins, directions, max_hits, tnear, one_per_point=False):
+    def _hits(self, origins, directions, max_hits, tnear, one_per_point=False, reorder=False):
         """Every ray's nearest ``max_hits`` hits: (rays, triangles, distances, ranks) (k,),
         sorted by ray, then distance, then triangle; with ``one_per_point``, the hits of a ray
-        at one point (an edge, a vertex) as one, the lowest-index triangle there."""
+        at one point (an edge, a vertex) as one, the lowest-index triangle there; and ``order``.
+
+        With ``reorder`` (and a big mesh: ``scene.bounds``) the rays are traced, and every
+        later step run, in a coherent order (``local_frame.ordered_local_rays``): ``order`` (n,)
+        then gives ray ``order[p]`` for each position p, and ``rays`` are positions (sorted by
+        position). Each ray's hits are computed from its own row alone, so they are the same in
+        any order. Otherwise ``order`` is None and ``rays`` are the rays' indices."""
         scene = self._scene
         n = len(origins)
-        local_origins, local_directions, magnitude = local_rays(origins, directions, scene.origin,
-                                                                scene.scale, scene.extent)
+        traced_order = None
+        if reorder and scene.bounds is not None:
+            traced_order, origins, directions, local_origins, local_directions, magnitude = (
+                ordered_local_rays(origins, directions, scene.origin, scene.scale, scene.extent,
+                                   scene.bounds, scene.bvh.threads))  # fmt: skip
+            if tnear is not None and np.ndim(tnear):
+                tnear = np.broadcast_to(np.asarray(tnear, np.float64), (n,))[traced_order]
+        else:
+            local_origins, local_directions, magnitude = local_rays(
+                origins, directions, scene.origin, scene.scale, scene.extent)
         near, inclusive = self._resolve_tnear(scene, magnitude, tnear)
         capacity = max(1, int(max_hits))
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
@@ -291,14 +305,16 @@ class RayMeshIntersector:
             rays, tris, distance, messy = settled_hits(
                 result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
                 directions[rows], scene.first_vertices, scene.normals, scene.min_altitude,
-                scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS,
+                scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS, scene.bvh.threads,
             )  # fmt: skip
             settled_parts.append((rays + first, tris, distance))
-            messy_rows = np.flatnonzero(messy)
-            if room == first_room and len(messy_rows):  # these hits are complete: kept
-                kept_parts.append((first + messy_rows, [x[messy_rows] for x in result]))
-            else:
-                pending_parts.append(first + messy_rows)
+            # messy rays whose hits all fit are complete: kept as traced (a second trace with
+            # more room records the same hits, in the same order); the others traced again
+            overflowed = result[6] if room > first_room else np.zeros(len(messy), bool)
+            complete_rows = np.flatnonzero(messy & ~overflowed)
+            if len(complete_rows):
+                kept_parts.append((first + complete_rows, [x[complete_rows] for x in result]))
+            pending_parts.append(first + np.flatnonzero(messy & overflowed))
         pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
         for first in range(0, len(pending), block):
@@ -351,7 +367,7 @@ class RayMeshIntersector:
             rays, tris, distance = rays[keep], tris[keep], distance[keep]
         ranks = _ranks(rays)
         within = ranks < capacity
-        return rays[within], tris[within], distance[within], ranks[within]
+        return rays[within], tris[within], distance[within], ranks[within], traced_order
 
     def _first_hits(self, origins, directions, tnear) -> np.ndarray:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
@@ -416,11 +432,12 @@ class RayMeshIntersector:
                                        np.arange(len(rays)), tris)[0]  # fmt: skip
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, distance, ranks = self._hits(origins, directions, max_hits, tnear,
-                                                 one_per_point=return_locations)
+        rays, tris, distance, ranks, order = self._hits(origins, directions, max_hits, tnear,
+                                                        one_per_point=return_locations,
+                                                        reorder=True)  # fmt: skip
         # rays are sorted: depth by depth, by ray
         rays, tris, locations = depth_major(rays, tris, distance, ranks, origins, directions,
-                                            return_locations)  # fmt: skip
+                                            return_locations, order)  # fmt: skip
         if return_locations:
             return tris, rays, locations
         return tris, rays

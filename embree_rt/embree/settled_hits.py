@@ -8,24 +8,36 @@ trimesh computes it), hits at the origin or along a face are dropped, and the re
 of an edge, at |cos| <= ``graze``, or that overflowed its buffer (when a retrace with more room
 follows) is *messy*: left to the caller's float64 path. In NumPy this pass was a dozen passes
 and gathers over every hit, more than the traversal itself on small meshes.
+
+In parallel over chunks of rays, with an output layout that does not depend on the thread
+count: each chunk writes its hits into its own range of a scratch array (sized by the hits the
+traversal found in the chunk, an upper bound), then the kept counts' prefix sum places each
+chunk's hits in the output, chunk after chunk. So the result is the serial pass's, bit for bit,
+on any number of threads (the arithmetic of a hit reads only its own ray and triangle).
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from embree_rt.embree.bvh import _query_lock
 from embree_rt.embree.plane_distances import plane_distance
+from embree_rt.embree.work_split import threads_for
+
+CHUNK = 512  # rays per parallel iteration
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, inclusive, origins,
-            directions, first_vertices, normals, altitude, floor_altitude, band_scale, graze,
-            parallel_cos, messy, out_rays, out_tris, out_distance):  # fmt: skip
-    k = 0
+def _settle_chunk(first, stop, k, t, prim, u, v, cos, count, more, retrace_more, magnitude,
+                  near, inclusive, origins, directions, first_vertices, normals, altitude,
+                  floor_altitude, band_scale, graze, parallel_cos, messy, out_rays, out_tris,
+                  out_distance):  # fmt: skip
+    # rays first .. stop, their kept hits written from index k on; returns the index past them
     one = np.float32(1.0)
     floor_scale = band_scale / floor_altitude if floor_altitude > 0 else np.inf
-    for i in range(count.shape[0]):
+    for i in range(first, stop):
         found = count[i]
         bad = retrace_more and more[i]
         for j in range(found):
@@ -64,6 +76,48 @@ def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, incl
     return k
 
 
+@njit(nogil=True, cache=True)
+def _copy_chunk(source, stop, target, rays, tris, distance, out_rays, out_tris, out_distance):
+    for k in range(source, stop):
+        out_rays[target] = rays[k]
+        out_tris[target] = tris[k]
+        out_distance[target] = distance[k]
+        target += 1
+
+
+@njit(parallel=True, nogil=True, cache=True)
+def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, inclusive, origins,
+            directions, first_vertices, normals, altitude, floor_altitude, band_scale, graze,
+            parallel_cos, messy):  # fmt: skip
+    n = count.shape[0]
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    starts = np.zeros(n_chunks + 1, np.int64)  # each chunk's scratch range: hits found
+    for i in range(n):
+        starts[i // CHUNK + 1] += count[i]
+    for c in range(n_chunks):
+        starts[c + 1] += starts[c]
+    rays = np.empty(starts[n_chunks], np.int64)
+    tris = np.empty(starts[n_chunks], np.int64)
+    distance = np.empty(starts[n_chunks], np.float64)
+    ends = np.empty(n_chunks, np.int64)
+    for c in prange(n_chunks):
+        ends[c] = _settle_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), starts[c], t, prim, u, v,
+                                cos, count, more, retrace_more, magnitude, near, inclusive,
+                                origins, directions, first_vertices, normals, altitude,
+                                floor_altitude, band_scale, graze, parallel_cos, messy, rays,
+                                tris, distance)  # fmt: skip
+    places = np.zeros(n_chunks + 1, np.int64)  # each chunk's place in the output
+    for c in range(n_chunks):
+        places[c + 1] = places[c] + ends[c] - starts[c]
+    out_rays = np.empty(places[n_chunks], np.int64)
+    out_tris = np.empty(places[n_chunks], np.int64)
+    out_distance = np.empty(places[n_chunks], np.float64)
+    for c in prange(n_chunks):
+        _copy_chunk(starts[c], ends[c], places[c], rays, tris, distance, out_rays, out_tris,
+                    out_distance)  # fmt: skip
+    return out_rays, out_tris, out_distance
+
+
 def settled_hits(
     result: tuple[np.ndarray, ...],
     retrace_more: bool,
@@ -79,6 +133,7 @@ def settled_hits(
     band_scale: float,
     graze: float,
     parallel_cos: float,
+    threads: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Final hits of the clear rays of one ``all_hits`` block, and which rays are messy.
 
@@ -96,17 +151,17 @@ def settled_hits(
     """
     _t, prim, u, v, cos, count, more = result
     n = len(count)
-    total = int(count.sum())
-    rays, tris = np.empty(total, np.int64), np.empty(total, np.int64)
-    distance = np.empty(total, np.float64)
     messy = np.zeros(n, bool)
-    if n:
-        kept = _settle(_t, prim, u, v, cos, count, more, bool(retrace_more),
-                       np.ascontiguousarray(magnitude, np.float64),
-                       np.ascontiguousarray(near, np.float64), bool(inclusive),
-                       np.ascontiguousarray(origins, np.float64),
-                       np.ascontiguousarray(directions, np.float64), first_vertices, normals,
-                       altitude, float(floor_altitude), float(band_scale), np.float32(graze),
-                       float(parallel_cos), messy, rays, tris, distance)  # fmt: skip
-        rays, tris, distance = rays[:kept], tris[:kept], distance[:kept]
+    if not n:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), messy
+    arguments = (_t, prim, u, v, cos, count, more, bool(retrace_more),
+                 np.ascontiguousarray(magnitude, np.float64),
+                 np.ascontiguousarray(near, np.float64), bool(inclusive),
+                 np.ascontiguousarray(origins, np.float64),
+                 np.ascontiguousarray(directions, np.float64), first_vertices, normals, altitude,
+                 float(floor_altitude), float(band_scale), np.float32(graze), float(parallel_cos),
+                 messy)  # fmt: skip
+    with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
+        numba.set_num_threads(threads_for(n, threads))
+        rays, tris, distance = _settle(*arguments)
     return rays, tris, distance, messy
