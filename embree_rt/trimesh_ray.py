@@ -53,6 +53,7 @@ from embree_rt.embree.depth_order import depth_major
 from embree_rt.embree.local_frame import local_rays, ordered_local_rays
 from embree_rt.embree.multihit import compact_hits
 from embree_rt.embree.plane_distances import plane_distances
+from embree_rt.embree.ray_groups import group_by_ray
 from embree_rt.embree.settled_hits import settled_hits
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
@@ -261,13 +262,12 @@ class RayMeshIntersector:
     def _hits(self, origins, directions, max_hits, tnear, one_per_point=False, reorder=False):
         """Every ray's nearest ``max_hits`` hits: (rays, triangles, distances, ranks) (k,),
         sorted by ray, then distance, then triangle; with ``one_per_point``, the hits of a ray
-        at one point (an edge, a vertex) as one, the lowest-index triangle there; and ``order``.
+        at one point (an edge, a vertex) as one, the lowest-index triangle there.
 
-        With ``reorder`` (and a big mesh: ``scene.bounds``) the rays are traced, and every
-        later step run, in a coherent order (``local_frame.ordered_local_rays``): ``order`` (n,)
-        then gives ray ``order[p]`` for each position p, and ``rays`` are positions (sorted by
-        position). Each ray's hits are computed from its own row alone, so they are the same in
-        any order. Otherwise ``order`` is None and ``rays`` are the rays' indices."""
+        With ``reorder`` (and a big mesh: ``scene.bounds``) the rays are traced, and every step
+        up to the regrouping by ray run, in a coherent order (``local_frame.ordered_local_rays``,
+        ``ray_groups.group_by_ray``). Each ray's hits are computed from its own row alone, so
+        they are the same in any order."""
         scene = self._scene
         n = len(origins)
         traced_order = None
@@ -359,15 +359,14 @@ class RayMeshIntersector:
                 rays, tris, distance = rays[order], tris[order], distance[order]
             parts.append((rays, tris, distance))
         rays, tris, distance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
-        if kept_parts:  # runs sorted by ray, merged (timsort finds the runs)
-            order = np.argsort(rays, kind="stable")
-            rays, tris, distance = rays[order], tris[order], distance[order]
+        if kept_parts or traced_order is not None:  # each ray's hits are contiguous in a part
+            rays, tris, distance = group_by_ray(rays, tris, distance, n, traced_order)
         if one_per_point:
             keep = _one_per_point(scene, rays, tris, distance)
             rays, tris, distance = rays[keep], tris[keep], distance[keep]
         ranks = _ranks(rays)
         within = ranks < capacity
-        return rays[within], tris[within], distance[within], ranks[within], traced_order
+        return rays[within], tris[within], distance[within], ranks[within]
 
     def _first_hits(self, origins, directions, tnear) -> np.ndarray:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
@@ -432,12 +431,11 @@ class RayMeshIntersector:
                                        np.arange(len(rays)), tris)[0]  # fmt: skip
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, distance, ranks, order = self._hits(origins, directions, max_hits, tnear,
-                                                        one_per_point=return_locations,
-                                                        reorder=True)  # fmt: skip
+        rays, tris, distance, ranks = self._hits(origins, directions, max_hits, tnear,
+                                                 one_per_point=return_locations, reorder=True)
         # rays are sorted: depth by depth, by ray
         rays, tris, locations = depth_major(rays, tris, distance, ranks, origins, directions,
-                                            return_locations, order)  # fmt: skip
+                                            return_locations)  # fmt: skip
         if return_locations:
             return tris, rays, locations
         return tris, rays

@@ -4,8 +4,8 @@ passes and their temporaries (about a tenth of an all-hits query on a small mesh
 
 ``ordered_local_rays`` also puts the rays in a coherent tracing order (``ray_order.segment_key``,
 the middle of each ray's path through the mesh's box): keys in a parallel pass, a serial radix
-sort (a pure function of the keys), then a parallel pass that gathers each ray's float64 row
-into its place and moves it to the local frame there. Every later step of the query reads the
+sort (a pure function of the keys), then a parallel pass that moves each ray's float64 row to
+its place and to the local frame there. Every later step of the query reads the
 rays in that order, so the BVH nodes, triangles and per-triangle tables one ray touched are
 still in cache for the next. Each output row is the same arithmetic on the same input row as
 ``local_rays``' (the order only moves rows), so no answer changes.
@@ -72,11 +72,19 @@ def _key_chunk(first, stop, origins, directions, lower, upper, cells_per_unit, k
 
 
 @njit(nogil=True, cache=True)
-def _gather_chunk(first, stop, order, origins, directions, shift, scale, extent,
-                  ordered_origins, ordered_directions, local_origins, local_directions,
-                  magnitude):  # fmt: skip
+def _inverse_chunk(first, stop, order, position):
     for j in range(first, stop):
-        i = order[j]
+        position[order[j]] = j
+
+
+@njit(nogil=True, cache=True)
+def _scatter_chunk(first, stop, position, origins, directions, shift, scale, extent,
+                   ordered_origins, ordered_directions, local_origins, local_directions,
+                   magnitude):  # fmt: skip
+    # rows read in the given order and written to their places: scattered stores, which do not
+    # stall the loop as scattered loads (a gather by `order`) do
+    for i in range(first, stop):
+        j = position[i]
         for k in range(3):
             ordered_origins[j, k] = origins[i, k]
             ordered_directions[j, k] = directions[i, k]
@@ -95,10 +103,13 @@ def _ordered_local_rays(origins, directions, shift, scale, extent, lower, upper,
         _key_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), origins, directions, lower, upper,
                    cells_per_unit, keys)  # fmt: skip
     order = radix_order(keys)
+    position = np.empty(n, np.int64)
     for c in prange(n_chunks):
-        _gather_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, origins, directions, shift,
-                      scale, extent, ordered_origins, ordered_directions, local_origins,
-                      local_directions, magnitude)  # fmt: skip
+        _inverse_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, position)
+    for c in prange(n_chunks):
+        _scatter_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), position, origins, directions, shift,
+                       scale, extent, ordered_origins, ordered_directions, local_origins,
+                       local_directions, magnitude)  # fmt: skip
     return order
 
 
