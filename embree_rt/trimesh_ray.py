@@ -50,8 +50,8 @@ from trimesh.constants import tol
 
 from embree_rt.embree import BVH
 from embree_rt.embree.depth_order import depth_major
+from embree_rt.embree.edge_hits import decided_hits
 from embree_rt.embree.local_frame import local_rays, ordered_local_rays
-from embree_rt.embree.multihit import compact_hits
 from embree_rt.embree.plane_distances import plane_distances
 from embree_rt.embree.ray_groups import group_by_ray
 from embree_rt.embree.settled_hits import settled_hits
@@ -191,38 +191,6 @@ def _plane_distance(scene, origins, directions, rays, tris):
     return plane_distances(scene.first_vertices, scene.normals, origins, directions, rays, tris)
 
 
-def _float64_hits(scene, origins, directions, rays, tris):
-    """ray_triangle's test of rays (k,) against triangles (k,): (k,) bool hit and (k,) float64
-    distance (``trimesh.triangles.points_to_barycentric`` within ``tol.zero``)."""
-    distance, cos = _plane_distance(scene, origins, directions, rays, tris)
-    meets = cos > _PARALLEL_COS
-    hit = np.zeros(len(rays), bool)
-    if meets.any():
-        rows = np.flatnonzero(meets)
-        points = origins[rays[rows]] + directions[rays[rows]] * distance[rows, None]
-        barycentric = trimesh.triangles.points_to_barycentric(scene.triangles[tris[rows]], points)
-        hit[rows] = ((barycentric > -tol.zero) & (barycentric < 1 + tol.zero)).all(axis=1)
-    return hit, distance
-
-
-def _neighbourhood(scene, rays, tris):
-    """(ray, triangle) pairs: each suspect hit's triangle and every triangle sharing a vertex
-    position with it, unique."""
-    canonical, starts, fan_faces = scene.fans()
-    corners = canonical[tris].reshape(-1)
-    lengths = starts[corners + 1] - starts[corners]
-    owner = np.repeat(np.repeat(rays, 3), lengths)
-    offsets = np.arange(lengths.sum()) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-    neighbours = fan_faces[np.repeat(starts[corners], lengths) + offsets]
-    return _unique_pairs(owner, neighbours, scene.face_count)
-
-
-def _unique_pairs(rays: np.ndarray, tris: np.ndarray, face_count: int):
-    """(ray, triangle) pairs (k,) int64, each once, sorted by ray then triangle."""
-    keys = np.unique(rays * max(face_count, 1) + tris)
-    return keys // max(face_count, 1), keys % max(face_count, 1)
-
-
 class RayMeshIntersector:
     """Ray queries on a ``trimesh.Trimesh`` through embree_rt's BVH (see the module docstring).
 
@@ -290,7 +258,7 @@ class RayMeshIntersector:
         first_room = min(room, _FIRST_ROOM)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
         buffers = None
-        settled_parts, pending_parts, kept_parts = [], [], []
+        parts, pending_parts = [], []
         band_scale = _BAND_ULPS * _EPS32
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
@@ -307,59 +275,26 @@ class RayMeshIntersector:
                 directions[rows], scene.first_vertices, scene.normals, scene.min_altitude,
                 scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS, scene.bvh.threads,
             )  # fmt: skip
-            settled_parts.append((rays + first, tris, distance))
-            # messy rays whose hits all fit are complete: kept as traced (a second trace with
-            # more room records the same hits, in the same order); the others traced again
+            parts.append((rays + first, tris, distance))
+            # Messy rays whose hits all fit are complete: decided in float64 now, from the
+            # buffers as traced (a second trace with more room records the same hits in the same
+            # order); the others are traced again first.
             overflowed = result[6] if room > first_room else np.zeros(len(messy), bool)
             complete_rows = np.flatnonzero(messy & ~overflowed)
-            if len(complete_rows):
-                kept_parts.append((first + complete_rows, [x[complete_rows] for x in result]))
+            parts.append(self._decided(complete_rows, first + complete_rows, result, magnitude,
+                                       near, inclusive, origins, directions))  # fmt: skip
             pending_parts.append(first + np.flatnonzero(messy & overflowed))
         pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
         for first in range(0, len(pending), block):
             which = pending[first:first + block]
             block_near = (near[which] * scene.scale * 0.5).astype(np.float32)
-            kept_parts.append((which, scene.bvh.all_hits(local_origins[which],
-                                                         local_directions[which], block_near,
-                                                         np.inf, room)))  # fmt: skip
-        clean_rays, clean_tris, messy_rays, messy_tris = [], [], [], []
-        for which, result in kept_parts:
-            ray_of, tris, u, v, cos = compact_hits(result)
-            ray_of = which[ray_of]
-            band = _edge_band(scene, tris, magnitude[ray_of])
-            suspect = (np.minimum(np.minimum(u, v), 1 - u - v) <= band) | (cos <= _GRAZE_COS)
-            messy = np.zeros(n, bool)
-            messy[ray_of[suspect]] = True
-            in_messy = messy[ray_of]
-            clean_rays.append(ray_of[~in_messy])
-            clean_tris.append(tris[~in_messy])
-            messy_rays.append(ray_of[in_messy & ~suspect])
-            messy_tris.append(tris[in_messy & ~suspect])
-            # Hits near an edge, a vertex or along a face: decided in float64 as ray_triangle
-            # decides them, against all the triangles around them.
-            pair_rays, pair_tris = _neighbourhood(scene, ray_of[suspect], tris[suspect])
-            hit, _ = _float64_hits(scene, origins, directions, pair_rays, pair_tris)
-            messy_rays.append(pair_rays[hit])
-            messy_tris.append(pair_tris[hit])
-        parts = settled_parts
-        for ray_parts, tri_parts, settled in ((clean_rays, clean_tris, True),
-                                              (messy_rays, messy_tris, False)):  # fmt: skip
-            rays = np.concatenate(ray_parts) if ray_parts else np.zeros(0, np.int64)
-            tris = np.concatenate(tri_parts) if tri_parts else np.zeros(0, np.int64)
-            if not settled:
-                rays, tris = _unique_pairs(rays, tris, scene.face_count)
-            distance, cos = _plane_distance(scene, origins, directions, rays, tris)
-            ahead = (distance >= near[rays]) if inclusive else (distance > near[rays])
-            keep = ahead & (cos > _PARALLEL_COS)
-            rays, tris, distance = rays[keep], tris[keep], distance[keep]
-            backwards = (rays[1:] == rays[:-1]) & (distance[1:] < distance[:-1])
-            if not settled or backwards.any():  # float64 may order what float32 tied
-                order = np.lexsort((tris, distance, rays))
-                rays, tris, distance = rays[order], tris[order], distance[order]
-            parts.append((rays, tris, distance))
+            result = scene.bvh.all_hits(local_origins[which], local_directions[which], block_near,
+                                        np.inf, room)  # fmt: skip
+            parts.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
+                                       inclusive, origins, directions))  # fmt: skip
         rays, tris, distance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
-        if kept_parts or traced_order is not None:  # each ray's hits are contiguous in a part
+        if len(parts) > 1 or traced_order is not None:  # a ray's hits are contiguous in a part
             rays, tris, distance = group_by_ray(rays, tris, distance, n, traced_order)
         if one_per_point:
             keep = _one_per_point(scene, rays, tris, distance)
@@ -367,6 +302,17 @@ class RayMeshIntersector:
         ranks = _ranks(rays)
         within = ranks < capacity
         return rays[within], tris[within], distance[within], ranks[within]
+
+    def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
+        """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
+        decides them, against all the triangles around them (``edge_hits.decided_hits``)."""
+        scene = self._scene
+        if not len(rows):
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+        return decided_hits(rows, positions, result, magnitude, near, inclusive, origins,
+                            directions, scene.first_vertices, scene.normals, scene.triangles,
+                            scene.min_altitude, _BAND_ULPS * _EPS32, _GRAZE_COS, _PARALLEL_COS,
+                            tol.zero, scene.fans())  # fmt: skip
 
     def _first_hits(self, origins, directions, tnear) -> np.ndarray:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
