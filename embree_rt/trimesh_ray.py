@@ -49,11 +49,10 @@ from trimesh import caching, util
 from trimesh.constants import tol
 
 from embree_rt.embree import BVH
-from embree_rt.embree.depth_order import depth_major
+from embree_rt.embree.depth_order import finished_hits
 from embree_rt.embree.edge_hits import decided_hits
 from embree_rt.embree.local_frame import local_rays, ordered_local_rays
 from embree_rt.embree.plane_distances import plane_distances
-from embree_rt.embree.ray_groups import group_by_ray
 from embree_rt.embree.settled_hits import settled_hits
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
@@ -227,17 +226,20 @@ class RayMeshIntersector:
             raise ValueError("tnear: must be finite and >= 0")
         return near, True
 
-    def _hits(self, origins, directions, max_hits, tnear, one_per_point=False, reorder=False):
-        """Every ray's nearest ``max_hits`` hits: (rays, triangles, distances, ranks) (k,),
-        sorted by ray, then distance, then triangle; with ``one_per_point``, the hits of a ray
-        at one point (an edge, a vertex) as one, the lowest-index triangle there.
+    def _hits(self, origins, directions, max_hits, tnear, one_per_point=False, reorder=False,
+              with_locations=False):
+        """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
+        ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
+        ``with_locations``, the points (k, 3) float64 (else None); each ray's hits by distance,
+        then triangle; with ``one_per_point``, the hits of a ray at one point (an edge, a
+        vertex) as one, the lowest-index triangle there.
 
         With ``reorder`` (and a big mesh: ``scene.bounds``) the rays are traced, and every step
-        up to the regrouping by ray run, in a coherent order (``local_frame.ordered_local_rays``,
-        ``ray_groups.group_by_ray``). Each ray's hits are computed from its own row alone, so
-        they are the same in any order."""
+        but the last run, in a coherent order (``local_frame.ordered_local_rays``); each ray's
+        hits are computed from its own row alone, so they are the same in any order."""
         scene = self._scene
         n = len(origins)
+        given_origins, given_directions = origins, directions
         traced_order = None
         if reorder and scene.bounds is not None:
             traced_order, origins, directions, local_origins, local_directions, magnitude = (
@@ -294,14 +296,10 @@ class RayMeshIntersector:
             parts.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
                                        inclusive, origins, directions))  # fmt: skip
         rays, tris, distance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
-        if len(parts) > 1 or traced_order is not None:  # a ray's hits are contiguous in a part
-            rays, tris, distance = group_by_ray(rays, tris, distance, n, traced_order)
-        if one_per_point:
-            keep = _one_per_point(scene, rays, tris, distance)
-            rays, tris, distance = rays[keep], tris[keep], distance[keep]
-        ranks = _ranks(rays)
-        within = ranks < capacity
-        return rays[within], tris[within], distance[within], ranks[within]
+        return finished_hits(rays, tris, distance, traced_order, n, capacity,
+                             scene.fans()[0] if one_per_point else None,
+                             scene.extent / scene.scale, given_origins, given_directions,
+                             with_locations)  # fmt: skip
 
     def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
         """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
@@ -377,11 +375,9 @@ class RayMeshIntersector:
                                        np.arange(len(rays)), tris)[0]  # fmt: skip
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, distance, ranks = self._hits(origins, directions, max_hits, tnear,
-                                                 one_per_point=return_locations, reorder=True)
-        # rays are sorted: depth by depth, by ray
-        rays, tris, locations = depth_major(rays, tris, distance, ranks, origins, directions,
-                                            return_locations)  # fmt: skip
+        rays, tris, locations = self._hits(origins, directions, max_hits, tnear,
+                                           one_per_point=return_locations, reorder=True,
+                                           with_locations=return_locations)  # fmt: skip
         if return_locations:
             return tris, rays, locations
         return tris, rays
@@ -459,44 +455,6 @@ class RayMeshIntersector:
 
     def __copy__(self, *args) -> RayMeshIntersector:
         return RayMeshIntersector(geometry=self.mesh, scale_to_box=self._scale_to_box)
-
-
-def _ranks(rays: np.ndarray) -> np.ndarray:
-    """(k,) position of each hit within its ray, for hits sorted by ray."""
-    if not len(rays):
-        return np.zeros(0, np.int64)
-    starts = np.flatnonzero(np.r_[True, rays[1:] != rays[:-1]])
-    lengths = np.diff(np.r_[starts, len(rays)])
-    return np.arange(len(rays)) - np.repeat(starts, lengths)
-
-
-def _one_per_point(scene: _LocalScene, rays, tris, distance) -> np.ndarray:
-    """(k,) bool keeping one hit per point, for hits sorted by ray, then distance: runs of
-    consecutive hits of a ray on triangles sharing a vertex position, at distances equal to
-    within float64 rounding of the mesh's size, are one point; the lowest triangle index of a
-    run stands for it."""
-    keep = np.ones(len(rays), bool)
-    if len(rays) < 2:
-        return keep
-    size = scene.extent / scene.scale
-    close = np.abs(distance[1:] - distance[:-1]) <= 1e3 * np.finfo(np.float64).eps * (
-        np.abs(distance[1:]) + size
-    )
-    pairs = np.flatnonzero(close & (rays[1:] == rays[:-1]))
-    if not len(pairs):
-        return keep
-    canonical = scene.fans()[0]
-    a, b = canonical[tris[pairs]], canonical[tris[pairs + 1]]
-    joined = pairs[(a[:, :, None] == b[:, None, :]).any(axis=(1, 2))] + 1
-    if not len(joined):
-        return keep
-    run = np.cumsum(np.r_[True, np.isin(np.arange(1, len(rays)), joined, invert=True)]) - 1
-    in_runs = np.flatnonzero(np.isin(run, run[joined]))
-    keep[in_runs] = False
-    order = in_runs[np.lexsort((tris[in_runs], run[in_runs]))]
-    first_of_run = np.r_[True, run[order][1:] != run[order][:-1]]
-    keep[order[first_of_run]] = True
-    return keep
 
 
 # -- opting in for every new Trimesh --------------------------------------------------------------
