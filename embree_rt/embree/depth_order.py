@@ -31,18 +31,17 @@ def _share_a_vertex(canonical, a, b):
 
 @njit(nogil=True, cache=True)
 def _finish(rays, tris, distance, order, ray_count, capacity, merge_points, canonical, size,
-            origins, directions, with_locations):  # fmt: skip
+            origins, directions, with_locations, starts, cursor, kept, grouped_tris,
+            grouped_distance):  # fmt: skip
     reordered = order.shape[0] > 0
     # 1. counting sort by ray
-    starts = np.zeros(ray_count + 1, np.int64)
+    starts[:] = 0
     for k in range(rays.shape[0]):
         ray = order[rays[k]] if reordered else rays[k]
         starts[ray + 1] += 1
     for r in range(ray_count):
         starts[r + 1] += starts[r]
-    grouped_tris = np.empty(rays.shape[0], np.int64)
-    grouped_distance = np.empty(rays.shape[0], np.float64)
-    cursor = starts[:-1].copy()
+    cursor[:] = starts[:-1]
     for k in range(rays.shape[0]):
         ray = order[rays[k]] if reordered else rays[k]
         slot = cursor[ray]
@@ -51,7 +50,6 @@ def _finish(rays, tris, distance, order, ray_count, capacity, merge_points, cano
         grouped_distance[slot] = distance[k]
     # 2. each ray's hits at one point merged (kept: the run's lowest triangle, in the run's
     # place), then cut to `capacity`, in place; `kept` hits per ray
-    kept = np.zeros(ray_count, np.int64)
     depth_counts = np.zeros(capacity + 1, np.int64)
     for r in range(ray_count):
         first, stop = starts[r], starts[r + 1]
@@ -112,6 +110,7 @@ def finished_hits(
     origins: np.ndarray,
     directions: np.ndarray,
     with_locations: bool,
+    scratch=None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """The multi-hit query's final ``(rays, tris)`` (m,) int64 in trimesh's order and, with
     ``with_locations``, the hit points (m, 3) float64 (else None).
@@ -124,8 +123,13 @@ def finished_hits(
     sharing a vertex position, at distances equal to within 1e3 float64 ulps of ``size`` plus
     the distance: the lowest triangle index stands for them), or None not to merge.
     ``origins``, ``directions`` (n, 3) float64: the points are ``origins[ray] + directions[ray]
-    * distance``.
+    * distance``. ``scratch``: a function ``(name, size, dtype) -> (size,) array`` lending
+    working space (or None for new arrays).
     """
+    if scratch is None:
+        def scratch(name, size, dtype):
+            return np.empty(size, dtype)
+    k = len(rays)
     out_rays, out_tris, locations = _finish(
         np.ascontiguousarray(rays, np.int64), np.ascontiguousarray(tris, np.int64),
         np.ascontiguousarray(distance, np.float64),
@@ -133,6 +137,8 @@ def finished_hits(
         int(ray_count), max(1, int(capacity)), canonical is not None,
         np.zeros((1, 3), np.int64) if canonical is None else canonical, float(size),
         np.ascontiguousarray(origins, np.float64), np.ascontiguousarray(directions, np.float64),
-        bool(with_locations),
+        bool(with_locations), scratch("starts", ray_count + 1, np.int64),
+        scratch("cursor", ray_count, np.int64), scratch("kept", ray_count, np.int64),
+        scratch("grouped_tris", k, np.int64), scratch("grouped_distance", k, np.float64),
     )  # fmt: skip
     return out_rays, out_tris, locations if with_locations else None

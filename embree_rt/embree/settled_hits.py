@@ -88,7 +88,7 @@ def _copy_chunk(source, stop, target, rays, tris, distance, out_rays, out_tris, 
 @njit(parallel=True, nogil=True, cache=True)
 def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, inclusive, origins,
             directions, first_vertices, normals, altitude, floor_altitude, band_scale, graze,
-            parallel_cos, messy):  # fmt: skip
+            parallel_cos, messy, rays, tris, distance):  # fmt: skip
     n = count.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     starts = np.zeros(n_chunks + 1, np.int64)  # each chunk's scratch range: hits found
@@ -96,9 +96,6 @@ def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, incl
         starts[i // CHUNK + 1] += count[i]
     for c in range(n_chunks):
         starts[c + 1] += starts[c]
-    rays = np.empty(starts[n_chunks], np.int64)
-    tris = np.empty(starts[n_chunks], np.int64)
-    distance = np.empty(starts[n_chunks], np.float64)
     ends = np.empty(n_chunks, np.int64)
     for c in prange(n_chunks):
         ends[c] = _settle_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), starts[c], t, prim, u, v,
@@ -134,6 +131,7 @@ def settled_hits(
     graze: float,
     parallel_cos: float,
     threads: int = 1,
+    scratch: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Final hits of the clear rays of one ``all_hits`` block, and which rays are messy.
 
@@ -161,7 +159,10 @@ def settled_hits(
                  np.ascontiguousarray(directions, np.float64), first_vertices, normals, altitude,
                  float(floor_altitude), float(band_scale), np.float32(graze), float(parallel_cos),
                  messy)  # fmt: skip
+    if scratch is None:
+        total = int(count.sum())
+        scratch = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
     with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
         numba.set_num_threads(threads_for(n, threads))
-        rays, tris, distance = _settle(*arguments)
+        rays, tris, distance = _settle(*arguments, *scratch)
     return rays, tris, distance, messy
