@@ -24,9 +24,11 @@ from numba import njit, prange
 
 from embree_rt.embree.bvh import _query_lock
 from embree_rt.embree.plane_distances import plane_distance
+from embree_rt.embree.pointers import prefetch
 from embree_rt.embree.work_split import threads_for
 
 CHUNK = 512  # rays per parallel iteration
+_AHEAD = 8  # rays whose triangles' rows are fetched ahead (4: 4.7 ms, 8: 4.0, 16: 8-12)
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
@@ -37,7 +39,17 @@ def _settle_chunk(first, stop, k, t, prim, u, v, cos, count, more, retrace_more,
     # rays first .. stop, their kept hits written from index k on; returns the index past them
     one = np.float32(1.0)
     floor_scale = band_scale / floor_altitude if floor_altitude > 0 else np.inf
+    vertex_rows, vertex_stride = first_vertices.ctypes.data, first_vertices.strides[0]
+    normal_rows, normal_stride = normals.ctypes.data, normals.strides[0]
     for i in range(first, stop):
+        # The triangles' rows are scattered over tables of tens of MB on a big mesh: their
+        # loads, one after the other, left this pass waiting on memory. Started _AHEAD rays
+        # early they overlap (the distances on the icosphere's hits: 10.4 -> 4.0 ms).
+        if i + _AHEAD < stop:
+            for j in range(count[i + _AHEAD]):
+                p = prim[i + _AHEAD, j]
+                prefetch(vertex_rows + vertex_stride * p)
+                prefetch(normal_rows + normal_stride * p + 16)
         found = count[i]
         bad = retrace_more and more[i]
         for j in range(found):
