@@ -17,7 +17,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from embree_rt.embree.pointers import prefetch
+
 _EPS64 = np.finfo(np.float64).eps
+_AHEAD = 16
 
 
 @njit(inline="always")
@@ -34,15 +37,21 @@ def _finish(rays, tris, distance, order, ray_count, capacity, merge_points, cano
             origins, directions, with_locations, starts, cursor, kept, grouped_tris,
             grouped_distance):  # fmt: skip
     reordered = order.shape[0] > 0
-    # 1. counting sort by ray
+    # 1. counting sort by ray; in traced order, the counters of each hit's ray are scattered:
+    # fetched _AHEAD hits early, so that their loads overlap
+    hits = rays.shape[0]
     starts[:] = 0
-    for k in range(rays.shape[0]):
+    for k in range(hits):
+        if reordered and k + _AHEAD < hits:
+            prefetch(starts.ctypes.data + 8 * (order[rays[k + _AHEAD]] + 1))
         ray = order[rays[k]] if reordered else rays[k]
         starts[ray + 1] += 1
     for r in range(ray_count):
         starts[r + 1] += starts[r]
     cursor[:] = starts[:-1]
-    for k in range(rays.shape[0]):
+    for k in range(hits):
+        if reordered and k + _AHEAD < hits:
+            prefetch(cursor.ctypes.data + 8 * order[rays[k + _AHEAD]])
         ray = order[rays[k]] if reordered else rays[k]
         slot = cursor[ray]
         cursor[ray] = slot + 1

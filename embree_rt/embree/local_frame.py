@@ -19,10 +19,12 @@ from numba import njit, prange
 
 from embree_rt.embree.bvh import _query_lock
 from embree_rt.embree.morton import radix_order
+from embree_rt.embree.pointers import prefetch
 from embree_rt.embree.ray_order import box_cells, segment_key
 from embree_rt.embree.work_split import threads_for
 
 CHUNK = 1024  # rays per parallel iteration of the ordering passes
+_AHEAD = 16
 
 
 @njit(inline="always")
@@ -84,6 +86,13 @@ def _scatter_chunk(first, stop, position, origins, directions, shift, scale, ext
     # rows read in the given order and written to their places: scattered stores, which do not
     # stall the loop as scattered loads (a gather by `order`) do
     for i in range(first, stop):
+        if i + _AHEAD < stop:  # the rows written _AHEAD rays on, fetched now: overlapping
+            ahead = position[i + _AHEAD]
+            prefetch(ordered_origins.ctypes.data + 24 * ahead)
+            prefetch(ordered_directions.ctypes.data + 24 * ahead)
+            prefetch(local_origins.ctypes.data + 12 * ahead)
+            prefetch(local_directions.ctypes.data + 12 * ahead)
+            prefetch(magnitude.ctypes.data + 8 * ahead)
         j = position[i]
         for k in range(3):
             ordered_origins[j, k] = origins[i, k]
