@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit
 
 from embree_rt.embree.plane_distances import plane_distance
+from embree_rt.embree.pointers import prefetch
 
 
 @njit(inline="always")
@@ -92,6 +93,15 @@ def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive,
                 candidates[stop] = p
                 tested[stop] = False
                 stop += 1
+        # the candidates' rows (scattered over tables of tens of MB on a big mesh) fetched now,
+        # to arrive while they are sorted
+        for i in range(bound[a], stop):
+            f = candidates[i]
+            prefetch(first_vertices.ctypes.data + first_vertices.strides[0] * f)
+            prefetch(normals.ctypes.data + normals.strides[0] * f + 16)
+            if tested[i]:
+                prefetch(triangles.ctypes.data + triangles.strides[0] * f)
+                prefetch(triangles.ctypes.data + triangles.strides[0] * f + 64)
         # by (triangle, tested): a triangle's first entry says whether Embree's hit stands
         for i in range(bound[a] + 1, stop):
             f, flag = candidates[i], tested[i]
