@@ -105,8 +105,7 @@ class _LocalScene:
         self.triangles = np.asarray(mesh.triangles, dtype=np.float64)
         # each triangle's first vertex and unit normal side by side in one (k, 6) table: the
         # float64 distance of a hit reads both, and on a big mesh each read is a cache miss
-        planes = np.hstack([self.triangles[:, 0], np.asarray(mesh.face_normals, np.float64)])
-        self.first_vertices, self.normals = planes[:, :3], planes[:, 3:]
+        self.planes = np.hstack([self.triangles[:, 0], np.asarray(mesh.face_normals, np.float64)])
         self.faces = faces
         self.vertices = vertices
         self.face_count = len(faces)
@@ -218,7 +217,45 @@ def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
 def _plane_distance(scene, origins, directions, rays, tris):
     """float64 distance along each ray to its triangle's plane, and |cos| of the angle between
     ray and normal, trimesh's planes_lines formula (compiled: ``plane_distances``)."""
-    return plane_distances(scene.first_vertices, scene.normals, origins, directions, rays, tris)
+    return plane_distances(scene.planes, origins, directions, rays, tris)
+
+
+class _HitList:
+    """The multi-hit query's hits, part after part, in arrays lent by the scene (grown as
+    needed): (rays, tris) int64 and distance float64, so that no part is copied twice."""
+
+    def __init__(self, scene: _LocalScene, size: int) -> None:
+        self._scene = scene
+        self._arrays = self._lent(max(size, 1))
+        self._count = 0
+
+    def _lent(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return tuple(self._scene.scratch(f"hits_{k}", size, dtype)
+                     for k, dtype in enumerate((np.int64, np.int64, np.float64)))  # fmt: skip
+
+    def room(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Views of the next ``size`` places, to write a part into (then ``filled``)."""
+        if self._count + size > len(self._arrays[0]):
+            grown = tuple(np.empty(2 * (self._count + size), array.dtype)
+                          for array in self._arrays)  # fmt: skip
+            for old, new in zip(self._arrays, grown, strict=True):
+                new[:self._count] = old[:self._count]
+            self._arrays = grown
+        return tuple(array[self._count:self._count + size] for array in self._arrays)
+
+    def filled(self, size: int) -> None:
+        """The next ``size`` places now hold a part."""
+        self._count += size
+
+    def append(self, part: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """Copy a part (rays, tris, distance) in."""
+        for target, source in zip(self.room(len(part[0])), part, strict=True):
+            target[:] = source
+        self.filled(len(part[0]))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rays, tris, distance) of every part so far."""
+        return tuple(array[:self._count] for array in self._arrays)
 
 
 class RayMeshIntersector:
@@ -291,7 +328,7 @@ class RayMeshIntersector:
         first_room = min(room, _FIRST_ROOM)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
         buffers = scene.hit_buffers(first_room)
-        parts, pending_parts = [], []
+        hits, pending_parts = _HitList(scene, 2 * n), []
         band_scale = _BAND_ULPS * _EPS32
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
@@ -306,19 +343,20 @@ class RayMeshIntersector:
             # float64 path below, those that overflowed `first_room` traced again first
             rays, tris, distance, messy = settled_hits(
                 result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
-                directions[rows], scene.first_vertices, scene.normals, scene.min_altitude,
+                directions[rows], scene.planes, scene.min_altitude,
                 scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS, scene.bvh.threads,
                 tuple(scene.scratch(f"settle_{k}", int(result[5].sum()), dtype) for k, dtype in
                       enumerate((np.int64, np.int64, np.float64))),
+                hits.room(int(result[5].sum())), first,
             )  # fmt: skip
-            parts.append((rays + first, tris, distance))
+            hits.filled(len(rays))
             # Messy rays whose hits all fit are complete: decided in float64 now, from the
             # buffers as traced (a second trace with more room records the same hits in the same
             # order); the others are traced again first.
             overflowed = result[6] if room > first_room else np.zeros(len(messy), bool)
             complete_rows = np.flatnonzero(messy & ~overflowed)
-            parts.append(self._decided(complete_rows, first + complete_rows, result, magnitude,
-                                       near, inclusive, origins, directions))  # fmt: skip
+            hits.append(self._decided(complete_rows, first + complete_rows, result, magnitude,
+                                      near, inclusive, origins, directions))  # fmt: skip
             pending_parts.append(first + np.flatnonzero(messy & overflowed))
         pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
@@ -327,9 +365,9 @@ class RayMeshIntersector:
             block_near = (near[which] * scene.scale * 0.5).astype(np.float32)
             result = scene.bvh.all_hits(local_origins[which], local_directions[which], block_near,
                                         np.inf, room)  # fmt: skip
-            parts.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
-                                       inclusive, origins, directions))  # fmt: skip
-        rays, tris, distance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
+            hits.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
+                                      inclusive, origins, directions))  # fmt: skip
+        rays, tris, distance = hits.arrays()
         return finished_hits(rays, tris, distance, traced_order, n, capacity,
                              scene.fans()[0] if one_per_point else None,
                              scene.extent / scene.scale, given_origins, given_directions,
@@ -342,7 +380,7 @@ class RayMeshIntersector:
         if not len(rows):
             return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
         return decided_hits(rows, positions, result, magnitude, near, inclusive, origins,
-                            directions, scene.first_vertices, scene.normals, scene.triangles,
+                            directions, scene.planes, scene.triangles,
                             scene.min_altitude, _BAND_ULPS * _EPS32, _GRAZE_COS, _PARALLEL_COS,
                             tol.zero, scene.fans())  # fmt: skip
 

@@ -121,7 +121,7 @@ def test_settled_hits_are_the_same_on_one_thread_and_two():
     result = scene.bvh.all_hits(local_origins, local_directions,
                                 (near * scene.scale * 0.5).astype(np.float32), np.inf, 4)
     answers = [settled_hits(result, True, magnitude, near, False, origins, directions,
-                            scene.first_vertices, scene.normals, scene.min_altitude,
+                            scene.planes, scene.min_altitude,
                             scene.floor_altitude, 8 * np.finfo(np.float32).eps, 1e-3, 1e-5,
                             threads) for threads in (1, 2)]  # fmt: skip
     assert answers[0][3].sum() > 100  # messy rays (left to the float64 pass) in the batch

@@ -54,7 +54,7 @@ def _barycentric_hit(triangles, f, px, py, pz, zero):
 
 @njit(nogil=True, cache=True, error_model="numpy")
 def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive, origins,
-            directions, first_vertices, normals, triangles, altitude, band_scale, graze,
+            directions, planes, triangles, altitude, band_scale, graze,
             parallel_cos, zero, canonical, fan_starts, fan_faces):  # fmt: skip
     m = rows.shape[0]
     bound = np.zeros(m + 1, np.int64)  # candidates of each ray, at most
@@ -97,8 +97,8 @@ def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive,
         # to arrive while they are sorted
         for i in range(bound[a], stop):
             f = candidates[i]
-            prefetch(first_vertices.ctypes.data + first_vertices.strides[0] * f)
-            prefetch(normals.ctypes.data + normals.strides[0] * f + 16)
+            prefetch(planes.ctypes.data + 48 * f)
+            prefetch(planes.ctypes.data + 48 * f + 40)
             if tested[i]:
                 prefetch(triangles.ctypes.data + triangles.strides[0] * f)
                 prefetch(triangles.ctypes.data + triangles.strides[0] * f + 64)
@@ -116,7 +116,7 @@ def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive,
             f = candidates[i]
             if i > bound[a] and candidates[i - 1] == f:
                 continue
-            distance, along = plane_distance(first_vertices, normals, origins, directions, q, f)
+            distance, along = plane_distance(planes, origins, directions, q, f)
             if not along > parallel_cos:
                 continue
             if tested[i] and not _barycentric_hit(
@@ -149,8 +149,7 @@ def decided_hits(
     inclusive: bool,
     origins: np.ndarray,
     directions: np.ndarray,
-    first_vertices: np.ndarray,
-    normals: np.ndarray,
+    planes: np.ndarray,
     triangles: np.ndarray,
     altitude: np.ndarray,
     band_scale: float,
@@ -164,12 +163,13 @@ def decided_hits(
 
     ``positions`` (m,) int64: each ray's index into the per-ray arrays ``magnitude``, ``near``
     (float64, as ``settled_hits``' arguments, ``inclusive`` too), ``origins``, ``directions``
-    (n, 3) float64 world rays (unit directions); ``first_vertices``, ``normals`` (triangles, 3)
-    and ``triangles`` (triangles, 3, 3) float64; ``altitude`` (triangles,) float64 smallest
-    local altitudes; ``band_scale``: edge band per unit of magnitude / altitude; ``graze``:
-    suspect |cos|; ``parallel_cos``: |cos| at or below which a ray misses a triangle's plane;
-    ``zero``: ray_triangle's barycentric tolerance; ``fans``: (canonical faces (triangles, 3),
-    starts, faces) CSR of the faces around each vertex position.
+    (n, 3) float64 world rays (unit directions); ``planes`` (triangles, 6) (as
+    ``plane_distances.plane_distances`` takes them) and ``triangles`` (triangles, 3, 3)
+    float64; ``altitude`` (triangles,) float64 smallest local altitudes; ``band_scale``: edge
+    band per unit of magnitude / altitude; ``graze``: suspect |cos|; ``parallel_cos``: |cos|
+    at or below which a ray misses a triangle's plane; ``zero``: ray_triangle's barycentric
+    tolerance; ``fans``: (canonical faces (triangles, 3), starts, faces) CSR of the faces
+    around each vertex position.
 
     Returns ``rays`` (k,) int64 (positions, in the order of ``positions``), ``tris`` (k,) int64
     and ``distance`` (k,) float64, sorted by (distance, triangle) within each ray.
@@ -182,6 +182,7 @@ def decided_hits(
                    prim, u, v, cos, count, np.ascontiguousarray(magnitude, np.float64),
                    np.ascontiguousarray(near, np.float64), bool(inclusive),
                    np.ascontiguousarray(origins, np.float64),
-                   np.ascontiguousarray(directions, np.float64), first_vertices, normals,
+                   np.ascontiguousarray(directions, np.float64),
+                   np.ascontiguousarray(planes, np.float64),
                    triangles, altitude, float(band_scale), np.float32(graze), float(parallel_cos),
                    float(zero), canonical, fan_starts, fan_faces)  # fmt: skip

@@ -33,14 +33,13 @@ _AHEAD = 8  # rays whose triangles' rows are fetched ahead (4: 4.7 ms, 8: 4.0, 1
 
 @njit(nogil=True, cache=True, error_model="numpy")
 def _settle_chunk(first, stop, k, t, prim, u, v, cos, count, more, retrace_more, magnitude,
-                  near, inclusive, origins, directions, first_vertices, normals, altitude,
+                  near, inclusive, origins, directions, planes, altitude,
                   floor_altitude, band_scale, graze, parallel_cos, messy, out_rays, out_tris,
                   out_distance):  # fmt: skip
     # rays first .. stop, their kept hits written from index k on; returns the index past them
     one = np.float32(1.0)
     floor_scale = band_scale / floor_altitude if floor_altitude > 0 else np.inf
-    vertex_rows, vertex_stride = first_vertices.ctypes.data, first_vertices.strides[0]
-    normal_rows, normal_stride = normals.ctypes.data, normals.strides[0]
+    rows = planes.ctypes.data
     for i in range(first, stop):
         # The triangles' rows are scattered over tables of tens of MB on a big mesh: their
         # loads, one after the other, left this pass waiting on memory. Started _AHEAD rays
@@ -48,8 +47,8 @@ def _settle_chunk(first, stop, k, t, prim, u, v, cos, count, more, retrace_more,
         if i + _AHEAD < stop:
             for j in range(count[i + _AHEAD]):
                 p = prim[i + _AHEAD, j]
-                prefetch(vertex_rows + vertex_stride * p)
-                prefetch(normal_rows + normal_stride * p + 16)
+                prefetch(rows + 48 * p)  # a row's 48 bytes may cross a line
+                prefetch(rows + 48 * p + 40)
         found = count[i]
         bad = retrace_more and more[i]
         for j in range(found):
@@ -70,7 +69,7 @@ def _settle_chunk(first, stop, k, t, prim, u, v, cos, count, more, retrace_more,
         start = k
         for j in range(found):
             p = prim[i, j]
-            distance, along = plane_distance(first_vertices, normals, origins, directions, i, p)
+            distance, along = plane_distance(planes, origins, directions, i, p)
             ahead = distance >= near[i] if inclusive else distance > near[i]
             if not (ahead and along > parallel_cos):
                 continue
@@ -89,9 +88,10 @@ def _settle_chunk(first, stop, k, t, prim, u, v, cos, count, more, retrace_more,
 
 
 @njit(nogil=True, cache=True)
-def _copy_chunk(source, stop, target, rays, tris, distance, out_rays, out_tris, out_distance):
+def _copy_chunk(source, stop, target, rays, tris, distance, ray_offset, out_rays, out_tris,
+                out_distance):  # fmt: skip
     for k in range(source, stop):
-        out_rays[target] = rays[k]
+        out_rays[target] = rays[k] + ray_offset
         out_tris[target] = tris[k]
         out_distance[target] = distance[k]
         target += 1
@@ -99,8 +99,9 @@ def _copy_chunk(source, stop, target, rays, tris, distance, out_rays, out_tris, 
 
 @njit(parallel=True, nogil=True, cache=True)
 def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, inclusive, origins,
-            directions, first_vertices, normals, altitude, floor_altitude, band_scale, graze,
-            parallel_cos, messy, rays, tris, distance):  # fmt: skip
+            directions, planes, altitude, floor_altitude, band_scale, graze, parallel_cos,
+            messy, rays, tris, distance, ray_offset, out_rays, out_tris,
+            out_distance):  # fmt: skip
     n = count.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     starts = np.zeros(n_chunks + 1, np.int64)  # each chunk's scratch range: hits found
@@ -112,19 +113,16 @@ def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, incl
     for c in prange(n_chunks):
         ends[c] = _settle_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), starts[c], t, prim, u, v,
                                 cos, count, more, retrace_more, magnitude, near, inclusive,
-                                origins, directions, first_vertices, normals, altitude,
-                                floor_altitude, band_scale, graze, parallel_cos, messy, rays,
-                                tris, distance)  # fmt: skip
+                                origins, directions, planes, altitude, floor_altitude,
+                                band_scale, graze, parallel_cos, messy, rays, tris,
+                                distance)  # fmt: skip
     places = np.zeros(n_chunks + 1, np.int64)  # each chunk's place in the output
     for c in range(n_chunks):
         places[c + 1] = places[c] + ends[c] - starts[c]
-    out_rays = np.empty(places[n_chunks], np.int64)
-    out_tris = np.empty(places[n_chunks], np.int64)
-    out_distance = np.empty(places[n_chunks], np.float64)
     for c in prange(n_chunks):
-        _copy_chunk(starts[c], ends[c], places[c], rays, tris, distance, out_rays, out_tris,
-                    out_distance)  # fmt: skip
-    return out_rays, out_tris, out_distance
+        _copy_chunk(starts[c], ends[c], places[c], rays, tris, distance, ray_offset, out_rays,
+                    out_tris, out_distance)  # fmt: skip
+    return places[n_chunks]
 
 
 def settled_hits(
@@ -135,8 +133,7 @@ def settled_hits(
     inclusive: bool,
     origins: np.ndarray,
     directions: np.ndarray,
-    first_vertices: np.ndarray,
-    normals: np.ndarray,
+    planes: np.ndarray,
     altitude: np.ndarray,
     floor_altitude: float,
     band_scale: float,
@@ -144,6 +141,8 @@ def settled_hits(
     parallel_cos: float,
     threads: int = 1,
     scratch: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ray_offset: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Final hits of the clear rays of one ``all_hits`` block, and which rays are messy.
 
@@ -151,13 +150,15 @@ def settled_hits(
     rays with ``more`` set are messy (the caller traces them again with more room);
     ``magnitude`` (n,) float64 largest local coordinate of each ray, ``near`` (n,) float64 world
     distance hits must lie beyond (``inclusive``: at or beyond); ``origins``, ``directions``
-    (n, 3) float64 world rays (unit directions); ``first_vertices``, ``normals`` (triangles, 3)
-    float64; ``altitude`` (triangles,) float64 smallest local altitude (0: degenerate, always
+    (n, 3) float64 world rays (unit directions); ``planes`` (triangles, 6) float64 (each
+    triangle's first vertex and unit normal, as ``plane_distances.plane_distances`` takes
+    them); ``altitude`` (triangles,) float64 smallest local altitude (0: degenerate, always
     messy), ``floor_altitude`` its minimum; ``band_scale``: edge band per unit of magnitude /
     altitude; ``graze``, ``parallel_cos``: the messy and the dropping |cos|.
 
-    Returns ``rays`` (k,) int64 (0 .. n - 1, ascending), ``tris`` (k,) int64, ``distance`` (k,)
-    float64 sorted by (distance, triangle) within each ray, and ``messy`` (n,) bool.
+    Returns ``rays`` (k,) int64 (``ray_offset`` + 0 .. n - 1, ascending), ``tris`` (k,)
+    int64, ``distance`` (k,) float64 sorted by (distance, triangle) within each ray, and
+    ``messy`` (n,) bool.
     """
     _t, prim, u, v, cos, count, more = result
     n = len(count)
@@ -168,13 +169,16 @@ def settled_hits(
                  np.ascontiguousarray(magnitude, np.float64),
                  np.ascontiguousarray(near, np.float64), bool(inclusive),
                  np.ascontiguousarray(origins, np.float64),
-                 np.ascontiguousarray(directions, np.float64), first_vertices, normals, altitude,
+                 np.ascontiguousarray(directions, np.float64),
+                 np.ascontiguousarray(planes, np.float64), altitude,
                  float(floor_altitude), float(band_scale), np.float32(graze), float(parallel_cos),
                  messy)  # fmt: skip
+    total = int(count.sum())
     if scratch is None:
-        total = int(count.sum())
         scratch = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
+    if out is None:
+        out = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
     with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
         numba.set_num_threads(threads_for(n, threads))
-        rays, tris, distance = _settle(*arguments, *scratch)
-    return rays, tris, distance, messy
+        kept = _settle(*arguments, *scratch, int(ray_offset), *out)
+    return out[0][:kept], out[1][:kept], out[2][:kept], messy
