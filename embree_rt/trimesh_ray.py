@@ -382,7 +382,7 @@ class RayMeshIntersector:
         return decided_hits(rows, positions, result, magnitude, near, inclusive, origins,
                             directions, scene.planes, scene.triangles,
                             scene.min_altitude, _BAND_ULPS * _EPS32, _GRAZE_COS, _PARALLEL_COS,
-                            tol.zero, scene.fans())  # fmt: skip
+                            tol.zero, scene.fans(), scene.bvh.threads)  # fmt: skip
 
     def _first_hits(self, origins, directions, tnear) -> np.ndarray:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)

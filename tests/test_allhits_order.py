@@ -1,6 +1,7 @@
 """The all-hits query's coherent tracing order and its parallel passes change no answer: rays
 traced sorted (embree_rt.embree.local_frame, ray_order.segment_key) against rays traced as
-given, the settling pass on one thread against two, and the keys against their definition."""
+given, the settling and float64 passes on one thread against two, and the keys against their
+definition."""
 
 from __future__ import annotations
 
@@ -8,8 +9,10 @@ import numpy as np
 import pytest
 import trimesh
 from numba import njit
+from trimesh.constants import tol
 
 from embree_rt import trimesh_ray
+from embree_rt.embree.edge_hits import decided_hits
 from embree_rt.embree.local_frame import local_rays, ordered_local_rays
 from embree_rt.embree.ray_order import box_cells, segment_key
 from embree_rt.embree.settled_hits import settled_hits
@@ -107,7 +110,7 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
     assert len(a[1]) > 2 * len(origins)
 
 
-def test_settled_hits_are_the_same_on_one_thread_and_two():
+def test_settled_and_decided_hits_are_the_same_on_one_thread_and_two():
     """Bitwise: each chunk of rays writes its own range, the ranges are placed by a prefix sum
     of their counts, and a hit's arithmetic reads only its ray and triangle."""
     mesh = trimesh.creation.icosphere(subdivisions=5)
@@ -127,4 +130,12 @@ def test_settled_hits_are_the_same_on_one_thread_and_two():
     assert answers[0][3].sum() > 100  # messy rays (left to the float64 pass) in the batch
     assert len(answers[0][0]) > len(origins)
     for x, y in zip(*answers, strict=True):
+        np.testing.assert_array_equal(x, y)
+    messy = np.flatnonzero(answers[0][3])
+    decided = [decided_hits(messy, messy, result, magnitude, near, False, origins, directions,
+                            scene.planes, scene.triangles, scene.min_altitude,
+                            8 * np.finfo(np.float32).eps, 1e-3, 1e-5, tol.zero, scene.fans(),
+                            threads) for threads in (1, 2)]  # fmt: skip
+    assert len(decided[0][0]) > len(messy)
+    for x, y in zip(*decided, strict=True):
         np.testing.assert_array_equal(x, y)

@@ -10,17 +10,24 @@ not met along its plane, sorted by (distance, triangle). Rays with no suspect hi
 buffers overflowed and were traced again) go through the same pass, with nothing to test.
 
 In NumPy these were a dozen passes with gathers, uniques and sorts over every candidate pair
-(about 10 µs a ray, a tenth of an all-hits query on the 1.3M-triangle icosphere). Serial: such
-rays are 1-2% of a batch.
+(about 10 µs a ray, a tenth of an all-hits query on the 1.3M-triangle icosphere). Such rays
+are 1-2% of a batch, but each reads a few dozen scattered table rows (fetched ahead, see
+``pointers.prefetch``): in parallel over chunks of rays, each writing its own ranges, so the
+output is the same on any number of threads.
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from embree_rt.embree.bvh import _query_lock
 from embree_rt.embree.plane_distances import plane_distance
 from embree_rt.embree.pointers import prefetch
+from embree_rt.embree.work_split import threads_for
+
+CHUNK = 16  # rays per parallel iteration
 
 
 @njit(inline="always")
@@ -53,12 +60,9 @@ def _barycentric_hit(triangles, f, px, py, pz, zero):
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive, origins,
-            directions, planes, triangles, altitude, band_scale, graze,
-            parallel_cos, zero, canonical, fan_starts, fan_faces):  # fmt: skip
-    m = rows.shape[0]
-    bound = np.zeros(m + 1, np.int64)  # candidates of each ray, at most
-    for a in range(m):
+def _bounds_chunk(first, stop, rows, positions, prim, u, v, cos, count, magnitude, altitude,
+                  band_scale, graze, canonical, fan_starts, totals):  # fmt: skip
+    for a in range(first, stop):  # candidates of each ray, at most
         r, q = rows[a], positions[a]
         total = 0
         for j in range(count[r]):
@@ -69,16 +73,18 @@ def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive,
                 for c in range(3):
                     corner = canonical[p, c]
                     total += fan_starts[corner + 1] - fan_starts[corner]
-        bound[a + 1] = bound[a] + total
-    candidates = np.empty(bound[m], np.int64)
-    tested = np.empty(bound[m], np.bool_)  # decided in float64 (else Embree's hit stands)
-    out_rays = np.empty(bound[m], np.int64)
-    out_tris = np.empty(bound[m], np.int64)
-    out_distance = np.empty(bound[m], np.float64)
-    k = 0
-    for a in range(m):
+        totals[a] = total
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _decide_chunk(first, stop, bound, rows, positions, prim, u, v, cos, count, magnitude, near,
+                  inclusive, origins, directions, planes, triangles, altitude, band_scale, graze,
+                  parallel_cos, zero, canonical, fan_starts, fan_faces, candidates, tested,
+                  out_tris, out_distance, kept):  # fmt: skip
+    # rays first .. stop; ray a's candidates and hits in bound[a] .. bound[a + 1], kept[a] hits
+    for a in range(first, stop):
         r, q = rows[a], positions[a]
-        stop = bound[a]
+        stop_a = bound[a]
         for j in range(count[r]):
             p = prim[r, j]
             if _is_suspect(u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p],
@@ -86,16 +92,16 @@ def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive,
                 for c in range(3):
                     corner = canonical[p, c]
                     for s in range(fan_starts[corner], fan_starts[corner + 1]):
-                        candidates[stop] = fan_faces[s]
-                        tested[stop] = True
-                        stop += 1
+                        candidates[stop_a] = fan_faces[s]
+                        tested[stop_a] = True
+                        stop_a += 1
             else:
-                candidates[stop] = p
-                tested[stop] = False
-                stop += 1
+                candidates[stop_a] = p
+                tested[stop_a] = False
+                stop_a += 1
         # the candidates' rows (scattered over tables of tens of MB on a big mesh) fetched now,
         # to arrive while they are sorted
-        for i in range(bound[a], stop):
+        for i in range(bound[a], stop_a):
             f = candidates[i]
             prefetch(planes.ctypes.data + 48 * f)
             prefetch(planes.ctypes.data + 48 * f + 40)
@@ -103,7 +109,7 @@ def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive,
                 prefetch(triangles.ctypes.data + triangles.strides[0] * f)
                 prefetch(triangles.ctypes.data + triangles.strides[0] * f + 64)
         # by (triangle, tested): a triangle's first entry says whether Embree's hit stands
-        for i in range(bound[a] + 1, stop):
+        for i in range(bound[a] + 1, stop_a):
             f, flag = candidates[i], tested[i]
             j = i - 1
             while j >= bound[a] and (candidates[j] > f or (candidates[j] == f and tested[j]
@@ -111,8 +117,8 @@ def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive,
                 candidates[j + 1], tested[j + 1] = candidates[j], tested[j]
                 j -= 1
             candidates[j + 1], tested[j + 1] = f, flag
-        start = k
-        for i in range(bound[a], stop):
+        start = k = bound[a]
+        for i in range(bound[a], stop_a):
             f = candidates[i]
             if i > bound[a] and candidates[i - 1] == f:
                 continue
@@ -135,9 +141,57 @@ def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive,
                 n -= 1
             out_distance[n] = distance
             out_tris[n] = f
-            out_rays[k] = q
             k += 1
-    return out_rays[:k], out_tris[:k], out_distance[:k]
+        kept[a] = k - start
+
+
+@njit(nogil=True, cache=True)
+def _gather_chunk(first, stop, bound, places, positions, tris, distance, kept, out_rays,
+                  out_tris, out_distance):  # fmt: skip
+    for a in range(first, stop):
+        for i in range(kept[a]):
+            out_rays[places[a] + i] = positions[a]
+            out_tris[places[a] + i] = tris[bound[a] + i]
+            out_distance[places[a] + i] = distance[bound[a] + i]
+
+
+@njit(parallel=True, nogil=True, cache=True, error_model="numpy")
+def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive, origins,
+            directions, planes, triangles, altitude, band_scale, graze, parallel_cos, zero,
+            canonical, fan_starts, fan_faces):  # fmt: skip
+    # in parallel over chunks of rays, each in its own ranges (a prefix sum of bounds, then of
+    # kept hits): the same output on any number of threads
+    m = rows.shape[0]
+    n_chunks = (m + CHUNK - 1) // CHUNK
+    totals = np.empty(m, np.int64)
+    for c in prange(n_chunks):
+        _bounds_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), rows, positions, prim, u, v, cos,
+                      count, magnitude, altitude, band_scale, graze, canonical, fan_starts,
+                      totals)  # fmt: skip
+    bound = np.zeros(m + 1, np.int64)
+    for a in range(m):
+        bound[a + 1] = bound[a] + totals[a]
+    candidates = np.empty(bound[m], np.int64)
+    tested = np.empty(bound[m], np.bool_)  # decided in float64 (else Embree's hit stands)
+    tris = np.empty(bound[m], np.int64)
+    distance = np.empty(bound[m], np.float64)
+    kept = np.empty(m, np.int64)
+    for c in prange(n_chunks):
+        _decide_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, rows, positions, prim, u, v,
+                      cos, count, magnitude, near, inclusive, origins, directions, planes,
+                      triangles, altitude, band_scale, graze, parallel_cos, zero, canonical,
+                      fan_starts, fan_faces, candidates, tested, tris, distance,
+                      kept)  # fmt: skip
+    places = np.zeros(m + 1, np.int64)
+    for a in range(m):
+        places[a + 1] = places[a] + kept[a]
+    out_rays = np.empty(places[m], np.int64)
+    out_tris = np.empty(places[m], np.int64)
+    out_distance = np.empty(places[m], np.float64)
+    for c in prange(n_chunks):
+        _gather_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, places, positions, tris,
+                      distance, kept, out_rays, out_tris, out_distance)  # fmt: skip
+    return out_rays, out_tris, out_distance
 
 
 def decided_hits(
@@ -157,6 +211,7 @@ def decided_hits(
     parallel_cos: float,
     zero: float,
     fans: tuple[np.ndarray, np.ndarray, np.ndarray],
+    threads: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Final hits of the rays in rows ``rows`` (m,) int64 of ``multihit.all_hits``' buffers
     ``result``, decided as the module docstring says.
@@ -169,7 +224,8 @@ def decided_hits(
     band per unit of magnitude / altitude; ``graze``: suspect |cos|; ``parallel_cos``: |cos|
     at or below which a ray misses a triangle's plane; ``zero``: ray_triangle's barycentric
     tolerance; ``fans``: (canonical faces (triangles, 3), starts, faces) CSR of the faces
-    around each vertex position.
+    around each vertex position; ``threads``: how many to run on (the answer is the same for
+    any).
 
     Returns ``rays`` (k,) int64 (positions, in the order of ``positions``), ``tris`` (k,) int64
     and ``distance`` (k,) float64, sorted by (distance, triangle) within each ray.
@@ -178,7 +234,7 @@ def decided_hits(
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     _t, prim, u, v, cos, count, _more = result[:7]
     canonical, fan_starts, fan_faces = fans
-    return _decide(np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(positions, np.int64),
+    arguments = (np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(positions, np.int64),
                    prim, u, v, cos, count, np.ascontiguousarray(magnitude, np.float64),
                    np.ascontiguousarray(near, np.float64), bool(inclusive),
                    np.ascontiguousarray(origins, np.float64),
@@ -186,3 +242,6 @@ def decided_hits(
                    np.ascontiguousarray(planes, np.float64),
                    triangles, altitude, float(band_scale), np.float32(graze), float(parallel_cos),
                    float(zero), canonical, fan_starts, fan_faces)  # fmt: skip
+    with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
+        numba.set_num_threads(threads_for(len(rows) * 16, threads))
+        return _decide(*arguments)
