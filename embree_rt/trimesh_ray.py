@@ -371,7 +371,7 @@ class RayMeshIntersector:
         return finished_hits(rays, tris, distance, traced_order, n, capacity,
                              scene.fans()[0] if one_per_point else None,
                              scene.extent / scene.scale, given_origins, given_directions,
-                             with_locations, scene.scratch)  # fmt: skip
+                             with_locations, scene.scratch, scene.bvh.threads)  # fmt: skip
 
     def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
         """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle

@@ -1,7 +1,7 @@
 """The all-hits query's coherent tracing order and its parallel passes change no answer: rays
 traced sorted (embree_rt.embree.local_frame, ray_order.segment_key) against rays traced as
-given, the settling and float64 passes on one thread against two, and the keys against their
-definition."""
+given, the settling, float64 and finishing passes on one thread against two, and the keys
+against their definition."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from numba import njit
 from trimesh.constants import tol
 
 from embree_rt import trimesh_ray
+from embree_rt.embree.depth_order import finished_hits
 from embree_rt.embree.edge_hits import decided_hits
 from embree_rt.embree.local_frame import local_rays, ordered_local_rays
 from embree_rt.embree.ray_order import box_cells, segment_key
@@ -110,7 +111,7 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
     assert len(a[1]) > 2 * len(origins)
 
 
-def test_settled_and_decided_hits_are_the_same_on_one_thread_and_two():
+def test_settled_decided_and_finished_hits_are_the_same_on_one_thread_and_two():
     """Bitwise: each chunk of rays writes its own range, the ranges are placed by a prefix sum
     of their counts, and a hit's arithmetic reads only its ray and triangle."""
     mesh = trimesh.creation.icosphere(subdivisions=5)
@@ -138,4 +139,11 @@ def test_settled_and_decided_hits_are_the_same_on_one_thread_and_two():
                             threads) for threads in (1, 2)]  # fmt: skip
     assert len(decided[0][0]) > len(messy)
     for x, y in zip(*decided, strict=True):
+        np.testing.assert_array_equal(x, y)
+    parts = [np.concatenate(arrays) for arrays in zip(answers[0][:3], decided[0], strict=True)]
+    order = np.random.default_rng(5).permutation(len(origins))  # as if traced in that order
+    finished = [finished_hits(*parts, order, len(origins), 3, scene.fans()[0], 1.0, origins,
+                              directions, True, None, threads) for threads in (1, 2)]
+    assert len(finished[0][0]) > len(origins)
+    for x, y in zip(*finished, strict=True):
         np.testing.assert_array_equal(x, y)
