@@ -74,7 +74,7 @@ _EPS32 = float(np.finfo(np.float32).eps)
 _BAND_ULPS = 8.0
 _TNEAR_ULPS = 16.0
 # Rays traced per call, and rays x room for hits: bounded memory, reused from block to block.
-_BLOCK_RAYS = 1 << 16
+_BLOCK_RAYS = 1 << 17  # 21 MB of hit buffers at 8 hits a ray, kept by the scene
 _FIRST_ROOM = 8
 _BLOCK_HITS = 1 << 21
 _REORDER_FACES = 1 << 15
