@@ -55,6 +55,7 @@ from embree_rt.embree.edge_hits import decided_hits
 from embree_rt.embree.local_frame import local_rays, ordered_local_rays
 from embree_rt.embree.plane_distances import plane_distances
 from embree_rt.embree.settled_hits import settled_hits
+from embree_rt.embree.validation import as_points
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
 # near an edge or along a face to trust their parity.
@@ -310,9 +311,14 @@ class RayMeshIntersector:
         given_origins, given_directions = origins, directions
         traced_order = None
         if reorder and scene.bounds is not None:
-            traced_order, origins, directions, local_origins, local_directions, magnitude = (
-                ordered_local_rays(origins, directions, scene.origin, scene.scale, scene.extent,
-                                   scene.bounds, scene.bvh.threads))  # fmt: skip
+            (traced_order, origins, directions, local_origins, local_directions, magnitude,
+             finite) = ordered_local_rays(origins, directions, scene.origin, scene.scale,
+                                          scene.extent, scene.bounds, scene.bvh.threads)
+            if not finite:  # named by its row as given
+                given = local_rays(given_origins, given_directions, scene.origin, scene.scale,
+                                   scene.extent)  # fmt: skip
+                as_points(given[0], "origins")
+                as_points(given[1], "directions")
             if tnear is not None and np.ndim(tnear):
                 tnear = np.broadcast_to(np.asarray(tnear, np.float64), (n,))[traced_order]
         else:

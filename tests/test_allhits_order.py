@@ -60,8 +60,9 @@ def test_ordered_local_rays_are_local_rays_moved_to_their_order():
     directions = trimesh.util.unitize(rng.normal(size=(5000, 3)))
     shift, scale, extent = np.array([1.0, -2.0, 3.0]), 0.37, 80.0
     bounds = np.array([[-20.0, -20, -20], [30.0, 30, 30]])
-    order, ordered_origins, ordered_directions, *local = ordered_local_rays(
+    order, ordered_origins, ordered_directions, *local, finite = ordered_local_rays(
         origins, directions, shift, scale, extent, bounds, 2)  # fmt: skip
+    assert finite
     assert sorted(order.tolist()) == list(range(5000))
     cells = box_cells(bounds[0], bounds[1])
     keys = _keys(origins, directions, bounds[0], bounds[1], cells)
@@ -109,6 +110,21 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
         for x, y in zip(a, b, strict=True):
             np.testing.assert_array_equal(x, y)
     assert len(a[1]) > 2 * len(origins)
+
+
+def test_non_finite_rays_traced_in_order_are_refused_naming_their_row(monkeypatch):
+    """The row as given, not its place in the tracing order (which sorts a NaN ray first)."""
+    monkeypatch.setattr(trimesh_ray, "_REORDER_FACES", 0)
+    ours = RayMeshIntersector(trimesh.creation.icosphere(subdivisions=2))
+    origins = np.tile([0.0, 0.0, -5.0], (3000, 1))
+    directions = np.tile([0.0, 0.0, 1.0], (3000, 1))
+    origins[1234, 1] = np.nan
+    with pytest.raises(ValueError, match="origins: row 1234 is not finite"):
+        ours.intersects_location(origins, directions)
+    origins[1234, 1] = 0.0
+    directions[2345, 2] = np.inf
+    with pytest.raises(ValueError, match="directions: row 2345 is not finite"):
+        ours.intersects_id(origins, directions)
 
 
 def test_settled_decided_and_finished_hits_are_the_same_on_one_thread_and_two():

@@ -13,6 +13,8 @@ still in cache for the next. Each output row is the same arithmetic on the same 
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 from numba import njit, prange
@@ -31,14 +33,17 @@ _AHEAD = 16
 def _to_local(origins, directions, i, shift, scale, extent, local_origins, local_directions,
               magnitude, j):  # fmt: skip
     """Row i of the float64 rays into row j of the local arrays: the one copy of this
-    arithmetic."""
+    arithmetic. Returns whether the local row is finite."""
     largest = extent
+    finite = True
     for k in range(3):
         local = np.float32((origins[i, k] - shift[k]) * scale)
         local_origins[j, k] = local
         local_directions[j, k] = np.float32(directions[i, k])
         largest = max(largest, abs(np.float64(local)))
+        finite = finite and math.isfinite(local) and math.isfinite(local_directions[j, k])
     magnitude[j] = largest
+    return finite
 
 
 @njit(nogil=True, cache=True)
@@ -82,7 +87,7 @@ def _inverse_chunk(first, stop, order, position):
 @njit(nogil=True, cache=True)
 def _scatter_chunk(first, stop, position, origins, directions, shift, scale, extent,
                    ordered_origins, ordered_directions, local_origins, local_directions,
-                   magnitude):  # fmt: skip
+                   magnitude, bad):  # fmt: skip
     # rows read in the given order and written to their places: scattered stores, which do not
     # stall the loop as scattered loads (a gather by `order`) do
     for i in range(first, stop):
@@ -97,14 +102,15 @@ def _scatter_chunk(first, stop, position, origins, directions, shift, scale, ext
         for k in range(3):
             ordered_origins[j, k] = origins[i, k]
             ordered_directions[j, k] = directions[i, k]
-        _to_local(origins, directions, i, shift, scale, extent, local_origins, local_directions,
-                  magnitude, j)  # fmt: skip
+        if not _to_local(origins, directions, i, shift, scale, extent, local_origins,
+                         local_directions, magnitude, j):  # fmt: skip
+            bad[0] = True  # the caller names the row
 
 
 @njit(parallel=True, nogil=True, cache=True)
 def _ordered_local_rays(origins, directions, shift, scale, extent, lower, upper, cells_per_unit,
                         ordered_origins, ordered_directions, local_origins, local_directions,
-                        magnitude):  # fmt: skip
+                        magnitude, bad):  # fmt: skip
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     keys = np.empty(n, np.uint32)
@@ -118,7 +124,7 @@ def _ordered_local_rays(origins, directions, shift, scale, extent, lower, upper,
     for c in prange(n_chunks):
         _scatter_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), position, origins, directions, shift,
                        scale, extent, ordered_origins, ordered_directions, local_origins,
-                       local_directions, magnitude)  # fmt: skip
+                       local_directions, magnitude, bad)  # fmt: skip
     return order
 
 
@@ -135,8 +141,9 @@ def ordered_local_rays(
 
     ``origins``, ``directions`` (n, 3) float64 world rays; ``bounds`` (2, 3) float64 world box
     of the mesh; ``threads``: threads to run on. Returns ``order`` (n,) int64 (row j below is
-    ray ``order[j]``), the reordered ``origins``, ``directions`` (n, 3) float64, and
-    ``local_rays``' three arrays in that order.
+    ray ``order[j]``), the reordered ``origins``, ``directions`` (n, 3) float64,
+    ``local_rays``' three arrays in that order, and whether every local row is finite (if not,
+    ``local_rays`` of the rays as given names the first bad one).
     """
     n = len(origins)
     lower, upper = np.asarray(bounds, np.float64)
@@ -144,12 +151,13 @@ def ordered_local_rays(
            np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
            np.empty(n, np.float64))  # fmt: skip
     if not n:
-        return (np.zeros(0, np.int64), *out)
+        return (np.zeros(0, np.int64), *out, True)
+    bad = np.zeros(1, np.bool_)
     arguments = (np.ascontiguousarray(origins, np.float64),
                  np.ascontiguousarray(directions, np.float64),
                  np.ascontiguousarray(shift, np.float64), float(scale), float(extent), lower,
-                 upper, box_cells(lower, upper), *out)  # fmt: skip
+                 upper, box_cells(lower, upper), *out, bad)  # fmt: skip
     with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
         numba.set_num_threads(threads_for(n, threads))
         order = _ordered_local_rays(*arguments)
-    return (order, *out)
+    return (order, *out, not bad[0])
