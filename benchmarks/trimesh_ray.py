@@ -19,8 +19,10 @@ beside embreex's own ``EmbreeScene.run`` on the same local rays (one thread), tr
 embreex ``intersects_first`` (the benchmark's baseline) and our ``intersects_first``; each
 taken once a turn. ``*_vs_trimesh_embreex`` is the median over turns of a rate ÷ trimesh's
 embreex ``intersects_first`` in the same turn. And all hits: our ``intersects_location`` and
-the bare traversal with the recording filter (``BVH.all_hits``, 8 hits of room, 2 threads),
-each ÷ trimesh's embreex ``intersects_location``.
+the bare traversal with the recording filter (``BVH.all_hits``, 8 hits of room, 2 threads) in
+the given order and (``*_segment_ordered``) in the order ``intersects_location`` traces them in
+on big meshes (``local_frame.ordered_local_rays``), each ÷ trimesh's embreex
+``intersects_location``.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ import trimesh
 from trimesh.ray import ray_pyembree, ray_triangle
 
 from embree_rt.embree import BVH
+from embree_rt.embree.local_frame import ordered_local_rays
 from embree_rt.trimesh_ray import RayMeshIntersector
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
@@ -130,6 +133,12 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
     runs["all_hits_embree_rt"] = lambda: ours.intersects_location(origins, directions)
     runs["all_hits_bare_2t"] = lambda: scene.bvh.all_hits(local_origins, local_directions, 0.0,
                                                           np.inf, 8)  # fmt: skip
+    # and on the rays in the order intersects_location traces them in on big meshes (by the
+    # middle of each ray's path through the box)
+    segment = ordered_local_rays(origins, trimesh.util.unitize(directions), scene.origin,
+                                 scene.scale, scene.extent, mesh.bounds, 2)[3:5]  # fmt: skip
+    runs["all_hits_bare_2t_segment_ordered"] = lambda: scene.bvh.all_hits(*segment, 0.0, np.inf,
+                                                                          8)  # fmt: skip
     rates: dict[str, list[float]] = {key: [] for key in runs}
     for _ in range(turns):
         for key, run in runs.items():
@@ -138,7 +147,8 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
     versus_all = {f"{key}_vs_trimesh_embreex": round(float(np.median(
         [rate / base for rate, base in zip(rates[key], rates["all_hits_trimesh_embreex"],
                                            strict=True)])), 2)
-        for key in ("all_hits_embree_rt", "all_hits_bare_2t")}  # fmt: skip
+        for key in ("all_hits_embree_rt", "all_hits_bare_2t", "all_hits_bare_2t_segment_ordered")
+    }  # fmt: skip
     return {
         "mesh": name, "triangles": len(mesh.faces), "rays": n, "turns": turns,
         "load_average": round(os.getloadavg()[0], 2),

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import threading
 
 import numpy as np
 import trimesh
@@ -49,11 +50,12 @@ from trimesh import caching, util
 from trimesh.constants import tol
 
 from embree_rt.embree import BVH
-from embree_rt.embree.depth_order import depth_major
-from embree_rt.embree.local_frame import local_rays
-from embree_rt.embree.multihit import compact_hits
+from embree_rt.embree.depth_order import finished_hits
+from embree_rt.embree.edge_hits import decided_hits
+from embree_rt.embree.local_frame import local_rays, ordered_local_rays
 from embree_rt.embree.plane_distances import plane_distances
 from embree_rt.embree.settled_hits import settled_hits
+from embree_rt.embree.validation import as_points
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
 # near an edge or along a face to trust their parity.
@@ -73,10 +75,11 @@ _EPS32 = float(np.finfo(np.float32).eps)
 _BAND_ULPS = 8.0
 _TNEAR_ULPS = 16.0
 # Rays traced per call, and rays x room for hits: bounded memory, reused from block to block.
-_BLOCK_RAYS = 1 << 16
+_BLOCK_RAYS = 1 << 17  # 21 MB of hit buffers at 8 hits a ray, kept by the scene
 _FIRST_ROOM = 8
 _BLOCK_HITS = 1 << 21
 _REORDER_FACES = 1 << 15
+_SCRATCH_ITEMS = 1 << 22
 
 
 class _LocalScene:
@@ -103,8 +106,7 @@ class _LocalScene:
         self.triangles = np.asarray(mesh.triangles, dtype=np.float64)
         # each triangle's first vertex and unit normal side by side in one (k, 6) table: the
         # float64 distance of a hit reads both, and on a big mesh each read is a cache miss
-        planes = np.hstack([self.triangles[:, 0], np.asarray(mesh.face_normals, np.float64)])
-        self.first_vertices, self.normals = planes[:, :3], planes[:, 3:]
+        self.planes = np.hstack([self.triangles[:, 0], np.asarray(mesh.face_normals, np.float64)])
         self.faces = faces
         self.vertices = vertices
         self.face_count = len(faces)
@@ -116,6 +118,35 @@ class _LocalScene:
                                         np.full(self.face_count, 2 * self.extent)
                                         ).astype(np.float32)  # fmt: skip
         self._fans: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        # all_hits' buffers and working space (megabytes), kept from query to query, one set a
+        # thread: fresh arrays of that size come from the kernel a page fault a 4 KiB page at a
+        # time (measured on the torus, 100k rays: 4,000 faults and 14 ms of system time, a
+        # fifth of the query)
+        self._buffers = threading.local()
+
+    def hit_buffers(self, capacity: int) -> tuple[np.ndarray, ...] | None:
+        """This thread's all_hits buffers of ``capacity`` hits a ray from its last query, or
+        None."""
+        kept = getattr(self._buffers, "arrays", None)
+        return kept if kept is not None and kept[0].shape[1] == capacity else None
+
+    def scratch(self, name: str, size: int, dtype) -> np.ndarray:
+        """(size,) array of ``dtype``: this thread's working space ``name``, kept from query to
+        query up to _SCRATCH_ITEMS (larger ones are new each time), contents undefined."""
+        pool = self._buffers.__dict__.setdefault("pool", {})
+        array = pool.get(name)
+        if array is None or len(array) < size:
+            array = np.empty(size, dtype)
+            if size <= _SCRATCH_ITEMS:
+                pool[name] = array
+        return array[:size]
+
+    def keep_hit_buffers(self, capacity: int, buffers: tuple[np.ndarray, ...]) -> None:
+        """Keep ``buffers`` (all_hits' arrays, ``capacity`` hits a ray) for this thread's next
+        query when they are at least as large as those kept."""
+        kept = self.hit_buffers(capacity)
+        if kept is None or len(buffers[0]) > len(kept[0]):
+            self._buffers.arrays = buffers
 
     def to_local(self, points: np.ndarray) -> np.ndarray:
         """(n, 3) float64 world points → (n, 3) float32 in the BVH's frame."""
@@ -187,39 +218,45 @@ def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
 def _plane_distance(scene, origins, directions, rays, tris):
     """float64 distance along each ray to its triangle's plane, and |cos| of the angle between
     ray and normal, trimesh's planes_lines formula (compiled: ``plane_distances``)."""
-    return plane_distances(scene.first_vertices, scene.normals, origins, directions, rays, tris)
+    return plane_distances(scene.planes, origins, directions, rays, tris)
 
 
-def _float64_hits(scene, origins, directions, rays, tris):
-    """ray_triangle's test of rays (k,) against triangles (k,): (k,) bool hit and (k,) float64
-    distance (``trimesh.triangles.points_to_barycentric`` within ``tol.zero``)."""
-    distance, cos = _plane_distance(scene, origins, directions, rays, tris)
-    meets = cos > _PARALLEL_COS
-    hit = np.zeros(len(rays), bool)
-    if meets.any():
-        rows = np.flatnonzero(meets)
-        points = origins[rays[rows]] + directions[rays[rows]] * distance[rows, None]
-        barycentric = trimesh.triangles.points_to_barycentric(scene.triangles[tris[rows]], points)
-        hit[rows] = ((barycentric > -tol.zero) & (barycentric < 1 + tol.zero)).all(axis=1)
-    return hit, distance
+class _HitList:
+    """The multi-hit query's hits, part after part, in arrays lent by the scene (grown as
+    needed): (rays, tris) int64 and distance float64, so that no part is copied twice."""
 
+    def __init__(self, scene: _LocalScene, size: int) -> None:
+        self._scene = scene
+        self._arrays = self._lent(max(size, 1))
+        self._count = 0
 
-def _neighbourhood(scene, rays, tris):
-    """(ray, triangle) pairs: each suspect hit's triangle and every triangle sharing a vertex
-    position with it, unique."""
-    canonical, starts, fan_faces = scene.fans()
-    corners = canonical[tris].reshape(-1)
-    lengths = starts[corners + 1] - starts[corners]
-    owner = np.repeat(np.repeat(rays, 3), lengths)
-    offsets = np.arange(lengths.sum()) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-    neighbours = fan_faces[np.repeat(starts[corners], lengths) + offsets]
-    return _unique_pairs(owner, neighbours, scene.face_count)
+    def _lent(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return tuple(self._scene.scratch(f"hits_{k}", size, dtype)
+                     for k, dtype in enumerate((np.int64, np.int64, np.float64)))  # fmt: skip
 
+    def room(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Views of the next ``size`` places, to write a part into (then ``filled``)."""
+        if self._count + size > len(self._arrays[0]):
+            grown = tuple(np.empty(2 * (self._count + size), array.dtype)
+                          for array in self._arrays)  # fmt: skip
+            for old, new in zip(self._arrays, grown, strict=True):
+                new[:self._count] = old[:self._count]
+            self._arrays = grown
+        return tuple(array[self._count:self._count + size] for array in self._arrays)
 
-def _unique_pairs(rays: np.ndarray, tris: np.ndarray, face_count: int):
-    """(ray, triangle) pairs (k,) int64, each once, sorted by ray then triangle."""
-    keys = np.unique(rays * max(face_count, 1) + tris)
-    return keys // max(face_count, 1), keys % max(face_count, 1)
+    def filled(self, size: int) -> None:
+        """The next ``size`` places now hold a part."""
+        self._count += size
+
+    def append(self, part: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """Copy a part (rays, tris, distance) in."""
+        for target, source in zip(self.room(len(part[0])), part, strict=True):
+            target[:] = source
+        self.filled(len(part[0]))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rays, tris, distance) of every part so far."""
+        return tuple(array[:self._count] for array in self._arrays)
 
 
 class RayMeshIntersector:
@@ -258,14 +295,35 @@ class RayMeshIntersector:
             raise ValueError("tnear: must be finite and >= 0")
         return near, True
 
-    def _hits(self, origins, directions, max_hits, tnear, one_per_point=False):
-        """Every ray's nearest ``max_hits`` hits: (rays, triangles, distances, ranks) (k,),
-        sorted by ray, then distance, then triangle; with ``one_per_point``, the hits of a ray
-        at one point (an edge, a vertex) as one, the lowest-index triangle there."""
+    def _hits(self, origins, directions, max_hits, tnear, one_per_point=False, reorder=False,
+              with_locations=False):
+        """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
+        ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
+        ``with_locations``, the points (k, 3) float64 (else None); each ray's hits by distance,
+        then triangle; with ``one_per_point``, the hits of a ray at one point (an edge, a
+        vertex) as one, the lowest-index triangle there.
+
+        With ``reorder`` (and a big mesh: ``scene.bounds``) the rays are traced, and every step
+        but the last run, in a coherent order (``local_frame.ordered_local_rays``); each ray's
+        hits are computed from its own row alone, so they are the same in any order."""
         scene = self._scene
         n = len(origins)
-        local_origins, local_directions, magnitude = local_rays(origins, directions, scene.origin,
-                                                                scene.scale, scene.extent)
+        given_origins, given_directions = origins, directions
+        traced_order = None
+        if reorder and scene.bounds is not None:
+            (traced_order, origins, directions, local_origins, local_directions, magnitude,
+             finite) = ordered_local_rays(origins, directions, scene.origin, scene.scale,
+                                          scene.extent, scene.bounds, scene.bvh.threads)
+            if not finite:  # named by its row as given
+                given = local_rays(given_origins, given_directions, scene.origin, scene.scale,
+                                   scene.extent)  # fmt: skip
+                as_points(given[0], "origins")
+                as_points(given[1], "directions")
+            if tnear is not None and np.ndim(tnear):
+                tnear = np.broadcast_to(np.asarray(tnear, np.float64), (n,))[traced_order]
+        else:
+            local_origins, local_directions, magnitude = local_rays(
+                origins, directions, scene.origin, scene.scale, scene.extent)
         near, inclusive = self._resolve_tnear(scene, magnitude, tnear)
         capacity = max(1, int(max_hits))
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
@@ -275,8 +333,8 @@ class RayMeshIntersector:
         # it, only the rays that overflowed (so the hit arrays stay small).
         first_room = min(room, _FIRST_ROOM)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
-        buffers = None
-        settled_parts, pending_parts, kept_parts = [], [], []
+        buffers = scene.hit_buffers(first_room)
+        hits, pending_parts = _HitList(scene, 2 * n), []
         band_scale = _BAND_ULPS * _EPS32
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
@@ -285,73 +343,52 @@ class RayMeshIntersector:
             block_near = (near[rows] * scene.scale * 0.5).astype(np.float32)
             result = scene.bvh.all_hits(local_origins[rows], local_directions[rows], block_near,
                                         np.inf, first_room, out=buffers)  # fmt: skip
-            buffers = buffers or result
+            scene.keep_hit_buffers(first_room, result)
+            buffers = result
             # rays clear of edges and grazing settled in one compiled pass; the others go to the
             # float64 path below, those that overflowed `first_room` traced again first
             rays, tris, distance, messy = settled_hits(
                 result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
-                directions[rows], scene.first_vertices, scene.normals, scene.min_altitude,
-                scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS,
+                directions[rows], scene.planes, scene.min_altitude,
+                scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS, scene.bvh.threads,
+                tuple(scene.scratch(f"settle_{k}", int(result[5].sum()), dtype) for k, dtype in
+                      enumerate((np.int64, np.int64, np.float64))),
+                hits.room(int(result[5].sum())), first,
             )  # fmt: skip
-            settled_parts.append((rays + first, tris, distance))
-            messy_rows = np.flatnonzero(messy)
-            if room == first_room and len(messy_rows):  # these hits are complete: kept
-                kept_parts.append((first + messy_rows, [x[messy_rows] for x in result]))
-            else:
-                pending_parts.append(first + messy_rows)
+            hits.filled(len(rays))
+            # Messy rays whose hits all fit are complete: decided in float64 now, from the
+            # buffers as traced (a second trace with more room records the same hits in the same
+            # order); the others are traced again first.
+            overflowed = result[6] if room > first_room else np.zeros(len(messy), bool)
+            complete_rows = np.flatnonzero(messy & ~overflowed)
+            hits.append(self._decided(complete_rows, first + complete_rows, result, magnitude,
+                                      near, inclusive, origins, directions))  # fmt: skip
+            pending_parts.append(first + np.flatnonzero(messy & overflowed))
         pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
         for first in range(0, len(pending), block):
             which = pending[first:first + block]
             block_near = (near[which] * scene.scale * 0.5).astype(np.float32)
-            kept_parts.append((which, scene.bvh.all_hits(local_origins[which],
-                                                         local_directions[which], block_near,
-                                                         np.inf, room)))  # fmt: skip
-        clean_rays, clean_tris, messy_rays, messy_tris = [], [], [], []
-        for which, result in kept_parts:
-            ray_of, tris, u, v, cos = compact_hits(result)
-            ray_of = which[ray_of]
-            band = _edge_band(scene, tris, magnitude[ray_of])
-            suspect = (np.minimum(np.minimum(u, v), 1 - u - v) <= band) | (cos <= _GRAZE_COS)
-            messy = np.zeros(n, bool)
-            messy[ray_of[suspect]] = True
-            in_messy = messy[ray_of]
-            clean_rays.append(ray_of[~in_messy])
-            clean_tris.append(tris[~in_messy])
-            messy_rays.append(ray_of[in_messy & ~suspect])
-            messy_tris.append(tris[in_messy & ~suspect])
-            # Hits near an edge, a vertex or along a face: decided in float64 as ray_triangle
-            # decides them, against all the triangles around them.
-            pair_rays, pair_tris = _neighbourhood(scene, ray_of[suspect], tris[suspect])
-            hit, _ = _float64_hits(scene, origins, directions, pair_rays, pair_tris)
-            messy_rays.append(pair_rays[hit])
-            messy_tris.append(pair_tris[hit])
-        parts = settled_parts
-        for ray_parts, tri_parts, settled in ((clean_rays, clean_tris, True),
-                                              (messy_rays, messy_tris, False)):  # fmt: skip
-            rays = np.concatenate(ray_parts) if ray_parts else np.zeros(0, np.int64)
-            tris = np.concatenate(tri_parts) if tri_parts else np.zeros(0, np.int64)
-            if not settled:
-                rays, tris = _unique_pairs(rays, tris, scene.face_count)
-            distance, cos = _plane_distance(scene, origins, directions, rays, tris)
-            ahead = (distance >= near[rays]) if inclusive else (distance > near[rays])
-            keep = ahead & (cos > _PARALLEL_COS)
-            rays, tris, distance = rays[keep], tris[keep], distance[keep]
-            backwards = (rays[1:] == rays[:-1]) & (distance[1:] < distance[:-1])
-            if not settled or backwards.any():  # float64 may order what float32 tied
-                order = np.lexsort((tris, distance, rays))
-                rays, tris, distance = rays[order], tris[order], distance[order]
-            parts.append((rays, tris, distance))
-        rays, tris, distance = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
-        if kept_parts:  # runs sorted by ray, merged (timsort finds the runs)
-            order = np.argsort(rays, kind="stable")
-            rays, tris, distance = rays[order], tris[order], distance[order]
-        if one_per_point:
-            keep = _one_per_point(scene, rays, tris, distance)
-            rays, tris, distance = rays[keep], tris[keep], distance[keep]
-        ranks = _ranks(rays)
-        within = ranks < capacity
-        return rays[within], tris[within], distance[within], ranks[within]
+            result = scene.bvh.all_hits(local_origins[which], local_directions[which], block_near,
+                                        np.inf, room)  # fmt: skip
+            hits.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
+                                      inclusive, origins, directions))  # fmt: skip
+        rays, tris, distance = hits.arrays()
+        return finished_hits(rays, tris, distance, traced_order, n, capacity,
+                             scene.fans()[0] if one_per_point else None,
+                             scene.extent / scene.scale, given_origins, given_directions,
+                             with_locations, scene.scratch, scene.bvh.threads)  # fmt: skip
+
+    def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
+        """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
+        decides them, against all the triangles around them (``edge_hits.decided_hits``)."""
+        scene = self._scene
+        if not len(rows):
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+        return decided_hits(rows, positions, result, magnitude, near, inclusive, origins,
+                            directions, scene.planes, scene.triangles,
+                            scene.min_altitude, _BAND_ULPS * _EPS32, _GRAZE_COS, _PARALLEL_COS,
+                            tol.zero, scene.fans(), scene.bvh.threads)  # fmt: skip
 
     def _first_hits(self, origins, directions, tnear) -> np.ndarray:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
@@ -416,11 +453,9 @@ class RayMeshIntersector:
                                        np.arange(len(rays)), tris)[0]  # fmt: skip
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, distance, ranks = self._hits(origins, directions, max_hits, tnear,
-                                                 one_per_point=return_locations)
-        # rays are sorted: depth by depth, by ray
-        rays, tris, locations = depth_major(rays, tris, distance, ranks, origins, directions,
-                                            return_locations)  # fmt: skip
+        rays, tris, locations = self._hits(origins, directions, max_hits, tnear,
+                                           one_per_point=return_locations, reorder=True,
+                                           with_locations=return_locations)  # fmt: skip
         if return_locations:
             return tris, rays, locations
         return tris, rays
@@ -498,44 +533,6 @@ class RayMeshIntersector:
 
     def __copy__(self, *args) -> RayMeshIntersector:
         return RayMeshIntersector(geometry=self.mesh, scale_to_box=self._scale_to_box)
-
-
-def _ranks(rays: np.ndarray) -> np.ndarray:
-    """(k,) position of each hit within its ray, for hits sorted by ray."""
-    if not len(rays):
-        return np.zeros(0, np.int64)
-    starts = np.flatnonzero(np.r_[True, rays[1:] != rays[:-1]])
-    lengths = np.diff(np.r_[starts, len(rays)])
-    return np.arange(len(rays)) - np.repeat(starts, lengths)
-
-
-def _one_per_point(scene: _LocalScene, rays, tris, distance) -> np.ndarray:
-    """(k,) bool keeping one hit per point, for hits sorted by ray, then distance: runs of
-    consecutive hits of a ray on triangles sharing a vertex position, at distances equal to
-    within float64 rounding of the mesh's size, are one point; the lowest triangle index of a
-    run stands for it."""
-    keep = np.ones(len(rays), bool)
-    if len(rays) < 2:
-        return keep
-    size = scene.extent / scene.scale
-    close = np.abs(distance[1:] - distance[:-1]) <= 1e3 * np.finfo(np.float64).eps * (
-        np.abs(distance[1:]) + size
-    )
-    pairs = np.flatnonzero(close & (rays[1:] == rays[:-1]))
-    if not len(pairs):
-        return keep
-    canonical = scene.fans()[0]
-    a, b = canonical[tris[pairs]], canonical[tris[pairs + 1]]
-    joined = pairs[(a[:, :, None] == b[:, None, :]).any(axis=(1, 2))] + 1
-    if not len(joined):
-        return keep
-    run = np.cumsum(np.r_[True, np.isin(np.arange(1, len(rays)), joined, invert=True)]) - 1
-    in_runs = np.flatnonzero(np.isin(run, run[joined]))
-    keep[in_runs] = False
-    order = in_runs[np.lexsort((tris[in_runs], run[in_runs]))]
-    first_of_run = np.r_[True, run[order][1:] != run[order][:-1]]
-    keep[order[first_of_run]] = True
-    return keep
 
 
 # -- opting in for every new Trimesh --------------------------------------------------------------

@@ -1,24 +1,57 @@
 """Rays moved into a BVH's local frame in one compiled pass (the multi-hit query's first step):
 what ``(p - shift) * scale`` rounded to float32, a cast and a row maximum cost as three NumPy
-passes and their temporaries (about a tenth of an all-hits query on a small mesh)."""
+passes and their temporaries (about a tenth of an all-hits query on a small mesh).
+
+``ordered_local_rays`` also puts the rays in a coherent tracing order (``ray_order.segment_key``,
+the middle of each ray's path through the mesh's box): keys in a parallel pass, a serial radix
+sort (a pure function of the keys), then a parallel pass that moves each ray's float64 row to
+its place and to the local frame there. Every later step of the query reads the
+rays in that order, so the BVH nodes, triangles and per-triangle tables one ray touched are
+still in cache for the next. Each output row is the same arithmetic on the same input row as
+``local_rays``' (the order only moves rows), so no answer changes.
+"""
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from embree_rt.embree.bvh import _query_lock
+from embree_rt.embree.morton import radix_order
+from embree_rt.embree.pointers import prefetch
+from embree_rt.embree.ray_order import box_cells, segment_key
+from embree_rt.embree.work_split import threads_for
+
+CHUNK = 1024  # rays per parallel iteration of the ordering passes
+_AHEAD = 16
+
+
+@njit(inline="always")
+def _to_local(origins, directions, i, shift, scale, extent, local_origins, local_directions,
+              magnitude, j):  # fmt: skip
+    """Row i of the float64 rays into row j of the local arrays: the one copy of this
+    arithmetic. Returns whether the local row is finite."""
+    largest = extent
+    finite = True
+    for k in range(3):
+        local = np.float32((origins[i, k] - shift[k]) * scale)
+        local_origins[j, k] = local
+        local_directions[j, k] = np.float32(directions[i, k])
+        largest = max(largest, abs(np.float64(local)))
+        finite = finite and math.isfinite(local) and math.isfinite(local_directions[j, k])
+    magnitude[j] = largest
+    return finite
 
 
 @njit(nogil=True, cache=True)
 def _local_rays(origins, directions, shift, scale, extent, local_origins, local_directions,
                 magnitude):  # fmt: skip
     for i in range(origins.shape[0]):
-        largest = extent
-        for k in range(3):
-            local = np.float32((origins[i, k] - shift[k]) * scale)
-            local_origins[i, k] = local
-            local_directions[i, k] = np.float32(directions[i, k])
-            largest = max(largest, abs(np.float64(local)))
-        magnitude[i] = largest
+        _to_local(origins, directions, i, shift, scale, extent, local_origins, local_directions,
+                  magnitude, i)  # fmt: skip
 
 
 def local_rays(
@@ -37,3 +70,94 @@ def local_rays(
                     np.ascontiguousarray(shift, np.float64), float(scale), float(extent),
                     local_origins, local_directions, magnitude)  # fmt: skip
     return local_origins, local_directions, magnitude
+
+
+@njit(nogil=True, cache=True)
+def _key_chunk(first, stop, origins, directions, lower, upper, cells_per_unit, keys):
+    for i in range(first, stop):
+        keys[i] = segment_key(origins[i], directions[i], lower, upper, cells_per_unit)
+
+
+@njit(nogil=True, cache=True)
+def _inverse_chunk(first, stop, order, position):
+    for j in range(first, stop):
+        position[order[j]] = j
+
+
+@njit(nogil=True, cache=True)
+def _scatter_chunk(first, stop, position, origins, directions, shift, scale, extent,
+                   ordered_origins, ordered_directions, local_origins, local_directions,
+                   magnitude, bad):  # fmt: skip
+    # rows read in the given order and written to their places: scattered stores, which do not
+    # stall the loop as scattered loads (a gather by `order`) do
+    for i in range(first, stop):
+        if i + _AHEAD < stop:  # the rows written _AHEAD rays on, fetched now: overlapping
+            ahead = position[i + _AHEAD]
+            prefetch(ordered_origins.ctypes.data + 24 * ahead)
+            prefetch(ordered_directions.ctypes.data + 24 * ahead)
+            prefetch(local_origins.ctypes.data + 12 * ahead)
+            prefetch(local_directions.ctypes.data + 12 * ahead)
+            prefetch(magnitude.ctypes.data + 8 * ahead)
+        j = position[i]
+        for k in range(3):
+            ordered_origins[j, k] = origins[i, k]
+            ordered_directions[j, k] = directions[i, k]
+        if not _to_local(origins, directions, i, shift, scale, extent, local_origins,
+                         local_directions, magnitude, j):  # fmt: skip
+            bad[0] = True  # the caller names the row
+
+
+@njit(parallel=True, nogil=True, cache=True)
+def _ordered_local_rays(origins, directions, shift, scale, extent, lower, upper, cells_per_unit,
+                        ordered_origins, ordered_directions, local_origins, local_directions,
+                        magnitude, bad):  # fmt: skip
+    n = origins.shape[0]
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    keys = np.empty(n, np.uint32)
+    for c in prange(n_chunks):
+        _key_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), origins, directions, lower, upper,
+                   cells_per_unit, keys)  # fmt: skip
+    order = radix_order(keys)
+    position = np.empty(n, np.int64)
+    for c in prange(n_chunks):
+        _inverse_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, position)
+    for c in prange(n_chunks):
+        _scatter_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), position, origins, directions, shift,
+                       scale, extent, ordered_origins, ordered_directions, local_origins,
+                       local_directions, magnitude, bad)  # fmt: skip
+    return order
+
+
+def ordered_local_rays(
+    origins: np.ndarray,
+    directions: np.ndarray,
+    shift: np.ndarray,
+    scale: float,
+    extent: float,
+    bounds: np.ndarray,
+    threads: int,
+) -> tuple[np.ndarray, ...]:
+    """``local_rays`` with the rays in tracing order (see the module docstring).
+
+    ``origins``, ``directions`` (n, 3) float64 world rays; ``bounds`` (2, 3) float64 world box
+    of the mesh; ``threads``: threads to run on. Returns ``order`` (n,) int64 (row j below is
+    ray ``order[j]``), the reordered ``origins``, ``directions`` (n, 3) float64,
+    ``local_rays``' three arrays in that order, and whether every local row is finite (if not,
+    ``local_rays`` of the rays as given names the first bad one).
+    """
+    n = len(origins)
+    lower, upper = np.asarray(bounds, np.float64)
+    out = (np.empty((n, 3), np.float64), np.empty((n, 3), np.float64),
+           np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
+           np.empty(n, np.float64))  # fmt: skip
+    if not n:
+        return (np.zeros(0, np.int64), *out, True)
+    bad = np.zeros(1, np.bool_)
+    arguments = (np.ascontiguousarray(origins, np.float64),
+                 np.ascontiguousarray(directions, np.float64),
+                 np.ascontiguousarray(shift, np.float64), float(scale), float(extent), lower,
+                 upper, box_cells(lower, upper), *out, bad)  # fmt: skip
+    with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
+        numba.set_num_threads(threads_for(n, threads))
+        order = _ordered_local_rays(*arguments)
+    return (order, *out, not bad[0])

@@ -380,28 +380,3 @@ def crossing_parity(
                          np.ascontiguousarray(edge_band, np.float32), np.float32(graze), odd,
                          clear)  # fmt: skip
     return odd, clear
-
-
-@njit(nogil=True, cache=True)  # serial: a copy, and no threading layer to share
-def _compact_hits(prim, u, v, cos, count, ray_of, tris, u_out, v_out, cos_out):
-    k = 0
-    for i in range(count.shape[0]):
-        for j in range(count[i]):
-            ray_of[k] = i
-            tris[k] = prim[i, j]
-            u_out[k] = u[i, j]
-            v_out[k] = v[i, j]
-            cos_out[k] = cos[i, j]
-            k += 1
-
-
-def compact_hits(result: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
-    """``all_hits``' (n, capacity) arrays as (k,) hits by ray, each ray's in the kernel's
-    (t, prim) order: (ray int64, triangle int64, u, v, cos float32)."""
-    _t, prim, u, v, cos, count, _more = result
-    total = int(count.sum())
-    out = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total, np.float32),
-           np.empty(total, np.float32), np.empty(total, np.float32))  # fmt: skip
-    if total:
-        _compact_hits(prim, u, v, cos, count, *out)
-    return out

@@ -1,0 +1,247 @@
+"""The multi-hit query's rays that the compiled settling pass leaves (``settled_hits``: a hit
+within float32 reach of an edge, or grazing), decided in float64 in one compiled pass.
+
+For each such ray, as ``trimesh.ray.ray_triangle`` decides: every hit near an edge or grazing
+(*suspect*) is replaced by the triangles around it, those sharing a vertex position with it
+(``fans``), each tested in float64 with ray_triangle's formulas (``planes_lines``' distance,
+then ``points_to_barycentric``'s Cramer's rule within ``zero``); the ray's other hits stand as
+Embree found them. The union, each triangle once, keeps what lies ahead of the origin and is
+not met along its plane, sorted by (distance, triangle). Rays with no suspect hit (whose
+buffers overflowed and were traced again) go through the same pass, with nothing to test.
+
+In NumPy these were a dozen passes with gathers, uniques and sorts over every candidate pair
+(about 10 µs a ray, a tenth of an all-hits query on the 1.3M-triangle icosphere). Such rays
+are 1-2% of a batch, but each reads a few dozen scattered table rows (fetched ahead, see
+``pointers.prefetch``): in parallel over chunks of rays, each writing its own ranges, so the
+output is the same on any number of threads.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from embree_rt.embree.bvh import _query_lock
+from embree_rt.embree.plane_distances import plane_distance
+from embree_rt.embree.pointers import prefetch
+from embree_rt.embree.work_split import threads_for
+
+CHUNK = 16  # rays per parallel iteration
+
+
+@njit(inline="always")
+def _is_suspect(u, v, cos, edge_band_scale, altitude, graze):
+    # as settled_hits screens: float32 distance from an edge against a float64 band
+    edge = min(min(u, v), np.float32(1.0) - u - v)
+    return edge <= edge_band_scale / altitude or cos <= graze
+
+
+@njit(inline="always", error_model="numpy")
+def _barycentric_hit(triangles, f, px, py, pz, zero):
+    """ray_triangle's test of point p against triangle f: trimesh.triangles.points_to_barycentric
+    (Cramer's rule; its row dot products summed as (x + y) + z, as trimesh's ``diagonal_dot``
+    sums them) within ``zero`` of the triangle."""
+    ax, ay, az = triangles[f, 0, 0], triangles[f, 0, 1], triangles[f, 0, 2]
+    e0x, e0y, e0z = triangles[f, 1, 0] - ax, triangles[f, 1, 1] - ay, triangles[f, 1, 2] - az
+    e1x, e1y, e1z = triangles[f, 2, 0] - ax, triangles[f, 2, 1] - ay, triangles[f, 2, 2] - az
+    wx, wy, wz = px - ax, py - ay, pz - az
+    dot00 = (e0x * e0x + e0y * e0y) + e0z * e0z
+    dot01 = (e0x * e1x + e0y * e1y) + e0z * e1z
+    dot02 = (e0x * wx + e0y * wy) + e0z * wz
+    dot11 = (e1x * e1x + e1y * e1y) + e1z * e1z
+    dot12 = (e1x * wx + e1y * wy) + e1z * wz
+    inverse_denominator = 1.0 / (dot00 * dot11 - dot01 * dot01)
+    b2 = (dot00 * dot12 - dot01 * dot02) * inverse_denominator
+    b1 = (dot11 * dot02 - dot01 * dot12) * inverse_denominator
+    b0 = 1 - b1 - b2
+    low, high = -zero, 1 + zero
+    return (b0 > low and b1 > low and b2 > low) and (b0 < high and b1 < high and b2 < high)
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _bounds_chunk(first, stop, rows, positions, prim, u, v, cos, count, magnitude, altitude,
+                  band_scale, graze, canonical, fan_starts, totals):  # fmt: skip
+    for a in range(first, stop):  # candidates of each ray, at most
+        r, q = rows[a], positions[a]
+        total = 0
+        for j in range(count[r]):
+            p = prim[r, j]
+            total += 1
+            if _is_suspect(u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p],
+                           graze):  # fmt: skip
+                for c in range(3):
+                    corner = canonical[p, c]
+                    total += fan_starts[corner + 1] - fan_starts[corner]
+        totals[a] = total
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _decide_chunk(first, stop, bound, rows, positions, prim, u, v, cos, count, magnitude, near,
+                  inclusive, origins, directions, planes, triangles, altitude, band_scale, graze,
+                  parallel_cos, zero, canonical, fan_starts, fan_faces, candidates, tested,
+                  out_tris, out_distance, kept):  # fmt: skip
+    # rays first .. stop; ray a's candidates and hits in bound[a] .. bound[a + 1], kept[a] hits
+    for a in range(first, stop):
+        r, q = rows[a], positions[a]
+        stop_a = bound[a]
+        for j in range(count[r]):
+            p = prim[r, j]
+            if _is_suspect(u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p],
+                           graze):  # fmt: skip
+                for c in range(3):
+                    corner = canonical[p, c]
+                    for s in range(fan_starts[corner], fan_starts[corner + 1]):
+                        candidates[stop_a] = fan_faces[s]
+                        tested[stop_a] = True
+                        stop_a += 1
+            else:
+                candidates[stop_a] = p
+                tested[stop_a] = False
+                stop_a += 1
+        # the candidates' rows (scattered over tables of tens of MB on a big mesh) fetched now,
+        # to arrive while they are sorted
+        for i in range(bound[a], stop_a):
+            f = candidates[i]
+            prefetch(planes.ctypes.data + 48 * f)
+            prefetch(planes.ctypes.data + 48 * f + 40)
+            if tested[i]:
+                prefetch(triangles.ctypes.data + triangles.strides[0] * f)
+                prefetch(triangles.ctypes.data + triangles.strides[0] * f + 64)
+        # by (triangle, tested): a triangle's first entry says whether Embree's hit stands
+        for i in range(bound[a] + 1, stop_a):
+            f, flag = candidates[i], tested[i]
+            j = i - 1
+            while j >= bound[a] and (candidates[j] > f or (candidates[j] == f and tested[j]
+                                                           and not flag)):  # fmt: skip
+                candidates[j + 1], tested[j + 1] = candidates[j], tested[j]
+                j -= 1
+            candidates[j + 1], tested[j + 1] = f, flag
+        start = k = bound[a]
+        for i in range(bound[a], stop_a):
+            f = candidates[i]
+            if i > bound[a] and candidates[i - 1] == f:
+                continue
+            distance, along = plane_distance(planes, origins, directions, q, f)
+            if not along > parallel_cos:
+                continue
+            if tested[i] and not _barycentric_hit(
+                    triangles, f, origins[q, 0] + directions[q, 0] * distance,
+                    origins[q, 1] + directions[q, 1] * distance,
+                    origins[q, 2] + directions[q, 2] * distance, zero):  # fmt: skip
+                continue
+            if not (distance >= near[q] if inclusive else distance > near[q]):
+                continue
+            # insertion by (distance, triangle)
+            n = k
+            while n > start and (out_distance[n - 1] > distance
+                                 or (out_distance[n - 1] == distance and out_tris[n - 1] > f)):
+                out_distance[n] = out_distance[n - 1]
+                out_tris[n] = out_tris[n - 1]
+                n -= 1
+            out_distance[n] = distance
+            out_tris[n] = f
+            k += 1
+        kept[a] = k - start
+
+
+@njit(nogil=True, cache=True)
+def _gather_chunk(first, stop, bound, places, positions, tris, distance, kept, out_rays,
+                  out_tris, out_distance):  # fmt: skip
+    for a in range(first, stop):
+        for i in range(kept[a]):
+            out_rays[places[a] + i] = positions[a]
+            out_tris[places[a] + i] = tris[bound[a] + i]
+            out_distance[places[a] + i] = distance[bound[a] + i]
+
+
+@njit(parallel=True, nogil=True, cache=True, error_model="numpy")
+def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive, origins,
+            directions, planes, triangles, altitude, band_scale, graze, parallel_cos, zero,
+            canonical, fan_starts, fan_faces):  # fmt: skip
+    # in parallel over chunks of rays, each in its own ranges (a prefix sum of bounds, then of
+    # kept hits): the same output on any number of threads
+    m = rows.shape[0]
+    n_chunks = (m + CHUNK - 1) // CHUNK
+    totals = np.empty(m, np.int64)
+    for c in prange(n_chunks):
+        _bounds_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), rows, positions, prim, u, v, cos,
+                      count, magnitude, altitude, band_scale, graze, canonical, fan_starts,
+                      totals)  # fmt: skip
+    bound = np.zeros(m + 1, np.int64)
+    for a in range(m):
+        bound[a + 1] = bound[a] + totals[a]
+    candidates = np.empty(bound[m], np.int64)
+    tested = np.empty(bound[m], np.bool_)  # decided in float64 (else Embree's hit stands)
+    tris = np.empty(bound[m], np.int64)
+    distance = np.empty(bound[m], np.float64)
+    kept = np.empty(m, np.int64)
+    for c in prange(n_chunks):
+        _decide_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, rows, positions, prim, u, v,
+                      cos, count, magnitude, near, inclusive, origins, directions, planes,
+                      triangles, altitude, band_scale, graze, parallel_cos, zero, canonical,
+                      fan_starts, fan_faces, candidates, tested, tris, distance,
+                      kept)  # fmt: skip
+    places = np.zeros(m + 1, np.int64)
+    for a in range(m):
+        places[a + 1] = places[a] + kept[a]
+    out_rays = np.empty(places[m], np.int64)
+    out_tris = np.empty(places[m], np.int64)
+    out_distance = np.empty(places[m], np.float64)
+    for c in prange(n_chunks):
+        _gather_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, places, positions, tris,
+                      distance, kept, out_rays, out_tris, out_distance)  # fmt: skip
+    return out_rays, out_tris, out_distance
+
+
+def decided_hits(
+    rows: np.ndarray,
+    positions: np.ndarray,
+    result: tuple[np.ndarray, ...],
+    magnitude: np.ndarray,
+    near: np.ndarray,
+    inclusive: bool,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    planes: np.ndarray,
+    triangles: np.ndarray,
+    altitude: np.ndarray,
+    band_scale: float,
+    graze: float,
+    parallel_cos: float,
+    zero: float,
+    fans: tuple[np.ndarray, np.ndarray, np.ndarray],
+    threads: int = 1,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Final hits of the rays in rows ``rows`` (m,) int64 of ``multihit.all_hits``' buffers
+    ``result``, decided as the module docstring says.
+
+    ``positions`` (m,) int64: each ray's index into the per-ray arrays ``magnitude``, ``near``
+    (float64, as ``settled_hits``' arguments, ``inclusive`` too), ``origins``, ``directions``
+    (n, 3) float64 world rays (unit directions); ``planes`` (triangles, 6) (as
+    ``plane_distances.plane_distances`` takes them) and ``triangles`` (triangles, 3, 3)
+    float64; ``altitude`` (triangles,) float64 smallest local altitudes; ``band_scale``: edge
+    band per unit of magnitude / altitude; ``graze``: suspect |cos|; ``parallel_cos``: |cos|
+    at or below which a ray misses a triangle's plane; ``zero``: ray_triangle's barycentric
+    tolerance; ``fans``: (canonical faces (triangles, 3), starts, faces) CSR of the faces
+    around each vertex position; ``threads``: how many to run on (the answer is the same for
+    any).
+
+    Returns ``rays`` (k,) int64 (positions, in the order of ``positions``), ``tris`` (k,) int64
+    and ``distance`` (k,) float64, sorted by (distance, triangle) within each ray.
+    """
+    if not len(rows):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+    _t, prim, u, v, cos, count, _more = result[:7]
+    canonical, fan_starts, fan_faces = fans
+    arguments = (np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(positions, np.int64),
+                   prim, u, v, cos, count, np.ascontiguousarray(magnitude, np.float64),
+                   np.ascontiguousarray(near, np.float64), bool(inclusive),
+                   np.ascontiguousarray(origins, np.float64),
+                   np.ascontiguousarray(directions, np.float64),
+                   np.ascontiguousarray(planes, np.float64),
+                   triangles, altitude, float(band_scale), np.float32(graze), float(parallel_cos),
+                   float(zero), canonical, fan_starts, fan_faces)  # fmt: skip
+    with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
+        numba.set_num_threads(threads_for(len(rows) * 16, threads))
+        return _decide(*arguments)
