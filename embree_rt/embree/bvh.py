@@ -20,6 +20,7 @@ from embree_rt.embree import (
     screened_nearest,
     spatial_order,
     user_spheres,
+    work_split,
 )
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
@@ -66,10 +67,9 @@ _NO_LABELS = np.zeros(0, np.int32)
 
 _kernel_lock = threading.Lock()
 _symbols_registered = False
-# Multi-threaded queries go one at a time: numba's fallback threading layer (workqueue) must
-# not be entered from two threads at once. Single-threaded BVHs use serial kernels, which need
-# no threading layer, so many Python threads may query them concurrently.
-_query_lock = threading.Lock()
+# Multi-threaded queries take the parallel-region lock (``work_split``); single-threaded BVHs
+# use serial kernels, so many Python threads may query them concurrently.
+_query_lock = work_split.parallel_region
 
 
 def _prepare_kernels() -> None:

@@ -18,9 +18,8 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.bvh import _query_lock
 from embree_rt.embree.pointers import prefetch
-from embree_rt.embree.work_split import threads_for
+from embree_rt.embree.work_split import parallel_region, threads_for
 
 _EPS64 = np.finfo(np.float64).eps
 _AHEAD = 16
@@ -184,7 +183,7 @@ def finished_hits(
         scratch("cursor", ray_count, np.int64), scratch("kept", ray_count, np.int64),
         scratch("grouped_tris", k, np.int64), scratch("grouped_distance", k, np.float64),
     )  # fmt: skip
-    with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
+    with parallel_region:
         numba.set_num_threads(threads_for(int(ray_count), threads))
         out_rays, out_tris, locations = _finish(*arguments)
     return out_rays, out_tris, locations if with_locations else None

@@ -22,10 +22,9 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.bvh import _query_lock
-from embree_rt.embree.plane_distances import plane_distance
+from embree_rt.embree.plane_distances import insert_by_distance, plane_distance
 from embree_rt.embree.pointers import prefetch
-from embree_rt.embree.work_split import threads_for
+from embree_rt.embree.work_split import parallel_region, threads_for
 
 CHUNK = 16  # rays per parallel iteration
 
@@ -132,15 +131,7 @@ def _decide_chunk(first, stop, bound, rows, positions, prim, u, v, cos, count, m
                 continue
             if not (distance >= near[q] if inclusive else distance > near[q]):
                 continue
-            # insertion by (distance, triangle)
-            n = k
-            while n > start and (out_distance[n - 1] > distance
-                                 or (out_distance[n - 1] == distance and out_tris[n - 1] > f)):
-                out_distance[n] = out_distance[n - 1]
-                out_tris[n] = out_tris[n - 1]
-                n -= 1
-            out_distance[n] = distance
-            out_tris[n] = f
+            insert_by_distance(out_distance, out_tris, start, k, distance, f)
             k += 1
         kept[a] = k - start
 
@@ -242,6 +233,6 @@ def decided_hits(
                    np.ascontiguousarray(planes, np.float64),
                    triangles, altitude, float(band_scale), np.float32(graze), float(parallel_cos),
                    float(zero), canonical, fan_starts, fan_faces)  # fmt: skip
-    with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
+    with parallel_region:
         numba.set_num_threads(threads_for(len(rows) * 16, threads))
         return _decide(*arguments)

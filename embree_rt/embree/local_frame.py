@@ -19,11 +19,10 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.bvh import _query_lock
 from embree_rt.embree.morton import radix_order
 from embree_rt.embree.pointers import prefetch
 from embree_rt.embree.ray_order import box_cells, segment_key
-from embree_rt.embree.work_split import threads_for
+from embree_rt.embree.work_split import parallel_region, threads_for
 
 CHUNK = 1024  # rays per parallel iteration of the ordering passes
 _AHEAD = 16
@@ -157,7 +156,7 @@ def ordered_local_rays(
                  np.ascontiguousarray(directions, np.float64),
                  np.ascontiguousarray(shift, np.float64), float(scale), float(extent), lower,
                  upper, box_cells(lower, upper), *out, bad)  # fmt: skip
-    with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
+    with parallel_region:
         numba.set_num_threads(threads_for(n, threads))
         order = _ordered_local_rays(*arguments)
     return (order, *out, not bad[0])

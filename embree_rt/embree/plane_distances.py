@@ -25,6 +25,21 @@ def plane_distance(planes, origins, directions, r, f):
     return toward / along, abs(along)  # ±inf or nan along the plane, as NumPy gives
 
 
+@njit(inline="always")
+def insert_by_distance(out_distance, out_tris, start, stop, distance, triangle):
+    """Insert the hit (``distance``, ``triangle``) into the run ``out_*[start:stop]``, kept
+    sorted by distance then triangle (a ray's few hits: insertion is the cheapest sort; float64
+    may order what float32 tied). The run grows to ``stop + 1``."""
+    m = stop
+    while m > start and (out_distance[m - 1] > distance
+                         or (out_distance[m - 1] == distance and out_tris[m - 1] > triangle)):
+        out_distance[m] = out_distance[m - 1]
+        out_tris[m] = out_tris[m - 1]
+        m -= 1
+    out_distance[m] = distance
+    out_tris[m] = triangle
+
+
 @njit(nogil=True, cache=True, error_model="numpy")
 def _plane_distances(planes, origins, directions, rays, tris, distance, cos):
     for k in range(rays.shape[0]):

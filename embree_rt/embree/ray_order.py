@@ -34,11 +34,9 @@ from embree_rt.embree.morton import CELLS, spread_bits
 
 
 @njit(inline="always")
-def entry_key(origin, direction, lower, upper, cells_per_unit):
-    """uint32 Morton code of where the ray ``origin``, ``direction`` ((3,) float64 rows) enters
-    the box ``lower`` .. ``upper`` ((3,) float64), on a grid of 1024 cells an axis
-    (``cells_per_unit`` (3,): 1023 / the box's size, 0 along a flat axis); a ray starting inside
-    is keyed by its origin, one that misses by its origin clamped to the box."""
+def _box_span(origin, direction, lower, upper):
+    """(near, far): the ray's parameters where it enters (0 when it starts inside) and leaves
+    the box ``lower`` .. ``upper``; near > far when it misses."""
     near, far = 0.0, math.inf
     for k in range(3):
         d = direction[k]
@@ -51,7 +49,12 @@ def entry_key(origin, direction, lower, upper, cells_per_unit):
             t1 = (upper[k] - origin[k]) * reciprocal
             near = max(near, min(t0, t1))
             far = min(far, max(t0, t1))
-    step = near if near <= far else 0.0
+    return near, far
+
+
+@njit(inline="always")
+def _point_code(origin, direction, step, lower, cells_per_unit):
+    """uint32 Morton code of the point ``origin + step * direction`` clamped to the grid."""
     code = np.uint32(0)
     for k in range(3):
         cell = (origin[k] + step * direction[k] - lower[k]) * cells_per_unit[k]
@@ -61,31 +64,26 @@ def entry_key(origin, direction, lower, upper, cells_per_unit):
 
 
 @njit(inline="always")
+def entry_key(origin, direction, lower, upper, cells_per_unit):
+    """uint32 Morton code of where the ray ``origin``, ``direction`` ((3,) float64 rows) enters
+    the box ``lower`` .. ``upper`` ((3,) float64), on a grid of 1024 cells an axis
+    (``cells_per_unit`` (3,): 1023 / the box's size, 0 along a flat axis); a ray starting inside
+    is keyed by its origin, one that misses by its origin clamped to the box."""
+    near, far = _box_span(origin, direction, lower, upper)
+    step = near if near <= far else 0.0
+    return _point_code(origin, direction, step, lower, cells_per_unit)
+
+
+@njit(inline="always")
 def segment_key(origin, direction, lower, upper, cells_per_unit):
     """uint32 Morton code of the middle of the ray's segment inside the box ``lower`` ..
     ``upper`` (arguments as ``entry_key``'s; the segment from where the ray enters, or its
     origin when it starts inside, to where it leaves), for queries that follow each ray through
     the whole box (all hits) rather than to its first hit; a ray that misses is keyed by its
     origin clamped to the box."""
-    near, far = 0.0, math.inf
-    for k in range(3):
-        d = direction[k]
-        if d == 0.0:
-            if origin[k] < lower[k] or origin[k] > upper[k]:
-                far = -1.0  # parallel to this slab and outside it
-        else:
-            reciprocal = 1.0 / d
-            t0 = (lower[k] - origin[k]) * reciprocal
-            t1 = (upper[k] - origin[k]) * reciprocal
-            near = max(near, min(t0, t1))
-            far = min(far, max(t0, t1))
+    near, far = _box_span(origin, direction, lower, upper)
     step = 0.5 * (near + far) if near <= far and far < math.inf else 0.0
-    code = np.uint32(0)
-    for k in range(3):
-        cell = (origin[k] + step * direction[k] - lower[k]) * cells_per_unit[k]
-        cell = min(max(cell, 0.0), float(CELLS))  # also maps nan (a non-finite ray) to 0
-        code |= np.uint32(spread_bits(np.uint32(cell))) << np.uint32(k)
-    return code
+    return _point_code(origin, direction, step, lower, cells_per_unit)
 
 
 def box_cells(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:

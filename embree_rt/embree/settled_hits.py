@@ -22,10 +22,9 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.bvh import _query_lock
-from embree_rt.embree.plane_distances import plane_distance
+from embree_rt.embree.plane_distances import insert_by_distance, plane_distance
 from embree_rt.embree.pointers import prefetch
-from embree_rt.embree.work_split import threads_for
+from embree_rt.embree.work_split import parallel_region, threads_for
 
 CHUNK = 512  # rays per parallel iteration
 _AHEAD = 8  # rays whose triangles' rows are fetched ahead (4: 4.7 ms, 8: 4.0, 16: 8-12)
@@ -73,15 +72,7 @@ def _settle_chunk(first, stop, k, t, prim, u, v, cos, count, more, retrace_more,
             ahead = distance >= near[i] if inclusive else distance > near[i]
             if not (ahead and along > parallel_cos):
                 continue
-            # insertion by (distance, triangle): float64 may order what float32 tied
-            m = k
-            while m > start and (out_distance[m - 1] > distance
-                                 or (out_distance[m - 1] == distance and out_tris[m - 1] > p)):
-                out_distance[m] = out_distance[m - 1]
-                out_tris[m] = out_tris[m - 1]
-                m -= 1
-            out_distance[m] = distance
-            out_tris[m] = p
+            insert_by_distance(out_distance, out_tris, start, k, distance, p)
             out_rays[k] = i
             k += 1
     return k
@@ -178,7 +169,7 @@ def settled_hits(
         scratch = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
     if out is None:
         out = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
-    with _query_lock:  # numba's threading layer, one parallel region at a time (bvh.py)
+    with parallel_region:
         numba.set_num_threads(threads_for(n, threads))
         kept = _settle(*arguments, *scratch, int(ray_offset), *out)
     return out[0][:kept], out[1][:kept], out[2][:kept], messy

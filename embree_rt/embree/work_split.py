@@ -1,6 +1,13 @@
-"""How many threads a batch of rays is worth."""
+"""How many threads a batch of rays is worth, and the lock every parallel region takes."""
 
 from __future__ import annotations
+
+import threading
+
+# Parallel regions (numba ``prange`` kernels: queries, the trimesh passes) run one at a time:
+# numba's fallback threading layer (workqueue) must not be entered from two threads at once.
+# Serial kernels need no threading layer, so many Python threads may run them concurrently.
+parallel_region = threading.Lock()
 
 # Below this many rays a query runs on the calling thread alone. Waking numba's other threads
 # costs little on an idle machine, but on a loaded one the region waits until every thread has
