@@ -33,7 +33,7 @@ def peak_rss_mb() -> float:
 
 class RecordingGeometry:
     """Stands in for a renderer's ``SceneGeometry`` and records every query it forwards, as
-    (kind, origins, directions, tfar) with rays as (3, n) columns."""
+    (kind, origins, directions, tfar, coherent) with rays as (3, n) columns."""
 
     def __init__(self, geometry) -> None:
         self.geometry = geometry
@@ -43,14 +43,14 @@ class RecordingGeometry:
     def __getattr__(self, name: str):
         return getattr(self.geometry, name)
 
-    def intersect_compact(self, origins, directions, tnear=0.0, tfar=np.inf):
+    def intersect_compact(self, origins, directions, tnear=0.0, tfar=np.inf, coherent=False):
         with self._lock:
-            self.log.append(("intersect", origins, directions, tfar))
-        return self.geometry.intersect_compact(origins, directions, tnear, tfar)
+            self.log.append(("intersect", origins, directions, tfar, coherent))
+        return self.geometry.intersect_compact(origins, directions, tnear, tfar, coherent)
 
     def occluded(self, origins, directions, tnear=0.0, tfar=np.inf):
         with self._lock:
-            self.log.append(("occluded", origins, directions, tfar))
+            self.log.append(("occluded", origins, directions, tfar, False))
         return self.geometry.occluded(origins, directions, tnear, tfar)
 
 
@@ -73,19 +73,20 @@ def replay(renderer: Renderer, log: list, threads: int | None = None) -> float:
     bvh.threads = renderer.workers if threads is None else threads
     # Compile and warm the kernels this thread count uses, outside the timing.
     # (numba compiles per memory layout: these are Fortran-ordered (n, 3) views, as logged.)
-    _, origins, directions, _ = log[0]
+    _, origins, directions, _, _ = log[0]
     origins, directions = (
         np.ascontiguousarray(origins[:, :64]),
         np.ascontiguousarray(directions[:, :64]),
     )
     bvh.intersect(origins.T, directions.T)
+    bvh.intersect(origins.T, directions.T, coherent=True)
     bvh.occluded(origins.T, directions.T)
     elapsed = 0.0
-    for kind, origins, directions, tfar in log:
+    for kind, origins, directions, tfar, coherent in log:
         start = time.perf_counter()
         # The log holds rays as (3, n) columns; the BVH takes (n, 3) views of them.
         if kind == "intersect":
-            bvh.intersect(origins.T, directions.T)
+            bvh.intersect(origins.T, directions.T, coherent=coherent)
         else:
             bvh.occluded(origins.T, directions.T, 0.0, tfar)
         elapsed += time.perf_counter() - start
