@@ -163,3 +163,29 @@ def test_settled_decided_and_finished_hits_are_the_same_on_one_thread_and_two():
     assert len(finished[0][0]) > len(origins)
     for x, y in zip(*finished, strict=True):
         np.testing.assert_array_equal(x, y)
+
+
+def test_a_query_does_not_overwrite_the_answers_of_the_one_before():
+    """The scene keeps and reuses its working buffers from query to query: what a query returned
+    must be the caller's, not a view of them (a second query, bigger and in another order,
+    would otherwise rewrite it)."""
+    mesh = trimesh.creation.icosphere(subdivisions=6)  # 81,920 faces: the ordered path
+    ours = RayMeshIntersector(mesh)
+    rng = np.random.default_rng(7)
+    origins = rng.normal(size=(3000, 3)) * 3
+    directions = rng.uniform(-0.5, 0.5, (3000, 3)) - origins  # toward the middle: two hits
+    answers = {
+        "location": ours.intersects_location(origins, directions),
+        "id": ours.intersects_id(origins, directions, return_locations=True),
+        "first": (ours.intersects_first(origins, directions),),
+    }
+    kept = {name: [np.copy(part) for part in parts] for name, parts in answers.items()}
+    more_origins = np.vstack([origins[::-1], origins]) * 1.5
+    more_directions = np.vstack([directions[::-1], directions])
+    ours.intersects_location(more_origins, more_directions)
+    ours.intersects_id(more_origins, more_directions, return_locations=True)
+    ours.intersects_first(more_origins, more_directions)
+    assert len(kept["location"][0]) > 1.5 * len(origins)
+    for name, parts in answers.items():
+        for part, copy in zip(parts, kept[name], strict=True):
+            np.testing.assert_array_equal(part, copy, err_msg=name)
