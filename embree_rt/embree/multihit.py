@@ -42,6 +42,7 @@ import numpy as np
 from numba import carray, cfunc, njit, prange, types
 
 from embree_rt.embree.kernels import (
+    FEATURE_FLAG_ALL,
     HIT_GEOM_ID,
     HIT_INST_ID,
     INVALID_ID,
@@ -60,7 +61,6 @@ from embree_rt.embree.work_split import threads_for
 
 # rtcore_common.h / rtcore_scene.h
 RAY_QUERY_FLAG_INVOKE_ARGUMENT_FILTER = 1 << 1
-FEATURE_FLAG_ALL = 0xFFFFFFFF
 SCENE_FLAG_ROBUST = 1 << 2
 SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS = 1 << 3
 
