@@ -103,6 +103,14 @@ def image_bytes(width: int, height: int, spp: int, batch_size: int, workers: int
     return pixels * FILM_BYTES_PER_PIXEL + in_flight * BYTES_PER_SAMPLE_IN_FLIGHT
 
 
+def bvh_needs(sphere_count: int, kind: str) -> dict[str, tuple[int, str]]:
+    """What building the BVH of ``sphere_count`` spheres entered as ``kind`` needs, for
+    ``require`` (a Dask worker's whole need: the film stays with the client)."""
+    return {
+        "spheres": (geometry_bytes(sphere_count, kind), f"the BVH of {sphere_count:,} spheres")
+    }
+
+
 def render_needs(
     sphere_count: int,
     kind: str,
@@ -115,7 +123,7 @@ def render_needs(
     """What a render needs beyond the scene itself, for ``require``: the BVH of
     ``sphere_count`` spheres entered as ``kind``, and the image with its batches."""
     return {
-        "spheres": (geometry_bytes(sphere_count, kind), f"the BVH of {sphere_count:,} spheres"),
+        **bvh_needs(sphere_count, kind),
         "image": (
             image_bytes(width, height, spp, batch_size, workers),
             f"a {width}x{height} image at {spp} spp",

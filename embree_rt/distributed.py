@@ -196,12 +196,7 @@ class SceneRendererPlugin(distributed.WorkerPlugin):
         spheres (and, with ``scene_bytes``, the scene's own arrays, not made yet)."""
         from embree_rt.geometry import sphere_kind
 
-        needs = {
-            "spheres": (
-                budget.geometry_bytes(count, sphere_kind(count, self.spheres)),
-                f"the BVH of {count:,} spheres",
-            )
-        }
+        needs = budget.bvh_needs(count, sphere_kind(count, self.spheres))
         if scene_bytes is not None:
             needs["field"] = (scene_bytes(count), f"a field of {count:,} spheres")
         budget.require(needs)

@@ -347,13 +347,14 @@ class RayMeshIntersector:
             buffers = result
             # rays clear of edges and grazing settled in one compiled pass; the others go to the
             # float64 path below, those that overflowed `first_room` traced again first
+            recorded = int(result[5].sum())
             rays, tris, distance, messy = settled_hits(
                 result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
                 directions[rows], scene.planes, scene.min_altitude,
                 scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS, scene.bvh.threads,
-                tuple(scene.scratch(f"settle_{k}", int(result[5].sum()), dtype) for k, dtype in
+                tuple(scene.scratch(f"settle_{k}", recorded, dtype) for k, dtype in
                       enumerate((np.int64, np.int64, np.float64))),
-                hits.room(int(result[5].sum())), first,
+                hits.room(recorded), first,
             )  # fmt: skip
             hits.filled(len(rays))
             # Messy rays whose hits all fit are complete: decided in float64 now, from the

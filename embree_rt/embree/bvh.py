@@ -20,7 +20,6 @@ from embree_rt.embree import (
     screened_nearest,
     spatial_order,
     user_spheres,
-    work_split,
 )
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
@@ -30,6 +29,7 @@ from embree_rt.embree.validation import (
     as_transform,
     as_triangle_indices,
 )
+from embree_rt.embree.work_split import parallel_region
 from embree_rt.transforms import affine_array_problem
 
 
@@ -67,9 +67,8 @@ _NO_LABELS = np.zeros(0, np.int32)
 
 _kernel_lock = threading.Lock()
 _symbols_registered = False
-# Multi-threaded queries take the parallel-region lock (``work_split``); single-threaded BVHs
-# use serial kernels, so many Python threads may query them concurrently.
-_query_lock = work_split.parallel_region
+# Multi-threaded queries take ``work_split.parallel_region``; single-threaded BVHs use serial
+# kernels, so many Python threads may query them concurrently.
 
 
 def _prepare_kernels() -> None:
@@ -454,7 +453,7 @@ class BVH:
             if self.threads == 1:
                 kernels.intersect_serial(*arguments)
             else:
-                with _query_lock:
+                with parallel_region:
                     numba.set_num_threads(self.threads)
                     kernels.intersect(*arguments)
         return hits
@@ -579,7 +578,7 @@ class BVH:
             if self.threads == 1:
                 kernels.occluded_serial(*arguments)
             else:
-                with _query_lock:
+                with parallel_region:
                     numba.set_num_threads(self.threads)
                     kernels.occluded(*arguments)
         if plane_y is not None:
@@ -600,7 +599,7 @@ class BVH:
         BVH of one geometry, no instances): see ``multihit.all_hits`` for what it returns."""
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         self._require_filters()
-        with _query_lock:
+        with parallel_region:
             return multihit.all_hits(self._live_scene(), origins, directions, tnear, tfar,
                                      int(capacity), self.threads, out)  # fmt: skip
 
@@ -613,7 +612,7 @@ class BVH:
         self._require_filters()
         if np.shape(edge_band) != (self.primitive_count,):
             raise ValueError(f"edge_band: expected shape ({self.primitive_count},)")
-        with _query_lock:
+        with parallel_region:
             return multihit.crossing_parity(self._live_scene(), origins, directions, edge_band,
                                             graze, self.threads)  # fmt: skip
 
@@ -626,7 +625,7 @@ class BVH:
         if not self._committed:
             raise RuntimeError("commit() the BVH before querying it")
         _prepare_kernels()
-        with _query_lock:
+        with parallel_region:
             prim, suspect, finite = screened_nearest.screened_nearest(
                 self._live_scene(), self.lanes, self.threads, origins, directions, **screen
             )
