@@ -264,6 +264,35 @@ def test_float64_float32_and_integer_inputs_agree(kind):
     np.testing.assert_array_equal(ha.prim_id, [0, 1])
 
 
+def test_coordinate_bound_is_the_farthest_reach_of_any_sphere(kind):
+    """``coordinate_bound`` (the size instances and surface offsets scale their rounding
+    error by) is max over spheres of max(|x|, |y|, |z|) + r, over every set added: checked
+    against NumPy on float32 values (exact: a max of float32 sums), with the farthest sphere
+    in each set somewhere else and a transposed (3, n) view as input."""
+    rng = np.random.default_rng(4)
+    first = float32_exact(rng.uniform(-50.0, 50.0, size=(3, 500))).T  # a strided view
+    first[123] = [-80.0, 2.0, 3.0]
+    second = float32_exact(rng.uniform(-20.0, 20.0, size=(300, 3)))
+    second[7] = [1.0, 1.0, 95.5]
+    radii_first = float32_exact(rng.uniform(0.1, 2.0, 500))
+    radii_second = float32_exact(rng.uniform(0.1, 2.0, 300))
+    with BVH() as bvh:
+        assert bvh.coordinate_bound == 0.0
+        bvh.add_spheres(first, radii_first, kind=kind)
+        after_first = bvh.coordinate_bound
+        bvh.add_spheres(second, radii_second, kind=kind)
+        after_second = bvh.coordinate_bound
+
+    def reach(centers, radii):
+        c = np.asarray(centers, np.float32)
+        return float((np.abs(c).max(axis=1) + np.asarray(radii, np.float32)).max())
+
+    assert after_first == reach(first, radii_first)
+    assert after_first == np.float32(80.0) + np.float32(radii_first[123])
+    assert after_second == max(after_first, reach(second, radii_second))
+    assert after_second == np.float32(95.5) + np.float32(radii_second[7])
+
+
 @pytest.mark.parametrize(("quality", "compact"), [("low", False), ("high", True), ("low", True)])
 def test_build_quality_and_compact_change_the_tree_not_the_answers(kind, quality, compact):
     """Every Embree build variant finds the same nearest sphere at the same t (to float32

@@ -19,6 +19,7 @@ from embree_rt.embree import (
     records,
     screened_nearest,
     spatial_order,
+    sphere_buffers,
     user_spheres,
 )
 from embree_rt.embree.records import HitLabels, HitRecords
@@ -238,15 +239,18 @@ class BVH:
             packed = np.ctypeslib.as_array(
                 (ctypes.c_float * (4 * count)).from_address(pointer)
             ).reshape(count, 4) if count else np.zeros((0, 4), np.float32)
-            packed[:, :3] = centers
-            packed[:, 3] = radii
+            reach = sphere_buffers.pack_spheres(
+                centers, radii, sphere_buffers.IN_GIVEN_ORDER, packed
+            )
             slot = _IDENTITY_SLOTS
         else:
             geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_USER)
             self._device.check("rtcNewGeometry(USER)")
             # Stored in spatial order, for the callbacks' memory traffic (spatial_order); the
             # callbacks report each sphere by its index among the spheres given.
-            packed, order, slot, in_order = spatial_order.store_in_spatial_order(centers, radii)
+            packed, order, slot, in_order, reach = spatial_order.store_in_spatial_order(
+                centers, radii
+            )
             if in_order:
                 slot = _IDENTITY_SLOTS
             # Embree reads these through the user pointer for as long as the BVH lives.
@@ -263,9 +267,7 @@ class BVH:
             lib.rtcSetGeometryBuildQuality(geometry, self._build_quality)
             self._device.check("setting up user-geometry spheres")
         self.primitive_count += count
-        if count:
-            reach = float((np.abs(centers).max(axis=1) + radii).max())
-            self.coordinate_bound = max(self.coordinate_bound, reach)
+        self.coordinate_bound = max(self.coordinate_bound, float(reach))
         geom_id = self._attach(geometry, "adding spheres")
         self._sphere_buffers[geom_id] = (packed, slot)
         return geom_id

@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 from embree_rt.embree.morton import CELLS, radix_order, spread_bits
+from embree_rt.embree.sphere_buffers import pack_spheres
 
 
 @njit(nogil=True, cache=True)
@@ -62,23 +63,21 @@ def store_in_spatial_order(centers, radii):
     """Spheres ``centers`` (n, 3), ``radii`` (n,) float32 as user geometry stores them.
 
     Returns the (n, 4) float32 (x, y, z, r) buffer in Morton order, ``order`` (n,) int32 (the
-    index of the sphere in each slot), ``slot`` (n,) int32 (the slot of each sphere) and
-    whether the spheres came in that order already (``order`` is the identity).
+    index of the sphere in each slot), ``slot`` (n,) int32 (the slot of each sphere), whether
+    the spheres came in that order already (``order`` is the identity) and their reach
+    (``sphere_buffers.pack_spheres``).
     """
     order = spatial_order(centers)
     n = len(order)
     packed = np.empty((max(n, 1), 4), np.float32)[:n]
+    reach = pack_spheres(centers, radii, order, packed)
     slot = np.empty(n, np.int32)
     in_order = True
     for k in range(n):
         i = order[k]
         in_order &= i == k
-        packed[k, 0] = centers[i, 0]
-        packed[k, 1] = centers[i, 1]
-        packed[k, 2] = centers[i, 2]
-        packed[k, 3] = radii[i]
         slot[i] = k
-    return packed, order, slot, in_order
+    return packed, order, slot, in_order, reach
 
 
 @njit(nogil=True, cache=True)

@@ -290,7 +290,9 @@ class _SphereDraws:
         plan, n, k = self.plan, self.plan.small, len(x)
         radius = np.random.Generator(self._stream(first)).uniform(*plan.radius, size=k)[rank]
         reach = plan.spacing / 2 - radius  # the sphere stays inside its cell, so none overlap
-        jitter = np.random.Generator(self._stream(n + 2 * first)).random((k, 2))[rank]
+        # (np.take, not jitter[rank]: NumPy's fancy indexing of a 2-wide row is 25x slower)
+        jitter = np.take(np.random.Generator(self._stream(n + 2 * first)).random((k, 2)), rank,
+                         axis=0)  # fmt: skip
         jitter *= 2
         jitter -= 1
         jitter *= reach[:, None]
