@@ -78,13 +78,17 @@ class SceneFile:
     def digest(self) -> bytes:
         """The path, the file's bytes, and the path, size and modification time of each data
         file it names: a sphere array or mesh replaced under a running cluster makes a new key,
-        so the workers load the scene again instead of rendering the old one. (Files a mesh
-        names in turn, an OBJ's materials and textures, are not stamped.)"""
+        so the workers load the scene again instead of rendering the old one. The files a mesh
+        names in turn (an OBJ's materials and textures, a glTF's buffers and images) are
+        stamped the same way."""
         from embree_rt.scene.loader import SceneReader, read_document
+        from embree_rt.scene.mesh_companions import companion_files
 
         path = Path(self.path)
         parts = [self.path.encode(), path.read_bytes()]
-        for named in SceneReader(path, read_document(path)).named_files():
+        files = SceneReader(path, read_document(path)).named_files()
+        files += [companion for named in files for companion in companion_files(named)]
+        for named in dict.fromkeys(files):
             try:
                 stat = named.stat()
             except OSError:  # the workers report what they cannot read, naming the key
