@@ -212,7 +212,9 @@ def _ray_arrays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
 def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
     """(n, 3) float64 origins and unit directions (trimesh's ``unitize``)."""
     origins, directions = _ray_arrays(ray_origins, ray_directions)
-    return origins, util.unitize(directions)
+    # A non-finite direction is refused by the BVH, naming its row; unitize would only warn.
+    with np.errstate(invalid="ignore", over="ignore"):
+        return origins, util.unitize(directions)
 
 
 def _plane_distance(scene, origins, directions, rays, tris):
