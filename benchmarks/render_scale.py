@@ -48,10 +48,13 @@ class RecordingGeometry:
             self.log.append(("intersect", origins, directions, tfar, coherent))
         return self.geometry.intersect_compact(origins, directions, tnear, tfar, coherent)
 
-    def occluded(self, origins, directions, tnear=0.0, tfar=np.inf):
+    def occluded_toward(self, points, rows, target):
+        # The shadow segments as the rays they are: from each point to the target, t in [0, 1].
+        origins = np.take(points, rows, axis=1)
+        directions = np.asarray(target, np.float32)[:, None] - origins
         with self._lock:
-            self.log.append(("occluded", origins, directions, tfar, False))
-        return self.geometry.occluded(origins, directions, tnear, tfar)
+            self.log.append(("occluded", origins, directions, 1.0, False))
+        return self.geometry.occluded_toward(points, rows, target)
 
 
 def record_queries(renderer: Renderer, image: dict) -> list:

@@ -432,6 +432,13 @@ class SceneGeometry:
         return self.bvh.occluded(origins.T, directions.T, tnear, tfar, plane_y=self.labels.plane_y)
 
 
+    def occluded_toward(
+        self, points: np.ndarray, rows: np.ndarray, target: np.ndarray
+    ) -> np.ndarray:
+        """(k,) bool: whether any surface, floor included, lies between each of the ``points``
+        (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``BVH.occluded_toward``."""
+        return self.bvh.occluded_toward(points, rows, target, plane_y=self.labels.plane_y)
+
 @dataclass
 class RaySurfaces:
     """What each of n rays hit (``SceneGeometry.intersect``), one ray per column: ``hit`` (n,)

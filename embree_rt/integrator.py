@@ -387,37 +387,17 @@ class Renderer:
         n = points.shape[1]
         if n == 0 or len(self.light_positions) == 0:
             return
-        # Shadow rays only where the light is in front of the surface. Each runs from the point
-        # to the light along the unnormalised offset, so the light sits at t = 1. All lights'
-        # rays go to Embree as one batch, light-major so each light's rays stay coherent.
-        per_light = []
-        for position in self.light_positions:
-            to_light = position[:, None] - points
-            per_light.append((np.flatnonzero(shading.dot(to_light, normal) > 0), to_light))
-        count = sum(len(facing) for facing, _ in per_light)
-        shadow_origins = np.empty((3, count), np.float32)
-        shadow_directions = np.empty((3, count), np.float32)
-        first = 0
-        for position, (facing, _) in zip(self.light_positions, per_light, strict=True):
-            stop = first + len(facing)
-            for axis in range(3):
-                # (mode="clip": the default mode copies through a buffer when given ``out``.)
-                origins = np.take(
-                    points[axis], facing, out=shadow_origins[axis, first:stop], mode="clip"
-                )
-                np.subtract(position[axis], origins, out=shadow_directions[axis, first:stop])
-            first = stop
-        blocked = self.geometry.occluded(shadow_origins, shadow_directions, 0.0, 1.0)
-        work.rays["shadow"] += count
-
+        # Shadow rays only where the light is in front of the surface: the segment from the
+        # point to the light, which the Embree layer builds from the points' columns.
         diffuse = np.take(self.diffuse_share, material)
         specular = np.take(self.materials.specular, material)
         shininess = np.take(self.materials.shininess, material)
-        first = 0
-        for light, (facing, to_light) in enumerate(per_light):
-            visible = ~blocked[first : first + len(facing)]
+        for light, position in enumerate(self.light_positions):
+            to_light = position[:, None] - points
+            facing = np.flatnonzero(shading.dot(to_light, normal) > 0)
+            visible = ~self.geometry.occluded_toward(points, facing, position)
+            work.rays["shadow"] += len(facing)
             lit = facing[visible]
-            first += len(facing)
             if len(lit) == 0:
                 continue
             if len(lit) > n // 2:

@@ -210,6 +210,60 @@ def test_occluded_agrees_with_reference_and_intersect(parts, kinds):
     assert np.array_equal(scalar_blocked[sure], np.isfinite(scalar_hits.t)[sure])
 
 
+@pytest.mark.parametrize("lanes", [1, 8])
+@pytest.mark.parametrize("threads", [1, 2])
+def test_occluded_toward_answers_what_occluded_answers_on_the_same_segments(parts, lanes,
+                                                                           threads):  # fmt: skip
+    """Segments from points (picked by index, with repeats) to one target, the ground plane
+    y = -4 included, against ``occluded`` on the rays spelled out (origin p, direction
+    target - p, t in [0, 1]) and against the float64 reference. One ray a query: bitwise the
+    same answers (the same float32 rays through the same single-ray kernel). Packets: the
+    kernel drops plane-blocked segments from its packets, so packets are cut elsewhere and
+    only rays float64 cannot decide may go either way."""
+    rng = np.random.default_rng(40)
+    points = float32_exact(rng.uniform(-8.0, 8.0, (3, 4000)))
+    rows = rng.integers(0, points.shape[1], 3000)
+    target = np.float32([4.0, 9.0, -3.0])
+    bvh, ids = parts.build(threads=threads)
+    with bvh:
+        bvh.lanes = lanes
+        blocked = bvh.occluded_toward(points, rows, target, plane_y=-4.0)
+        origins = points[:, rows].T.copy()
+        directions = (target[:, None] - points[:, rows]).T.copy()
+        expected = bvh.occluded(origins, directions, 0.0, 1.0, plane_y=-4.0)
+        hits = bvh.intersect(origins, directions, 0.0, 1.0)
+    below = origins[:, 1] < -4.0  # these cross the plane on their way up to the target
+    assert 0.1 < below.mean() < 0.3 and blocked[below].all()
+    assert 0.2 < blocked[~below].mean() < 0.8  # both answers are exercised
+    if lanes == 1:
+        assert np.array_equal(blocked, expected)
+    ref, *_ = parts.reference(KINDS, ids, origins, directions, 0.0, 1.0)
+    sure = ~(ref.ambiguous | our_triangle_edge_hits(hits, ids))
+    assert sure.mean() > 0.99
+    assert np.array_equal(blocked[sure], (ref.hit | below)[sure])
+    assert np.array_equal(blocked[sure], expected[sure])
+
+
+def test_occluded_toward_refuses_bad_points_and_rows(parts):
+    bvh, _ = parts.build(("spheres",))
+    points = np.zeros((3, 5), np.float32)
+    with bvh:
+        assert bvh.occluded_toward(points, np.zeros(0, np.int64), [0, 1, 0]).shape == (0,)
+        with pytest.raises(ValueError, match=r"rows: row 1 is 5, outside \[0, 5\)"):
+            bvh.occluded_toward(points, [0, 5], [0, 1, 0])
+        with pytest.raises(ValueError, match="rows: row 0 is -1"):
+            bvh.occluded_toward(points, [-1], [0, 1, 0])
+        with pytest.raises(ValueError, match="rows: expected"):
+            bvh.occluded_toward(points, [0.5], [0, 1, 0])
+        with pytest.raises(ValueError, match=r"points: expected shape \(3, n\)"):
+            bvh.occluded_toward(points.T, [0], [0, 1, 0])
+        points[1, 3] = np.nan
+        with pytest.raises(ValueError, match="points: row 3 is not finite"):
+            bvh.occluded_toward(points, [0], [0, 1, 0])
+        with pytest.raises(ValueError, match="target: row 0 is not finite"):
+            bvh.occluded_toward(points[:, :3], [0], [0, np.inf, 0])
+
+
 def test_empty_scene_misses_everything():
     origins, directions = rays(34, 100)
     with BVH() as bvh:

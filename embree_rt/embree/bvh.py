@@ -18,12 +18,14 @@ from embree_rt.embree import (
     multihit,
     records,
     screened_nearest,
+    segments,
     spatial_order,
     sphere_buffers,
     user_spheres,
 )
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
+    as_indices,
     as_points,
     as_positive,
     as_ray_bounds,
@@ -586,6 +588,41 @@ class BVH:
         if plane_y is not None:
             records.block_by_plane(origins.T, directions.T, tnear, tfar, np.float32(plane_y),
                                    blocked)  # fmt: skip
+        return blocked
+
+    def occluded_toward(
+        self,
+        points: np.ndarray,
+        rows: np.ndarray,
+        target: np.ndarray,
+        plane_y: float | None = None,
+    ) -> np.ndarray:
+        """(k,) bool: whether anything (with ``plane_y``, the ground plane y = plane_y too) lies
+        on the segment from each point ``points[:, rows[i]]`` to ``target``, the ray
+        ``p + t (target - p)`` with t in [0, 1]: the answers ``occluded`` gives for those rays,
+        which are built inside the kernel (``segments``). ``points`` (3, n) float, ``rows``
+        (k,) int indices into its columns, ``target`` (3,)."""
+        if not self._committed:
+            raise RuntimeError("commit() the BVH before querying it")
+        points = np.asarray(points)
+        if points.ndim != 2 or points.shape[0] != 3:
+            raise ValueError(f"points: expected shape (3, n), got {points.shape}")
+        points = np.ascontiguousarray(as_points(points.T, "points").T)
+        rows = as_indices(rows, "rows", points.shape[1])
+        target = as_points(np.reshape(target, (1, 3)), "target")[0].copy()
+        _prepare_kernels()
+        blocked = np.zeros(len(rows), bool)
+        if len(rows):
+            has_plane = plane_y is not None
+            arguments = (self._live_scene(), kernels.query_arguments(False), self.lanes, points,
+                         rows, target, has_plane, np.float32(plane_y if has_plane else 0.0),
+                         blocked)  # fmt: skip
+            if self.threads == 1:
+                segments.occluded_toward_serial(*arguments)
+            else:
+                with parallel_region:
+                    numba.set_num_threads(self.threads)
+                    segments.occluded_toward(*arguments)
         return blocked
 
     def all_hits(

@@ -43,6 +43,18 @@ def as_positive(values: np.ndarray, name: str, count: int) -> np.ndarray:
     return array
 
 
+def as_indices(values: np.ndarray, name: str, count: int) -> np.ndarray:
+    """``values`` as a (k,) int64 array of indices in ``[0, count)``."""
+    array = np.asarray(values)
+    if array.ndim != 1 or (len(array) and array.dtype.kind not in "iu"):
+        raise ValueError(f"{name}: expected (k,) integer indices, got {array.shape} {array.dtype}")
+    array = array.astype(np.int64, copy=False)
+    if len(array) and (array.min() < 0 or array.max() >= count):
+        row = _first_bad_row((array < 0) | (array >= count))
+        raise ValueError(f"{name}: row {row} is {array[row]}, outside [0, {count})")
+    return array
+
+
 def as_triangle_indices(values: np.ndarray, name: str, vertex_count: int) -> np.ndarray:
     """``values`` as a (k, 3) uint32 array of vertex indices in ``[0, vertex_count)``."""
     array = np.asarray(values)
