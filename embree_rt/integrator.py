@@ -135,8 +135,8 @@ class Renderer:
         self.ambient_share = (table.ambient * local).astype(np.float32)
         self.diffuse_share = (table.diffuse * local).astype(np.float32)
         self.reflect_share = (table.reflectivity * (1.0 - table.transparency)).astype(np.float32)
-        # 1 on metals, 0 elsewhere; None when no material is metallic (nothing to tint).
-        self.metal_share = table.metallic.astype(np.float32) if table.metallic.any() else None
+        # Which materials are metals; None when none is (nothing to tint).
+        self.metallic = table.metallic if table.metallic.any() else None
         lights = scene.lights
         self.light_positions = np.array([lt.position for lt in lights], np.float32).reshape(-1, 3)
         self.light_rgb = np.array(
@@ -361,10 +361,12 @@ class Renderer:
         still show, started just outside the surface. Most hits reflect a little, so the
         weights are formed on every row and only the rows kept are gathered."""
         weight = rays.weight * reflect_share
-        if self.metal_share is not None:
-            # Metals tint what they reflect: a factor of color on metals, 1 elsewhere.
-            metal = np.take(self.metal_share, material)
-            weight *= (color - np.float32(1.0)) * metal + np.float32(1.0)
+        if self.metallic is not None:
+            # Metals tint what they reflect by their colour; the rest reflect untinted. (Metals
+            # are few: three row passes over them beat a tint factor formed on every row.)
+            metals = np.flatnonzero(np.take(self.metallic, material))
+            for row in range(3):
+                weight[row, metals] *= color[row, metals]
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
         if len(keep) == 0:
             return NO_RAYS
