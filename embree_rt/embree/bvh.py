@@ -424,6 +424,16 @@ class BVH:
 
     # -- queries ------------------------------------------------------------------------------
 
+    def _run_query(self, serial, parallel, arguments: tuple) -> None:
+        """Run a query kernel: ``serial`` in the calling thread on one thread (several Python
+        threads may do so at once), else ``parallel`` on numba's threads."""
+        if self.threads == 1:
+            serial(*arguments)
+        else:
+            with parallel_region:
+                numba.set_num_threads(self.threads)
+                parallel(*arguments)
+
     def _query_inputs(self, origins, directions, tnear, tfar):
         if not self._committed:
             raise RuntimeError("commit() the BVH before querying it")
@@ -454,12 +464,7 @@ class BVH:
                 directions, tnear, tfar, hits.t, hits.normal, hits.u, hits.v, hits.prim_id,
                 hits.geom_id, hits.inst_id, hits.inst_prim_id if copies else None,
             )  # fmt: skip
-            if self.threads == 1:
-                kernels.intersect_serial(*arguments)
-            else:
-                with parallel_region:
-                    numba.set_num_threads(self.threads)
-                    kernels.intersect(*arguments)
+            self._run_query(kernels.intersect_serial, kernels.intersect, arguments)
         return hits
 
     def intersect(
@@ -579,12 +584,7 @@ class BVH:
         if len(origins):
             arguments = (self._live_scene(), kernels.query_arguments(coherent), self.lanes,
                          origins, directions, tnear, tfar, blocked)  # fmt: skip
-            if self.threads == 1:
-                kernels.occluded_serial(*arguments)
-            else:
-                with parallel_region:
-                    numba.set_num_threads(self.threads)
-                    kernels.occluded(*arguments)
+            self._run_query(kernels.occluded_serial, kernels.occluded, arguments)
         if plane_y is not None:
             records.block_by_plane(origins.T, directions.T, tnear, tfar, np.float32(plane_y),
                                    blocked)  # fmt: skip
@@ -617,12 +617,7 @@ class BVH:
             arguments = (self._live_scene(), kernels.query_arguments(False), self.lanes, points,
                          rows, target, has_plane, np.float32(plane_y if has_plane else 0.0),
                          blocked)  # fmt: skip
-            if self.threads == 1:
-                segments.occluded_toward_serial(*arguments)
-            else:
-                with parallel_region:
-                    numba.set_num_threads(self.threads)
-                    segments.occluded_toward(*arguments)
+            self._run_query(segments.occluded_toward_serial, segments.occluded_toward, arguments)
         return blocked
 
     def all_hits(
