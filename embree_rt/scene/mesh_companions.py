@@ -4,8 +4,8 @@ An OBJ names its material library on its first ``mtllib`` line, and that library
 textures on its ``map_Kd`` lines; a glTF (``.gltf``, or the JSON chunk of a ``.glb``) names
 external buffers and images by ``uri``. embree_rt loads meshes through trimesh, so these follow
 trimesh's own rules: names are taken as written (the rest of the line, stripped), relative to
-the mesh's directory, and tried as given, without a leading slash, then as a bare file name,
-never outside that directory. The other formats embree_rt reads are self-contained.
+the mesh's directory, and tried as given, without a leading slash, then as a bare file name.
+The other formats embree_rt reads are self-contained.
 
 The cluster's scene key stamps these files (``embree_rt.distributed``): a texture repainted
 under a running cluster is a new scene.
@@ -24,40 +24,35 @@ _GLB_JSON_CHUNK = 0x4E4F534A
 
 
 def companion_files(mesh: Path) -> list[Path]:
-    """The files ``mesh`` names that trimesh would read with it, each once, in the order it
-    names them (a library before its textures). A name that resolves to no file is listed at
-    the path it would be read from, so that creating the file later is noticed too; a mesh
-    or library that cannot be read lists nothing (loading it reports the problem)."""
+    """The files ``mesh`` names that trimesh may read with it, each once, in the order it
+    names them (a library before its textures), every path a name may be read from included:
+    one that does not exist is listed too, so that creating it later is noticed. A mesh that
+    cannot be read lists nothing (loading it reports the problem)."""
     suffix = mesh.suffix.lower()
     try:
         if suffix == ".obj":
             found = _obj_companions(mesh)
         elif suffix in (".gltf", ".glb"):
             tree = json.loads(mesh.read_bytes()) if suffix == ".gltf" else _glb_json(mesh)
-            found = [_resolve(mesh.parent, uri) for uri in _gltf_uris(tree)]
+            found = [path for uri in _gltf_uris(tree) for path in _candidates(mesh.parent, uri)]
         else:
             return []
     except (OSError, ValueError, UnicodeDecodeError):
         return []
-    return list(dict.fromkeys(path for path in found if path is not None))
+    return list(dict.fromkeys(found))
 
 
 def _obj_companions(mesh: Path) -> list[Path]:
     name = _first_line_after(mesh, b"mtllib")
     if name is None:
         return []
-    library = _resolve(mesh.parent, name)
-    if library is None:
-        return []
-    found = [library]
-    if library.is_file():
+    found = _candidates(mesh.parent, name)
+    for library in [path for path in found if path.is_file()]:
         for line in library.read_text(encoding="utf-8", errors="replace").splitlines():
             words = line.strip().split()
             if len(words) > 1 and words[0].lower() == "map_kd":
                 at = line.lower().index("map_kd") + len("map_kd")
-                texture = _resolve(mesh.parent, line[at:].strip())
-                if texture is not None:
-                    found.append(texture)
+                found += _candidates(mesh.parent, line[at:].strip())
     return found
 
 
@@ -101,15 +96,9 @@ def _gltf_uris(tree: object) -> list[str]:
     return uris
 
 
-def _resolve(root: Path, name: str) -> Path | None:
-    """Where trimesh's file resolver reads ``name`` from under ``root``: the first candidate
-    that exists, else the first that stays inside ``root``; None when none does."""
-    root = root.resolve()
-    inside = []
-    for candidate in (name.strip(), name.strip().lstrip("/"), os.path.split(name)[-1]):
-        path = (root / candidate).resolve()
-        if path.is_relative_to(root):
-            if path.is_file():
-                return path
-            inside.append(path)
-    return inside[0] if inside else None
+def _candidates(root: Path, name: str) -> list[Path]:
+    """Every path trimesh's file resolver may read ``name`` from, relative to ``root``: as
+    written, without a leading slash, and as a bare file name (trimesh 4's releases differ in
+    which they try and whether a path may leave ``root``, so all are stamped)."""
+    names = (name.strip(), name.strip().lstrip("/"), os.path.split(name.strip())[-1])
+    return list(dict.fromkeys((root / candidate).resolve() for candidate in names if candidate))
