@@ -418,26 +418,13 @@ class SceneGeometry:
         world = _unit(world)
         return np.where(smooth, world, face_normal)
 
-    def occluded(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-    ) -> np.ndarray:
-        """(n,) bool: whether any surface, floor included, lies on each ray within the window;
-        ``origins``, ``directions`` (3, n) float32."""
-        origins = np.asarray(origins, np.float32)
-        directions = np.asarray(directions, np.float32)
-        return self.bvh.occluded(origins.T, directions.T, tnear, tfar, plane_y=self.labels.plane_y)
-
-
     def occluded_toward(
         self, points: np.ndarray, rows: np.ndarray, target: np.ndarray
     ) -> np.ndarray:
         """(k,) bool: whether any surface, floor included, lies between each of the ``points``
         (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``BVH.occluded_toward``."""
         return self.bvh.occluded_toward(points, rows, target, plane_y=self.labels.plane_y)
+
 
 @dataclass
 class RaySurfaces:

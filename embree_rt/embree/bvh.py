@@ -434,13 +434,17 @@ class BVH:
                 numba.set_num_threads(self.threads)
                 parallel(*arguments)
 
-    def _query_inputs(self, origins, directions, tnear, tfar):
+    def _ready_to_query(self) -> None:
+        """Refuse a query before ``commit``; make Embree's functions known to the kernels."""
         if not self._committed:
             raise RuntimeError("commit() the BVH before querying it")
+        _prepare_kernels()
+
+    def _query_inputs(self, origins, directions, tnear, tfar):
+        self._ready_to_query()
         origins = as_points(origins, "origins")
         directions = as_points(directions, "directions", len(origins))
         tnear, tfar = as_ray_bounds(tnear, tfar, len(origins))
-        _prepare_kernels()
         return origins, directions, tnear, tfar
 
     def _raw_hits(self, origins, directions, tnear, tfar, coherent=False) -> Hits:
@@ -602,15 +606,13 @@ class BVH:
         ``p + t (target - p)`` with t in [0, 1]: the answers ``occluded`` gives for those rays,
         which are built inside the kernel (``segments``). ``points`` (3, n) float, ``rows``
         (k,) int indices into its columns, ``target`` (3,)."""
-        if not self._committed:
-            raise RuntimeError("commit() the BVH before querying it")
+        self._ready_to_query()
         points = np.asarray(points)
         if points.ndim != 2 or points.shape[0] != 3:
             raise ValueError(f"points: expected shape (3, n), got {points.shape}")
         points = np.ascontiguousarray(as_points(points.T, "points").T)
         rows = as_indices(rows, "rows", points.shape[1])
         target = as_points(np.reshape(target, (1, 3)), "target")[0].copy()
-        _prepare_kernels()
         blocked = np.zeros(len(rows), bool)
         if len(rows):
             has_plane = plane_y is not None
@@ -656,9 +658,7 @@ class BVH:
         doubt in the same compiled pass: ``(prim (n,) int32, suspect (n,) bool)``; ``screen``
         is ``screened_nearest.screened_nearest``'s keywords after ``directions``. A BVH of one
         triangle geometry, no instances."""
-        if not self._committed:
-            raise RuntimeError("commit() the BVH before querying it")
-        _prepare_kernels()
+        self._ready_to_query()
         with parallel_region:
             prim, suspect, finite = screened_nearest.screened_nearest(
                 self._live_scene(), self.lanes, self.threads, origins, directions, **screen
