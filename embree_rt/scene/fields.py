@@ -81,7 +81,7 @@ class Table:
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, f"expected an integer, got {_show(value)}")
         if low is not None and value < low:
-            raise self.error(name, f"must be >= {low}, got {value}")
+            raise self.error(name, f"must be >= {low}, got {_show(value)}")
         return value
 
     def boolean(self, name: str, default: bool) -> bool:
@@ -100,6 +100,13 @@ class Table:
             raise self.error(name, f"expected a non-empty string, got {_show(value)}")
         return value
 
+    def file_name(self, name: str) -> str:
+        """A required file name: a non-empty string the operating system can take (no NUL)."""
+        value = self.string(name, required=True)
+        if "\0" in value:
+            raise self.error(name, f"a file name cannot hold a NUL character, got {_show(value)}")
+        return value
+
     def vector(self, name: str, default=None, *, required: bool = False, non_negative=False):
         """Three finite numbers as a tuple of floats."""
         value = self._value(name, required)
@@ -111,11 +118,10 @@ class Table:
         for item in value:
             if isinstance(item, bool) or not isinstance(item, int | float):
                 raise self.error(name, f"expected numbers, got {_show(item)}")
-            if not math.isfinite(item):
-                raise self.error(name, f"must be finite, got {item}")
+            item = _finite_float(self, name, item)
             if non_negative and item < 0:
                 raise self.error(name, f"must not be negative, got {item}")
-            numbers.append(float(item))
+            numbers.append(item)
         return tuple(numbers)
 
     def pair(
@@ -158,14 +164,23 @@ class Table:
 def check_number(table, name, value, low, high, low_open, high_open) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise table.error(name, f"expected a number, got {_show(value)}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise table.error(name, f"must be finite, got {value}")
+    value = _finite_float(table, name, value)
     if low is not None and (value <= low if low_open else value < low):
         raise table.error(name, f"must be {'>' if low_open else '>='} {low:g}, got {value:g}")
     if high is not None and (value >= high if high_open else value > high):
         raise table.error(name, f"must be {'<' if high_open else '<='} {high:g}, got {value:g}")
     return value
+
+
+def _finite_float(table: Table, name: str, value: int | float) -> float:
+    """``value`` as a finite float; an int beyond float range is an error, not OverflowError."""
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise table.error(name, f"must be finite, got {_show(value)}")
+    return number
 
 
 def _kind(value: object) -> str:

@@ -59,18 +59,45 @@ def read_document(path: Path) -> dict:
     except (OSError, UnicodeDecodeError) as error:
         raise SceneError(path, "(file)", f"cannot read: {error}") from None
     try:
-        if suffix == ".toml":
-            return tomllib.loads(text)  # its messages say "(at line L, column C)"
-        document = json.loads(text)
+        # tomllib's messages say "(at line L, column C)"
+        document = tomllib.loads(text) if suffix == ".toml" else json.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise SceneError(path, "(syntax)", f"malformed TOML: {error}") from None
     except json.JSONDecodeError as error:
         raise SceneError(
             path, "(syntax)", f"malformed JSON at line {error.lineno}: {error.msg}"
         ) from None
+    except RecursionError:  # the parsers recurse once a level
+        raise SceneError(path, "(syntax)", "tables or lists nested too deeply") from None
+    except ValueError as error:  # Python's limit on the digits of an int literal, above all
+        limit = sys.get_int_max_str_digits()
+        problem = f"an integer of more than {limit} digits" if "digits" in str(error) else error
+        raise SceneError(path, "(syntax)", f"malformed {suffix[1:].upper()}: {problem}") from None
     if not isinstance(document, dict):
         raise SceneError(path, "(top level)", "expected a JSON object")
+    if (key := _too_deep(document, MAX_NESTING)) is not None:
+        raise SceneError(path, key, f"nested more than {MAX_NESTING} levels deep")
     return document
+
+
+# No key of the schema is more than 5 levels down (instances[0].transform[3][2]); the limit keeps
+# every later step (reading, repr in messages, NumPy) clear of Python's recursion limit.
+MAX_NESTING = 16
+
+
+def _too_deep(document: dict, limit: int) -> str | None:
+    """The key of the first value of ``document`` nested more than ``limit`` tables or lists
+    deep, or None; iterative, so any depth the parser returned is measured safely."""
+    stack: list[tuple[str, object, int]] = [("", document, 0)]
+    while stack:
+        key, value, depth = stack.pop()
+        if depth > limit:
+            return key or "(top level)"
+        if isinstance(value, dict):
+            stack.extend((f"{key}.{k}" if key else str(k), v, depth + 1) for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend((f"{key}[{i}]", v, depth + 1) for i, v in enumerate(value))
+    return None
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -326,7 +353,7 @@ class SceneReader:
         return center, radius, material
 
     def _file(self, table: Table) -> Path:
-        return (self.base / table.string("file", required=True)).resolve()
+        return (self.base / table.file_name("file")).resolve()
 
     def _sphere_array(self, table: Table) -> _SphereArrayEntry:
         entry = _SphereArrayEntry(table.key("file"), self._file(table), self._material_name(table))
@@ -348,9 +375,9 @@ class SceneReader:
     def _instances(self, table: Table) -> _InstancesEntry:
         entry = _InstancesEntry(
             key=table.key("mesh"),
-            path=(self.base / table.string("mesh", required=True)).resolve(),
+            path=(self.base / table.file_name("mesh")).resolve(),
             placements_key=table.key("transforms"),
-            placements_path=(self.base / table.string("transforms", required=True)).resolve(),
+            placements_path=(self.base / table.file_name("transforms")).resolve(),
             material=self._material_name(table, None),
             smooth=table.boolean("smooth", True),
         )
