@@ -12,9 +12,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from embree_rt import load_scene
+from embree_rt import Scene, load_scene, render
 from embree_rt.scene import SceneError
 
 SPHERE = "[[spheres]]\ncenter = [0, 1, 0]\nradius = 1\n"
@@ -50,14 +51,14 @@ PARSER_LIMITS = {
     ),
     "400-digit radius": (
         "s.toml", SPHERE.replace("radius = 1", f"radius = {DIGITS_400}"), "spheres[0].radius",
-        "finite",
+        "within ±1e+10",
     ),
     "400-digit centre": (
         "s.toml", SPHERE.replace("[0, 1, 0]", f"[{DIGITS_400}, 1, 0]"), "spheres[0].center",
-        "finite",
+        "within ±1e+10",
     ),
     "400-digit negative fov": ("s.json", json.dumps({"camera": {"fov": -(10**400)}}),
-                               "camera.fov", "finite"),
+                               "camera.fov", "within"),
     "NUL in a mesh file name": (
         "s.toml", '[[meshes]]\nfile = "a\\u0000b.obj"', "meshes[0].file", "NUL",
     ),
@@ -102,3 +103,135 @@ def test_the_command_says_one_line_and_exits_2_for_a_parser_limit(tmp_path: Path
     assert result.returncode == 2, result.stderr
     assert result.stderr.count("\n") == 1 and "deep.toml: (syntax):" in result.stderr
     assert not (tmp_path / "out.png").exists()
+
+
+# -- numbers float64 holds and float32 does not ----------------------------------------------------
+
+LIGHT = "[[lights]]\nposition = [0, 5, 0]\n"
+# case: (scene text, support file to write (name, kind, value), key, words)
+BEYOND_FLOAT32 = {
+    "centre 1e39": (SPHERE.replace("[0, 1, 0]", "[1e39, 1, 0]"), None, "spheres[0].center",
+                    "within ±1e+10"),
+    "light at 1e39": ("[[lights]]\nposition = [0, 1e39, 0]\n", None, "lights[0].position",
+                      "within"),
+    "light intensity 1e39": (LIGHT + "intensity = 1e39\n", None, "lights[0].intensity", "within"),
+    "light intensity 2e6": (LIGHT + "intensity = 2e6\n", None, "lights[0].intensity", "<= 1e+06"),
+    "light colour 1e39": (LIGHT + "color = [1, 1e39, 1]\n", None, "lights[0].color", "within"),
+    "light colour 1e7": (LIGHT + "color = [1, 1e7, 1]\n", None, "lights[0].color", "<= 1e+06"),
+    "material colour 1e39": ("[materials.hot]\ncolor = [1e39, 0, 0]\n", None,
+                             "materials.hot.color", "within"),
+    "material colour 2e6": ("[materials.hot]\ncolor = [0, 2e6, 0]\n", None,
+                            "materials.hot.color", "<= 1e+06"),
+    "sky 1e39": ("[background]\nzenith = [1e39, 0, 0]\n", None, "background.zenith", "within"),
+    "ior 1e39": ("[materials.hot]\nior = 1e39\n", None, "materials.hot.ior", "within"),
+    "radius 1e-320": (SPHERE.replace("radius = 1", "radius = 1e-320"), None, "spheres[0].radius",
+                      ">= 1e-18"),
+    "floor square 1e-300": ("[floor]\nsize = 1e-300\n", None, "floor.size", ">= 1e-18"),
+    "npz centre 1e308": ('[[sphere_arrays]]\nfile = "a.npz"\n', ("a.npz", "centers", 1e308),
+                         "sphere_arrays[0].file", "centers row 1 must be finite and within"),
+    "npz radius 1e-320": ('[[sphere_arrays]]\nfile = "a.npz"\n', ("a.npz", "radii", 1e-320),
+                          "sphere_arrays[0].file", "radii row 1"),
+    "obj vertex 1e39": ('[[meshes]]\nfile = "far.obj"\n', ("far.obj", "vertex", 1e39),
+                        "meshes[0].file", "beyond the ±1e+10"),
+    "mesh scaled past the limit": ('[[meshes]]\nfile = "far.obj"\nscale = 1e9\n',
+                                   ("far.obj", "vertex", 100.0), "meshes[0].file", "beyond"),
+    "instances placed at 1e12": ('[[instances]]\nmesh = "far.obj"\ntransforms = "p.npz"\n',
+                                 ("p.npz", "positions", 1e12), "instances[0].transforms",
+                                 "row 1 places the mesh"),
+}
+
+
+def _write_support(folder: Path, name: str, kind: str, value: float) -> None:
+    if kind in ("centers", "radii"):
+        arrays = {"centers": np.zeros((3, 3)), "radii": np.ones(3)}
+        arrays[kind][1] = value
+        np.savez(folder / name, **arrays)
+    elif kind == "vertex":
+        (folder / name).write_text(f"v 0 0 0\nv {value!r} 0 0\nv 0 1 0\nf 1 2 3\n")
+    else:
+        (folder / "far.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+        np.savez(folder / name, positions=np.array([[0.0, 0, 0], [value, 0, 0]]))
+
+
+@pytest.mark.parametrize("case", sorted(BEYOND_FLOAT32))
+def test_numbers_beyond_float32_are_refused_where_they_enter(tmp_path: Path, case: str) -> None:
+    text, support, key, words = BEYOND_FLOAT32[case]
+    if support is not None:
+        _write_support(tmp_path, *support)
+    error = _load_error(tmp_path / "s.toml", text)
+    assert error.key == key
+    assert words in error.problem
+
+
+def test_the_python_api_holds_spheres_and_meshes_to_the_same_limits() -> None:
+    import trimesh
+
+    scene = Scene()
+    with pytest.raises(ValueError, match=r"centers row 0 must be finite and within"):
+        scene.add_sphere((1e39, 0.0, 0.0), 1.0)
+    with pytest.raises(ValueError, match=r"radii row 1"):
+        scene.add_spheres(np.zeros((2, 3)), np.array([1.0, 1e-320]), "matte")
+    assert len(scene.sphere_radii) == 0
+    triangle = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    with pytest.raises(ValueError, match=r"transform: places the mesh 2e\+11"):
+        scene.add_mesh(triangle, transform=np.diag([2e11, 2e11, 2e11, 1.0]))
+    placements = np.stack([np.eye(4)] * 3)
+    placements[2, 0, 3] = -3e10
+    with pytest.raises(ValueError, match=r"transforms: row 2: places the mesh 3e\+10"):
+        scene.add_instances(triangle, placements)
+    assert scene.meshes == [] and scene.instances == []
+
+
+def test_a_scene_at_every_limit_renders_without_nan_or_inf(tmp_path: Path) -> None:
+    """Colours and intensities at 1e6, lights and spheres at 1e10, a 1e-18 radius and floor
+    square, an ior and shininess of 1e10, eight bounces: finite pixels, and bright ones."""
+    (tmp_path / "limits.toml").write_text(LIMITS_SCENE)
+    image = render(load_scene(tmp_path / "limits.toml"))
+    assert np.isfinite(image).all()
+    assert image.max() > 1e12  # the 1e6 colours did reach the image
+
+
+LIMITS_SCENE = """
+[render]
+width = 24
+height = 16
+spp = 2
+max_depth = 8
+[camera]
+position = [0, 2, 8]
+look_at = [0, 1, 0]
+[background]
+horizon = [1e6, 1e6, 1e6]
+zenith = [1e6, 0, 1e6]
+[materials.hot]
+color = [1e6, 1e6, 1e6]
+shininess = 1e10
+ior = 1e10
+transparency = 0.5
+reflectivity = 0.5
+specular = 1
+diffuse = 1
+[floor]
+color_a = [1e6, 1e6, 1e6]
+size = 1e-18
+[[lights]]
+position = [0, 1e10, 0]
+intensity = 1e6
+color = [1e6, 1e6, 1e6]
+[[lights]]
+position = [1e10, -1e10, 1e10]
+intensity = 1e6
+color = [1e6, 1e6, 1e6]
+[[spheres]]
+center = [0, 1, 0]
+radius = 1
+material = "hot"
+[[spheres]]
+center = [1e10, 1e10, -1e10]
+radius = 1e10
+material = "hot"
+[[spheres]]
+center = [1, 1, 1]
+radius = 1e-18
+material = "mirror"
+"""

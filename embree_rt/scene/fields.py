@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from embree_rt.scene.errors import SceneError, unknown_key_message
+from embree_rt.scene.limits import COORDINATE_LIMIT, RADIANCE_LIMIT
 
 _ABSENT = object()
 
@@ -107,8 +108,9 @@ class Table:
             raise self.error(name, f"a file name cannot hold a NUL character, got {_show(value)}")
         return value
 
-    def vector(self, name: str, default=None, *, required: bool = False, non_negative=False):
-        """Three finite numbers as a tuple of floats."""
+    def vector(self, name: str, default=None, *, required: bool = False, non_negative=False,
+               high: float | None = None):  # fmt: skip
+        """Three finite numbers as a tuple of floats, each at most ``high`` if given."""
         value = self._value(name, required)
         if value is _ABSENT:
             return default
@@ -121,6 +123,8 @@ class Table:
             item = _finite_float(self, name, item)
             if non_negative and item < 0:
                 raise self.error(name, f"must not be negative, got {item}")
+            if high is not None and item > high:
+                raise self.error(name, f"must be <= {high:g} a component, got {item:g}")
             numbers.append(item)
         return tuple(numbers)
 
@@ -139,7 +143,8 @@ class Table:
         return low_value, high_value
 
     def color(self, name: str, default=None):
-        return self.vector(name, default, non_negative=True)
+        """Three numbers from 0 to ``RADIANCE_LIMIT``."""
+        return self.vector(name, default, non_negative=True, high=RADIANCE_LIMIT)
 
     def table(self, name: str) -> Table | None:
         """The sub-table at ``name``, or None when absent."""
@@ -173,14 +178,15 @@ def check_number(table, name, value, low, high, low_open, high_open) -> float:
 
 
 def _finite_float(table: Table, name: str, value: int | float) -> float:
-    """``value`` as a finite float; an int beyond float range is an error, not OverflowError."""
-    try:
-        number = float(value)
-    except OverflowError:
-        number = math.inf
-    if not math.isfinite(number):
-        raise table.error(name, f"must be finite, got {_show(value)}")
-    return number
+    """``value`` as a float within ``COORDINATE_LIMIT`` (every number of a scene file is: see
+    ``scene.limits``); an int beyond float range is an error, not OverflowError."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise table.error(name, f"must be finite, got {value}")
+    if not -COORDINATE_LIMIT <= value <= COORDINATE_LIMIT:  # exact for an int of any size
+        raise table.error(
+            name, f"must lie within ±{COORDINATE_LIMIT:g} (float32's reach), got {_show(value)}"
+        )
+    return float(value)
 
 
 def _kind(value: object) -> str:

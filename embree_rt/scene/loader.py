@@ -21,6 +21,7 @@ from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.archives import read_archive
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
+from embree_rt.scene.limits import MIN_LENGTH, RADIANCE_LIMIT, placed_mesh_problem, spheres_problem
 from embree_rt.scene.model import (
     Background,
     Camera,
@@ -197,6 +198,12 @@ class SceneReader:
             for _, node_transform in parts[entry.path]:
                 if (problem := affine_problem(node_transform)) is not None:
                     raise SceneError(self.path, entry.key, f"{entry.path}: a node {problem}")
+        for entry, (transforms, _) in zip(self.instances, placements, strict=True):
+            for mesh, node_transform in parts[entry.path]:
+                if (problem := placed_mesh_problem(mesh.vertices, transforms @ node_transform)):
+                    row, text = problem
+                    raise SceneError(self.path, entry.placements_key,
+                                     f"{entry.placements_path}: row {row} {text}")  # fmt: skip
         for entry in self.meshes:
             if entry.path not in parts:  # one load per file: its placements share the Trimesh
                 from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
@@ -211,6 +218,10 @@ class SceneReader:
                     raise SceneError(
                         self.path, entry.placement_key, f"with the file's node transforms {problem}"
                     )
+            for mesh, node_transform in parts[entry.path]:
+                placed = (entry.placement @ node_transform)[None]
+                if (problem := placed_mesh_problem(mesh.vertices, placed)) is not None:
+                    raise SceneError(self.path, entry.key, f"{entry.path}: {problem[1]}")
         # Step 3: build.
         if self.field is not None:
             add_field_spheres(scene, self.field)
@@ -244,7 +255,7 @@ class SceneReader:
         count = table.integer("count", low=1)
         seed = table.integer("seed", 0, low=0)
         extent = table.number("extent", None, low=0, low_open=True)
-        radius = table.pair("radius", low=0, low_open=True) if table.has("radius") else None
+        radius = table.pair("radius", low=MIN_LENGTH) if table.has("radius") else None
         mix = None
         if (mix_table := table.table("mix")) is not None:
             for name in mix_table.data:
@@ -286,7 +297,7 @@ class SceneReader:
         light = PointLight(
             position=table.vector("position", required=True),
             color=table.color("color", (1.0, 1.0, 1.0)),
-            intensity=table.number("intensity", 1.0, low=0),
+            intensity=table.number("intensity", 1.0, low=0, high=RADIANCE_LIMIT),
         )
         table.finish()
         return light
@@ -332,7 +343,7 @@ class SceneReader:
             checker=Checker(
                 color_a=table.color("color_a", default.checker.color_a),
                 color_b=table.color("color_b", default.checker.color_b),
-                size=table.number("size", default.checker.size, low=0, low_open=True),
+                size=table.number("size", default.checker.size, low=MIN_LENGTH),
             ),
             material=self._material_fields(table, self._preset(table, default.material)),
         )
@@ -347,7 +358,7 @@ class SceneReader:
 
     def _sphere(self, table: Table) -> tuple[tuple[float, float, float], float, str]:
         center = table.vector("center", required=True)
-        radius = table.number("radius", required=True, low=0, low_open=True)
+        radius = table.number("radius", required=True, low=MIN_LENGTH)
         material = self._material_name(table)
         table.finish()
         return center, radius, material
@@ -432,13 +443,8 @@ class SceneReader:
         n = len(centers)
         if radii.shape != (n,) or radii.dtype.kind not in "fiu":
             raise fail(f"radii must be ({n},) numbers, got {radii.shape} {radii.dtype}")
-        if not np.isfinite(centers).all():
-            row = int(np.flatnonzero(~np.isfinite(centers).all(axis=1))[0])
-            raise fail(f"centers row {row} is not finite")
-        bad = ~(np.isfinite(radii) & (radii > 0))
-        if bad.any():
-            row = int(np.flatnonzero(bad)[0])
-            raise fail(f"radii row {row} must be a finite number > 0, got {radii[row]}")
+        if (problem := spheres_problem(centers, radii)) is not None:
+            raise fail(problem)
         materials = arrays.get("materials")
         if materials is None:
             return centers, radii, entry.material
