@@ -235,3 +235,54 @@ center = [1, 1, 1]
 radius = 1e-18
 material = "mirror"
 """
+
+
+# -- a zip bomb --------------------------------------------------------------------------------
+
+
+def test_a_sphere_array_too_large_for_memory_is_refused_from_its_headers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The issue's bomb (3.7 MB of zip declaring 610 M spheres) scaled to a machine with 40 MB
+    available: 400,000 spheres of zeros, 190 kB of zip, 12.8 MB of arrays, and 28.4 MB more for
+    the scene and the BVH (71 bytes a sphere at least): 41.2 MB. The headers alone refuse it:
+    nothing near the arrays' size is allocated. 50,000 spheres then load under that budget."""
+    import tracemalloc
+
+    from embree_rt import budget
+
+    count = 400_000
+    np.savez_compressed(tmp_path / "bomb.npz", centers=np.zeros((count, 3)), radii=np.ones(count))
+    assert (tmp_path / "bomb.npz").stat().st_size < 300_000
+    monkeypatch.setattr(budget, "available_memory", lambda: 40_000_000)
+    path = tmp_path / "s.toml"
+    path.write_text('[[sphere_arrays]]\nfile = "bomb.npz"\n')
+    tracemalloc.start()
+    try:
+        with pytest.raises(SceneError) as caught:
+            load_scene(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert caught.value.key == "sphere_arrays[0].file"
+    assert "400,000 spheres would need ~0.0412 GB of memory" in caught.value.problem
+    assert peak < 2_000_000  # the arrays alone are 12.8 MB
+    count = 50_000
+    np.savez_compressed(tmp_path / "bomb.npz", centers=np.zeros((count, 3)), radii=np.ones(count))
+    assert len(load_scene(path).sphere_radii) == count
+
+
+def test_any_archive_unpacking_beyond_memory_is_refused_from_its_headers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Instance placements too: 200,000 (4, 4) float64 matrices are 25.6 MB unpacked."""
+    from embree_rt import budget
+
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    np.savez_compressed(tmp_path / "p.npz", transforms=np.zeros((200_000, 4, 4)))
+    monkeypatch.setattr(budget, "available_memory", lambda: 20_000_000)
+    path = tmp_path / "s.toml"
+    path.write_text('[[instances]]\nmesh = "m.obj"\ntransforms = "p.npz"\n')
+    error = _load_error(path, path.read_text())
+    assert error.key == "instances[0].transforms"
+    assert "its arrays would need ~0.0256 GB of memory" in error.problem

@@ -16,9 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+from embree_rt import budget
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
-from embree_rt.scene.archives import read_archive
+from embree_rt.scene.archives import Headers, read_archive, unpacked_bytes
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
 from embree_rt.scene.limits import MIN_LENGTH, RADIANCE_LIMIT, placed_mesh_problem, spheres_problem
@@ -108,6 +109,15 @@ def load_scene(path: str | Path) -> Scene:
     """
     path = Path(path)
     return SceneReader(path, read_document(path)).build()
+
+
+def _sphere_array_cost(headers: Headers) -> tuple[int, str]:
+    """What a sphere array needs in memory by its headers: its arrays unpacked, and each sphere
+    in the scene and in the BVH in its least costly form (what any render of it needs at least)."""
+    shape = headers.get("centers", ((0,), None))[0]
+    count = shape[0] if shape else 1
+    per_sphere = budget.SCENE_BYTES_PER_SPHERE + min(budget.GEOMETRY_BYTES_PER_SPHERE.values())
+    return unpacked_bytes(headers) + count * per_sphere, f"{count:,} spheres"
 
 
 @dataclass
@@ -433,7 +443,7 @@ class SceneReader:
         def fail(problem: str) -> SceneError:
             return SceneError(self.path, entry.key, f"{path}: {problem}")
 
-        arrays = read_archive(path, fail)
+        arrays = read_archive(path, fail, _sphere_array_cost)
         for required in ("centers", "radii"):
             if required not in arrays:
                 raise fail(f"missing array {required!r} (has: {', '.join(arrays) or 'none'})")
