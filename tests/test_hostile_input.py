@@ -286,3 +286,35 @@ def test_any_archive_unpacking_beyond_memory_is_refused_from_its_headers(
     error = _load_error(path, path.read_text())
     assert error.key == "instances[0].transforms"
     assert "its arrays would need ~0.0256 GB of memory" in error.problem
+
+
+# -- integers beyond int64 ---------------------------------------------------------------------
+
+BIG_INTEGERS = {
+    "spp 1e29 (a float)": ("[render]\nspp = 1e29\n", "render.spp", "expected an integer"),
+    "spp 10**29": (f"[render]\nspp = {10**29}\n", "render.spp", f"<= {2**63 - 1}"),
+    "width 2**63": (f"[render]\nwidth = {2**63}\n", "render.width", "<= 9223372036854775807"),
+    "2**64 samples": (f"[render]\nwidth = {2**32}\nheight = {2**16}\nspp = {2**16}\n",
+                      "render.spp", "1.84e+19 samples, more than"),
+    "seed 2**64": (f"[render]\nseed = {2**64}\n", "render.seed", f"<= {2**64 - 1}"),
+    "field seed 2**64": (f"[random_field]\ncount = 5\nseed = {2**64}\n", "random_field.seed",
+                         "<= 18446744073709551615"),
+    "field count 10**30": (f"[random_field]\ncount = {10**30}\n", "random_field.count", "<="),
+    "frames 10**30": (f"[animation]\nframes = {10**30}\norbit = 360\n", "animation.frames", "<="),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BIG_INTEGERS))
+def test_integers_beyond_int64_are_refused(tmp_path: Path, case: str) -> None:
+    text, key, words = BIG_INTEGERS[case]
+    error = _load_error(tmp_path / "s.toml", text)
+    assert error.key == key
+    assert words in error.problem
+
+
+def test_the_command_refuses_spp_beyond_int64_in_a_file_in_one_line(tmp_path: Path) -> None:
+    (tmp_path / "s.toml").write_text(f"[render]\nwidth = 16\nheight = 16\nspp = {10**29}\n")
+    result = _run("render", "s.toml", "-o", "out.png", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count("\n") == 1 and "s.toml: render.spp: must be <=" in result.stderr
+    assert not (tmp_path / "out.png").exists()

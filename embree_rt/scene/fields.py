@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from embree_rt.scene.errors import SceneError, unknown_key_message
-from embree_rt.scene.limits import COORDINATE_LIMIT, RADIANCE_LIMIT
+from embree_rt.scene.limits import COORDINATE_LIMIT, INTEGER_LIMIT, RADIANCE_LIMIT
 
 _ABSENT = object()
 
@@ -75,7 +75,11 @@ class Table:
             return default
         return check_number(self, name, value, low, high, low_open, high_open)
 
-    def integer(self, name: str, default: int | None = None, *, low: int | None = None) -> int:
+    def integer(
+        self, name: str, default: int | None = None, *, low: int | None = None,
+        high: int = INTEGER_LIMIT,
+    ) -> int:  # fmt: skip
+        """An integer in [low, high] (``high`` by default what int64 holds)."""
         value = self._value(name, required=False)
         if value is _ABSENT:
             return default
@@ -83,6 +87,8 @@ class Table:
             raise self.error(name, f"expected an integer, got {_show(value)}")
         if low is not None and value < low:
             raise self.error(name, f"must be >= {low}, got {_show(value)}")
+        if value > high:
+            raise self.error(name, f"must be <= {high}, got {_show(value)}")
         return value
 
     def boolean(self, name: str, default: bool) -> bool:

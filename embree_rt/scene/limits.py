@@ -27,6 +27,10 @@ MIN_LENGTH = 1e-18
 # intensity ≤ 1e18), which leaves float32 a factor of 1e20 for the sums over lights, bounces and
 # samples before anything could overflow.
 RADIANCE_LIMIT = 1e6
+# Counts, sizes, depths and sample numbers are int64 in the renderer's arrays.
+INTEGER_LIMIT = 2**63 - 1
+# Seeds are hashed as uint64 (``sampling``): a larger one would alias a smaller one silently.
+SEED_LIMIT = 2**64 - 1
 
 
 def spheres_problem(centers: np.ndarray, radii: np.ndarray) -> str | None:

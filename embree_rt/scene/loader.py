@@ -22,7 +22,13 @@ from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.archives import Headers, read_archive, unpacked_bytes
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
-from embree_rt.scene.limits import MIN_LENGTH, RADIANCE_LIMIT, placed_mesh_problem, spheres_problem
+from embree_rt.scene.limits import (
+    MIN_LENGTH,
+    RADIANCE_LIMIT,
+    SEED_LIMIT,
+    placed_mesh_problem,
+    spheres_problem,
+)
 from embree_rt.scene.model import (
     Background,
     Camera,
@@ -31,6 +37,7 @@ from embree_rt.scene.model import (
     RenderSettings,
     Scene,
     camera_problem,
+    render_problem,
 )
 from embree_rt.scene.random_field import (
     FieldParameterError,
@@ -263,7 +270,7 @@ class SceneReader:
             return None
         table.require("count")
         count = table.integer("count", low=1)
-        seed = table.integer("seed", 0, low=0)
+        seed = table.integer("seed", 0, low=0, high=SEED_LIMIT)
         extent = table.number("extent", None, low=0, low_open=True)
         radius = table.pair("radius", low=MIN_LENGTH) if table.has("radius") else None
         mix = None
@@ -285,9 +292,11 @@ class SceneReader:
             height=table.integer("height", current.height, low=1),
             spp=table.integer("spp", current.spp, low=1),
             max_depth=table.integer("max_depth", current.max_depth, low=0),
-            seed=table.integer("seed", current.seed, low=0),
+            seed=table.integer("seed", current.seed, low=0, high=SEED_LIMIT),
         )
         table.finish()
+        if (problem := render_problem(settings)) is not None:
+            raise table.error(*problem)
         return settings
 
     def _camera(self, table: Table, current: Camera) -> Camera:

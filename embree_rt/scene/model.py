@@ -12,7 +12,7 @@ import numpy as np
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
-from embree_rt.scene.limits import placed_mesh_problem, spheres_problem
+from embree_rt.scene.limits import INTEGER_LIMIT, placed_mesh_problem, spheres_problem
 from embree_rt.scene.writer import save_scene
 from embree_rt.transforms import as_affine
 
@@ -112,6 +112,18 @@ class RenderSettings:
     spp: int = 8
     max_depth: int = 6
     seed: int = 0
+
+
+def render_problem(settings: RenderSettings) -> tuple[str, str] | None:
+    """What keeps ``settings`` from numbering its samples, as (field, problem), or None: the
+    samples of an image (width × height × spp) are numbered in int64."""
+    samples = settings.width * settings.height * settings.spp
+    if samples > INTEGER_LIMIT:
+        return "spp", (
+            f"a {settings.width}x{settings.height} image at {settings.spp} spp is {samples:.3g} "
+            f"samples, more than the {INTEGER_LIMIT:.3g} int64 can number"
+        )
+    return None
 
 
 @dataclass
