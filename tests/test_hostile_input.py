@@ -35,39 +35,70 @@ def _load_error(path: Path, text: str) -> SceneError:
 PARSER_LIMITS = {
     "600 nested toml arrays": ("s.toml", "a = " + "[" * 600 + "]" * 600, "(syntax)", "nested"),
     "600 nested toml tables": (
-        "s.toml", "a = " + "{b = " * 600 + "1" + "}" * 600, "(syntax)", "nested",
+        "s.toml",
+        "a = " + "{b = " * 600 + "1" + "}" * 600,
+        "(syntax)",
+        "nested",
     ),
-    "100000 nested json lists": ("s.json", '{"a": ' + "[" * 100_000 + "]" * 100_000 + "}",
-                                 "(syntax)", "nested"),
+    "100000 nested json lists": (
+        "s.json",
+        '{"a": ' + "[" * 100_000 + "]" * 100_000 + "}",
+        "(syntax)",
+        "nested",
+    ),
     "20 nested json tables": (
-        "s.json", '{"render": ' + '{"a": ' * 20 + "1" + "}" * 21, "render" + ".a" * 16,
+        "s.json",
+        '{"render": ' + '{"a": ' * 20 + "1" + "}" * 21,
+        "render" + ".a" * 16,
         "levels deep",
     ),
     "4400-digit toml integer": (
-        "s.toml", "[render]\nwidth = " + "1" * 4400, "(syntax)", "more than 4300 digits",
+        "s.toml",
+        "[render]\nwidth = " + "1" * 4400,
+        "(syntax)",
+        "more than 4300 digits",
     ),
     "4400-digit json integer": (
-        "s.json", '{"render": {"width": ' + "1" * 4400 + "}}", "(syntax)", "4300 digits",
+        "s.json",
+        '{"render": {"width": ' + "1" * 4400 + "}}",
+        "(syntax)",
+        "4300 digits",
     ),
     "400-digit radius": (
-        "s.toml", SPHERE.replace("radius = 1", f"radius = {DIGITS_400}"), "spheres[0].radius",
+        "s.toml",
+        SPHERE.replace("radius = 1", f"radius = {DIGITS_400}"),
+        "spheres[0].radius",
         "within ±1e+10",
     ),
     "400-digit centre": (
-        "s.toml", SPHERE.replace("[0, 1, 0]", f"[{DIGITS_400}, 1, 0]"), "spheres[0].center",
+        "s.toml",
+        SPHERE.replace("[0, 1, 0]", f"[{DIGITS_400}, 1, 0]"),
+        "spheres[0].center",
         "within ±1e+10",
     ),
-    "400-digit negative fov": ("s.json", json.dumps({"camera": {"fov": -(10**400)}}),
-                               "camera.fov", "within"),
+    "400-digit negative fov": (
+        "s.json",
+        json.dumps({"camera": {"fov": -(10**400)}}),
+        "camera.fov",
+        "within",
+    ),
     "NUL in a mesh file name": (
-        "s.toml", '[[meshes]]\nfile = "a\\u0000b.obj"', "meshes[0].file", "NUL",
+        "s.toml",
+        '[[meshes]]\nfile = "a\\u0000b.obj"',
+        "meshes[0].file",
+        "NUL",
     ),
     "NUL in a sphere array name": (
-        "s.toml", '[[sphere_arrays]]\nfile = "a\\u0000.npz"', "sphere_arrays[0].file", "NUL",
+        "s.toml",
+        '[[sphere_arrays]]\nfile = "a\\u0000.npz"',
+        "sphere_arrays[0].file",
+        "NUL",
     ),
     "NUL in a placements name": (
-        "s.toml", '[[instances]]\nmesh = "m.obj"\ntransforms = "\\u0000"',
-        "instances[0].transforms", "NUL",
+        "s.toml",
+        '[[instances]]\nmesh = "m.obj"\ntransforms = "\\u0000"',
+        "instances[0].transforms",
+        "NUL",
     ),
 }
 
@@ -110,34 +141,73 @@ def test_the_command_says_one_line_and_exits_2_for_a_parser_limit(tmp_path: Path
 LIGHT = "[[lights]]\nposition = [0, 5, 0]\n"
 # case: (scene text, support file to write (name, kind, value), key, words)
 BEYOND_FLOAT32 = {
-    "centre 1e39": (SPHERE.replace("[0, 1, 0]", "[1e39, 1, 0]"), None, "spheres[0].center",
-                    "within ±1e+10"),
-    "light at 1e39": ("[[lights]]\nposition = [0, 1e39, 0]\n", None, "lights[0].position",
-                      "within"),
+    "centre 1e39": (
+        SPHERE.replace("[0, 1, 0]", "[1e39, 1, 0]"),
+        None,
+        "spheres[0].center",
+        "within ±1e+10",
+    ),
+    "light at 1e39": (
+        "[[lights]]\nposition = [0, 1e39, 0]\n",
+        None,
+        "lights[0].position",
+        "within",
+    ),
     "light intensity 1e39": (LIGHT + "intensity = 1e39\n", None, "lights[0].intensity", "within"),
     "light intensity 2e6": (LIGHT + "intensity = 2e6\n", None, "lights[0].intensity", "<= 1e+06"),
     "light colour 1e39": (LIGHT + "color = [1, 1e39, 1]\n", None, "lights[0].color", "within"),
     "light colour 1e7": (LIGHT + "color = [1, 1e7, 1]\n", None, "lights[0].color", "<= 1e+06"),
-    "material colour 1e39": ("[materials.hot]\ncolor = [1e39, 0, 0]\n", None,
-                             "materials.hot.color", "within"),
-    "material colour 2e6": ("[materials.hot]\ncolor = [0, 2e6, 0]\n", None,
-                            "materials.hot.color", "<= 1e+06"),
+    "material colour 1e39": (
+        "[materials.hot]\ncolor = [1e39, 0, 0]\n",
+        None,
+        "materials.hot.color",
+        "within",
+    ),
+    "material colour 2e6": (
+        "[materials.hot]\ncolor = [0, 2e6, 0]\n",
+        None,
+        "materials.hot.color",
+        "<= 1e+06",
+    ),
     "sky 1e39": ("[background]\nzenith = [1e39, 0, 0]\n", None, "background.zenith", "within"),
     "ior 1e39": ("[materials.hot]\nior = 1e39\n", None, "materials.hot.ior", "within"),
-    "radius 1e-320": (SPHERE.replace("radius = 1", "radius = 1e-320"), None, "spheres[0].radius",
-                      ">= 1e-18"),
+    "radius 1e-320": (
+        SPHERE.replace("radius = 1", "radius = 1e-320"),
+        None,
+        "spheres[0].radius",
+        ">= 1e-18",
+    ),
     "floor square 1e-300": ("[floor]\nsize = 1e-300\n", None, "floor.size", ">= 1e-18"),
-    "npz centre 1e308": ('[[sphere_arrays]]\nfile = "a.npz"\n', ("a.npz", "centers", 1e308),
-                         "sphere_arrays[0].file", "centers row 1 must be finite and within"),
-    "npz radius 1e-320": ('[[sphere_arrays]]\nfile = "a.npz"\n', ("a.npz", "radii", 1e-320),
-                          "sphere_arrays[0].file", "radii row 1"),
-    "obj vertex 1e39": ('[[meshes]]\nfile = "far.obj"\n', ("far.obj", "vertex", 1e39),
-                        "meshes[0].file", "beyond the ±1e+10"),
-    "mesh scaled past the limit": ('[[meshes]]\nfile = "far.obj"\nscale = 1e9\n',
-                                   ("far.obj", "vertex", 100.0), "meshes[0].file", "beyond"),
-    "instances placed at 1e12": ('[[instances]]\nmesh = "far.obj"\ntransforms = "p.npz"\n',
-                                 ("p.npz", "positions", 1e12), "instances[0].transforms",
-                                 "row 1 places the mesh"),
+    "npz centre 1e308": (
+        '[[sphere_arrays]]\nfile = "a.npz"\n',
+        ("a.npz", "centers", 1e308),
+        "sphere_arrays[0].file",
+        "centers row 1 must be finite and within",
+    ),
+    "npz radius 1e-320": (
+        '[[sphere_arrays]]\nfile = "a.npz"\n',
+        ("a.npz", "radii", 1e-320),
+        "sphere_arrays[0].file",
+        "radii row 1",
+    ),
+    "obj vertex 1e39": (
+        '[[meshes]]\nfile = "far.obj"\n',
+        ("far.obj", "vertex", 1e39),
+        "meshes[0].file",
+        "beyond the ±1e+10",
+    ),
+    "mesh scaled past the limit": (
+        '[[meshes]]\nfile = "far.obj"\nscale = 1e9\n',
+        ("far.obj", "vertex", 100.0),
+        "meshes[0].file",
+        "beyond",
+    ),
+    "instances placed at 1e12": (
+        '[[instances]]\nmesh = "far.obj"\ntransforms = "p.npz"\n',
+        ("p.npz", "positions", 1e12),
+        "instances[0].transforms",
+        "row 1 places the mesh",
+    ),
 }
 
 
@@ -294,11 +364,17 @@ BIG_INTEGERS = {
     "spp 1e29 (a float)": ("[render]\nspp = 1e29\n", "render.spp", "expected an integer"),
     "spp 10**29": (f"[render]\nspp = {10**29}\n", "render.spp", f"<= {2**63 - 1}"),
     "width 2**63": (f"[render]\nwidth = {2**63}\n", "render.width", "<= 9223372036854775807"),
-    "2**64 samples": (f"[render]\nwidth = {2**32}\nheight = {2**16}\nspp = {2**16}\n",
-                      "render.spp", "1.84e+19 samples, more than"),
+    "2**64 samples": (
+        f"[render]\nwidth = {2**32}\nheight = {2**16}\nspp = {2**16}\n",
+        "render.spp",
+        "1.84e+19 samples, more than",
+    ),
     "seed 2**64": (f"[render]\nseed = {2**64}\n", "render.seed", f"<= {2**64 - 1}"),
-    "field seed 2**64": (f"[random_field]\ncount = 5\nseed = {2**64}\n", "random_field.seed",
-                         "<= 18446744073709551615"),
+    "field seed 2**64": (
+        f"[random_field]\ncount = 5\nseed = {2**64}\n",
+        "random_field.seed",
+        "<= 18446744073709551615",
+    ),
     "field count 10**30": (f"[random_field]\ncount = {10**30}\n", "random_field.count", "<="),
     "frames 10**30": (f"[animation]\nframes = {10**30}\norbit = 360\n", "animation.frames", "<="),
 }
@@ -318,3 +394,22 @@ def test_the_command_refuses_spp_beyond_int64_in_a_file_in_one_line(tmp_path: Pa
     assert result.returncode == 2, result.stderr
     assert result.stderr.count("\n") == 1 and "s.toml: render.spp: must be <=" in result.stderr
     assert not (tmp_path / "out.png").exists()
+
+
+def test_a_long_camera_path_is_checked_whole_and_bounded(tmp_path: Path) -> None:
+    """Every frame's camera is checked (as arrays: a million frames in about a second, where a
+    camera object a frame took minutes, and 10**12 frames never ended); past a million frames
+    the path is refused."""
+    keys = "keyframes = [{frame = 0, position = [0, 1, 5]}, {frame = 999999, position = [5, 1, 0]}]"
+    path = tmp_path / "s.toml"
+    path.write_text(f"[animation]\nframes = 1000000\n{keys}\n")
+    assert load_scene(path).animation.frames == 1_000_000
+    # Through look_at = [0, 0, 0] half way: the one frame where position meets it is found.
+    keys = (
+        "keyframes = [{frame = 0, position = [0, 0, -5]}, {frame = 999998, position = [0, 0, 5]}]"
+    )
+    error = _load_error(path, f"[animation]\nframes = 1000000\n{keys}\n")
+    assert error.key == "animation.keyframes"
+    assert error.problem.startswith("frame 499999's interpolated camera: look_at must differ")
+    error = _load_error(path, "[animation]\nframes = 1000001\norbit = 360\n")
+    assert error.key == "animation.frames" and "<= 1000000" in error.problem

@@ -217,7 +217,7 @@ class SceneReader:
                     raise SceneError(self.path, entry.key, f"{entry.path}: a node {problem}")
         for entry, (transforms, _) in zip(self.instances, placements, strict=True):
             for mesh, node_transform in parts[entry.path]:
-                if (problem := placed_mesh_problem(mesh.vertices, transforms @ node_transform)):
+                if problem := placed_mesh_problem(mesh.vertices, transforms @ node_transform):
                     row, text = problem
                     raise SceneError(self.path, entry.placements_key,
                                      f"{entry.placements_path}: row {row} {text}")  # fmt: skip
