@@ -413,3 +413,19 @@ def test_a_long_camera_path_is_checked_whole_and_bounded(tmp_path: Path) -> None
     assert error.problem.startswith("frame 499999's interpolated camera: look_at must differ")
     error = _load_error(path, "[animation]\nframes = 1000001\norbit = 360\n")
     assert error.key == "animation.frames" and "<= 1000000" in error.problem
+
+
+def test_no_warning_is_printed_before_the_one_line_error(tmp_path: Path) -> None:
+    """A keyframe at 1e308 once printed NumPy's RuntimeWarnings (overflow in the spline) before
+    its error; an OBJ vertex at 1e39 those of the float32 cast. Now: the one line alone."""
+    (tmp_path / "far.obj").write_text("v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "mesh.toml").write_text('[[meshes]]\nfile = "far.obj"\n')
+    (tmp_path / "keys.toml").write_text(
+        "[animation]\nframes = 10\nkeyframes = [{frame = 0, position = [0, 1, 5]}, "
+        "{frame = 9, position = [1e308, 1, 0]}]\n"
+    )
+    for name, key in (("mesh.toml", "meshes[0].file"), ("keys.toml", "keyframes[1].position")):
+        result = _run("render", name, "-o", "out.png", cwd=tmp_path)
+        assert result.returncode == 2
+        assert result.stderr.startswith("embree-rt: error: ") and result.stderr.count("\n") == 1
+        assert key in result.stderr
