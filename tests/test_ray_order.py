@@ -1,5 +1,5 @@
 """Rays traced in a coherent order (embree_rt.embree.ray_order) get the answers they get in the
-order given: the radix sort (embree_rt.embree.morton) against NumPy's stable argsort, and first
+order given: the radix sort (embree_rt.compiled.morton) against NumPy's stable argsort, and first
 hits traced sorted against first hits traced as given, on meshes where many hits are suspect
 (edges, grazing)."""
 
@@ -11,7 +11,7 @@ import trimesh
 from numba import njit
 
 from embree_rt import trimesh_ray
-from embree_rt.embree.morton import radix_order
+from embree_rt.compiled.morton import radix_order
 from embree_rt.embree.ray_order import box_cells, entry_key
 from embree_rt.trimesh_ray import RayMeshIntersector
 

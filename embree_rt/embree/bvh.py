@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from embree_rt.compiled.work_split import parallel_region
 from embree_rt.embree import device as device_module
 from embree_rt.embree import (
     instance_arrays,
@@ -32,7 +33,6 @@ from embree_rt.embree.validation import (
     as_transform,
     as_triangle_indices,
 )
-from embree_rt.embree.work_split import parallel_region
 from embree_rt.transforms import affine_array_problem
 
 

@@ -35,7 +35,7 @@ import math
 import numpy as np
 from numba import carray, njit
 
-from embree_rt.embree import pointers
+from embree_rt.compiled import pointers
 
 ARRAY_TRANSFORMS = 0
 ARRAY_COUNT = 1

@@ -19,10 +19,10 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.morton import radix_order
-from embree_rt.embree.pointers import prefetch
+from embree_rt.compiled.morton import radix_order
+from embree_rt.compiled.pointers import prefetch
+from embree_rt.compiled.work_split import parallel_region, threads_for
 from embree_rt.embree.ray_order import box_cells, segment_key
-from embree_rt.embree.work_split import parallel_region, threads_for
 
 CHUNK = 1024  # rays per parallel iteration of the ordering passes
 _AHEAD = 16

@@ -41,6 +41,7 @@ import numba
 import numpy as np
 from numba import carray, cfunc, njit, prange, types
 
+from embree_rt.compiled.work_split import threads_for
 from embree_rt.embree.kernels import (
     FEATURE_FLAG_ALL,
     HIT_GEOM_ID,
@@ -57,7 +58,6 @@ from embree_rt.embree.kernels import (
     rtc_intersect1,
 )
 from embree_rt.embree.user_spheres import _floats, _ints, _words32, _words64
-from embree_rt.embree.work_split import threads_for
 
 # rtcore_common.h / rtcore_scene.h
 RAY_QUERY_FLAG_INVOKE_ARGUMENT_FILTER = 1 << 1

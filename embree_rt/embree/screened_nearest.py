@@ -29,10 +29,10 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from embree_rt.compiled.morton import radix_order
+from embree_rt.compiled.work_split import threads_for
 from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, _intersect_chunk
-from embree_rt.embree.morton import radix_order
 from embree_rt.embree.ray_order import box_cells, entry_key
-from embree_rt.embree.work_split import threads_for
 
 _EPS32 = np.float64(np.finfo(np.float32).eps)
 # trimesh.util.unitize leaves vectors no longer than this as they are
