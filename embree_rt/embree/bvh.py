@@ -18,7 +18,6 @@ from embree_rt.embree import (
     library,
     multihit,
     records,
-    screened_nearest,
     segments,
     spatial_order,
     sphere_buffers,
@@ -652,22 +651,12 @@ class BVH:
             return multihit.crossing_parity(self._live_scene(), origins, directions, edge_band,
                                             graze, self.threads)  # fmt: skip
 
-    def screened_nearest(self, origins: np.ndarray, directions: np.ndarray,
-                         **screen) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-        """Nearest hits of float64 rays, moved to this BVH's frame and screened for float32
-        doubt in the same compiled pass: ``(prim (n,) int32, suspect (n,) bool)``; ``screen``
-        is ``screened_nearest.screened_nearest``'s keywords after ``directions``. A BVH of one
-        triangle geometry, no instances."""
+    def committed_scene(self) -> int:
+        """The committed Embree scene's handle (``RTCScene``), for a compiled pass that calls
+        Embree's nearest-hit query itself (``kernels.intersect_chunk``) on this BVH; refuses
+        before ``commit`` or after ``close``."""
         self._ready_to_query()
-        with parallel_region:
-            prim, suspect, finite = screened_nearest.screened_nearest(
-                self._live_scene(), self.lanes, self.threads, origins, directions, **screen
-            )
-        if not finite:
-            as_points(origins, "origins")  # raises, naming the first bad row
-            as_points(directions, "directions")
-            raise ValueError("rays: not finite in the BVH's frame (coordinates too large)")
-        return prim, suspect
+        return self._live_scene()
 
     def _require_filters(self) -> None:
         if not self.filters:

@@ -88,7 +88,7 @@ rtc_occluded16 = types.ExternalFunction("rtcOccluded16", _SIGNATURE_N)
 
 
 @njit(inline="always")
-def _aligned_word(row: np.ndarray, alignment: int) -> int:
+def aligned_word(row: np.ndarray, alignment: int) -> int:
     return ((alignment - (row.ctypes.data & (alignment - 1))) & (alignment - 1)) >> 2
 
 
@@ -106,7 +106,7 @@ def _store_miss(i, t, normal, u, v, prim, geom, inst):
 
 
 @njit(inline="always")
-def _fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar):
+def fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar):
     """Write rays first .. first + count into the packet at word ``b`` (one ray: ``lanes`` 1,
     an ``RTCRayHit``, whose fields are the same words with one lane)."""
     valid = b + PACKET_FIELDS * lanes
@@ -142,7 +142,7 @@ def _intersect_packet(lanes, valid_address, scene, address, query):
 
 
 @njit(inline="always")
-def _occluded_packet(lanes, valid_address, scene, address, query):
+def occluded_packet(lanes, valid_address, scene, address, query):
     if lanes == 8:
         rtc_occluded8(valid_address, scene, address, query)
     elif lanes == 16:
@@ -154,17 +154,17 @@ def _occluded_packet(lanes, valid_address, scene, address, query):
 
 
 @njit(inline="always")
-def _intersect_chunk(scene, query, lanes, words, first_ray, stop, origins, directions, tnear,
+def intersect_chunk(scene, query, lanes, words, first_ray, stop, origins, directions, tnear,
                      tfar, t, normal, u, v, prim, geom, inst, inst_prim):  # fmt: skip
     # inst_prim: (n,) int32 for Embree's instPrimID[0] (instance arrays), or None; numba
     # compiles the None case apart, with the test pruned: the plain loop pays nothing for it.
     floats = words.view(np.float32)
-    b = _aligned_word(words, PACKET_ALIGN)
+    b = aligned_word(words, PACKET_ALIGN)
     address = words.ctypes.data + 4 * b
     valid_address = address + 4 * PACKET_FIELDS * lanes
     for first in range(first_ray, stop, lanes):
         count = min(lanes, stop - first)
-        _fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar)
+        fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar)
         _intersect_packet(lanes, valid_address, scene, address, query)
         for lane in range(count):
             i = first + lane
@@ -190,13 +190,13 @@ def _intersect_chunk(scene, query, lanes, words, first_ray, stop, origins, direc
 def _occluded_chunk(scene, query, lanes, words, first_ray, stop, origins, directions, tnear, tfar,
                     blocked):  # fmt: skip
     floats = words.view(np.float32)
-    b = _aligned_word(words, PACKET_ALIGN)
+    b = aligned_word(words, PACKET_ALIGN)
     address = words.ctypes.data + 4 * b
     valid_address = address + 4 * PACKET_FIELDS * lanes
     for first in range(first_ray, stop, lanes):
         count = min(lanes, stop - first)
-        _fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar)
-        _occluded_packet(lanes, valid_address, scene, address, query)
+        fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar)
+        occluded_packet(lanes, valid_address, scene, address, query)
         for lane in range(count):
             blocked[first + lane] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
@@ -215,7 +215,7 @@ def intersect(scene, query, lanes, origins, directions, tnear, tfar, t, normal, 
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _intersect_chunk(scene, query, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
+        intersect_chunk(scene, query, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
                          origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
                          inst_prim)  # fmt: skip
 
@@ -224,7 +224,7 @@ def intersect(scene, query, lanes, origins, directions, tnear, tfar, t, normal, 
 def intersect_serial(scene, query, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim,
                      geom, inst, inst_prim):  # fmt: skip
     scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _intersect_chunk(scene, query, lanes, scratch, 0, origins.shape[0], origins, directions, tnear,
+    intersect_chunk(scene, query, lanes, scratch, 0, origins.shape[0], origins, directions, tnear,
                      tfar, t, normal, u, v, prim, geom, inst, inst_prim)  # fmt: skip
 
 

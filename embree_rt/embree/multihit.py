@@ -41,6 +41,7 @@ import numba
 import numpy as np
 from numba import carray, cfunc, njit, prange, types
 
+from embree_rt.compiled import pointers
 from embree_rt.compiled.work_split import threads_for
 from embree_rt.embree.kernels import (
     FEATURE_FLAG_ALL,
@@ -57,7 +58,6 @@ from embree_rt.embree.kernels import (
     RAY_TNEAR,
     rtc_intersect1,
 )
-from embree_rt.embree.user_spheres import _floats, _ints, _words32, _words64
 
 # rtcore_common.h / rtcore_scene.h
 RAY_QUERY_FLAG_INVOKE_ARGUMENT_FILTER = 1 << 1
@@ -102,6 +102,10 @@ _SCRATCH_WORDS = 2 * (2 + _RAYHIT_WORDS64 + ARGS_WORDS + CONTEXT_WORDS)  # 4-byt
 CHUNK = 64  # rays per parallel iteration
 
 _FILTER_SIGNATURE = types.void(types.uintp)
+_words64 = pointers.words64
+_words32 = pointers.words32
+_floats = pointers.floats
+_ints = pointers.ints
 
 
 @cfunc(_FILTER_SIGNATURE, nopython=True, cache=True)

@@ -22,9 +22,9 @@ from embree_rt.embree.kernels import (
     PACKET_FIELDS,
     RAY_TFAR,
     SCRATCH_WORDS,
-    _aligned_word,
-    _fill_packet,
-    _occluded_packet,
+    aligned_word,
+    fill_packet,
+    occluded_packet,
 )
 from embree_rt.embree.records import plane_crossing
 
@@ -33,10 +33,10 @@ from embree_rt.embree.records import plane_crossing
 def _segments_chunk(scene, query, lanes, words, first_row, stop, points, rows, target, has_plane,
                     plane_y, blocked):  # fmt: skip
     floats = words.view(np.float32)
-    b = _aligned_word(words, PACKET_ALIGN)
+    b = aligned_word(words, PACKET_ALIGN)
     address = words.ctypes.data + 4 * b
     valid_address = address + 4 * PACKET_FIELDS * lanes
-    # One packet's rays at a time, as _fill_packet takes them: (lanes, 3) origins, directions.
+    # One packet's rays at a time, as fill_packet takes them: (lanes, 3) origins, directions.
     origins = np.empty((lanes, 3), np.float32)
     directions = np.empty((lanes, 3), np.float32)
     near = np.zeros(lanes, np.float32)
@@ -62,8 +62,8 @@ def _segments_chunk(scene, query, lanes, words, first_row, stop, points, rows, t
             k += 1
         if count == 0:
             continue
-        _fill_packet(words, floats, b, lanes, 0, count, origins, directions, near, far)
-        _occluded_packet(lanes, valid_address, scene, address, query)
+        fill_packet(words, floats, b, lanes, 0, count, origins, directions, near, far)
+        occluded_packet(lanes, valid_address, scene, address, query)
         for lane in range(count):
             blocked[order[lane]] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
