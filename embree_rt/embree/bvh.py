@@ -146,8 +146,8 @@ class BVH:
         )
         self._build_quality = library.BUILD_QUALITY[build_quality]
         self._lib.rtcSetSceneBuildQuality(self._scene, self._build_quality)
-        flags = (library.SCENE_FLAG_COMPACT * compact | multihit.SCENE_FLAG_ROBUST * robust
-                 | multihit.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS * filters)  # fmt: skip
+        flags = (library.SCENE_FLAG_COMPACT * compact | library.SCENE_FLAG_ROBUST * robust
+                 | library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS * filters)  # fmt: skip
         if flags:
             self._lib.rtcSetSceneFlags(self._scene, flags)
         self.filters = bool(filters)
@@ -577,20 +577,16 @@ class BVH:
         directions: np.ndarray,
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
-        plane_y: float | None = None,
         coherent: bool = False,
     ) -> np.ndarray:
-        """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``; with
-        ``plane_y``, the ground plane y = plane_y too. ``origins``, ``directions`` (n, 3)."""
+        """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``.
+        ``origins``, ``directions`` (n, 3)."""
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         blocked = np.zeros(len(origins), bool)
         if len(origins):
             arguments = (self._live_scene(), kernels.query_arguments(coherent), self.lanes,
                          origins, directions, tnear, tfar, blocked)  # fmt: skip
             self._run_query(kernels.occluded_serial, kernels.occluded, arguments)
-        if plane_y is not None:
-            records.block_by_plane(origins.T, directions.T, tnear, tfar, np.float32(plane_y),
-                                   blocked)  # fmt: skip
         return blocked
 
     def occluded_toward(

@@ -59,10 +59,8 @@ from embree_rt.embree.kernels import (
     rtc_intersect1,
 )
 
-# rtcore_common.h / rtcore_scene.h
+# rtcore_common.h
 RAY_QUERY_FLAG_INVOKE_ARGUMENT_FILTER = 1 << 1
-SCENE_FLAG_ROBUST = 1 << 2
-SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS = 1 << 3
 
 # RTCIntersectArguments in 8-byte words
 ARGS_FLAGS = 0  # flags | feature_mask << 32
@@ -336,7 +334,8 @@ def all_hits(
 ) -> tuple[np.ndarray, ...]:
     """Up to ``capacity`` nearest hits of each ray, each primitive once, sorted by (t, prim).
 
-    ``scene`` is a committed Embree scene built with ``SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS``
+    ``scene`` is a committed Embree scene built with
+    ``library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS``
     (``BVH(filters=True)``); ``origins``, ``directions`` (n, 3) float32, ``tnear``, ``tfar``
     (n,) float32 (hits with tnear <= t <= tfar). Returns ``t`` (n, capacity) float32, ``prim``
     (n, capacity) int32, ``u``, ``v`` (n, capacity) float32 barycentrics (weights of the

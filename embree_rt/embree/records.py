@@ -218,13 +218,3 @@ def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, ng, u, 
         scale[j] = geometry_scale[top]
     return (rays, counts[:3].copy(), out_t, position, normal, label, scale, incoming, out_prim,
             out_inst, out_u, out_v)  # fmt: skip
-
-
-@njit(nogil=True, cache=True)
-def block_by_plane(origins, directions, tnear, tfar, plane_y, blocked):
-    """Mark in ``blocked`` (n,) bool the rays that cross the plane y = plane_y in their window;
-    ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32."""
-    for i in range(origins.shape[1]):
-        if not blocked[i]:
-            t = plane_crossing(origins[1, i], directions[1, i], tnear[i], tfar[i], plane_y)
-            blocked[i] = not math.isnan(t)
