@@ -22,6 +22,7 @@ from embree_rt.embree import (
     spatial_order,
     sphere_buffers,
     user_spheres,
+    world_normals,
 )
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
@@ -66,6 +67,8 @@ SPHERE_KINDS = ("user", "point")
 _NO_SPHERES = (np.zeros((0, 4), np.float32), np.zeros(0, np.int32))
 _IDENTITY_SLOTS = np.zeros(0, np.int32)
 _NO_LABELS = np.zeros(0, np.int32)
+_NO_NORMAL_MATRICES = np.zeros((0, 3, 3), np.float32)
+_NO_ARRAYS = np.zeros((0, instance_arrays.ARRAY_COLUMNS), np.uint64)
 
 _kernel_lock = threading.Lock()
 _symbols_registered = False
@@ -160,14 +163,16 @@ class BVH:
         # The user-geometry spheres' user data (two addresses) and storage order, kept alive
         # here for as long as Embree may call the callbacks.
         self._sphere_user_data: list[tuple[np.ndarray, np.ndarray]] = []
-        # Inverse-transpose of each instance's linear part, by geometry id, for world normals.
+        # Inverse-transpose of each single instance's linear part, by geometry id: one
+        # (g, 3, 3) table at commit (world_normals).
         self._normal_matrices: dict[int, np.ndarray] = {}
-        self._normal_matrix_array: np.ndarray | None = None
+        self._normal_matrix_table = _NO_NORMAL_MATRICES
         # Instance arrays by geometry id: the buffers Embree reads (transforms, child index) and
         # the children's coordinate bounds, all kept alive here; described to the compiled
         # passes by one table at commit (instance_arrays.ARRAY_* columns).
         self._arrays: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray]] = {}
-        self._array_table: np.ndarray | None = None
+        self._array_table = _NO_ARRAYS
+        self._has_instances = False
         self.geometry_count = 0
         self.primitive_count = 0
         self.instance_count = 0  # instances in instance arrays
@@ -406,8 +411,8 @@ class BVH:
         table[:] = np.eye(3, dtype=np.float32)
         for geom_id, matrix in self._normal_matrices.items():
             table[geom_id] = matrix
-        self._normal_matrix_array = table
-        self._has_instances = bool(self._normal_matrices)
+        self._normal_matrix_table = table
+        self._has_instances = bool(self._normal_matrices or self._arrays)
         self._normal_matrices = {}
         if self._arrays:
             table = np.zeros((max(self.geometry_count, 1), instance_arrays.ARRAY_COLUMNS),
@@ -459,7 +464,7 @@ class BVH:
             v=np.empty(n, np.float32),
         )
         # Only instance arrays have copy numbers to copy out; otherwise every hit's is -1.
-        copies = self._array_table is not None
+        copies = bool(self.array_count)
         hits.inst_prim_id = np.empty(n, np.int32) if copies else np.full(n, -1, np.int32)
         if n:
             arguments = (
@@ -484,10 +489,9 @@ class BVH:
         """
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         hits = self._raw_hits(origins, directions, tnear, tfar, coherent)
-        self._normals_to_world(hits)
-        if self._array_table is not None:
-            instance_arrays.hits_to_world(hits.inst_id, hits.inst_prim_id, hits.normal,
-                                          self._array_table)  # fmt: skip
+        if self._has_instances:
+            world_normals.hits_to_world(hits.inst_id, hits.inst_prim_id, hits.normal,
+                                        self._normal_matrix_table, self._array_table)  # fmt: skip
         return hits
 
     def intersect_records(
@@ -511,22 +515,20 @@ class BVH:
         has_plane = labels.plane_y is not None
         fields = records.build_records(
             origins, directions, near, far, hits.t, hits.geom_id, hits.prim_id, hits.inst_id,
-            hits.normal, hits.u, hits.v, has_plane,
+            hits.inst_prim_id, hits.normal, hits.u, hits.v, has_plane,
             np.float32(labels.plane_y if has_plane else 0.0), int(labels.plane_label),
             int(labels.sphere_geom_id) if len(spheres) else -1, spheres, sphere_slot,
             np.asarray(sphere_label, np.int32), np.asarray(labels.geometry_label, np.int64),
-            np.asarray(labels.geometry_scale, np.float32), self._normal_matrix_array,
+            np.asarray(labels.geometry_scale, np.float32), self._normal_matrix_table,
+            self._array_table,
         )  # fmt: skip
         result = HitRecords(*fields)
-        if self._array_table is None:
-            result.inst_prim_id = np.full(len(result.t), -1, np.int32)
-        else:
+        result.inst_prim_id = np.full(len(result.t), -1, np.int32)
+        if self.array_count:
             other = result.group("other")
-            result.inst_prim_id = np.full(len(result.t), -1, np.int32)
             result.inst_prim_id[other] = instance_arrays.finish_records(
                 result.rays, other.start, other.stop, hits.inst_id, hits.inst_prim_id,
-                hits.normal, result.normal, result.label, result.scale,
-                self._labelled_array_table(labels),
+                result.label, result.scale, self._labelled_array_table(labels),
             )  # fmt: skip
         return result
 
@@ -551,20 +553,20 @@ class BVH:
     def instance_normals(
         self, inst_id: np.ndarray, inst_prim_id: np.ndarray, normals: np.ndarray
     ) -> np.ndarray:
-        """(3, k) float32: ``normals`` (3, k) of k hits taken from their child's space to unit
-        world normals where the hit (``inst_id``, ``inst_prim_id`` (k,) int32) is in an
-        instance array; other columns unchanged."""
-        if self._array_table is None:
-            return np.asarray(normals, np.float32)
-        return instance_arrays.normals_to_world(
+        """(3, k) float32 world normals of k instance hits (``inst_id``, ``inst_prim_id`` (k,)
+        int32) from ``normals`` (k, 3) float32 in the instanced object's space, e.g. smooth
+        shading normals: ``world_normals.shading_normals`` (unit length on instance-array hits,
+        unnormalised on single instances)."""
+        return world_normals.shading_normals(
             np.ascontiguousarray(inst_id, np.int32), np.ascontiguousarray(inst_prim_id, np.int32),
-            np.asarray(normals, np.float32), self._array_table,
+            np.ascontiguousarray(normals, np.float32), self._normal_matrix_table,
+            self._array_table,
         )  # fmt: skip
 
     def instance_children(self, inst_id: np.ndarray, inst_prim_id: np.ndarray) -> np.ndarray:
         """(k,) int32: for k hits, the position in its array's ``children`` of the child each
         was in (-1 for hits outside instance arrays)."""
-        if self._array_table is None:
+        if not self.array_count:
             return np.full(len(inst_id), -1, np.int32)
         return instance_arrays.child_of_hits(
             np.ascontiguousarray(inst_id, np.int32), np.ascontiguousarray(inst_prim_id, np.int32),
@@ -657,12 +659,3 @@ class BVH:
     def _require_filters(self) -> None:
         if not self.filters:
             raise RuntimeError("build the BVH with filters=True to collect every hit")
-
-    def _normals_to_world(self, hits: Hits) -> None:
-        # Embree reports an instance hit's normal in the instanced object's own space.
-        if not self._has_instances:
-            return
-        rows = np.flatnonzero(hits.inst_id >= 0)
-        if len(rows):
-            matrices = self._normal_matrix_array[hits.inst_id[rows]]
-            hits.normal[rows] = np.einsum("nij,nj->ni", matrices, hits.normal[rows])

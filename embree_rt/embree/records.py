@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from embree_rt.embree.world_normals import unit_world_normal
+
 GROUPS = ("plane", "spheres", "other")
 
 
@@ -97,17 +99,17 @@ def plane_crossing(oy, dy, tnear, tfar, plane_y):
 
 
 @njit(nogil=True, cache=True)
-def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, ng, u, v,
+def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, inst_prim, ng, u, v,
                   has_plane, plane_y, plane_label, sphere_geom, spheres, sphere_slot, sphere_label,
-                  geometry_label, geometry_scale, normal_matrix):  # fmt: skip
+                  geometry_label, geometry_scale, normal_matrices, arrays):  # fmt: skip
     """The compiled pass behind ``BVH.intersect_records``: classify, count, then fill.
 
     Inputs per ray: ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32
-    and the raw hits ``t`` (n,) float32, ``geom``, ``prim``, ``inst`` (n,) int32, ``ng`` (n, 3)
-    float32 object-space normal, ``u``, ``v`` (n,) float32. ``spheres`` (m, 4) float32 is the
-    sphere set's (x, y, z, r) buffer as the BVH stores it, sphere p in slot ``sphere_slot[p]``
-    ((m,) int32; empty when slot p holds sphere p), ``normal_matrix`` (g, 3, 3) float32 the
-    inverse-transpose of each instance's linear part (identity elsewhere).
+    and the raw hits ``t`` (n,) float32, ``geom``, ``prim``, ``inst``, ``inst_prim`` (n,) int32,
+    ``ng`` (n, 3) float32 object-space normal, ``u``, ``v`` (n,) float32. ``spheres`` (m, 4)
+    float32 is the sphere set's (x, y, z, r) buffer as the BVH stores it, sphere p in slot
+    ``sphere_slot[p]`` ((m,) int32; empty when slot p holds sphere p); ``normal_matrices`` and
+    ``arrays``: the BVH's tables for world normals (``world_normals``).
     """
     n = origins.shape[1]
     kind = np.empty(n, np.uint8)
@@ -201,19 +203,11 @@ def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, ng, u, 
         position[0, j] = origins[0, i] + dx * ti
         position[1, j] = origins[1, i] + dy * ti
         position[2, j] = origins[2, i] + dz * ti
-        m = normal_matrix[top]
-        gx = ng[i, 0]
-        gy = ng[i, 1]
-        gz = ng[i, 2]
-        wx = m[0, 0] * gx + m[0, 1] * gy + m[0, 2] * gz
-        wy = m[1, 0] * gx + m[1, 1] * gy + m[1, 2] * gz
-        wz = m[2, 0] * gx + m[2, 1] * gy + m[2, 2] * gz
-        length = math.sqrt(np.float64(wx) * wx + np.float64(wy) * wy + np.float64(wz) * wz)
-        if length == 0.0:
-            length = 1.0
-        normal[0, j] = wx / length
-        normal[1, j] = wy / length
-        normal[2, j] = wz / length
+        wx, wy, wz = unit_world_normal(normal_matrices, arrays, top, inst_prim[i], ng[i, 0],
+                                       ng[i, 1], ng[i, 2])  # fmt: skip
+        normal[0, j] = wx
+        normal[1, j] = wy
+        normal[2, j] = wz
         label[j] = geometry_label[top]
         scale[j] = geometry_scale[top]
     return (rays, counts[:3].copy(), out_t, position, normal, label, scale, incoming, out_prim,
