@@ -468,12 +468,20 @@ class BVH:
         hits.inst_prim_id = np.empty(n, np.int32) if copies else np.full(n, -1, np.int32)
         if n:
             arguments = (
-                self._live_scene(), kernels.query_arguments(coherent), self.lanes, origins,
-                directions, tnear, tfar, hits.t, hits.normal, hits.u, hits.v, hits.prim_id,
-                hits.geom_id, hits.inst_id, hits.inst_prim_id if copies else None,
-            )  # fmt: skip
+                self._query(coherent), kernels.Rays(origins, directions, tnear, tfar),
+                self._nearest(hits), hits.inst_prim_id if copies else None,
+            )
             self._run_query(kernels.intersect_serial, kernels.intersect, arguments)
         return hits
+
+    def _query(self, coherent: bool) -> kernels.Query:
+        return kernels.Query(self._live_scene(), kernels.query_arguments(coherent), self.lanes)
+
+    @staticmethod
+    def _nearest(hits: Hits) -> kernels.NearestHits:
+        """The kernels' view of ``hits``' arrays."""
+        return kernels.NearestHits(hits.t, hits.normal, hits.u, hits.v, hits.prim_id,
+                                   hits.geom_id, hits.inst_id)  # fmt: skip
 
     def intersect(
         self,
@@ -513,15 +521,16 @@ class BVH:
         spheres, sphere_slot = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
         sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
         has_plane = labels.plane_y is not None
-        fields = records.build_records(
-            origins, directions, near, far, hits.t, hits.geom_id, hits.prim_id, hits.inst_id,
-            hits.inst_prim_id, hits.normal, hits.u, hits.v, has_plane,
-            np.float32(labels.plane_y if has_plane else 0.0), int(labels.plane_label),
+        record_labels = records.RecordLabels(
+            has_plane, np.float32(labels.plane_y if has_plane else 0.0), int(labels.plane_label),
             int(labels.sphere_geom_id) if len(spheres) else -1, spheres, sphere_slot,
             np.asarray(sphere_label, np.int32), np.asarray(labels.geometry_label, np.int64),
-            np.asarray(labels.geometry_scale, np.float32), self._normal_matrix_table,
-            self._array_table,
-        )  # fmt: skip
+            np.asarray(labels.geometry_scale, np.float32),
+        )
+        fields = records.build_records(
+            origins, directions, near, far, self._nearest(hits), hits.inst_prim_id,
+            record_labels, self._normal_matrix_table, self._array_table,
+        )
         result = HitRecords(*fields)
         result.inst_prim_id = np.full(len(result.t), -1, np.int32)
         if self.array_count:
@@ -586,8 +595,8 @@ class BVH:
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         blocked = np.zeros(len(origins), bool)
         if len(origins):
-            arguments = (self._live_scene(), kernels.query_arguments(coherent), self.lanes,
-                         origins, directions, tnear, tfar, blocked)  # fmt: skip
+            arguments = (self._query(coherent), kernels.Rays(origins, directions, tnear, tfar),
+                         blocked)
             self._run_query(kernels.occluded_serial, kernels.occluded, arguments)
         return blocked
 
@@ -613,9 +622,9 @@ class BVH:
         blocked = np.zeros(len(rows), bool)
         if len(rows):
             has_plane = plane_y is not None
-            arguments = (self._live_scene(), kernels.query_arguments(False), self.lanes, points,
-                         rows, target, has_plane, np.float32(plane_y if has_plane else 0.0),
-                         blocked)  # fmt: skip
+            shadow = segments.Segments(points, rows, target, has_plane,
+                                       np.float32(plane_y if has_plane else 0.0))
+            arguments = (self._query(False), shadow, blocked)
             self._run_query(segments.occluded_toward_serial, segments.occluded_toward, arguments)
         return blocked
 
@@ -626,8 +635,8 @@ class BVH:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
         capacity: int = 16,
-        out: tuple[np.ndarray, ...] | None = None,
-    ) -> tuple[np.ndarray, ...]:
+        out: multihit.HitBuffers | None = None,
+    ) -> multihit.HitBuffers:
         """Up to ``capacity`` nearest hits of each ray, each primitive once (a ``filters=True``
         BVH of one geometry, no instances): see ``multihit.all_hits`` for what it returns."""
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)

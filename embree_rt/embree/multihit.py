@@ -36,6 +36,7 @@ Layouts (Embree 4.4 headers; proved by tests/test_multihit_layout.py):
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -56,6 +57,7 @@ from embree_rt.embree.kernels import (
     RAY_TFAR,
     RAY_TIME,
     RAY_TNEAR,
+    Rays,
     rtc_intersect1,
 )
 
@@ -246,8 +248,9 @@ def _sort_hits(count, t, prim, u, v, cos):
 # written inline in the loop body, numba's parallel lowering lost the stores into the scratch row
 # that Embree reads through its address (measured: every ray went out with zero fields).
 @njit(nogil=True, cache=True)
-def _all_hits_chunk(scene, filter_address, words, first, stop, origins, directions, tnear, tfar,
-                    t, prim, u, v, cos, count, more):  # fmt: skip
+def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
+    origins, directions, tnear, tfar = rays
+    t, prim, u, v, cos, count, more = hits
     capacity = t.shape[1]
     rayhit, args, context = _prepare_scratch(words, filter_address)
     buffers = np.empty(5, np.uint64)
@@ -267,20 +270,19 @@ def _all_hits_chunk(scene, filter_address, words, first, stop, origins, directio
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _all_hits(scene, filter_address, origins, directions, tnear, tfar, t, prim, u, v, cos, count,
-              more):  # fmt: skip
-    n = origins.shape[0]
+def _all_hits(scene, filter_address, rays, hits):
+    n = rays.origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
         _all_hits_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                        origins, directions, tnear, tfar, t, prim, u, v, cos, count,
-                        more)  # fmt: skip
+                        rays, hits)
 
 
 @njit(nogil=True, cache=True)
-def _parity_chunk(scene, filter_address, words, first, stop, origins, directions, capacity,
-                  edge_band, graze, odd, clear):  # fmt: skip
+def _parity_chunk(scene, filter_address, words, first, stop, origins, directions, screen, parity):
+    capacity, edge_band, graze = screen
+    odd, clear = parity
     rayhit, args, context = _prepare_scratch(words, filter_address)
     hits = np.empty((4, capacity), np.float32)
     prims = np.empty(capacity, np.int32)
@@ -304,23 +306,36 @@ def _parity_chunk(scene, filter_address, words, first, stop, origins, directions
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _crossing_parity(scene, filter_address, origins, directions, capacity, edge_band, graze,
-                     odd, clear):  # fmt: skip
+def _crossing_parity(scene, filter_address, origins, directions, screen, parity):
+    # screen: (capacity, (primitives,) float32 edge band, float32 graze); parity: (odd, clear)
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
         _parity_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                      origins, directions, capacity, edge_band, graze, odd, clear)  # fmt: skip
+                      origins, directions, screen, parity)
 
 
-def new_hit_buffers(n: int, capacity: int) -> tuple[np.ndarray, ...]:
-    """Empty (t, prim, u, v, cos, count, more) arrays for ``all_hits`` of n rays."""
+class HitBuffers(NamedTuple):
+    """Every hit of n rays, up to ``capacity`` a ray (see ``all_hits``): ``t`` (n, capacity)
+    float32, ``prim`` (n, capacity) int32, ``u``, ``v``, ``cos`` (n, capacity) float32,
+    ``count`` (n,) int64, ``more`` (n,) bool."""
+
+    t: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    cos: np.ndarray
+    count: np.ndarray
+    more: np.ndarray
+
+
+def new_hit_buffers(n: int, capacity: int) -> HitBuffers:
+    """Empty ``HitBuffers`` for ``all_hits`` of n rays."""
     shape = (n, capacity)
-    return (np.empty(shape, np.float32), np.empty(shape, np.int32), np.empty(shape, np.float32),
-            np.empty(shape, np.float32), np.empty(shape, np.float32), np.empty(n, np.int64),
-            np.empty(n, bool))  # fmt: skip
-
+    return HitBuffers(np.empty(shape, np.float32), np.empty(shape, np.int32),
+                      np.empty(shape, np.float32), np.empty(shape, np.float32),
+                      np.empty(shape, np.float32), np.empty(n, np.int64), np.empty(n, bool))
 
 def all_hits(
     scene: int,
@@ -330,30 +345,29 @@ def all_hits(
     tfar: np.ndarray,
     capacity: int,
     threads: int,
-    out: tuple[np.ndarray, ...] | None = None,
-) -> tuple[np.ndarray, ...]:
+    out: HitBuffers | None = None,
+) -> HitBuffers:
     """Up to ``capacity`` nearest hits of each ray, each primitive once, sorted by (t, prim).
 
     ``scene`` is a committed Embree scene built with
-    ``library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS``
-    (``BVH(filters=True)``); ``origins``, ``directions`` (n, 3) float32, ``tnear``, ``tfar``
-    (n,) float32 (hits with tnear <= t <= tfar). Returns ``t`` (n, capacity) float32, ``prim``
-    (n, capacity) int32, ``u``, ``v`` (n, capacity) float32 barycentrics (weights of the
-    triangle's second and third vertex), ``cos`` (n, capacity) float32 |cos| of the angle
-    between ray and geometric normal, ``count`` (n,) int64 hits kept (row entries past it are
-    undefined), ``more`` (n,) bool: the ray has more hits than ``capacity``. ``out``: arrays of
-    at least those shapes to fill (their leading n rows are returned), so that a caller tracing
+    ``library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS`` (``BVH(filters=True)``); ``origins``,
+    ``directions`` (n, 3) float32, ``tnear``, ``tfar`` (n,) float32 (hits with tnear <= t <=
+    tfar). Returns ``HitBuffers``: ``t`` (n, capacity) float32, ``prim`` (n, capacity) int32,
+    ``u``, ``v`` (n, capacity) float32 barycentrics (weights of the triangle's second and third
+    vertex), ``cos`` (n, capacity) float32 |cos| of the angle between ray and geometric normal,
+    ``count`` (n,) int64 hits kept (row entries past it are undefined), ``more`` (n,) bool: the
+    ray has more hits than ``capacity``. ``out``: ``HitBuffers`` of at least those shapes to
+    fill (their leading n rows are returned), so that a caller tracing
     block after block reuses memory that is already mapped.
     """
     n = len(origins)
     if out is None or len(out[0]) < n or out[0].shape[1] != capacity:
         out = new_hit_buffers(n, capacity)
-    t, prim, u, v, cos, count, more = (array[:n] for array in out)
+    hits = HitBuffers(*(array[:n] for array in out))
     if n:
         numba.set_num_threads(threads_for(n, threads))
-        _all_hits(scene, FILTER_ADDRESS, origins, directions, tnear, tfar, t, prim, u, v, cos,
-                  count, more)  # fmt: skip
-    return t, prim, u, v, cos, count, more
+        _all_hits(scene, FILTER_ADDRESS, Rays(origins, directions, tnear, tfar), hits)
+    return hits
 
 
 def crossing_parity(
@@ -379,7 +393,6 @@ def crossing_parity(
     clear = np.zeros(n, bool)
     if n:
         numba.set_num_threads(threads_for(n, threads))
-        _crossing_parity(scene, FILTER_ADDRESS, origins, directions, capacity,
-                         np.ascontiguousarray(edge_band, np.float32), np.float32(graze), odd,
-                         clear)  # fmt: skip
+        screen = (capacity, np.ascontiguousarray(edge_band, np.float32), np.float32(graze))
+        _crossing_parity(scene, FILTER_ADDRESS, origins, directions, screen, (odd, clear))
     return odd, clear

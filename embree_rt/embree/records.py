@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -98,19 +99,38 @@ def plane_crossing(oy, dy, tnear, tfar, plane_y):
     return np.nan
 
 
+class RecordLabels(NamedTuple):
+    """``HitLabels`` as ``build_records`` reads them: with ``has_plane`` the ground plane y =
+    ``plane_y`` (float32) labelled ``plane_label``; ``sphere_geom`` the top-level sphere set's
+    geometry id (-1: none), ``spheres`` (m, 4) float32 its (x, y, z, r) buffer as the BVH stores
+    it, sphere p in slot ``sphere_slot[p]`` ((m,) int32; empty when slot p holds sphere p), and
+    ``sphere_label`` (m,) int32; ``geometry_label`` (g,) int64 and ``geometry_scale`` (g,)
+    float32 by top-level geometry id."""
+
+    has_plane: bool
+    plane_y: np.float32
+    plane_label: int
+    sphere_geom: int
+    spheres: np.ndarray
+    sphere_slot: np.ndarray
+    sphere_label: np.ndarray
+    geometry_label: np.ndarray
+    geometry_scale: np.ndarray
+
+
 @njit(nogil=True, cache=True)
-def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, inst_prim, ng, u, v,
-                  has_plane, plane_y, plane_label, sphere_geom, spheres, sphere_slot, sphere_label,
-                  geometry_label, geometry_scale, normal_matrices, arrays):  # fmt: skip
+def build_records(origins, directions, tnear, tfar, hits, inst_prim, labels, normal_matrices,
+                  arrays):  # fmt: skip
     """The compiled pass behind ``BVH.intersect_records``: classify, count, then fill.
 
     Inputs per ray: ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32
-    and the raw hits ``t`` (n,) float32, ``geom``, ``prim``, ``inst``, ``inst_prim`` (n,) int32,
-    ``ng`` (n, 3) float32 object-space normal, ``u``, ``v`` (n,) float32. ``spheres`` (m, 4)
-    float32 is the sphere set's (x, y, z, r) buffer as the BVH stores it, sphere p in slot
-    ``sphere_slot[p]`` ((m,) int32; empty when slot p holds sphere p); ``normal_matrices`` and
+    and the raw hits: ``hits`` (``kernels.NearestHits``, normals in the object's space) and
+    ``inst_prim`` (n,) int32. ``labels``: a ``RecordLabels``; ``normal_matrices`` and
     ``arrays``: the BVH's tables for world normals (``world_normals``).
     """
+    t, ng, u, v, prim, geom, inst = hits
+    (has_plane, plane_y, plane_label, sphere_geom, spheres, sphere_slot, sphere_label,
+     geometry_label, geometry_scale) = labels  # fmt: skip
     n = origins.shape[1]
     kind = np.empty(n, np.uint8)
     plane_t = np.empty(n, np.float32)

@@ -32,7 +32,14 @@ from numba import njit, prange
 from embree_rt.compiled.morton import radix_order
 from embree_rt.compiled.work_split import parallel_region, threads_for
 from embree_rt.embree import BVH
-from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, intersect_chunk
+from embree_rt.embree.kernels import (
+    CHUNK,
+    SCRATCH_WORDS,
+    NearestHits,
+    Query,
+    Rays,
+    intersect_chunk,
+)
 from embree_rt.embree.validation import as_points
 from embree_rt.trimesh_ray.local_frame import local_coordinate
 from embree_rt.trimesh_ray.ray_order import box_cells, entry_key
@@ -98,8 +105,9 @@ def _trace_chunk(scene, lanes, words, first, stop, origins, directions, limits, 
     for i in range(first, stop):
         tnear[i] = np.float32(limits[i, 0])
         tfar[i] = np.inf
-    intersect_chunk(scene, 0, lanes, words, first, stop, origins, directions, tnear, tfar, t,
-                     normal, u, v, prim, geom, inst, None)  # fmt: skip
+    intersect_chunk(Query(scene, 0, lanes), words, first, stop,
+                    Rays(origins, directions, tnear, tfar),
+                    NearestHits(t, normal, u, v, prim, geom, inst), None)
     floor_band_scale = band_ulps * _EPS32 / floor_altitude if floor_altitude > 0 else np.inf
     for i in range(first, stop):
         p = prim[i]
