@@ -216,6 +216,15 @@ def trimesh_queries() -> dict[str, str]:
     return out
 
 
+def cpu_isa() -> list[str]:
+    """The vector instruction sets Embree chooses kernels by, as the CPU reports them."""
+    try:
+        flags = Path("/proc/cpuinfo").read_text().split("flags", 1)[1].split("\n", 1)[0].split()
+    except (OSError, IndexError):
+        return []
+    return sorted({"sse4_2", "avx", "avx2", "avx512f"} & set(flags))
+
+
 def compare(before: Path, after: Path) -> int:
     """Print every output whose digest differs or that only one side has; 0 when none."""
     a = json.loads(before.read_text())
@@ -261,6 +270,7 @@ def main() -> int:
         parser.error("give OUT.json or --compare A B")
     import embree_rt
 
+    print(f"measuring the checkout at {checkout()}", file=sys.stderr, flush=True)
     began = time.perf_counter()
     with tempfile.TemporaryDirectory() as workdir:
         outputs = renders(args.full, Path(workdir))
@@ -271,7 +281,7 @@ def main() -> int:
         "meta": {
             "embree_rt": str(Path(embree_rt.__file__).parent),
             "machine": platform.machine(),
-            "processor": platform.processor(),
+            "isa": cpu_isa(),
             "python": platform.python_version(),
             "numpy": np.__version__,
             "seconds": round(time.perf_counter() - began, 1),
