@@ -51,6 +51,7 @@ from trimesh.constants import tol
 from embree_rt.embree.validation import as_points
 from embree_rt.trimesh_ray.decided_hits import decided_hits
 from embree_rt.trimesh_ray.finished_hits import finished_hits
+from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
 from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
 from embree_rt.trimesh_ray.local_scene import BAND_ULPS, EDGE_BAND_SCALE, EPS32, LocalScene
 from embree_rt.trimesh_ray.plane_distances import plane_distances
@@ -218,7 +219,8 @@ class RayMeshIntersector:
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
         buffers = scene.hit_buffers(first_room)
         hits, pending_parts = _HitList(scene, 2 * n), []
-        band_scale = EDGE_BAND_SCALE
+        rules = tolerances(EDGE_BAND_SCALE, _GRAZE_COS, _PARALLEL_COS, tol.zero)
+        world = world_rays(origins, directions, magnitude, near, inclusive)
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
             # Embree from the local frame's tnear (inclusive, a little short of ours): which
@@ -232,9 +234,10 @@ class RayMeshIntersector:
             # float64 path below, those that overflowed `first_room` traced again first
             recorded = int(result[5].sum())
             rays, tris, distance, messy = settled_hits(
-                result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
-                directions[rows], scene.planes, scene.min_altitude,
-                scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS, scene.bvh.threads,
+                result, room > first_room,
+                world_rays(origins[rows], directions[rows], magnitude[rows], near[rows],
+                           inclusive),
+                scene.tables, rules, scene.bvh.threads,
                 tuple(scene.scratch(f"settle_{k}", recorded, dtype) for k, dtype in
                       enumerate((np.int64, np.int64, np.float64))),
                 hits.room(recorded), first,
@@ -245,8 +248,7 @@ class RayMeshIntersector:
             # order); the others are traced again first.
             overflowed = result[6] if room > first_room else np.zeros(len(messy), bool)
             complete_rows = np.flatnonzero(messy & ~overflowed)
-            hits.append(self._decided(complete_rows, first + complete_rows, result, magnitude,
-                                      near, inclusive, origins, directions))  # fmt: skip
+            hits.append(self._decided(complete_rows, first + complete_rows, result, world, rules))
             pending_parts.append(first + np.flatnonzero(messy & overflowed))
         pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
@@ -255,24 +257,21 @@ class RayMeshIntersector:
             block_near = (near[which] * scene.scale * 0.5).astype(np.float32)
             result = scene.bvh.all_hits(local_origins[which], local_directions[which], block_near,
                                         np.inf, room)  # fmt: skip
-            hits.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
-                                      inclusive, origins, directions))  # fmt: skip
+            hits.append(self._decided(np.arange(len(which)), which, result, world, rules))
         rays, tris, distance = hits.arrays()
         return finished_hits(rays, tris, distance, traced_order, n, capacity,
                              scene.fans()[0] if one_per_point else None,
                              scene.extent / scene.scale, given_origins, given_directions,
                              with_locations, scene.scratch, scene.bvh.threads)  # fmt: skip
 
-    def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
+    def _decided(self, rows, positions, result, world, rules):
         """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
         decides them, against all the triangles around them (``decided_hits``)."""
         scene = self._scene
         if not len(rows):
             return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-        return decided_hits(rows, positions, result, magnitude, near, inclusive, origins,
-                            directions, scene.planes, scene.triangles,
-                            scene.min_altitude, EDGE_BAND_SCALE, _GRAZE_COS, _PARALLEL_COS,
-                            tol.zero, scene.fans(), scene.bvh.threads)  # fmt: skip
+        return decided_hits(rows, positions, result, world, scene.tables, rules, scene.fans(),
+                            scene.bvh.threads)  # fmt: skip
 
     def _first_hits(self, origins, directions, tnear) -> np.ndarray:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)

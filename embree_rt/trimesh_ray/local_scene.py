@@ -10,6 +10,7 @@ import numpy as np
 import trimesh
 
 from embree_rt.embree import BVH
+from embree_rt.trimesh_ray.hit_inputs import MeshTables
 from embree_rt.trimesh_ray.local_frame import local_points
 
 EPS32 = float(np.finfo(np.float32).eps)
@@ -55,6 +56,9 @@ class LocalScene:
         self.min_altitude = min_altitudes(self.triangles, np.asarray(mesh.area_faces)) * scale
         # 0 when any triangle is degenerate: then every hit's own altitude is looked up
         self.floor_altitude = float(self.min_altitude.min()) if self.face_count else 0.0
+        # the same tables as the compiled float64 passes take them
+        self.tables = MeshTables(np.ascontiguousarray(self.planes, np.float64), self.triangles,
+                                 self.min_altitude, self.floor_altitude)  # fmt: skip
         # contains_points' rays reach twice the mesh's extent
         self.contains_band = _edge_band(self, np.arange(self.face_count),
                                         np.full(self.face_count, 2 * self.extent)
