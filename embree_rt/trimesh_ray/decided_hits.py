@@ -73,8 +73,9 @@ def _bounds_chunk(first, stop, rows, positions, hits, rays, mesh, tolerances, fa
         for j in range(count[r]):
             p = prim[r, j]
             total += 1
-            if _is_suspect(u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p],
-                           graze):  # fmt: skip
+            if _is_suspect(
+                u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p], graze
+            ):
                 for c in range(3):
                     corner = canonical[p, c]
                     total += fan_starts[corner + 1] - fan_starts[corner]
@@ -82,8 +83,9 @@ def _bounds_chunk(first, stop, rows, positions, hits, rays, mesh, tolerances, fa
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _decide_chunk(first, stop, bound, rows, positions, hits, rays, mesh, tolerances, fans, work,
-                  kept):  # fmt: skip
+def _decide_chunk(
+    first, stop, bound, rows, positions, hits, rays, mesh, tolerances, fans, work, kept
+):
     # rays first .. stop; ray a's candidates and hits in bound[a] .. bound[a + 1] of `work`
     # (candidates, tested, tris, distance), kept[a] hits
     _t, prim, u, v, cos, count, _more = hits
@@ -97,8 +99,9 @@ def _decide_chunk(first, stop, bound, rows, positions, hits, rays, mesh, toleran
         stop_a = bound[a]
         for j in range(count[r]):
             p = prim[r, j]
-            if _is_suspect(u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p],
-                           graze):  # fmt: skip
+            if _is_suspect(
+                u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p], graze
+            ):
                 for c in range(3):
                     corner = canonical[p, c]
                     for s in range(fan_starts[corner], fan_starts[corner + 1]):
@@ -122,8 +125,9 @@ def _decide_chunk(first, stop, bound, rows, positions, hits, rays, mesh, toleran
         for i in range(bound[a] + 1, stop_a):
             f, flag = candidates[i], tested[i]
             j = i - 1
-            while j >= bound[a] and (candidates[j] > f or (candidates[j] == f and tested[j]
-                                                           and not flag)):  # fmt: skip
+            while j >= bound[a] and (
+                candidates[j] > f or (candidates[j] == f and tested[j] and not flag)
+            ):
                 candidates[j + 1], tested[j + 1] = candidates[j], tested[j]
                 j -= 1
             candidates[j + 1], tested[j + 1] = f, flag
@@ -136,9 +140,13 @@ def _decide_chunk(first, stop, bound, rows, positions, hits, rays, mesh, toleran
             if not along > parallel_cos:
                 continue
             if tested[i] and not _barycentric_hit(
-                    triangles, f, origins[q, 0] + directions[q, 0] * distance,
-                    origins[q, 1] + directions[q, 1] * distance,
-                    origins[q, 2] + directions[q, 2] * distance, zero):  # fmt: skip
+                triangles,
+                f,
+                origins[q, 0] + directions[q, 0] * distance,
+                origins[q, 1] + directions[q, 1] * distance,
+                origins[q, 2] + directions[q, 2] * distance,
+                zero,
+            ):
                 continue
             if not (distance >= near[q] if inclusive else distance > near[q]):
                 continue
@@ -166,26 +174,54 @@ def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
     n_chunks = (m + CHUNK - 1) // CHUNK
     totals = np.empty(m, np.int64)
     for c in prange(n_chunks):
-        _bounds_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), rows, positions, hits, rays, mesh,
-                      tolerances, fans, totals)  # fmt: skip
+        _bounds_chunk(
+            c * CHUNK,
+            min(m, (c + 1) * CHUNK),
+            rows,
+            positions,
+            hits,
+            rays,
+            mesh,
+            tolerances,
+            fans,
+            totals,
+        )
     bound = np.zeros(m + 1, np.int64)
     for a in range(m):
         bound[a + 1] = bound[a] + totals[a]
     # candidates, tested (decided in float64, else Embree's hit stands), tris, distance
-    work = (np.empty(bound[m], np.int64), np.empty(bound[m], np.bool_),
-            np.empty(bound[m], np.int64), np.empty(bound[m], np.float64))  # fmt: skip
+    work = (
+        np.empty(bound[m], np.int64),
+        np.empty(bound[m], np.bool_),
+        np.empty(bound[m], np.int64),
+        np.empty(bound[m], np.float64),
+    )
     kept = np.empty(m, np.int64)
     for c in prange(n_chunks):
-        _decide_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, rows, positions, hits, rays,
-                      mesh, tolerances, fans, work, kept)  # fmt: skip
+        _decide_chunk(
+            c * CHUNK,
+            min(m, (c + 1) * CHUNK),
+            bound,
+            rows,
+            positions,
+            hits,
+            rays,
+            mesh,
+            tolerances,
+            fans,
+            work,
+            kept,
+        )
     places = np.zeros(m + 1, np.int64)
     for a in range(m):
         places[a + 1] = places[a] + kept[a]
-    out = (np.empty(places[m], np.int64), np.empty(places[m], np.int64),
-           np.empty(places[m], np.float64))  # fmt: skip
+    out = (
+        np.empty(places[m], np.int64),
+        np.empty(places[m], np.int64),
+        np.empty(places[m], np.float64),
+    )
     for c in prange(n_chunks):
-        _gather_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, places, positions, work, kept,
-                      out)  # fmt: skip
+        _gather_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, places, positions, work, kept, out)
     return out
 
 
@@ -216,6 +252,12 @@ def decided_hits(
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     with parallel_region:
         numba.set_num_threads(threads_for(len(rows) * 16, threads))
-        return _decide(np.ascontiguousarray(rows, np.int64),
-                       np.ascontiguousarray(positions, np.int64), HitBuffers(*hits[:7]), rays,
-                       mesh, tolerances, tuple(fans))  # fmt: skip
+        return _decide(
+            np.ascontiguousarray(rows, np.int64),
+            np.ascontiguousarray(positions, np.int64),
+            HitBuffers(*hits[:7]),
+            rays,
+            mesh,
+            tolerances,
+            tuple(fans),
+        )

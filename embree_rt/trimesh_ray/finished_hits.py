@@ -51,10 +51,13 @@ def _merge_chunk(first_ray, stop_ray, starts, capacity, merge, grouped, kept):
             j = k + 1
             # runs of hits on triangles sharing a vertex position at distances equal to within
             # float64 rounding of the mesh's size are one point
-            while merge_points and j < stop and abs(grouped_distance[j]
-                                                    - grouped_distance[j - 1]) <= (
-                    1e3 * _EPS64 * (abs(grouped_distance[j]) + size)) and _share_a_vertex(
-                    canonical, grouped_tris[j - 1], grouped_tris[j]):  # fmt: skip
+            while (
+                merge_points
+                and j < stop
+                and abs(grouped_distance[j] - grouped_distance[j - 1])
+                <= (1e3 * _EPS64 * (abs(grouped_distance[j]) + size))
+                and _share_a_vertex(canonical, grouped_tris[j - 1], grouped_tris[j])
+            ):
                 if grouped_tris[j] < grouped_tris[best]:
                     best = j
                 j += 1
@@ -82,8 +85,9 @@ def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped, points, out)
             out_tris[slot] = grouped_tris[first + d]
             if with_locations:
                 for axis in range(3):  # NumPy's origins[r] + directions[r] * distance, unfused
-                    locations[slot, axis] = (origins[r, axis]
-                                             + directions[r, axis] * grouped_distance[first + d])
+                    locations[slot, axis] = (
+                        origins[r, axis] + directions[r, axis] * grouped_distance[first + d]
+                    )
 
 
 @njit(parallel=True, nogil=True, cache=True)
@@ -119,8 +123,9 @@ def _finish(parts, order, ray_count, capacity, merge, points, scratch):
     # 2. in parallel over chunks of rays: merged and cut, in each ray's own range
     n_chunks = (ray_count + CHUNK - 1) // CHUNK
     for c in prange(n_chunks):
-        _merge_chunk(c * CHUNK, min(ray_count, (c + 1) * CHUNK), starts, capacity, merge,
-                     grouped, kept)  # fmt: skip
+        _merge_chunk(
+            c * CHUNK, min(ray_count, (c + 1) * CHUNK), starts, capacity, merge, grouped, kept
+        )
     # 3. depth-major: rays with more than d hits, ascending, for each depth d; each chunk's
     # hits of depth d follow the earlier chunks' (a prefix sum over chunks, depth by depth), so
     # the placement is the serial one on any number of threads
@@ -143,8 +148,9 @@ def _finish(parts, order, ray_count, capacity, merge, points, scratch):
     locations = np.empty((total if with_locations else 0, 3), np.float64)
     out = (out_rays, out_tris, locations)
     for c in prange(n_chunks):
-        _place_chunk(c * CHUNK, min(ray_count, (c + 1) * CHUNK), slots[c], starts, kept,
-                     grouped, points, out)  # fmt: skip
+        _place_chunk(
+            c * CHUNK, min(ray_count, (c + 1) * CHUNK), slots[c], starts, kept, grouped, points, out
+        )
     return out
 
 
@@ -179,21 +185,37 @@ def finished_hits(
     the same for any).
     """
     if scratch is None:
+
         def scratch(name, size, dtype):
             return np.empty(size, dtype)
+
     k = len(rays)
-    parts = (np.ascontiguousarray(rays, np.int64), np.ascontiguousarray(tris, np.int64),
-             np.ascontiguousarray(distance, np.float64))  # fmt: skip
-    merge = (canonical is not None,
-             np.zeros((1, 3), np.int64) if canonical is None else canonical, float(size))
-    points = (np.ascontiguousarray(origins, np.float64),
-              np.ascontiguousarray(directions, np.float64), bool(with_locations))
-    work = (scratch("starts", ray_count + 1, np.int64), scratch("cursor", ray_count, np.int64),
-            scratch("kept", ray_count, np.int64), scratch("grouped_tris", k, np.int64),
-            scratch("grouped_distance", k, np.float64))  # fmt: skip
+    parts = (
+        np.ascontiguousarray(rays, np.int64),
+        np.ascontiguousarray(tris, np.int64),
+        np.ascontiguousarray(distance, np.float64),
+    )
+    merge = (
+        canonical is not None,
+        np.zeros((1, 3), np.int64) if canonical is None else canonical,
+        float(size),
+    )
+    points = (
+        np.ascontiguousarray(origins, np.float64),
+        np.ascontiguousarray(directions, np.float64),
+        bool(with_locations),
+    )
+    work = (
+        scratch("starts", ray_count + 1, np.int64),
+        scratch("cursor", ray_count, np.int64),
+        scratch("kept", ray_count, np.int64),
+        scratch("grouped_tris", k, np.int64),
+        scratch("grouped_distance", k, np.float64),
+    )
     order = np.zeros(0, np.int64) if order is None else np.ascontiguousarray(order, np.int64)
     with parallel_region:
         numba.set_num_threads(threads_for(int(ray_count), threads))
-        out_rays, out_tris, locations = _finish(parts, order, int(ray_count),
-                                                max(1, int(capacity)), merge, points, work)
+        out_rays, out_tris, locations = _finish(
+            parts, order, int(ray_count), max(1, int(capacity)), merge, points, work
+        )
     return out_rays, out_tris, locations if with_locations else None

@@ -47,14 +47,20 @@ class Tolerances(NamedTuple):
 
 
 def world_rays(
-    origins: np.ndarray, directions: np.ndarray, magnitude: np.ndarray, near: np.ndarray,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    magnitude: np.ndarray,
+    near: np.ndarray,
     inclusive: bool,
-) -> WorldRays:  # fmt: skip
+) -> WorldRays:
     """``WorldRays`` of the arrays given, as the kernels take them (C-contiguous float64)."""
-    return WorldRays(np.ascontiguousarray(origins, np.float64),
-                     np.ascontiguousarray(directions, np.float64),
-                     np.ascontiguousarray(magnitude, np.float64),
-                     np.ascontiguousarray(near, np.float64), bool(inclusive))  # fmt: skip
+    return WorldRays(
+        np.ascontiguousarray(origins, np.float64),
+        np.ascontiguousarray(directions, np.float64),
+        np.ascontiguousarray(magnitude, np.float64),
+        np.ascontiguousarray(near, np.float64),
+        bool(inclusive),
+    )
 
 
 def tolerances(band_scale: float, graze: float, parallel_cos: float, zero: float) -> Tolerances:

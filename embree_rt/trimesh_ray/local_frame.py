@@ -101,9 +101,12 @@ def local_rays(
     local_directions = np.empty((n, 3), np.float32)
     magnitude = np.empty(n, np.float64)
     if n:
-        _local_rays(np.ascontiguousarray(origins, np.float64),
-                    np.ascontiguousarray(directions, np.float64), frame(shift, scale, extent),
-                    (local_origins, local_directions, magnitude))  # fmt: skip
+        _local_rays(
+            np.ascontiguousarray(origins, np.float64),
+            np.ascontiguousarray(directions, np.float64),
+            frame(shift, scale, extent),
+            (local_origins, local_directions, magnitude),
+        )
     return local_origins, local_directions, magnitude
 
 
@@ -155,8 +158,9 @@ def _ordered_local_rays(origins, directions, frame, box, out, bad):
     for c in prange(n_chunks):
         _inverse_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, position)
     for c in prange(n_chunks):
-        _scatter_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), position, origins, directions, frame,
-                       out, bad)  # fmt: skip
+        _scatter_chunk(
+            c * CHUNK, min(n, (c + 1) * CHUNK), position, origins, directions, frame, out, bad
+        )
     return order
 
 
@@ -178,15 +182,24 @@ def ordered_local_rays(
     ``local_rays`` of the rays as given names the first bad one).
     """
     n = len(origins)
-    out = (np.empty((n, 3), np.float64), np.empty((n, 3), np.float64),
-           np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
-           np.empty(n, np.float64))  # fmt: skip
+    out = (
+        np.empty((n, 3), np.float64),
+        np.empty((n, 3), np.float64),
+        np.empty((n, 3), np.float32),
+        np.empty((n, 3), np.float32),
+        np.empty(n, np.float64),
+    )
     if not n:
         return (np.zeros(0, np.int64), *out, True)
     bad = np.zeros(1, np.bool_)
     with parallel_region:
         numba.set_num_threads(threads_for(n, threads))
-        order = _ordered_local_rays(np.ascontiguousarray(origins, np.float64),
-                                    np.ascontiguousarray(directions, np.float64),
-                                    frame(shift, scale, extent), box(bounds), out, bad)
+        order = _ordered_local_rays(
+            np.ascontiguousarray(origins, np.float64),
+            np.ascontiguousarray(directions, np.float64),
+            frame(shift, scale, extent),
+            box(bounds),
+            out,
+            bad,
+        )
     return (order, *out, not bad[0])

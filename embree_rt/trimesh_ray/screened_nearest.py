@@ -166,8 +166,9 @@ def _scatter_chunk(first, stop, order, ordered_prim, ordered_suspect, prim, susp
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _screened(query, origins, directions, frame, reorder, box, near_rule, screen, prim, suspect,
-              bad):  # fmt: skip
+def _screened(
+    query, origins, directions, frame, reorder, box, near_rule, screen, prim, suspect, bad
+):
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     rays = np.empty((n, 6), np.float32)
@@ -175,33 +176,73 @@ def _screened(query, origins, directions, frame, reorder, box, near_rule, screen
     keys = np.empty(n if reorder else 0, np.uint32)
     staged = (rays, limits, keys)
     for c in prange(n_chunks):
-        _frame_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), origins, directions, frame, near_rule,
-                     box, staged, bad)  # fmt: skip
+        _frame_chunk(
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            origins,
+            directions,
+            frame,
+            near_rule,
+            box,
+            staged,
+            bad,
+        )
     if reorder:
         order = radix_order(keys)
         ordered_rays = np.empty((n, 6), np.float32)
         ordered_limits = np.empty((n, 2), np.float64)
         for c in prange(n_chunks):
-            _gather_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, rays, limits, ordered_rays,
-                          ordered_limits)  # fmt: skip
+            _gather_chunk(
+                c * CHUNK,
+                min(n, (c + 1) * CHUNK),
+                order,
+                rays,
+                limits,
+                ordered_rays,
+                ordered_limits,
+            )
     else:
         order = np.arange(0)
         ordered_rays, ordered_limits = rays, limits
-    local = Rays(ordered_rays[:, :3], ordered_rays[:, 3:], np.empty(n, np.float32),
-                 np.empty(n, np.float32))  # fmt: skip
+    local = Rays(
+        ordered_rays[:, :3], ordered_rays[:, 3:], np.empty(n, np.float32), np.empty(n, np.float32)
+    )
     ordered_prim = np.empty(n, np.int32) if reorder else prim
     ordered_suspect = np.empty(n, np.bool_) if reorder else suspect
-    hits = NearestHits(np.empty(n, np.float32), np.empty((n, 3), np.float32),
-                       np.empty(n, np.float32), np.empty(n, np.float32), ordered_prim,
-                       np.empty(n, np.int32), np.empty(n, np.int32))  # fmt: skip
+    hits = NearestHits(
+        np.empty(n, np.float32),
+        np.empty((n, 3), np.float32),
+        np.empty(n, np.float32),
+        np.empty(n, np.float32),
+        ordered_prim,
+        np.empty(n, np.int32),
+        np.empty(n, np.int32),
+    )
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _trace_chunk(query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), local,
-                     ordered_limits, frame.extent, screen, hits, ordered_suspect)  # fmt: skip
+        _trace_chunk(
+            query,
+            scratch[c],
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            local,
+            ordered_limits,
+            frame.extent,
+            screen,
+            hits,
+            ordered_suspect,
+        )
     if reorder:
         for c in prange(n_chunks):
-            _scatter_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, ordered_prim,
-                           ordered_suspect, prim, suspect)  # fmt: skip
+            _scatter_chunk(
+                c * CHUNK,
+                min(n, (c + 1) * CHUNK),
+                order,
+                ordered_prim,
+                ordered_suspect,
+                prim,
+                suspect,
+            )
 
 
 def screened_nearest(
@@ -249,17 +290,33 @@ def screened_nearest(
     prim = np.empty(n, np.int32)
     suspect = np.empty(n, bool)
     bad = np.zeros(1, bool)
-    near_rule = Near(np.zeros(0) if near is None else np.ascontiguousarray(near, np.float64),
-                     float(near_ulps), float(near_factor))  # fmt: skip
-    screen = Screen(np.ascontiguousarray(altitude, np.float64), float(floor_altitude),
-                    float(band_ulps), float(graze))  # fmt: skip
+    near_rule = Near(
+        np.zeros(0) if near is None else np.ascontiguousarray(near, np.float64),
+        float(near_ulps),
+        float(near_factor),
+    )
+    screen = Screen(
+        np.ascontiguousarray(altitude, np.float64),
+        float(floor_altitude),
+        float(band_ulps),
+        float(graze),
+    )
     with parallel_region:
         if n:
             numba.set_num_threads(threads_for(n, bvh.threads))
-            _screened(Query(scene, 0, bvh.lanes), np.ascontiguousarray(origins, np.float64),
-                      np.ascontiguousarray(directions, np.float64), frame(shift, scale, extent),
-                      bounds is not None, box(np.zeros((2, 3)) if bounds is None else bounds),
-                      near_rule, screen, prim, suspect, bad)  # fmt: skip
+            _screened(
+                Query(scene, 0, bvh.lanes),
+                np.ascontiguousarray(origins, np.float64),
+                np.ascontiguousarray(directions, np.float64),
+                frame(shift, scale, extent),
+                bounds is not None,
+                box(np.zeros((2, 3)) if bounds is None else bounds),
+                near_rule,
+                screen,
+                prim,
+                suspect,
+                bad,
+            )
     if bad[0]:
         as_points(origins, "origins")  # raises, naming the first bad row
         as_points(directions, "directions")

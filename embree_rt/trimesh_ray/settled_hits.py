@@ -106,8 +106,18 @@ def _settle(hits, retrace_more, rays, mesh, tolerances, messy, scratch, ray_offs
         starts[c + 1] += starts[c]
     ends = np.empty(n_chunks, np.int64)
     for c in prange(n_chunks):
-        ends[c] = _settle_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), starts[c], hits,
-                                retrace_more, rays, mesh, tolerances, messy, scratch)
+        ends[c] = _settle_chunk(
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            starts[c],
+            hits,
+            retrace_more,
+            rays,
+            mesh,
+            tolerances,
+            messy,
+            scratch,
+        )
     places = np.zeros(n_chunks + 1, np.int64)  # each chunk's place in the output
     for c in range(n_chunks):
         places[c + 1] = places[c] + ends[c] - starts[c]
@@ -151,6 +161,15 @@ def settled_hits(
         out = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
     with parallel_region:
         numba.set_num_threads(threads_for(n, threads))
-        kept = _settle(hits, bool(retrace_more), rays, mesh, tolerances, messy, tuple(scratch),
-                       int(ray_offset), tuple(out))  # fmt: skip
+        kept = _settle(
+            hits,
+            bool(retrace_more),
+            rays,
+            mesh,
+            tolerances,
+            messy,
+            tuple(scratch),
+            int(ray_offset),
+            tuple(out),
+        )
     return out[0][:kept], out[1][:kept], out[2][:kept], messy
