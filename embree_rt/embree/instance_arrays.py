@@ -100,15 +100,14 @@ def finish_records(rays, start, stop, inst, inst_prim, label, scale, table):
         if table[g, ARRAY_CHILD_INDEX] != 0:
             index = carray(_uint_pointer(table[g, ARRAY_CHILD_INDEX]), table[g, ARRAY_COUNT])
             child = index[p]
-        bound = np.float64(
-            carray(_float_pointer(table[g, ARRAY_CHILD_BOUND]), child + 1)[child]
-        )
+        bound = np.float64(carray(_float_pointer(table[g, ARRAY_CHILD_BOUND]), child + 1)[child])
         largest = 0.0
         for row in range(3):
             reach = abs(np.float64(m[p, row, 3])) + bound * (
-                abs(np.float64(m[p, row, 0])) + abs(np.float64(m[p, row, 1]))
+                abs(np.float64(m[p, row, 0]))
+                + abs(np.float64(m[p, row, 1]))
                 + abs(np.float64(m[p, row, 2]))
-            )  # fmt: skip
+            )
             largest = max(largest, reach)
         scale[j] = largest
     return out

@@ -201,8 +201,9 @@ def _prepare_scratch(words, filter_address):
 
 
 @njit(inline="always")
-def _trace_one(scene, words, rayhit, args, context, origin, direction, tnear, tfar, buffers,
-               capacity):  # fmt: skip
+def _trace_one(
+    scene, words, rayhit, args, context, origin, direction, tnear, tfar, buffers, capacity
+):
     """Trace one ray, recording its hits in the (capacity,) buffers at the addresses
     ``buffers`` (t, prim, u, v, cos); returns (count, more)."""
     floats = words.view(np.float32)
@@ -261,9 +262,19 @@ def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
         buffers[2] = u.ctypes.data + 4 * i * capacity
         buffers[3] = v.ctypes.data + 4 * i * capacity
         buffers[4] = cos.ctypes.data + 4 * i * capacity
-        found, dropped = _trace_one(scene, words, rayhit, args, context, origins[i],
-                                    directions[i], tnear[i], tfar[i], buffers,
-                                    capacity)  # fmt: skip
+        found, dropped = _trace_one(
+            scene,
+            words,
+            rayhit,
+            args,
+            context,
+            origins[i],
+            directions[i],
+            tnear[i],
+            tfar[i],
+            buffers,
+            capacity,
+        )
         _sort_hits(found, t[i], prim[i], u[i], v[i], cos[i])
         count[i] = found
         more[i] = dropped
@@ -275,8 +286,9 @@ def _all_hits(scene, filter_address, rays, hits):
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _all_hits_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                        rays, hits)
+        _all_hits_chunk(
+            scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), rays, hits
+        )
 
 
 @njit(nogil=True, cache=True)
@@ -294,8 +306,19 @@ def _parity_chunk(scene, filter_address, words, first, stop, origins, directions
     buffers[3] = v.ctypes.data
     buffers[4] = cos.ctypes.data
     for i in range(first, stop):
-        found, dropped = _trace_one(scene, words, rayhit, args, context, origins[i],
-                                    directions[i], 0.0, np.inf, buffers, capacity)  # fmt: skip
+        found, dropped = _trace_one(
+            scene,
+            words,
+            rayhit,
+            args,
+            context,
+            origins[i],
+            directions[i],
+            0.0,
+            np.inf,
+            buffers,
+            capacity,
+        )
         ok = not dropped
         for k in range(found):
             band = edge_band[prims[k]]
@@ -312,8 +335,17 @@ def _crossing_parity(scene, filter_address, origins, directions, screen, parity)
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _parity_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                      origins, directions, screen, parity)
+        _parity_chunk(
+            scene,
+            filter_address,
+            scratch[c],
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            origins,
+            directions,
+            screen,
+            parity,
+        )
 
 
 class HitBuffers(NamedTuple):
@@ -333,9 +365,16 @@ class HitBuffers(NamedTuple):
 def new_hit_buffers(n: int, capacity: int) -> HitBuffers:
     """Empty ``HitBuffers`` for ``all_hits`` of n rays."""
     shape = (n, capacity)
-    return HitBuffers(np.empty(shape, np.float32), np.empty(shape, np.int32),
-                      np.empty(shape, np.float32), np.empty(shape, np.float32),
-                      np.empty(shape, np.float32), np.empty(n, np.int64), np.empty(n, bool))
+    return HitBuffers(
+        np.empty(shape, np.float32),
+        np.empty(shape, np.int32),
+        np.empty(shape, np.float32),
+        np.empty(shape, np.float32),
+        np.empty(shape, np.float32),
+        np.empty(n, np.int64),
+        np.empty(n, bool),
+    )
+
 
 def all_hits(
     scene: int,
