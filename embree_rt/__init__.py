@@ -1,8 +1,14 @@
-"""embree_rt: a Whitted-style ray tracer for scenes of very many objects."""
+"""embree_rt: a Whitted-style ray tracer for scenes of very many objects.
+
+``render(scene)`` renders one image; ``Renderer(scene)`` keeps the BVH for many views
+(``Renderer.render(camera=...)``). Both return a ``RenderResult``: the linear image, its AOVs
+and the render's statistics.
+"""
 
 from embree_rt.aovs import AOV_NAMES, save_with_aovs
+from embree_rt.api import Renderer, RenderResult, render
 from embree_rt.film import save_image
-from embree_rt.integrator import RenderStats, render
+from embree_rt.integrator import RenderStats
 from embree_rt.materials import PRESETS, Checker, Material, preset
 from embree_rt.scene import (
     Background,
@@ -27,8 +33,10 @@ __all__ = [
     "Material",
     "MeshObject",
     "PointLight",
+    "RenderResult",
     "RenderSettings",
     "RenderStats",
+    "Renderer",
     "Scene",
     "SceneError",
     "load_scene",

@@ -130,7 +130,7 @@ phase, count, output = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 retain_freed_memory()  # as the renderer runs: freed arrays stay in the heap
 tiny = Scene()
 tiny.add_sphere((0.0, 1.0, 0.0), 1.0)
-render(tiny, width=8, height=8, spp=1)  # the kernels compiled and loaded before measuring
+render(tiny, width=8, height=8, spp=1).image  # the kernels compiled and loaded before measuring
 scene = random_field(count) if phase in ("user", "point") else None
 before = status("VmRSS")
 Path("/proc/self/clear_refs").write_text("5")  # reset the peak (VmHWM) to VmRSS
@@ -139,7 +139,7 @@ if phase == "field":
 elif phase in ("user", "point"):
     SceneGeometry(scene, spheres="analytic" if phase == "user" else "point", threads=1).close()
 else:  # what the command does with an image: render it and write a PNG
-    save_image(render(tiny, width=1920, height=1080, spp=1, threads=2), output)
+    save_image(render(tiny, width=1920, height=1080, spp=1, threads=2).image, output)
 print(status("VmHWM") - before)
 """
 

@@ -439,8 +439,8 @@ BUGS = {
 # Where each command meets the bug: (command line, (module, attribute) to break). The field's
 # module is named in full: ``embree_rt.scene.random_field`` as an attribute is the function.
 BROKEN_STAGES = {
-    "render": (["render", "{scene}", "-o", "{out}"], ("embree_rt.integrator", "render")),
-    "random": (["random", "--count", "5", "-o", "{out}"], ("embree_rt.integrator", "render")),
+    "render": (["render", "{scene}", "-o", "{out}"], ("embree_rt.api", "render")),
+    "random": (["random", "--count", "5", "-o", "{out}"], ("embree_rt.api", "render")),
     "random field": (
         ["random", "--count", "5", "-o", "{out}"],
         ("embree_rt.scene.random_field", "add_field_spheres"),

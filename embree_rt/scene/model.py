@@ -106,11 +106,28 @@ class Background:
 
 @dataclass
 class RenderSettings:
+    """Image size, samples per pixel, bounces and seed of a render (a scene's ``render`` table)."""
+
     width: int = 640
     height: int = 360
     spp: int = 8
     max_depth: int = 6
     seed: int = 0
+
+    def with_overrides(
+        self,
+        *,
+        width: int | None = None,
+        height: int | None = None,
+        spp: int | None = None,
+        max_depth: int | None = None,
+        seed: int | None = None,
+    ) -> RenderSettings:
+        """These settings with every value that is not None replaced: the one rule by which
+        flags and keyword arguments override a scene's ``render`` table."""
+        given = {"width": width, "height": height, "spp": spp, "max_depth": max_depth,
+                 "seed": seed}  # fmt: skip
+        return replace(self, **{name: value for name, value in given.items() if value is not None})
 
 
 @dataclass
