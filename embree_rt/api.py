@@ -21,9 +21,9 @@ import numpy as np
 
 from embree_rt import budget, film
 from embree_rt.aovs import check_aov_names, render_aovs, save_with_aovs
-from embree_rt.camera import camera_frame
+from embree_rt.camera import Camera, camera_frame
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, Integrator, RenderStats
-from embree_rt.scene.model import Camera, RenderSettings, Scene
+from embree_rt.scene.model import RenderSettings, Scene
 
 
 @dataclass

@@ -38,11 +38,11 @@ import numpy as np
 from embree_rt import budget
 from embree_rt.api import RenderResult
 from embree_rt.batches import batch_ranges
-from embree_rt.camera import CameraFrame, camera_frame
+from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.errors import InputError
 from embree_rt.film import Film
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, RenderStats
-from embree_rt.scene.model import Camera, RenderSettings, Scene
+from embree_rt.scene.model import RenderSettings, Scene
 from embree_rt.scene.random_field import FieldPlan
 
 # How long a render waits with no worker at all (lost, or not yet joined) before giving up.

@@ -163,7 +163,7 @@ def test_keyframe_fields_left_out_keep_the_previous_value(tmp_path: Path) -> Non
 def test_scene_save_writes_the_animation_back(tmp_path: Path, table: str, suffix: str) -> None:
     scene = rt.load_scene(scene_file(tmp_path, table))
     saved = tmp_path / f"saved{suffix}"
-    scene.save(saved)
+    rt.save_scene(scene, saved)
     assert rt.load_scene(saved).animation == scene.animation
     assert scene.animation is not None
 

@@ -14,8 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from embree_rt.camera import camera_frame, primary_rays
-from embree_rt.scene.model import Camera
+from embree_rt.camera import Camera, camera_frame, primary_rays
 
 # -- camera: an independent pinhole model ---------------------------------------------------------
 

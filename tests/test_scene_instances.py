@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from embree_rt import Scene, SceneError, load_scene, render
+from embree_rt import Scene, SceneError, load_scene, render, save_scene
 from embree_rt.geometry import SceneGeometry
 from embree_rt.scene import meshes as meshes_module
 from embree_rt.scene.instances import placement_matrices
@@ -121,7 +121,7 @@ def test_scene_save_writes_the_placements_back(tmp_path: Path):
     transforms[2, :3, 0] *= -1  # a mirrored copy
     scene = load_scene(write_instances_scene(tmp_path, {"transforms": transforms},
                                              'material = "red"\nsmooth = false'))  # fmt: skip
-    scene.save(tmp_path / "saved.toml")
+    save_scene(scene, tmp_path / "saved.toml")
     assert (tmp_path / "saved.instances0.npz").is_file()
     again = load_scene(tmp_path / "saved.toml")
     (before,), (after,) = scene.instances, again.instances

@@ -31,6 +31,7 @@ def command_random(args: argparse.Namespace) -> None:
         field_scene,
         plan_field,
     )
+    from embree_rt.scene.writer import save_scene
 
     check_output(args.output, args.aov)
     if args.save_scene is not None:
@@ -59,7 +60,7 @@ def command_random(args: argparse.Namespace) -> None:
         spheres_to_instances(scene, mesh, keep=plan.heroes, seed=plan.seed)
     generate_s = time.perf_counter() - started
     if args.save_scene is not None:
-        writing(args.save_scene, lambda: scene.save(args.save_scene))
+        writing(args.save_scene, lambda: save_scene(scene, args.save_scene))
     render_and_save(scene, args, ("generate", generate_s), None if mesh is not None else plan)
 
 

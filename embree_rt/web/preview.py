@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from embree_rt.api import Renderer
-from embree_rt.camera import camera_frame, sample_rays
+from embree_rt.camera import camera_frame, camera_problem, sample_rays
 from embree_rt.film import Film, FilmBlock, tonemap
 from embree_rt.integrator import Integrator
 from embree_rt.scene.loader import read_document
-from embree_rt.scene.model import Scene, camera_problem
+from embree_rt.scene.model import Scene
 from embree_rt.scene.writer import inline_short_arrays
 
 # Pixels a chunk of a pass traces: small enough that an edit stops a pass within ~0.1 s.
