@@ -169,22 +169,6 @@ def _check_range(start: object, count: object, total: int, units: str, image: st
         )
 
 
-def primary_rays(
-    frame: CameraFrame, spp: int, seed: int, start: int, count: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Camera rays for the global sample indices ``i`` in ``[start, start + count)``.
-
-    Sample i belongs to pixel ``i // spp`` (row-major, row 0 at the top, column 0 at the left)
-    and is sample ``s = i % spp`` of it, placed in cell ``strata(spp)[2][s]`` of the pixel's
-    jitter grid and jittered inside it by ``sampling.uniform_pair(seed, i, 0)``, so any split
-    of the indices into batches yields the same rays. Returns origins (3, count) float32, unit
-    directions (3, count) float32 (one ray per column) and pixel (count,) int64.
-    """
-    size = f"{frame.width}x{frame.height}"
-    _check_range(start, count, frame.width * frame.height * spp, "samples", f"{size} at {spp} spp")
-    return sample_rays(frame, spp, seed, np.arange(start, start + count, dtype=np.int64))
-
-
 # Camera rays are traced in tiles of TILE_WIDTH x TILE_HEIGHT pixels: one 8-ray packet then
 # covers a 4x2 block instead of 8 pixels of one row, and on the 1e6-sphere field Embree traced
 # such packets 1.18x faster (1e5: the same speed).
@@ -236,9 +220,13 @@ def sample_rays(
     frame: CameraFrame, spp: int, seed: int, index: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Camera rays for the (n,) int64 global sample indices ``index`` (any order, each below
-    ``width * height * spp``), placed as ``primary_rays`` places them: sample i of a render is
-    the same ray whichever call makes it. Returns origins (3, n) float32, unit directions
-    (3, n) float32 and pixel (n,) int64."""
+    ``width * height * spp``).
+
+    Sample i belongs to pixel ``i // spp`` (row-major, row 0 at the top, column 0 at the left)
+    and is sample ``s = i % spp`` of it, placed in cell ``strata(spp)[2][s]`` of the pixel's
+    jitter grid and jittered inside it by ``sampling.uniform_pair(seed, i, 0)``: sample i of a
+    render is the same ray whichever call, batch or order makes it. Returns origins (3, n)
+    float32, unit directions (3, n) float32 and pixel (n,) int64."""
     nx, ny, cells = strata(spp)
     # Floor division and remainder by a scalar, not np.divmod: NumPy divides by a constant
     # through libdivide only in these two (13x faster here).
@@ -258,9 +246,9 @@ def pixel_center_rays(
     frame: CameraFrame, start: int, count: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One camera ray through the centre of each pixel ``start .. start + count - 1``
-    (row-major, as ``primary_rays`` numbers them), with no jitter: the rays of the AOVs.
+    (row-major, as ``sample_rays`` numbers them), with no jitter: the rays of the AOVs.
     Returns origins (3, count) float32, unit directions (3, count) float32 and pixel (count,)
-    int64, as ``primary_rays`` does."""
+    int64, as ``sample_rays`` does."""
     size = f"{frame.width}x{frame.height}"
     _check_range(start, count, frame.width * frame.height, "pixels", size)
     pixel = np.arange(start, start + count, dtype=np.int64)
@@ -273,7 +261,7 @@ def _rays_through(
     frame: CameraFrame, column: np.ndarray, row: np.ndarray, pixel: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rays from the eye through the image points at (n,) float64 ``column``, ``row`` (in
-    pixels, from the top left corner), for ``primary_rays`` and ``pixel_center_rays``."""
+    pixels, from the top left corner), for ``sample_rays`` and ``pixel_center_rays``."""
     # Screen coordinates, x = (2 column / width - 1) half_width and y = (1 - 2 row / height)
     # half_height, in float64: the jitter must survive being added to a column number in the
     # thousands.

@@ -28,7 +28,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import dask
@@ -241,19 +241,14 @@ def render_batch(
 
 @dataclass
 class ClusterProgress:
-    """What the client knows mid-render: samples done of ``total``, rays traced, seconds since
-    the start, and the workers present."""
+    """What the client knows mid-render: samples done of ``total``, frames done, the workers
+    present, and ``stats``, the rays traced and seconds spent since the start."""
 
     done: int = 0
     total: int = 0
-    rays: int = 0
-    elapsed_s: float = 0.0
     workers: int = 0
     frames_done: int = 0
-
-    @property
-    def rays_per_s(self) -> float:
-        return self.rays / self.elapsed_s if self.elapsed_s > 0 else 0.0
+    stats: RenderStats = field(default_factory=RenderStats)
 
 
 @dataclass
@@ -382,14 +377,14 @@ class ClusterRenderer:
                     self.bytes_returned += result.sums.nbytes
                     for kind, n in result.rays.items():
                         self.stats.rays[kind] += n
+                        state.stats.rays[kind] += n
                     state.done += result.count * settings.spp
-                    state.rays += sum(result.rays.values())
                     image.pending -= 1
                     if image.pending == 0:
                         on_frame(image.label, image.film.image(settings.spp))
                         state.frames_done += 1
                 top_up()
-                state.elapsed_s = self.stats.render_s = time.perf_counter() - began
+                state.stats.render_s = self.stats.render_s = time.perf_counter() - began
                 if progress is not None:
                     progress(state)
         finally:
@@ -505,7 +500,7 @@ def progress_bar(total: int, quiet: bool) -> Iterator[Callable[[ClusterProgress]
     def show(state: ClusterProgress) -> None:
         bar.update(state.done - bar.n)
         bar.set_postfix_str(
-            f"{state.rays_per_s / 1e6:.1f} Mrays/s, {state.workers} workers", refresh=False
+            f"{state.stats.rays_per_s / 1e6:.1f} Mrays/s, {state.workers} workers", refresh=False
         )
 
     try:

@@ -324,14 +324,9 @@ class Integrator:
             return []
         d_glass = np.take(rays.directions, glass, axis=1)
         normal_glass = np.take(normal, glass, axis=1)
-        ior = table.ior[material[glass]]
-        entering_glass = entering[glass]
-        n1 = np.where(entering_glass, np.float32(1.0), ior)
-        n2 = np.where(entering_glass, ior, np.float32(1.0))
-        refracted, total_internal = shading.refract(d_glass, normal_glass, n1 / n2)
-        cos_incident = np.clip(-shading.dot(d_glass, normal_glass), 0.0, 1.0)
-        fresnel = shading.fresnel_schlick(cos_incident, n1, n2)
-        fresnel[total_internal] = 1.0
+        refracted, _, fresnel = shading.dielectric_split(
+            d_glass, normal_glass, entering[glass], table.ior[material[glass]]
+        )
         reflect_share[glass] += transparency[glass] * fresnel
         # Glass tints what passes through it (the green marble), not what it reflects.
         weight = np.take(rays.weight, glass, axis=1)

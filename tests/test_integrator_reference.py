@@ -18,9 +18,10 @@ import math
 
 import numpy as np
 import pytest
+from camera_samples import primary_rays
 
 from embree_rt import Background, Camera, Floor, Material, PointLight, Scene, preset, render
-from embree_rt.camera import camera_frame, primary_rays
+from embree_rt.camera import camera_frame
 
 WIDTH, HEIGHT = 48, 32
 MAX_DEPTH = 6

@@ -20,9 +20,10 @@ import numpy as np
 import pytest
 import trimesh
 from bvh_reference import triangle_hits
+from camera_samples import primary_rays
 
 import embree_rt as rt
-from embree_rt.camera import camera_frame, primary_rays
+from embree_rt.camera import camera_frame
 from embree_rt.geometry import SceneGeometry
 from embree_rt.scene.meshes import load_mesh_parts, metallic_roughness_material
 from embree_rt.textures import sample_bilinear, texels_from_image

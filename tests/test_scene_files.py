@@ -415,20 +415,20 @@ def test_showcase_has_the_articles_six_spheres() -> None:
     scene = load_scene(ROOT / "scenes" / "showcase.toml")
     materials = [_material(scene, i) for i in range(len(scene.sphere_radii))]
     assert len(materials) == 6
-    glass = [m for m in materials if m.is_glass]
+    glass = [m for m in materials if m.transparency > 0]
     assert len(glass) == 2 and any(m.color[1] > max(m.color[0], m.color[2]) for m in glass)  # green
     metals = [m for m in materials if m.metallic]
     assert any(m.color[0] > 2 * m.color[1] for m in metals)  # red
     assert any(m.color[0] > m.color[1] > m.color[2] + 0.3 for m in metals)  # gold
-    assert any(m.reflectivity >= 0.9 and not m.is_glass for m in materials)  # chrome
+    assert any(m.reflectivity >= 0.9 and m.transparency == 0 for m in materials)  # chrome
     assert any(m.reflectivity == 0 and m.color[2] > 2 * m.color[0] for m in materials)  # blue
 
 
 def test_three_spheres_and_material_spectrum() -> None:
     three = load_scene(ROOT / "scenes" / "three_spheres.toml")
     red, glass, mirror = (_material(three, i) for i in np.argsort(three.sphere_centers[:, 0]))
-    assert red.reflectivity == 0 and red.color[0] > 4 * red.color[1] and not red.is_glass
-    assert glass.is_glass and mirror.reflectivity >= 0.9
+    assert red.reflectivity == 0 and red.color[0] > 4 * red.color[1] and red.transparency == 0
+    assert glass.transparency > 0 and mirror.reflectivity >= 0.9
 
     spectrum = load_scene(ROOT / "scenes" / "material_spectrum.toml")
     order = np.argsort(spectrum.sphere_centers[:, 0])
@@ -437,7 +437,7 @@ def test_three_spheres_and_material_spectrum() -> None:
     # matte, glossy, metal, mirror: ever more specular and reflective; then glass.
     assert [m.specular for m in row[:4]] == sorted(m.specular for m in row[:4])
     assert [m.reflectivity for m in row[:4]] == sorted(m.reflectivity for m in row[:4])
-    assert row[0].specular == 0 and row[2].metallic and row[4].is_glass
+    assert row[0].specular == 0 and row[2].metallic and row[4].transparency > 0
 
 
 def test_mesh_scene_places_one_mesh_many_times_and_every_format() -> None:

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from camera_samples import primary_rays
 
-from embree_rt.camera import camera_frame, primary_rays, sample_rays
+from embree_rt.camera import camera_frame, sample_rays
 from embree_rt.film import Film
 from embree_rt.integrator import Integrator
 from embree_rt.scene import load_scene
