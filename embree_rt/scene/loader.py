@@ -16,20 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
+from embree_rt.camera import Camera, camera_problem
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.archives import read_archive
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
-from embree_rt.scene.model import (
-    Background,
-    Camera,
-    Floor,
-    PointLight,
-    RenderSettings,
-    Scene,
-    camera_problem,
-)
+from embree_rt.scene.model import Background, Floor, PointLight, RenderSettings, Scene
 from embree_rt.scene.random_field import (
     FieldParameterError,
     FieldPlan,
