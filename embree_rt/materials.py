@@ -43,10 +43,6 @@ class Material:
             raise ValueError(f"ior: must be >= 1, got {self.ior}")
         object.__setattr__(self, "color", tuple(float(c) for c in self.color))
 
-    @property
-    def is_glass(self) -> bool:
-        return self.transparency > 0.0
-
 
 PRESETS: dict[str, Material] = {
     "matte": Material(diffuse=0.85, specular=0.0, shininess=8.0, reflectivity=0.0),

@@ -256,7 +256,7 @@ def test_a_scene_at_every_limit_renders_without_nan_or_inf(tmp_path: Path) -> No
     """Colours and intensities at 1e6, lights and spheres at 1e10, a 1e-18 radius and floor
     square, an ior and shininess of 1e10, eight bounces: finite pixels, and bright ones."""
     (tmp_path / "limits.toml").write_text(LIMITS_SCENE)
-    image = render(load_scene(tmp_path / "limits.toml"))
+    image = render(load_scene(tmp_path / "limits.toml")).image
     assert np.isfinite(image).all()
     assert image.max() > 1e12  # the 1e6 colours did reach the image
 

@@ -192,7 +192,7 @@ def _check(folder: Path, name: str, text: str, render_it: bool) -> str:
             return "refused"
         if not render_it:
             return "loaded"
-        image = render(scene, width=16, height=16, spp=1, max_depth=3, threads=1)
+        image = render(scene, width=16, height=16, spp=1, max_depth=3, threads=1).image
         assert image.shape == (16, 16, 3)
         assert np.isfinite(image).all()
         return "rendered"

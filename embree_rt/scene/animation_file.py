@@ -6,14 +6,14 @@ from dataclasses import replace
 
 import numpy as np
 
+from embree_rt.camera import Camera, camera_problem, view_problem
 from embree_rt.scene.animation import MAX_FRAMES, Animation, Keyframe, keyframe_paths
 from embree_rt.scene.fields import Table
-from embree_rt.scene.model import Camera, camera_problem, view_problem
 
 
 def read_animation(table: Table, camera: Camera) -> Animation:
     """The ``[animation]`` table, checked: every frame's camera must define an image (the rule
-    of ``model.camera_problem``). Raises ``SceneError`` naming the key."""
+    of ``camera.camera_problem``). Raises ``SceneError`` naming the key."""
     table.require("frames")
     frames = table.integer("frames", low=1, high=MAX_FRAMES)
     keyframe_tables = table.tables("keyframes")

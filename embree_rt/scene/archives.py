@@ -1,9 +1,9 @@
 """Reading the ``.npz`` archives scene files name (sphere arrays, instance placements).
 
-An archive is a zip of ``.npy`` files, and a few megabytes of zip can unpack to gigabytes: the
-shapes its ``.npy`` headers declare are read first, from the start of each member, and what they
-would take (with what the caller says they cost beyond themselves) is held against the memory
-available before any array is unpacked.
+An archive is a zip of ``.npy`` files, and a few megabytes of zip can unpack to gigabytes:
+``array_headers`` reads the shapes its ``.npy`` headers declare, from the start of each member,
+so that what they would take is known (and held against the memory available, by the loader)
+before any array is unpacked.
 """
 
 from __future__ import annotations
@@ -14,8 +14,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-
-from embree_rt import budget
 
 # (shape, dtype) of each array of an archive, by name.
 Headers = dict[str, tuple[tuple[int, ...], np.dtype]]
@@ -48,29 +46,10 @@ def unpacked_bytes(headers: Headers) -> int:
     return sum(math.prod(shape) * dtype.itemsize for shape, dtype in headers.values())
 
 
-def read_archive(
-    path: Path,
-    fail: Callable[[str], Exception],
-    cost: Callable[[Headers], tuple[int, str]] | None = None,
-) -> dict[str, np.ndarray]:
+def read_archive(path: Path, fail: Callable[[str], Exception]) -> dict[str, np.ndarray]:
     """Every array of the ``.npz`` at ``path``, by name, read with ``allow_pickle=False``; a
-    missing file, a plain ``.npy``, a corrupt archive, pickled object arrays, or arrays whose
-    ``cost`` (bytes, what for; default: their unpacked size) is more than the memory available
-    are raised as ``fail("problem")``, the last before anything is unpacked."""
-    try:
-        headers = array_headers(path)
-    except FileNotFoundError:
-        raise fail("no such file") from None
-    except Exception as error:  # a directory, a corrupt zip or .npy header...
-        raise fail(f"cannot read .npz: {error}") from None
-    if headers is not None:
-        needed, what = cost(headers) if cost else (unpacked_bytes(headers), "its arrays")
-        available = budget.available_memory()
-        if available is not None and needed > available:
-            raise fail(
-                f"{what} would need ~{budget.format_bytes(needed)} of memory, this machine has "
-                f"{budget.format_bytes(available)} available"
-            )
+    missing file, a plain ``.npy``, a corrupt archive or pickled object arrays are raised as
+    ``fail("problem")``."""
     try:
         with np.load(path, allow_pickle=False) as archive:
             return {name: archive[name] for name in archive.files}

@@ -11,15 +11,17 @@ from __future__ import annotations
 import json
 import math
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from embree_rt import budget
+from embree_rt.camera import Camera, camera_problem
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
-from embree_rt.scene.archives import Headers, read_archive, unpacked_bytes
+from embree_rt.scene.archives import Headers, array_headers, read_archive, unpacked_bytes
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
 from embree_rt.scene.limits import (
@@ -31,12 +33,10 @@ from embree_rt.scene.limits import (
 )
 from embree_rt.scene.model import (
     Background,
-    Camera,
     Floor,
     PointLight,
     RenderSettings,
     Scene,
-    camera_problem,
     render_problem,
 )
 from embree_rt.scene.random_field import (
@@ -116,6 +116,28 @@ def load_scene(path: str | Path) -> Scene:
     """
     path = Path(path)
     return SceneReader(path, read_document(path)).build()
+
+
+def _check_unpacking(
+    path: Path, fail: Callable[[str], Exception], cost: Callable[[Headers], tuple[int, str]]
+) -> None:
+    """Raise ``fail("problem")`` when the arrays of the ``.npz`` at ``path`` would ``cost``
+    (bytes, what for) more than the memory available, known from the headers alone: a zip bomb
+    is refused before anything is unpacked. A file that cannot be read is left for
+    ``read_archive`` to report."""
+    try:
+        headers = array_headers(path)
+    except Exception:  # missing, a directory, a corrupt zip or .npy header: read_archive says
+        return
+    if headers is None:
+        return
+    needed, what = cost(headers)
+    available = budget.available_memory()
+    if available is not None and needed > available:
+        raise fail(
+            f"{what} would need ~{budget.format_bytes(needed)} of memory, this machine has "
+            f"{budget.format_bytes(available)} available"
+        )
 
 
 def _sphere_array_cost(headers: Headers) -> tuple[int, str]:
@@ -452,7 +474,8 @@ class SceneReader:
         def fail(problem: str) -> SceneError:
             return SceneError(self.path, entry.key, f"{path}: {problem}")
 
-        arrays = read_archive(path, fail, _sphere_array_cost)
+        _check_unpacking(path, fail, _sphere_array_cost)
+        arrays = read_archive(path, fail)
         for required in ("centers", "radii"):
             if required not in arrays:
                 raise fail(f"missing array {required!r} (has: {', '.join(arrays) or 'none'})")
@@ -494,4 +517,5 @@ class SceneReader:
         def fail(problem: str) -> SceneError:
             return SceneError(self.path, entry.placements_key, f"{path}: {problem}")
 
+        _check_unpacking(path, fail, lambda headers: (unpacked_bytes(headers), "its arrays"))
         return read_placements(path, fail, self._materials_problem)

@@ -3,92 +3,20 @@
 from __future__ import annotations
 
 import hashlib
-import math
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from embree_rt.camera import Camera, Vec3
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
 from embree_rt.scene.limits import INTEGER_LIMIT, placed_mesh_problem, spheres_problem
-from embree_rt.scene.writer import save_scene
 from embree_rt.transforms import as_affine
 
 if TYPE_CHECKING:  # trimesh (and SciPy behind it) loads in ~1 s: only scenes with meshes pay
     import trimesh
-
-Vec3 = tuple[float, float, float]
-
-
-@dataclass
-class Camera:
-    """A pinhole camera at ``position`` looking at ``look_at``; ``fov`` is vertical, in degrees."""
-
-    position: Vec3 = (0.0, 1.0, 5.0)
-    look_at: Vec3 = (0.0, 0.0, 0.0)
-    up: Vec3 = (0.0, 1.0, 0.0)
-    fov: float = 45.0
-
-
-# sin of the smallest angle allowed between a camera's ``up`` and its viewing direction: below
-# it the camera's roll is decided by rounding error.
-MIN_UP_SINE = 1e-6
-
-
-def camera_problem(camera: Camera) -> tuple[str, str] | None:
-    """What keeps ``camera`` from defining an image, as (field, problem), or None if nothing.
-
-    The one rule for a camera, followed by scene files and by ``camera.camera_frame``: ``fov``
-    a number of degrees strictly between 0 and 180; ``position``, ``look_at`` and ``up`` three
-    finite numbers each; ``look_at`` apart from ``position``; ``up`` not zero and at least
-    ``MIN_UP_SINE`` (sine of the angle) away from the viewing direction.
-    """
-    try:
-        fov = float(camera.fov)
-    except (TypeError, ValueError):
-        return "fov", f"expected a number of degrees, got {camera.fov!r}"
-    if not (math.isfinite(fov) and 0.0 < fov < 180.0):
-        return "fov", f"must be > 0 and < 180 degrees, got {fov:g}"
-    vectors = {}
-    for name in ("position", "look_at", "up"):
-        value = getattr(camera, name)
-        try:
-            vector = np.asarray(value, np.float64)
-        except (TypeError, ValueError):
-            vector = None
-        if vector is None or vector.shape != (3,) or not np.isfinite(vector).all():
-            return name, f"expected three finite numbers, got {value!r}"
-        vectors[name] = vector
-    found = view_problem(vectors["position"][None], vectors["look_at"][None], vectors["up"])
-    return None if found is None else found[1:]
-
-
-def view_problem(positions: np.ndarray, looks: np.ndarray, up) -> tuple[int, str, str] | None:
-    """The first of n cameras at (n, 3) float64 finite ``positions`` looking at (n, 3)
-    ``looks``, all with the finite (3,) ``up``, whose image ``camera_problem``'s rule refuses
-    (``look_at`` at ``position``, ``up`` zero or within ``MIN_UP_SINE`` of the view), as
-    (index, field, problem), or None: the rule over a whole camera path at once."""
-    up = np.asarray(up, np.float64)
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        view = positions - looks
-        distance = np.linalg.norm(view, axis=1)
-        up_length = np.linalg.norm(up)
-        sine = np.linalg.norm(np.cross(up / up_length, view / distance[:, None]), axis=1)
-    refused = ~(distance > 0.0) | ~(up_length > 0.0) | ~(sine >= MIN_UP_SINE)
-    if not refused.any():
-        return None
-    i = int(np.flatnonzero(refused)[0])
-    if not distance[i] > 0.0:
-        return i, "look_at", f"must differ from camera.position, both are {looks[i].tolist()}"
-    if not up_length > 0.0:
-        return i, "up", "must not be the zero vector"
-    problem = (
-        f"{up.tolist()} is parallel to the viewing direction (from {positions[i].tolist()} to "
-        f"{looks[i].tolist()})"
-    )
-    return i, "up", problem
 
 
 @dataclass
@@ -121,11 +49,28 @@ class Background:
 
 @dataclass
 class RenderSettings:
+    """Image size, samples per pixel, bounces and seed of a render (a scene's ``render`` table)."""
+
     width: int = 640
     height: int = 360
     spp: int = 8
     max_depth: int = 6
     seed: int = 0
+
+    def with_overrides(
+        self,
+        *,
+        width: int | None = None,
+        height: int | None = None,
+        spp: int | None = None,
+        max_depth: int | None = None,
+        seed: int | None = None,
+    ) -> RenderSettings:
+        """These settings with every value that is not None replaced: the one rule by which
+        flags and keyword arguments override a scene's ``render`` table."""
+        given = {"width": width, "height": height, "spp": spp, "max_depth": max_depth,
+                 "seed": seed}  # fmt: skip
+        return replace(self, **{name: value for name, value in given.items() if value is not None})
 
 
 def render_problem(settings: RenderSettings) -> tuple[str, str] | None:
@@ -362,10 +307,6 @@ class Scene:
         ]
         self.meshes.extend(added)
         return added
-
-    def save(self, path) -> None:
-        """Write this scene to a ``.toml`` or ``.json`` file (bulk data beside it)."""
-        save_scene(self, path)
 
     def _mesh_material(self, mesh: trimesh.Trimesh) -> str:
         """The name of the material the mesh's own file gives it (added to ``materials`` under a
