@@ -25,7 +25,7 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 from tolerances import RTOL32, assert_close
 
-from embree_rt import SceneError, load_scene
+from embree_rt import Scene, SceneError, load_scene
 from embree_rt.camera import camera_frame, primary_rays
 from embree_rt.geometry import SceneGeometry
 from embree_rt.scene.errors import InputWarning
@@ -495,3 +495,114 @@ def test_a_missing_buffer_names_the_file_and_the_key(tmp_path: Path) -> None:
     output = tmp_path / "out.png"
     assert main(["render", str(scene), "-o", str(output), "--quiet"]) == 2
     assert not output.exists()
+
+
+# -- 9. a mesh file rendered on its own ------------------------------------------------------------
+
+
+def in_view(camera, width: int, height: int, points: np.ndarray) -> np.ndarray:
+    """(n,) bool: each point in front of the pinhole ``camera`` and inside its image, by the
+    pinhole's closed form (vertical ``fov``, the image's aspect)."""
+    position = np.asarray(camera.position, float)
+    forward = np.asarray(camera.look_at, float) - position
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, camera.up)
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    d = points - position
+    depth = d @ forward
+    half = np.tan(np.radians(camera.fov) / 2)
+    return (depth > 0) & (np.abs(d @ up) < half * depth) & (
+        np.abs(d @ right) < half * width / height * depth)  # fmt: skip
+
+
+def test_a_gltf_renders_from_its_own_camera_under_its_own_lights(tmp_path: Path) -> None:
+    """A camera on a child node of a moved, turned parent; a point, a spot and a directional
+    light; the mesh seen through the file's camera hits where the reference says."""
+    gltf = box_gltf()
+    turn = Rotation.from_euler("y", 20, degrees=True)
+    gltf.node(children=[2], translation=[0.5, 0.0, 0.0], rotation=turn.as_quat().tolist())
+    tilt = Rotation.from_euler("x", -15, degrees=True)
+    gltf.node(root=False, camera=0, translation=[0.0, 1.2, 4.0], rotation=tilt.as_quat().tolist())
+    gltf.tree["cameras"] = [{"type": "perspective",
+                             "perspective": {"yfov": 0.6, "aspectRatio": 2.0, "znear": 0.1}}]
+    down = Rotation.from_euler("x", -90, degrees=True)  # -z turned to point down
+    gltf.node(translation=[0.0, 3.0, 0.0], extensions={"KHR_lights_punctual": {"light": 0}})
+    gltf.node(translation=[2.0, 2.0, 0.0], rotation=down.as_quat().tolist(),
+              extensions={"KHR_lights_punctual": {"light": 1}})
+    gltf.node(rotation=down.as_quat().tolist(), extensions={"KHR_lights_punctual": {"light": 2}})
+    gltf.tree["extensions"] = {"KHR_lights_punctual": {"lights": [
+        {"type": "point", "intensity": 90.0, "color": [1.0, 0.5, 0.25]},
+        {"type": "spot", "intensity": 80.0, "spot": {"outerConeAngle": 0.5}},
+        {"type": "directional", "intensity": 5.0}]}}  # fmt: skip
+    gltf.tree["extensionsUsed"] = ["KHR_lights_punctual"]
+    box_vertices = np.asarray(gltf_box_vertices(gltf))
+    path = gltf.write_glb(tmp_path / "staged.glb")
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = Scene.from_file(path)
+    (line,) = warning_lines(caught)
+    assert "extensions.KHR_lights_punctual.lights[1]: a spot light, rendered as a point" in line
+    eye = turn.apply([0.0, 1.2, 4.0]) + np.array([0.5, 0.0, 0.0])
+    forward = (turn * tilt).apply([0.0, 0.0, -1.0])
+    np.testing.assert_allclose(scene.camera.position, eye, atol=1e-12)
+    aim = np.asarray(scene.camera.look_at) - eye
+    np.testing.assert_allclose(aim / np.linalg.norm(aim), forward, atol=1e-12)
+    np.testing.assert_allclose(scene.camera.up, (turn * tilt).apply([0.0, 1.0, 0.0]), atol=1e-12)
+    assert scene.camera.fov == pytest.approx(np.degrees(0.6))
+    assert scene.render.width == 2 * scene.render.height
+    # the lights: E = I / d^2 at the box's centre (the origin), lux for the directional one
+    point, spot, sun = scene.lights
+    strengths = np.array([90.0 / 9.0, 80.0 / 8.0, 5.0])
+    assert [light.intensity for light in scene.lights] == pytest.approx(strengths / strengths.sum())
+    assert point.color == (1.0, 0.5, 0.25)
+    np.testing.assert_allclose(spot.position, [2.0, 2.0, 0.0])
+    sun_direction = np.asarray(sun.position) / np.linalg.norm(sun.position)
+    np.testing.assert_allclose(sun_direction, [0.0, 1.0, 0.0], atol=1e-9)  # shining down
+    assert np.linalg.norm(sun.position) > 1e3
+    assert scene.floor is not None and scene.floor.height < box_vertices[:, 1].min()
+    assert any("cameras[0]" in note for note in scene.notes)
+    scene.render.width, scene.render.height = WIDTH, HEIGHT
+    covered = assert_pixels_match(scene, box_vertices, trimesh.creation.box().faces)
+    assert covered > 0.05 * WIDTH * HEIGHT
+
+
+def gltf_box_vertices(gltf: Gltf) -> np.ndarray:
+    """The box_gltf's positions as its bytes hold them."""
+    view = gltf.tree["bufferViews"][gltf.tree["accessors"][0]["bufferView"]]
+    data = bytes(gltf.blob[view["byteOffset"] : view["byteOffset"] + view["byteLength"]])
+    return np.frombuffer(data, "<f4").reshape(-1, 3).astype(np.float64)
+
+
+@pytest.mark.parametrize("floor", [True, False])
+def test_a_file_without_camera_or_lights_is_framed_and_lit(tmp_path: Path, floor: bool) -> None:
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    mesh.apply_scale([300.0, 500.0, 200.0])  # a large model, off the origin
+    mesh.apply_translation([1000.0, 600.0, -50.0])
+    mesh.export(tmp_path / "big.stl")
+    scene = Scene.from_file(tmp_path / "big.stl", floor=floor)
+    settings = scene.render
+    assert in_view(scene.camera, settings.width, settings.height, mesh.vertices).all()
+    assert len(scene.lights) == 2
+    if floor:
+        assert 0.0 < mesh.vertices[:, 1].min() - scene.floor.height < 1.0
+    else:
+        assert scene.floor is None
+    scene.render.width, scene.render.height = WIDTH, HEIGHT
+    assert assert_pixels_match(scene, mesh.vertices, mesh.faces) > 0.1 * WIDTH * HEIGHT
+
+
+def test_from_trimesh_uses_the_trimesh_scenes_camera() -> None:
+    box = trimesh.creation.box()
+    loaded = trimesh.Scene(box)
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_euler("y", 30, degrees=True).as_matrix()
+    pose[:3, 3] = Rotation.from_euler("y", 30, degrees=True).apply([0.0, 0.0, 5.0])
+    loaded.camera = trimesh.scene.Camera(fov=(50.0, 40.0), resolution=(500, 400))
+    loaded.camera_transform = pose
+    scene = Scene.from_trimesh(loaded, floor=False)
+    np.testing.assert_allclose(scene.camera.position, pose[:3, 3], atol=1e-12)
+    aim = np.asarray(scene.camera.look_at) - pose[:3, 3]
+    np.testing.assert_allclose(aim / np.linalg.norm(aim), -pose[:3, 2], atol=1e-12)
+    assert scene.camera.fov == pytest.approx(40.0) and scene.floor is None

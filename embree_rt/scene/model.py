@@ -153,6 +153,28 @@ class Scene:
     instances: list[MeshInstances] = field(default_factory=list)
     # A camera path (``scene.animation``): None for a still image.
     animation: Animation | None = None
+    # What the scene's maker found and chose, one line each (a mesh file rendered on its own:
+    # whose camera and lights, where the floor is), for ``embree-rt info``.
+    notes: list[str] = field(default_factory=list)
+
+    @classmethod
+    def from_file(cls, path, floor: bool = True) -> Scene:
+        """A mesh file (OBJ, PLY, STL, OFF, glTF/GLB) rendered on its own: its own camera and
+        lights when it has them, else a camera framed from its bounds and a default light rig,
+        and a floor under it unless ``floor`` is False (``embree_rt.scene.model_file``).
+        Raises ``SceneError`` naming the file and the key in it."""
+        from embree_rt.scene.model_file import scene_from_model
+
+        return scene_from_model(path, floor=floor)
+
+    @classmethod
+    def from_trimesh(cls, loaded: trimesh.Trimesh | trimesh.Scene, floor: bool = True) -> Scene:
+        """A trimesh.Trimesh or trimesh.Scene rendered on its own: from the trimesh.Scene's
+        camera when it has one, else framed from the bounds; a default light rig; a floor under
+        it unless ``floor`` is False."""
+        from embree_rt.scene.model_file import scene_from_trimesh
+
+        return scene_from_trimesh(loaded, floor=floor)
 
     @property
     def material_names(self) -> list[str]:

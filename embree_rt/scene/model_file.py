@@ -1,0 +1,191 @@
+"""A mesh file rendered on its own, with no scene file (``embree-rt render model.glb``).
+
+The scene shows the file as it is placed (glTF nodes, instancing) and, when the file has them,
+from its own camera (glTF: the first camera a node uses) under its own lights
+(``KHR_lights_punctual``); otherwise from a camera framed on its bounds under a default rig of
+two lights. A checkered floor lies under it unless asked not to. ``Scene.notes`` says what was
+found and what was chosen.
+
+The renderer's lights are points with no falloff and no cone, so a file's lights are mapped:
+a point light stays one; a spot light becomes a point light (said in a warning line); a
+directional light becomes a point light so far along its direction (10^4 model radii) that
+its rays are parallel to 10^-4 radians. Their strengths keep their ratios at the model's centre
+(candela over squared distance; lux for a directional light), scaled to sum to
+``FILE_LIGHTS_TOTAL``, since the renderer has no exposure to take physical units.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from embree_rt.materials import Checker
+from embree_rt.scene.errors import warn_input
+from embree_rt.scene.gltf import FileCamera, FileLight
+from embree_rt.scene.meshes import LoadedModel, load_model, mesh_parts
+from embree_rt.scene.model import Camera, Floor, PointLight, Scene, camera_problem
+
+FRAMED_FOV = 40.0  # degrees, vertical
+# The framed view: from the front, a little to the right and above (azimuth, elevation, degrees).
+FRAMED_AZIMUTH, FRAMED_ELEVATION = 30.0, 20.0
+# The default rig: a key light and a fill, as (offset from the centre in model radii, intensity).
+DEFAULT_RIG = (((4.0, 7.0, 6.0), 0.8), ((-6.0, 3.0, 2.0), 0.3))
+FILE_LIGHTS_TOTAL = 1.0
+DISTANT_LIGHT_RADII = 1e4
+# The floor lies this far (in model diameters) below the lowest point, so that a model standing
+# on y = 0 does not share its soles' plane with the floor.
+FLOOR_GAP = 1e-4
+
+
+def model_bounds(model: LoadedModel) -> tuple[np.ndarray, np.ndarray]:
+    """(3,) float64 lowest and highest world coordinates of a model's triangles (an instanced
+    mesh's copies bounded by its box's corners when they are many)."""
+    lows, highs = [], []
+    for mesh, transform in model.parts:
+        points = trimesh.transform_points(np.asarray(mesh.vertices, np.float64), transform)
+        lows.append(points.min(axis=0))
+        highs.append(points.max(axis=0))
+    for mesh, transforms in model.instanced:
+        points = np.asarray(mesh.vertices, np.float64)
+        if len(points) * len(transforms) > 1_000_000:
+            points = trimesh.bounds.corners(mesh.bounds)
+        world = np.einsum("nij,kj->nki", transforms[:, :3, :3], points)
+        world += transforms[:, None, :3, 3]
+        lows.append(world.min(axis=(0, 1)))
+        highs.append(world.max(axis=(0, 1)))
+    return np.min(lows, axis=0), np.max(highs, axis=0)
+
+
+def framed_camera(low: np.ndarray, high: np.ndarray, fov: float = FRAMED_FOV) -> Camera:
+    """A camera on the ball around the box ``low``..``high``, from ``FRAMED_AZIMUTH`` and
+    ``FRAMED_ELEVATION``, near enough for the ball to fill the image's height."""
+    center = (low + high) / 2.0
+    radius = max(float(np.linalg.norm(high - low)) / 2.0, 1e-12)
+    azimuth, elevation = math.radians(FRAMED_AZIMUTH), math.radians(FRAMED_ELEVATION)
+    direction = np.array([math.sin(azimuth) * math.cos(elevation), math.sin(elevation),
+                          math.cos(azimuth) * math.cos(elevation)])  # fmt: skip
+    distance = 1.05 * radius / math.sin(math.radians(fov) / 2.0)
+    return Camera(position=_vec(center + distance * direction), look_at=_vec(center), fov=fov)
+
+
+def default_lights(low: np.ndarray, high: np.ndarray) -> list[PointLight]:
+    """``DEFAULT_RIG`` placed around the box ``low``..``high``."""
+    center = (low + high) / 2.0
+    radius = max(float(np.linalg.norm(high - low)) / 2.0, 1e-12)
+    return [PointLight(position=_vec(center + radius * np.array(offset)), intensity=intensity)
+            for offset, intensity in DEFAULT_RIG]  # fmt: skip
+
+
+def floor_under(low: np.ndarray, high: np.ndarray) -> Floor:
+    """A floor just under the box ``low``..``high``, its squares a round size near a quarter
+    of the model's width (a 0.16-unit model and a 1,100-unit one both show a few)."""
+    extent = float(np.max(high - low))
+    size = 10.0 ** math.floor(math.log10(extent / 4.0)) if extent > 0 else 1.0
+    return Floor(height=float(low[1]) - FLOOR_GAP * max(extent, 1e-12), checker=Checker(size=size))
+
+
+def file_camera(camera: FileCamera, center: np.ndarray, radius: float) -> Camera | None:
+    """A file's camera as embree_rt's, aimed along its view; None when it cannot be one."""
+    reach = max(float(np.dot(center - camera.position, camera.forward)), radius, 1e-12)
+    made = Camera(position=_vec(camera.position), look_at=_vec(camera.position +
+                  reach * camera.forward), up=_vec(camera.up), fov=camera.yfov_degrees)  # fmt: skip
+    return None if camera_problem(made) else made
+
+
+def file_lights(path: Path, lights: list[FileLight], center: np.ndarray,
+                radius: float) -> list[PointLight]:  # fmt: skip
+    """A file's lights as point lights (module docstring), warning once per spot light."""
+    strengths = []
+    positions = []
+    for light in lights:
+        if light.kind == "directional":
+            positions.append(center - DISTANT_LIGHT_RADII * radius * light.direction)
+            strengths.append(light.intensity)
+            continue
+        if light.kind == "spot":
+            warn_input(f"{path}: {light.key}: a spot light, rendered as a point light (embree_rt's "
+                       f"lights have no cone; its outer cone is {light.outer_cone_degrees:g} "
+                       "degrees)")  # fmt: skip
+        positions.append(light.position)
+        squared = max(float(np.sum((light.position - center) ** 2)), (1e-3 * radius) ** 2)
+        strengths.append(light.intensity / squared)
+    total = sum(strengths)
+    scale = FILE_LIGHTS_TOTAL / total if total > 0 else 0.0
+    return [PointLight(position=_vec(p), color=light.color, intensity=s * scale)
+            for p, s, light in zip(positions, strengths, lights, strict=True)]  # fmt: skip
+
+
+def scene_from_model(path: str | Path, floor: bool = True) -> Scene:
+    """The scene of a mesh file rendered on its own (module docstring). Raises ``SceneError``
+    naming the file and the key in it for a file that cannot be rendered as it says."""
+    path = Path(path)
+    model = load_model(path)
+    scene = Scene()
+    for mesh, transform in model.parts:
+        scene.add_mesh(mesh, transform=transform)
+    for mesh, transforms in model.instanced:
+        scene.add_instances(mesh, transforms)
+    low, high = model_bounds(model)
+    center, radius = (low + high) / 2.0, max(float(np.linalg.norm(high - low)) / 2.0, 1e-12)
+    camera = None if model.camera is None else file_camera(model.camera, center, radius)
+    if camera is not None:
+        scene.camera = camera
+        aspect = model.camera.aspect_ratio
+        if aspect and aspect > 0:
+            scene.render.height = max(1, round(scene.render.width / aspect))
+        scene.notes.append(f"camera: the file's {model.camera.key}")
+    else:
+        scene.camera = framed_camera(low, high)
+        scene.notes.append("camera: framed from the bounds (the file has none)")
+    if model.lights:
+        scene.lights = file_lights(path, model.lights, center, radius)
+        kinds = ", ".join(light.kind for light in model.lights)
+        scene.notes.append(f"lights: the file's {len(model.lights)} (KHR_lights_punctual: {kinds})")
+    else:
+        scene.lights = default_lights(low, high)
+        scene.notes.append("lights: the default rig of two (the file has none)")
+    _floor(scene, low, high, floor)
+    return scene
+
+
+def scene_from_trimesh(loaded: trimesh.Trimesh | trimesh.Scene, floor: bool = True) -> Scene:
+    """The scene of a trimesh.Trimesh or trimesh.Scene rendered on its own: a Scene's nodes as
+    they are placed, from its camera when it has one (``trimesh.Scene.has_camera``), else
+    framed from the bounds; the default light rig; a floor under it unless ``floor`` is
+    False. Raises TypeError or ValueError as ``Scene.add_mesh``."""
+    scene = Scene()
+    scene.add_mesh(loaded)
+    low, high = model_bounds(LoadedModel(mesh_parts(loaded)))
+    camera = None
+    if isinstance(loaded, trimesh.Scene) and loaded.has_camera:
+        pose = np.asarray(loaded.camera_transform, np.float64)
+        center, radius = (low + high) / 2.0, float(np.linalg.norm(high - low)) / 2.0
+        camera = file_camera(FileCamera(key="camera", position=pose[:3, 3],
+                                        forward=-pose[:3, 2] / np.linalg.norm(pose[:3, 2]),
+                                        up=pose[:3, 1] / np.linalg.norm(pose[:3, 1]),
+                                        yfov_degrees=float(loaded.camera.fov[1]),
+                                        aspect_ratio=None), center, radius)  # fmt: skip
+    scene.camera = camera if camera is not None else framed_camera(low, high)
+    scene.notes.append("camera: the trimesh.Scene's" if camera else "camera: framed from the "
+                       "bounds")  # fmt: skip
+    scene.lights = default_lights(low, high)
+    scene.notes.append("lights: the default rig of two")
+    _floor(scene, low, high, floor)
+    return scene
+
+
+def _floor(scene: Scene, low: np.ndarray, high: np.ndarray, floor: bool) -> None:
+    if floor:
+        scene.floor = floor_under(low, high)
+        scene.notes.append(f"floor: under the model, y = {scene.floor.height:.6g}")
+    else:
+        scene.floor = None
+        scene.notes.append("floor: none")
+
+
+def _vec(values: np.ndarray) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in values)
+    return (x, y, z)
