@@ -80,10 +80,16 @@ def default_lights(low: np.ndarray, high: np.ndarray) -> list[PointLight]:
 
 
 def floor_under(low: np.ndarray, high: np.ndarray) -> Floor:
-    """A floor just under the box ``low``..``high``, its squares a round size near a quarter
-    of the model's width (a 0.16-unit model and a 1,100-unit one both show a few)."""
+    """A floor just under the box ``low``..``high``, its squares the round size (1, 2.5 or 5
+    times a power of ten) nearest a quarter of the model's width: a 0.16-unit model and a
+    1,100-unit one both stand on a few squares."""
     extent = float(np.max(high - low))
-    size = 10.0 ** math.floor(math.log10(extent / 4.0)) if extent > 0 else 1.0
+    size = 1.0
+    if extent > 0:
+        wanted = math.log10(extent / 4.0)
+        decade = math.floor(wanted)
+        size = min((step * 10.0**power for power in (decade, decade + 1) for step in (1, 2.5, 5)),
+                   key=lambda candidate: abs(math.log10(candidate) - wanted))  # fmt: skip
     return Floor(height=float(low[1]) - FLOOR_GAP * max(extent, 1e-12), checker=Checker(size=size))
 
 
