@@ -187,9 +187,12 @@ def still_life(texture: Image.Image) -> trimesh.Scene:
     leg = _pbr(trimesh.creation.cylinder(radius=0.035, height=0.69, sections=24),
                (0.08, 0.08, 0.09), 0.0, 0.4)  # fmt: skip
     upright = trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0])
-    for i, (x, z) in enumerate([(-0.72, -0.37), (0.72, -0.37), (-0.72, 0.37), (0.72, 0.37)]):
-        scene.add_geometry(leg, geom_name="leg", node_name=f"leg{i}",
-                           transform=_moved(x, 0.345, z) @ upright)  # fmt: skip
+    scene.add_geometry(leg, geom_name="leg", node_name="leg0",
+                       transform=_moved(-0.72, 0.345, -0.37) @ upright)  # fmt: skip
+    for i, (x, z) in enumerate([(0.72, -0.37), (-0.72, 0.37), (0.72, 0.37)], start=1):
+        # the other three nodes name the same mesh: one glTF mesh placed four times
+        scene.graph.update(frame_to=f"leg{i}", geometry="leg",
+                           matrix=_moved(x, 0.345, z) @ upright)  # fmt: skip
     metal = _pbr(trimesh.creation.icosphere(subdivisions=3, radius=0.16), (0.95, 0.8, 0.5), 1.0,
                  0.05)  # fmt: skip
     scene.add_geometry(metal, node_name="metal_ball", transform=_moved(-0.45, 0.91, 0.1))

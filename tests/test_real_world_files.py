@@ -12,6 +12,7 @@ coordinates over the cosine of incidence (``tolerances``).
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import struct
 import warnings
@@ -606,3 +607,21 @@ def test_from_trimesh_uses_the_trimesh_scenes_camera() -> None:
     aim = np.asarray(scene.camera.look_at) - pose[:3, 3]
     np.testing.assert_allclose(aim / np.linalg.norm(aim), -pose[:3, 2], atol=1e-12)
     assert scene.camera.fov == pytest.approx(40.0) and scene.floor is None
+
+
+def test_the_still_life_asset_renders_straight_from_its_file() -> None:
+    """assets/still_life.glb (the README's picture) on its own: every part where
+    make_assets.py put it (its parts baked at their node transforms, as made), seen by the
+    framed camera, every triangle in view, over a floor under the table's feet."""
+    root = Path(__file__).resolve().parent.parent / "assets"
+    spec = importlib.util.spec_from_file_location("make_assets", root / "make_assets.py")
+    make = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(make)
+    made = make.still_life(make.quadrants()).to_mesh()  # world space, as made
+    scene = Scene.from_file(root / "still_life.glb")
+    assert len(scene.meshes) == 9  # top, four legs, metal ball, torus, painted ball, cube
+    assert len({id(placed.mesh) for placed in scene.meshes}) == 6  # the legs share a mesh
+    assert in_view(scene.camera, scene.render.width, scene.render.height, made.vertices).all()
+    assert 0.0 < made.vertices[:, 1].min() - scene.floor.height < 1e-3
+    scene.render.width, scene.render.height = WIDTH, HEIGHT
+    assert assert_pixels_match(scene, made.vertices, made.faces) > 0.1 * WIDTH * HEIGHT

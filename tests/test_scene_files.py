@@ -1019,7 +1019,8 @@ def test_assets_are_what_make_assets_makes_one_per_format(tmp_path: Path) -> Non
     on_disk = sorted(p.name for p in (ROOT / "assets").iterdir() if p.suffix != ".py")
     # and the meshes with looks of their own, which tests/test_mesh_looks.py checks
     looks = ["node_scaled.glb", "painted_ball.ply", "quadrant_cube.glb", "quadrant_cube.mtl",
-             "quadrant_cube.obj", "quadrants.png", "zero_normals.obj"]  # fmt: skip
+             "quadrant_cube.obj", "quadrants.png", "still_life.glb",
+             "zero_normals.obj"]  # fmt: skip  (still_life: tests/test_real_world_files.py)
     assert on_disk == sorted([*expected, *looks])
     document = {"floor": False, "meshes": [{"file": str(ROOT / "assets" / n)} for n in expected]}
     (tmp_path / "assets.json").write_text(json.dumps(document))
