@@ -563,7 +563,7 @@ def test_a_gltf_renders_from_its_own_camera_under_its_own_lights(tmp_path: Path)
     np.testing.assert_allclose(sun_direction, [0.0, 1.0, 0.0], atol=1e-9)  # shining down
     assert np.linalg.norm(sun.position) > 1e3
     assert scene.floor is not None and scene.floor.height < box_vertices[:, 1].min()
-    assert any("cameras[0]" in note for note in scene.notes)
+    assert f"camera: cameras[0] of {path}" in scene.notes
     scene.render.width, scene.render.height = WIDTH, HEIGHT
     covered = assert_pixels_match(scene, box_vertices, trimesh.creation.box().faces)
     assert covered > 0.05 * WIDTH * HEIGHT

@@ -1,4 +1,6 @@
-"""A mesh file rendered on its own, with no scene file (``embree-rt render model.glb``).
+"""How to show a mesh file rendered on its own, with no scene file (``embree-rt render
+model.glb``): where the camera, the lights and the floor go, as plain numbers (a ``Staging``)
+that ``Scene.from_file`` and ``Scene.from_trimesh`` make the scene's camera, lights and floor of.
 
 The scene shows the file as it is placed (glTF nodes, instancing) and, when the file has them,
 from its own camera (glTF: the first camera a node uses) under its own lights
@@ -18,16 +20,16 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import trimesh
 
-from embree_rt.materials import Checker
 from embree_rt.scene.errors import warn_input
 from embree_rt.scene.gltf import FileCamera, FileLight
-from embree_rt.scene.meshes import LoadedModel, load_model, mesh_parts
-from embree_rt.scene.model import Camera, Floor, PointLight, Scene, camera_problem
+from embree_rt.scene.meshes import LoadedModel, mesh_parts
 
+Point = tuple[float, float, float]
 FRAMED_FOV = 40.0  # degrees, vertical
 # The framed view: from the front, a little to the right and above (azimuth, elevation, degrees).
 FRAMED_AZIMUTH, FRAMED_ELEVATION = 30.0, 20.0
@@ -59,7 +61,38 @@ def model_bounds(model: LoadedModel) -> tuple[np.ndarray, np.ndarray]:
     return np.min(lows, axis=0), np.max(highs, axis=0)
 
 
-def framed_camera(low: np.ndarray, high: np.ndarray, fov: float = FRAMED_FOV) -> Camera:
+class View(NamedTuple):
+    """A pinhole camera's placement (``Camera``'s fields) and where it comes from."""
+
+    position: Point
+    look_at: Point
+    up: Point
+    fov: float
+    note: str
+
+
+class Light(NamedTuple):
+    """A point light's fields (``PointLight``'s)."""
+
+    position: Point
+    color: Point
+    intensity: float
+
+
+class Staging(NamedTuple):
+    """How to show a model: ``views`` in order of preference (the file's camera, when it has
+    one, then the framed one: the first the camera rule accepts is taken); ``lights``;
+    ``floor`` (height, checker square size); the file camera's width / height or None;
+    ``notes`` on the lights and floor (``Scene.notes``)."""
+
+    views: list[View]
+    lights: list[Light]
+    floor: tuple[float, float]
+    aspect_ratio: float | None
+    notes: list[str]
+
+
+def framed_view(low: np.ndarray, high: np.ndarray, fov: float = FRAMED_FOV) -> View:
     """A camera on the ball around the box ``low``..``high``, from ``FRAMED_AZIMUTH`` and
     ``FRAMED_ELEVATION``, near enough for the ball to fill the image's height."""
     center = (low + high) / 2.0
@@ -68,18 +101,19 @@ def framed_camera(low: np.ndarray, high: np.ndarray, fov: float = FRAMED_FOV) ->
     direction = np.array([math.sin(azimuth) * math.cos(elevation), math.sin(elevation),
                           math.cos(azimuth) * math.cos(elevation)])  # fmt: skip
     distance = 1.05 * radius / math.sin(math.radians(fov) / 2.0)
-    return Camera(position=_vec(center + distance * direction), look_at=_vec(center), fov=fov)
+    return View(_vec(center + distance * direction), _vec(center), (0.0, 1.0, 0.0), fov,
+                "camera: framed from the bounds")  # fmt: skip
 
 
-def default_lights(low: np.ndarray, high: np.ndarray) -> list[PointLight]:
+def default_lights(low: np.ndarray, high: np.ndarray) -> list[Light]:
     """``DEFAULT_RIG`` placed around the box ``low``..``high``."""
     center = (low + high) / 2.0
     radius = max(float(np.linalg.norm(high - low)) / 2.0, 1e-12)
-    return [PointLight(position=_vec(center + radius * np.array(offset)), intensity=intensity)
+    return [Light(_vec(center + radius * np.array(offset)), (1.0, 1.0, 1.0), intensity)
             for offset, intensity in DEFAULT_RIG]  # fmt: skip
 
 
-def floor_under(low: np.ndarray, high: np.ndarray) -> Floor:
+def floor_under(low: np.ndarray, high: np.ndarray) -> tuple[float, float]:
     """A floor just under the box ``low``..``high``, its squares the round size (1, 2.5 or 5
     times a power of ten) nearest a quarter of the model's width: a 0.16-unit model and a
     1,100-unit one both stand on a few squares."""
@@ -90,19 +124,18 @@ def floor_under(low: np.ndarray, high: np.ndarray) -> Floor:
         decade = math.floor(wanted)
         size = min((step * 10.0**power for power in (decade, decade + 1) for step in (1, 2.5, 5)),
                    key=lambda candidate: abs(math.log10(candidate) - wanted))  # fmt: skip
-    return Floor(height=float(low[1]) - FLOOR_GAP * max(extent, 1e-12), checker=Checker(size=size))
+    return float(low[1]) - FLOOR_GAP * max(extent, 1e-12), size
 
 
-def file_camera(camera: FileCamera, center: np.ndarray, radius: float) -> Camera | None:
-    """A file's camera as embree_rt's, aimed along its view; None when it cannot be one."""
+def file_view(camera: FileCamera, center: np.ndarray, radius: float, note: str) -> View:
+    """A file's camera as a pinhole's placement, aimed along its view."""
     reach = max(float(np.dot(center - camera.position, camera.forward)), radius, 1e-12)
-    made = Camera(position=_vec(camera.position), look_at=_vec(camera.position +
-                  reach * camera.forward), up=_vec(camera.up), fov=camera.yfov_degrees)  # fmt: skip
-    return None if camera_problem(made) else made
+    return View(_vec(camera.position), _vec(camera.position + reach * camera.forward),
+                _vec(camera.up), camera.yfov_degrees, note)  # fmt: skip
 
 
 def file_lights(path: Path, lights: list[FileLight], center: np.ndarray,
-                radius: float) -> list[PointLight]:  # fmt: skip
+                radius: float) -> list[Light]:  # fmt: skip
     """A file's lights as point lights (module docstring), warning once per spot light."""
     strengths = []
     positions = []
@@ -120,78 +153,46 @@ def file_lights(path: Path, lights: list[FileLight], center: np.ndarray,
         strengths.append(light.intensity / squared)
     total = sum(strengths)
     scale = FILE_LIGHTS_TOTAL / total if total > 0 else 0.0
-    return [PointLight(position=_vec(p), color=light.color, intensity=s * scale)
+    return [Light(_vec(p), light.color, s * scale)
             for p, s, light in zip(positions, strengths, lights, strict=True)]  # fmt: skip
 
 
-def scene_from_model(path: str | Path, floor: bool = True) -> Scene:
-    """The scene of a mesh file rendered on its own (module docstring). Raises ``SceneError``
-    naming the file and the key in it for a file that cannot be rendered as it says."""
-    path = Path(path)
-    model = load_model(path)
-    scene = Scene()
-    for mesh, transform in model.parts:
-        scene.add_mesh(mesh, transform=transform)
-    for mesh, transforms in model.instanced:
-        scene.add_instances(mesh, transforms)
+def stage_model(path: Path, model: LoadedModel) -> Staging:
+    """How to show the mesh file at ``path``, read as ``model`` (module docstring)."""
     low, high = model_bounds(model)
     center, radius = (low + high) / 2.0, max(float(np.linalg.norm(high - low)) / 2.0, 1e-12)
-    camera = None if model.camera is None else file_camera(model.camera, center, radius)
-    if camera is not None:
-        scene.camera = camera
+    views = [framed_view(low, high)]
+    aspect = None
+    if model.camera is not None:
+        views.insert(0, file_view(model.camera, center, radius,
+                                  f"camera: {model.camera.key} of {path}"))  # fmt: skip
         aspect = model.camera.aspect_ratio
-        if aspect and aspect > 0:
-            scene.render.height = max(1, round(scene.render.width / aspect))
-        scene.notes.append(f"camera: the file's {model.camera.key}")
-    else:
-        scene.camera = framed_camera(low, high)
-        scene.notes.append("camera: framed from the bounds (the file has none)")
     if model.lights:
-        scene.lights = file_lights(path, model.lights, center, radius)
+        lights = file_lights(path, model.lights, center, radius)
         kinds = ", ".join(light.kind for light in model.lights)
-        scene.notes.append(f"lights: the file's {len(model.lights)} (KHR_lights_punctual: {kinds})")
+        note = f"lights: the file's {len(model.lights)} (KHR_lights_punctual: {kinds})"
     else:
-        scene.lights = default_lights(low, high)
-        scene.notes.append("lights: the default rig of two (the file has none)")
-    _floor(scene, low, high, floor)
-    return scene
+        lights, note = default_lights(low, high), "lights: the default rig of two"
+    return Staging(views, lights, floor_under(low, high), aspect, [note])
 
 
-def scene_from_trimesh(loaded: trimesh.Trimesh | trimesh.Scene, floor: bool = True) -> Scene:
-    """The scene of a trimesh.Trimesh or trimesh.Scene rendered on its own: a Scene's nodes as
-    they are placed, from its camera when it has one (``trimesh.Scene.has_camera``), else
-    framed from the bounds; the default light rig; a floor under it unless ``floor`` is
-    False. Raises TypeError or ValueError as ``Scene.add_mesh``."""
-    scene = Scene()
-    scene.add_mesh(loaded)
+def stage_trimesh(loaded: trimesh.Trimesh | trimesh.Scene) -> Staging:
+    """How to show a trimesh.Trimesh or trimesh.Scene: from a Scene's camera when it has one
+    (``trimesh.Scene.has_camera``), else framed; the default light rig."""
     low, high = model_bounds(LoadedModel(mesh_parts(loaded)))
-    camera = None
+    views = [framed_view(low, high)]
     if isinstance(loaded, trimesh.Scene) and loaded.has_camera:
         pose = np.asarray(loaded.camera_transform, np.float64)
+        camera = FileCamera(key="camera", position=pose[:3, 3],
+                            forward=-pose[:3, 2] / np.linalg.norm(pose[:3, 2]),
+                            up=pose[:3, 1] / np.linalg.norm(pose[:3, 1]),
+                            yfov_degrees=float(loaded.camera.fov[1]), aspect_ratio=None)
         center, radius = (low + high) / 2.0, float(np.linalg.norm(high - low)) / 2.0
-        camera = file_camera(FileCamera(key="camera", position=pose[:3, 3],
-                                        forward=-pose[:3, 2] / np.linalg.norm(pose[:3, 2]),
-                                        up=pose[:3, 1] / np.linalg.norm(pose[:3, 1]),
-                                        yfov_degrees=float(loaded.camera.fov[1]),
-                                        aspect_ratio=None), center, radius)  # fmt: skip
-    scene.camera = camera if camera is not None else framed_camera(low, high)
-    scene.notes.append("camera: the trimesh.Scene's" if camera else "camera: framed from the "
-                       "bounds")  # fmt: skip
-    scene.lights = default_lights(low, high)
-    scene.notes.append("lights: the default rig of two")
-    _floor(scene, low, high, floor)
-    return scene
+        views.insert(0, file_view(camera, center, radius, "camera: the trimesh.Scene's"))
+    return Staging(views, default_lights(low, high), floor_under(low, high), None,
+                   ["lights: the default rig of two"])  # fmt: skip
 
 
-def _floor(scene: Scene, low: np.ndarray, high: np.ndarray, floor: bool) -> None:
-    if floor:
-        scene.floor = floor_under(low, high)
-        scene.notes.append(f"floor: under the model, y = {scene.floor.height:.6g}")
-    else:
-        scene.floor = None
-        scene.notes.append("floor: none")
-
-
-def _vec(values: np.ndarray) -> tuple[float, float, float]:
+def _vec(values: np.ndarray) -> Point:
     x, y, z = (float(v) for v in values)
     return (x, y, z)
