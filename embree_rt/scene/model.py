@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.camera import Camera, Vec3
+from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
