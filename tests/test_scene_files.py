@@ -878,7 +878,7 @@ def test_the_mistake_is_found_before_any_heavy_work(
 
     spy(loader_module, "add_field_spheres")
     # The loader imports mesh loading when a scene has meshes (trimesh takes ~1 s to import).
-    spy(meshes_module, "load_mesh_parts")
+    spy(meshes_module, "load_model")
     trimesh.creation.box().export(tmp_path / "box.ply")
     np.savez(tmp_path / "bulk.npz", centers=np.zeros((2, 3)), radii=np.ones(2))
     head = '[random_field]\ncount = 1000000\n[[sphere_arrays]]\nfile = "bulk.npz"\n' + MESH
@@ -890,7 +890,7 @@ def test_the_mistake_is_found_before_any_heavy_work(
     (tmp_path / "bad_mesh.toml").write_text(head + '[[meshes]]\nfile = "missing.obj"\n')
     with pytest.raises(SceneError, match=r"meshes\[1\]\.file"):
         load_scene(tmp_path / "bad_mesh.toml")
-    assert "add_field_spheres" not in calls and calls.count("load_mesh_parts") == 2
+    assert "add_field_spheres" not in calls and calls.count("load_model") == 2
 
 
 def test_a_bad_file_never_escapes_as_another_exception(tmp_path: Path) -> None:
@@ -1020,7 +1020,8 @@ def test_assets_are_what_make_assets_makes_one_per_format(tmp_path: Path) -> Non
     on_disk = sorted(p.name for p in (ROOT / "assets").iterdir() if p.suffix != ".py")
     # and the meshes with looks of their own, which tests/test_mesh_looks.py checks
     looks = ["node_scaled.glb", "painted_ball.ply", "quadrant_cube.glb", "quadrant_cube.mtl",
-             "quadrant_cube.obj", "quadrants.png", "zero_normals.obj"]  # fmt: skip
+             "quadrant_cube.obj", "quadrants.png", "still_life.glb",
+             "zero_normals.obj"]  # fmt: skip  (still_life: tests/test_real_world_files.py)
     assert on_disk == sorted([*expected, *looks])
     document = {"floor": False, "meshes": [{"file": str(ROOT / "assets" / n)} for n in expected]}
     (tmp_path / "assets.json").write_text(json.dumps(document))

@@ -170,7 +170,7 @@ def test_a_bad_placements_file_is_one_line_before_any_mesh_loads(name, tmp_path,
     def no_mesh(*args, **kwargs):
         raise AssertionError("a mesh was loaded before the placements were checked")
 
-    monkeypatch.setattr(meshes_module, "load_mesh_parts", no_mesh)
+    monkeypatch.setattr(meshes_module, "load_model", no_mesh)
     with pytest.raises(SceneError) as error:
         load_scene(path)
     message = str(error.value)

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.camera import Camera, Vec3
+from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
@@ -57,20 +57,11 @@ class RenderSettings:
     max_depth: int = 6
     seed: int = 0
 
-    def with_overrides(
-        self,
-        *,
-        width: int | None = None,
-        height: int | None = None,
-        spp: int | None = None,
-        max_depth: int | None = None,
-        seed: int | None = None,
-    ) -> RenderSettings:
-        """These settings with every value that is not None replaced: the one rule by which
-        flags and keyword arguments override a scene's ``render`` table."""
-        given = {"width": width, "height": height, "spp": spp, "max_depth": max_depth,
-                 "seed": seed}  # fmt: skip
-        return replace(self, **{name: value for name, value in given.items() if value is not None})
+    def with_overrides(self, **values: int | None) -> RenderSettings:
+        """These settings with each field named in ``values`` (width, height, spp, max_depth,
+        seed) replaced, unless its value is None: the one rule by which flags and keyword
+        arguments override a scene's ``render`` table. An unknown name raises TypeError."""
+        return replace(self, **{name: value for name, value in values.items() if value is not None})
 
 
 def render_problem(settings: RenderSettings) -> tuple[str, str] | None:
@@ -125,6 +116,70 @@ class Scene:
     instances: list[MeshInstances] = field(default_factory=list)
     # A camera path (``scene.animation``): None for a still image.
     animation: Animation | None = None
+    # What the scene's maker found and chose, one line each (a mesh file rendered on its own:
+    # whose camera and lights, where the floor is), for ``embree-rt info``.
+    notes: list[str] = field(default_factory=list)
+
+    @classmethod
+    def from_file(cls, path, floor: bool = True) -> Scene:
+        """A mesh file (OBJ, PLY, STL, OFF, glTF/GLB) rendered on its own, as it places its
+        meshes: from its own camera and under its own lights when it has them, else from a
+        camera framed on its bounds under a default rig, with a floor under it unless
+        ``floor`` is False (``embree_rt.scene.model_file``). Raises ``SceneError`` naming the
+        file and the key in it."""
+        from pathlib import Path
+
+        from embree_rt.scene.meshes import load_model
+        from embree_rt.scene.model_file import stage_model
+
+        path = Path(path)
+        model = load_model(path)
+        scene = cls()
+        for mesh, transform in model.parts:
+            scene.add_mesh(mesh, transform=transform)
+        for mesh, transforms in model.instanced:
+            scene.add_instances(mesh, transforms)
+        scene._stage(stage_model(path, model), floor)
+        return scene
+
+    @classmethod
+    def from_trimesh(cls, loaded: trimesh.Trimesh | trimesh.Scene, floor: bool = True) -> Scene:
+        """A trimesh.Trimesh or trimesh.Scene rendered on its own (as ``add_mesh`` places it):
+        from the trimesh.Scene's camera when it has one, else framed on its bounds; a default
+        light rig; a floor under it unless ``floor`` is False. Raises as ``add_mesh``."""
+        from embree_rt.scene.model_file import stage_trimesh
+
+        scene = cls()
+        scene.add_mesh(loaded)
+        scene._stage(stage_trimesh(loaded), floor)
+        return scene
+
+    def _stage(self, staging, floor: bool) -> None:
+        """Camera, lights and floor from a ``model_file.Staging``: its first view the camera
+        rule accepts (``camera_problem``), a render as wide as the file camera's aspect."""
+        from embree_rt.scene.errors import warn_input
+
+        for view in staging.views:
+            camera = Camera(position=view.position, look_at=view.look_at, up=view.up,
+                            fov=view.fov)  # fmt: skip
+            if (problem := camera_problem(camera)) is None:
+                break
+            warn_input(f"{view.note}: cannot be used ({problem[0]}: {problem[1]}); the next "
+                       "choice is taken")  # fmt: skip
+        self.camera = camera
+        self.notes.append(view.note)
+        if view is not staging.views[-1] and staging.aspect_ratio:  # the file's own camera
+            self.render.height = max(1, round(self.render.width / staging.aspect_ratio))
+        self.lights = [PointLight(position=light.position, color=light.color,
+                                  intensity=light.intensity) for light in staging.lights]
+        self.notes += staging.notes
+        if floor:
+            height, size = staging.floor
+            self.floor = Floor(height=height, checker=Checker(size=size))
+            self.notes.append(f"floor: under the model, y = {height:.6g}")
+        else:
+            self.floor = None
+            self.notes.append("floor: none")
 
     @property
     def material_names(self) -> list[str]:
