@@ -46,7 +46,9 @@ BYTES_PER_ARRAYED_INSTANCE = 128
 # bytes): an upper bound now.
 FILM_BYTES_PER_PIXEL = 88
 # Per camera sample in flight: the rays and hit records of the batches the workers hold (up to
-# three batches a worker). 1920x1080 at 1 spp, 2 workers: ~60 bytes a sample.
+# three batches a worker). 1920x1080 at 1 spp, 2 workers: ~60 bytes a sample. Independent of the
+# depth: a batch's film block sums its samples whenever it holds more than the batch's camera
+# samples (inside a closed mirror, 320x180: 254 MB peak at depth 6, 60 and 600 alike).
 BYTES_PER_SAMPLE_IN_FLIGHT = 100
 BATCHES_IN_FLIGHT_PER_WORKER = 3
 

@@ -46,24 +46,35 @@ class FilmBlock:
     """Sums for the ``count`` consecutive pixels from ``first``: what one batch of camera samples
     accumulates on its own (no locking, and cheaper than bincounts over the whole film).
 
-    Samples are kept as added and summed once, when ``sums`` is read: one bincount per channel
-    for the whole batch instead of one per bounce (each of which would sweep all ``count``
-    pixels however few samples it adds).
+    Samples are kept as added and summed when ``sums`` is read, or as soon as more than
+    ``hold`` are held: a few bincounts per channel for the whole batch instead of one per
+    bounce (each of which would sweep all ``count`` pixels however few samples it adds), while
+    what a block holds stays bounded however many bounces add to it. ``hold`` None: no bound.
+
+    Each pixel's sum is formed sample by sample in the order the samples were added, however
+    the adds are grouped into settlings: bincount adds its weights in input order, and a
+    settling passes the sums so far as the first weight of each pixel (0.0 + s is s exactly).
     """
 
-    def __init__(self, first: int, count: int) -> None:
+    def __init__(self, first: int, count: int, hold: int | None = None) -> None:
         self.first = int(first)
         self.count = int(count)
+        self.hold = hold
+        self.held = 0  # samples added and not yet summed
+        self._settled = False  # whether _sums holds samples already
         self._sums = np.zeros((3, self.count), np.float64)
         self._pixels: list[np.ndarray] = []
         self._rgb: list[np.ndarray] = []
 
     def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:
         """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block.
-        The arrays are kept, not copied, until ``sums`` is read: do not modify them."""
+        The arrays are kept, not copied, until they are summed: do not modify them."""
         if len(pixel):
             self._pixels.append(pixel)
             self._rgb.append(rgb)
+            self.held += len(pixel)
+            if self.hold is not None and self.held > self.hold:
+                self.settle()
 
     @property
     def sums(self) -> np.ndarray:
@@ -72,19 +83,25 @@ class FilmBlock:
         return self._sums
 
     def settle(self) -> None:
-        """Sum the samples added so far into the block's pixels. The renderer calls it in the
-        thread that traced the batch: the thread adding blocks to the film then only adds."""
-        if self._pixels:
-            # (concatenating a single part would only copy it)
-            pixels = self._pixels[0] if len(self._pixels) == 1 else np.concatenate(self._pixels)
-            rgb = self._rgb[0] if len(self._rgb) == 1 else np.concatenate(self._rgb, axis=1)
-            local = pixels - self.first
-            self._pixels.clear()
-            self._rgb.clear()
-            for channel in range(3):
-                self._sums[channel] += np.bincount(
-                    local, weights=rgb[channel], minlength=self.count
-                )
+        """Sum the samples held into the block's pixels. The renderer calls it in the thread
+        that traced the batch: the thread adding blocks to the film then only adds."""
+        if not self._pixels:
+            return
+        # (concatenating a single part would only copy it)
+        pixels = self._pixels[0] if len(self._pixels) == 1 else np.concatenate(self._pixels)
+        rgb = self._rgb[0] if len(self._rgb) == 1 else np.concatenate(self._rgb, axis=1)
+        local = pixels - self.first
+        if self._settled:  # the sums so far come first, as one more sample per pixel
+            local = np.concatenate([np.arange(self.count), local])
+        self._pixels.clear()
+        self._rgb.clear()
+        self.held = 0
+        for channel in range(3):
+            weights = rgb[channel]
+            if self._settled:
+                weights = np.concatenate([self._sums[channel], weights])
+            self._sums[channel] = np.bincount(local, weights=weights, minlength=self.count)
+        self._settled = True
 
 
 def tonemap(image: np.ndarray) -> np.ndarray:

@@ -217,7 +217,7 @@ class Integrator:
             raise ValueError(f"sample: must lie in [0, {spp}), got {sample}")
         index = np.arange(first, first + count, dtype=np.int64) * spp + sample
         origins, directions, pixel = sample_rays(frame, spp, seed, index)
-        work = BatchWork(FilmBlock(first, count))
+        work = BatchWork(FilmBlock(first, count, hold=count))
         rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
         work.rays["primary"] += count
         self._trace(rays, work, max_depth)
@@ -232,7 +232,9 @@ class Integrator:
         ``batch_ranges`` cuts them) through every bounce: their film block and ray counts.
         A pure function of its arguments and the scene, so any process holding the same scene
         computes the same block (``embree_rt.distributed`` runs it on Dask workers)."""
-        work = BatchWork(FilmBlock(start // spp, count // spp))
+        # The block sums its samples whenever it holds more than the batch's camera samples: a
+        # batch holds no more for a thousand bounces than for two.
+        work = BatchWork(FilmBlock(start // spp, count // spp, hold=count))
         origins, directions, pixel = sample_rays(
             frame, spp, seed, tiled_samples(frame, spp, start, count)
         )
