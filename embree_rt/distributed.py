@@ -19,6 +19,7 @@ does not change.
 
 from __future__ import annotations
 
+import asyncio
 import hashlib
 import logging
 import os
@@ -47,6 +48,10 @@ from embree_rt.scene.random_field import FieldPlan
 
 # How long a render waits with no worker at all (lost, or not yet joined) before giving up.
 NO_WORKERS_TIMEOUT_S = 30.0
+# How long ``--scheduler`` may take to answer as a Dask scheduler (``--scheduler-timeout``).
+SCHEDULER_TIMEOUT_S = 10.0
+# ``--cluster local:N``: worker processes a core, at most.
+LOCAL_WORKERS_PER_CORE = 4
 # How often the client looks at the cluster (workers present, progress) while it waits.
 POLL_S = 0.25
 
@@ -532,31 +537,76 @@ def local_cluster(workers: int, **options) -> distributed.LocalCluster:
 
 @contextmanager
 def connect(
-    cluster: str | None, scheduler: str | None, *, timeout_s: float | None = None
+    cluster: str | None, scheduler: str | None, *, timeout_s: float = SCHEDULER_TIMEOUT_S
 ) -> Iterator[distributed.Client]:
     """A client on ``--cluster local:N`` (a ``LocalCluster`` of N worker processes of one thread
-    each, closed afterwards) or on the running scheduler at ``--scheduler ADDRESS``, tried for
-    ``timeout_s`` (default Dask's ``distributed.comm.timeouts.connect``, 30 s unless configured,
-    e.g. ``DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT=5s``). Bad values and unreachable
-    schedulers are ``InputError``s naming the flag."""
+    each, closed afterwards) or on the running scheduler at ``--scheduler ADDRESS``, which must
+    answer as a Dask scheduler within ``timeout_s`` (``check_scheduler``). Bad values and
+    unreachable or silent schedulers are ``InputError``s naming the flag."""
     if cluster is not None:
-        count = _local_worker_count(cluster)
+        count = local_worker_count(cluster)
         with local_cluster(count, silence_logs=logging.ERROR) as local, distributed.Client(
             local
         ) as client:
             yield client
         return
+    check_scheduler(scheduler, timeout_s)
     try:
-        timeout = {} if timeout_s is None else {"timeout": timeout_s}
-        client = distributed.Client(scheduler, **timeout)
+        client = distributed.Client(scheduler, timeout=timeout_s)
     except (OSError, TimeoutError, ValueError) as error:
         raise ClusterError(f"--scheduler: {scheduler}: cannot connect: {error}") from None
     with client:
         yield client
 
 
-def _local_worker_count(text: str) -> int:
+def check_scheduler(address: str | None, timeout_s: float) -> None:
+    """Raise ``ClusterError`` unless a Dask scheduler at ``address`` answers an identity request
+    within ``timeout_s`` seconds, all told. Dask's client would wait forever on a socket that
+    accepts and never answers, and read another protocol's reply (an HTTP server's) as a frame
+    length to allocate: neither is left to it."""
+    if not address or not address.strip():
+        raise ClusterError(
+            f"--scheduler: expected a scheduler address (tcp://HOST:PORT), got {address!r}"
+        )
+
+    async def identity():
+        comm = await distributed.comm.connect(address, timeout=timeout_s)
+        try:
+            await comm.write({"op": "identity"})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    where = f"--scheduler: {address}"
+    try:
+        reply = asyncio.run(asyncio.wait_for(identity(), timeout_s))
+    except TimeoutError:
+        raise ClusterError(
+            f"{where}: no answer within {timeout_s:g} s (--scheduler-timeout sets the wait)"
+        ) from None
+    except (OSError, ValueError) as error:
+        raise ClusterError(f"{where}: cannot connect: {error}") from None
+    except Exception as error:  # any reply Dask cannot decode: another protocol's
+        raise ClusterError(
+            f"{where}: does not speak Dask's protocol (its reply fails to decode: "
+            f"{type(error).__name__})"
+        ) from None
+    kind = reply.get("type") if isinstance(reply, dict) else type(reply).__name__
+    if kind != "Scheduler":
+        raise ClusterError(f"{where}: answers, but as a {kind}, not a Dask scheduler")
+
+
+def local_worker_count(text: str) -> int:
+    """The N of ``--cluster local:N``: at least 1, at most ``LOCAL_WORKERS_PER_CORE`` a core
+    (each worker is a process of its own; ten thousand would swamp the machine)."""
     kind, _, count = text.partition(":")
     if kind != "local" or not count.isdigit() or int(count) < 1:
         raise InputError(f"--cluster: expected local:N with N >= 1 workers, got {text!r}")
+    cores = os.cpu_count() or 1
+    most = LOCAL_WORKERS_PER_CORE * cores
+    if int(count) > most:
+        raise InputError(
+            f"--cluster: {text} would start {int(count):,} worker processes; this machine's "
+            f"{cores} cores take at most {most} ({LOCAL_WORKERS_PER_CORE} a core)"
+        )
     return int(count)

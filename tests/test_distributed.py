@@ -23,6 +23,7 @@ import sys
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager, suppress
 from dataclasses import replace
 from pathlib import Path
 
@@ -34,6 +35,7 @@ distributed = pytest.importorskip("distributed")  # the test extra installs it: 
 import embree_rt as rt  # noqa: E402
 from embree_rt import budget  # noqa: E402
 from embree_rt import distributed as rd  # noqa: E402
+from embree_rt.errors import InputError  # noqa: E402
 from embree_rt.scene import RenderSettings  # noqa: E402
 from embree_rt.scene.animation import Animation, camera_at  # noqa: E402
 from embree_rt.scene.random_field import plan_field  # noqa: E402
@@ -361,13 +363,112 @@ def test_command_with_an_unreachable_scheduler_fails_in_one_line(tmp_path: Path)
     output = tmp_path / "out.png"
     address = f"tcp://127.0.0.1:{free_port()}"  # nothing listens there
     started = time.monotonic()
-    # Dask's own setting bounds the attempt (default 30 s).
+    # --scheduler-timeout bounds the attempt (default 10 s).
     result = run_cli("render", "scenes/three_spheres.toml", "-o", str(output), "--width", "8",
                      "--height", "8", "--scheduler", address,
-                     env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "2s"})  # fmt: skip
+                     "--scheduler-timeout", "2")  # fmt: skip
     assert result.returncode == 2, result.stderr
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("embree-rt: error: --scheduler: "), lines
     assert address in lines[0] and "Traceback" not in result.stderr
     assert not output.exists()
     assert time.monotonic() - started < 60
+
+
+def one_line_refusal(result: subprocess.CompletedProcess, start: str) -> str:
+    """The command's single stderr line, asserted to be exit 2 starting with ``start``."""
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"embree-rt: error: {start}"), lines
+    return lines[0]
+
+
+@contextmanager
+def listening(answer: bytes | None):
+    """A socket on 127.0.0.1 that accepts every connection and, when ``answer`` is given,
+    replies it to whatever arrives (else says nothing, ever): its tcp:// address."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    server.settimeout(0.2)
+    stopping = threading.Event()
+    held = []
+
+    def serve() -> None:
+        while not stopping.is_set():
+            try:
+                connection, _ = server.accept()
+            except TimeoutError:
+                continue
+            held.append(connection)
+            if answer is not None:
+                connection.settimeout(5)
+                with suppress(OSError):
+                    connection.recv(4096)
+                    connection.sendall(answer)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    finally:
+        stopping.set()
+        thread.join(timeout=5)
+        for connection in held:
+            connection.close()
+        server.close()
+
+
+SMALL_FLAGS = ("--width", "8", "--height", "8", "--spp", "1")
+
+
+def test_a_scheduler_that_accepts_and_never_answers_is_refused_within_the_timeout(tmp_path):
+    output = tmp_path / "out.npy"
+    with listening(None) as address:
+        started = time.monotonic()
+        result = run_cli("render", "scenes/three_spheres.toml", "-o", str(output), *SMALL_FLAGS,
+                         "--scheduler", address, "--scheduler-timeout", "2")  # fmt: skip
+        elapsed = time.monotonic() - started
+    line = one_line_refusal(result, f"--scheduler: {address}: no answer within 2 s")
+    assert "--scheduler-timeout" in line
+    assert 2 <= elapsed < 30  # waited the 2 s, not forever (Python and Embree start in the rest)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_port_speaking_http_is_not_a_scheduler(tmp_path):
+    # Dask would read "HTTP/1.1" as a frame length of 3.5e18 bytes and try to allocate it.
+    output = tmp_path / "out.npy"
+    with listening(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n") as address:
+        result = run_cli("render", "scenes/three_spheres.toml", "-o", str(output), *SMALL_FLAGS,
+                         "--scheduler", address)  # fmt: skip
+    one_line_refusal(result, f"--scheduler: {address}: does not speak Dask's protocol")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("flags", "start"),
+    [
+        (("--scheduler", ""), "--scheduler: expected a value, got ''"),
+        (("--scheduler", " "), "--scheduler: expected a value"),
+        (("--cluster", ""), "--cluster: expected a value"),
+        (("--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "0"), "--scheduler-timeout"),
+        (("--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "nan"),
+         "--scheduler-timeout"),
+        (("--cluster", f"local:{4 * (os.cpu_count() or 1) + 1}"), "--cluster: local:"),
+        (("--cluster", "local:10000"), "--cluster: local:10000 would start 10,000 worker"),
+    ],
+)
+def test_empty_addresses_bad_timeouts_and_more_workers_than_the_machine_are_refused(
+    tmp_path, flags, start
+):
+    output = tmp_path / "out.npy"
+    result = run_cli("render", "scenes/three_spheres.toml", "-o", str(output), *SMALL_FLAGS, *flags)
+    one_line_refusal(result, start)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_local_worker_count_takes_up_to_four_workers_a_core() -> None:
+    most = 4 * (os.cpu_count() or 1)
+    assert rd.local_worker_count(f"local:{most}") == most
+    with pytest.raises(InputError, match=f"at most {most}"):
+        rd.local_worker_count(f"local:{most + 1}")

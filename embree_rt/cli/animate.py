@@ -162,7 +162,9 @@ def _render_on_cluster(
         raise InputError(
             f"{flag}: needs Dask's distributed ({error}): pip install 'embree-rt[distributed]'"
         ) from None
-    with _quiet_dask(), distributed.connect(args.cluster, args.scheduler) as client:
+    timeout_s = args.scheduler_timeout
+    connection = distributed.connect(args.cluster, args.scheduler, timeout_s=timeout_s)
+    with _quiet_dask(), connection as client:
         if isinstance(source, Path):  # every worker loads the file itself
             source = distributed.SceneFile(str(source.resolve()))
         else:  # every worker generates the field itself

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from embree_rt.cli.errors import EXIT_BAD_INPUT
@@ -34,6 +35,24 @@ def int_at_least(low: int):
         return value
 
     return parse
+
+
+def non_empty(text: str) -> str:
+    """An argparse type: any text but an empty or blank one (which would read as not given)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a value, got {text!r}")
+    return text
+
+
+def positive_seconds(text: str) -> float:
+    """An argparse type: a finite number of seconds > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not 0 < value < math.inf:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
 
 
 def aov_list(text: str) -> tuple[str, ...]:
@@ -73,8 +92,16 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     cluster = parser.add_mutually_exclusive_group()  # embree_rt/distributed.py
-    cluster.add_argument("--cluster", metavar="local:N", help="render on N local Dask workers")
-    cluster.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="render on a Dask cluster")
+    cluster.add_argument(
+        "--cluster", type=non_empty, metavar="local:N", help="render on N local Dask workers"
+    )
+    cluster.add_argument(
+        "--scheduler", type=non_empty, metavar="tcp://HOST:PORT", help="render on a Dask cluster"
+    )
+    parser.add_argument(
+        "--scheduler-timeout", type=positive_seconds, default=10.0, metavar="SECONDS",
+        help="how long --scheduler may take to answer (default: 10)",
+    )  # fmt: skip
     parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
     parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
 
