@@ -232,7 +232,7 @@ def _side_writer(suffix: str, name: str, values: np.ndarray):
 
     def write(handle: BinaryIO) -> None:
         if suffix == ".npy":
-            np.save(handle, values)
+            film.save_npy(values, handle)
         else:
             from PIL import Image
 

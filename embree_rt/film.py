@@ -12,6 +12,7 @@ import numpy as np
 
 GAMMA = 2.2
 IMAGE_SUFFIXES = (".png", ".npy", ".npz", ".exr")
+TEMP_TOKEN_HEX = 16  # hex digits of the random part of a temporary file's name
 
 
 class Film:
@@ -124,7 +125,8 @@ def check_output_path(path: str | os.PathLike) -> None:
     """Check, before any rendering, that an image can be written to ``path``.
 
     Raises ValueError naming the path for an unknown extension, a missing or unwritable
-    directory, or a directory in the way; RuntimeError for ``.exr`` without the OpenEXR package.
+    directory, a directory in the way, or a name too long for the file system (the temporary
+    name it is written under included); RuntimeError for ``.exr`` without the OpenEXR package.
     """
     target = Path(path)
     suffix = target.suffix.lower()
@@ -134,12 +136,24 @@ def check_output_path(path: str | os.PathLike) -> None:
             f"use one of {', '.join(IMAGE_SUFFIXES)}"
         )
     directory = target.parent
-    if not directory.is_dir():
-        raise ValueError(f"{target}: directory {directory} does not exist")
-    if not os.access(directory, os.W_OK | os.X_OK):
-        raise ValueError(f"{target}: directory {directory} is not writable")
-    if target.is_dir():
-        raise ValueError(f"{target}: is a directory")
+    try:
+        if not directory.is_dir():
+            raise ValueError(f"{target}: directory {directory} does not exist")
+        if not os.access(directory, os.W_OK | os.X_OK):
+            raise ValueError(f"{target}: directory {directory} is not writable")
+        if target.is_dir():
+            raise ValueError(f"{target}: is a directory")
+        longest = os.pathconf(directory, "PC_NAME_MAX")
+    except OSError as error:  # a path too long for the system, a directory that cannot be read
+        raise ValueError(f"{target}: {error.strerror or error}") from None
+    name = len(os.fsencode(target.name))
+    extra = len(os.fsencode(temp_path(target).name)) - name
+    if name + extra > longest:
+        raise ValueError(
+            f"{target}: file name too long ({name} bytes): this file system takes names of up "
+            f"to {longest} bytes, and the image is first written under a temporary name {extra} "
+            "bytes longer"
+        )
     if suffix == ".exr":
         _exr_module()
 
@@ -162,7 +176,22 @@ def _write_png(image: np.ndarray, handle: BinaryIO) -> None:
 
 
 def _write_npy(image: np.ndarray, handle: BinaryIO) -> None:
-    np.save(handle, np.asarray(image, np.float32))
+    save_npy(np.asarray(image, np.float32), handle)
+
+
+class _WriteOnly:
+    """A binary file seen only through its ``write``: NumPy then writes it in chunks with that
+    method instead of with ``ndarray.tofile``."""
+
+    def __init__(self, handle: BinaryIO) -> None:
+        self.write = handle.write
+
+
+def save_npy(array: np.ndarray, handle: BinaryIO) -> None:
+    """``np.save`` of ``array`` to the binary file ``handle``, through the file's own writes: a
+    failed write then raises the OSError of its errno ("No space left on device"), where
+    ``tofile`` (NumPy's way with a real file) says only "N requested and M written"."""
+    np.save(_WriteOnly(handle), array)
 
 
 def _write_npz(image: np.ndarray, handle: BinaryIO) -> None:
@@ -215,6 +244,11 @@ def save_image(image: np.ndarray, path: str | os.PathLike) -> None:
     write_atomically([(target, lambda handle: writer(image, handle))])
 
 
+def temp_path(target: Path) -> Path:
+    """A fresh name to write ``target`` under until it is complete: hidden, beside it."""
+    return target.with_name(f".{target.name}.{secrets.token_hex(TEMP_TOKEN_HEX // 2)}.tmp")
+
+
 def write_atomically(files: list[tuple[Path, Callable[[BinaryIO], None]]]) -> None:
     """Write each of ``files`` (target path, writer(binary handle)) all or nothing.
 
@@ -228,7 +262,7 @@ def write_atomically(files: list[tuple[Path, Callable[[BinaryIO], None]]]) -> No
             # A plain exclusive open(), not tempfile's: the umask then gives the image the usual
             # mode (tempfile's files are private, 0600). A name someone else holds raises
             # FileExistsError before it joins ``temps``: never delete another's file.
-            temp = target.with_name(f".{target.name}.{secrets.token_hex(8)}.tmp")
+            temp = temp_path(target)
             handle = open(temp, "xb")  # noqa: SIM115 (closed by the with below)
             temps.append(temp)
             with handle:

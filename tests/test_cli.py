@@ -10,6 +10,7 @@ a traceback, a request for a report, exit code 1.
 
 from __future__ import annotations
 
+import errno
 import importlib
 import json
 import os
@@ -561,3 +562,125 @@ def test_the_sphere_flag_offers_exactly_the_geometry_modes() -> None:
     from embree_rt import cli, geometry
 
     assert cli.SPHERE_CHOICES == geometry.SPHERE_MODES
+
+
+# -- SIGTERM, long names, full disks --------------------------------------------------------------
+
+
+def test_sigterm_mid_render_exits_143_in_one_line_and_keeps_the_old_image(tmp_path: Path) -> None:
+    """SIGTERM (a service manager stopping the render, ``kill``) is taken as Ctrl-C is."""
+    output = tmp_path / "out.png"
+    Image.new("RGB", (4, 4), (200, 100, 50)).save(output, format="PNG")
+    before = output.read_bytes()
+    process = subprocess.Popen(
+        [
+            sys.executable, "-m", "embree_rt", "random", "--count", "200000", "-o", str(output),
+            "--width", "1920", "--height", "1080", "--spp", "16", "--quiet",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    try:
+        wait_until_busy(process.pid, cpu_seconds=3.0)
+        assert process.poll() is None, "the render ended before it could be stopped"
+        process.send_signal(signal.SIGTERM)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 143, stderr
+    assert stderr == "embree-rt: terminated\n"
+    assert output.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png"]  # no .out.png.* temp file
+
+
+# The command, with the .npy writer sending the process SIGTERM halfway through the image.
+TERMINATED_WHILE_WRITING = """
+import os, signal, sys
+import numpy as np
+from embree_rt import cli, film
+
+def write_half_then_stop(image, handle):
+    handle.write(b"\\x93NUMPY half an image")
+    handle.flush()
+    os.kill(os.getpid(), signal.SIGTERM)
+    for _ in range(1000):  # Python runs the handler between these bytecodes
+        handle.write(b"more")
+    raise AssertionError("SIGTERM did not stop the write")
+
+film.WRITERS[".npy"] = write_half_then_stop
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def test_sigterm_while_the_image_is_written_leaves_no_temp_file(tmp_path: Path) -> None:
+    scene = _one_sphere_scene(tmp_path)
+    output = tmp_path / "out.npy"
+    np.save(output, np.zeros((2, 2, 3), np.float32))
+    before = output.read_bytes()
+    result = subprocess.run(
+        [sys.executable, "-c", TERMINATED_WHILE_WRITING, "render", str(scene), "-o", str(output),
+         *TINY, "--quiet"],
+        capture_output=True, text=True, timeout=120, cwd=ROOT,
+    )  # fmt: skip
+    assert result.returncode == 143, result.stderr
+    assert result.stderr == "embree-rt: terminated\n"
+    assert output.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.npy", "scene.toml"]
+
+
+def name_max(folder: Path) -> int:
+    return os.pathconf(folder, "PC_NAME_MAX")
+
+
+@pytest.mark.parametrize("over", ["the name", "its temporary name"])
+def test_an_output_name_too_long_for_the_file_system_is_refused_up_front(
+    tmp_path: Path, over: str
+) -> None:
+    """A name over the limit fails with ENAMETOOLONG; one within it by fewer bytes than the
+    temporary name adds (``.NAME.<16 hex>.tmp``) is refused before rendering too, saying why
+    (it would otherwise fail once the image is rendered)."""
+    stem = "x" * (name_max(tmp_path) + 1 if over == "the name" else name_max(tmp_path) - 10)
+    output = tmp_path / f"{stem}.npy"
+    result = run_cli("render", str(_one_sphere_scene(tmp_path)), "-o", str(output), *TINY)
+    reason = os.strerror(errno.ENAMETOOLONG) if over == "the name" else "temporary name"
+    assert_one_line_error(result, [reason])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
+
+
+def test_a_npy_write_to_a_full_device_says_no_space_left(tmp_path: Path) -> None:
+    """/dev/full fails every write with ENOSPC, as a full disk does: the error keeps its errno
+    (NumPy's ``tofile`` would report "N requested and M written" with none)."""
+    from embree_rt import film
+
+    image = np.ones((64, 64, 3), np.float32)  # 48 KiB: more than the file's buffer
+    aov_file = lambda image, handle: film.save_npy(image[..., 0], handle)  # noqa: E731
+    for write in (film.WRITERS[".npy"], aov_file):
+        # the write or the close that flushes it fails
+        with pytest.raises(OSError) as caught, open("/dev/full", "wb") as handle:
+            write(image, handle)
+        assert caught.value.errno == errno.ENOSPC
+        assert caught.value.strerror == os.strerror(errno.ENOSPC)
+
+
+def test_a_file_size_limit_is_said_with_its_errno(tmp_path: Path) -> None:
+    """The command under RLIMIT_FSIZE (SIGXFSZ ignored, so writes past it fail with EFBIG):
+    the one error line gives the system's reason, not a count of bytes written."""
+    import resource
+
+    def limit_file_size() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (64 << 10, 64 << 10))
+
+    output = tmp_path / "out.npy"
+    result = subprocess.run(
+        [sys.executable, "-m", "embree_rt", "render", str(_one_sphere_scene(tmp_path)), "-o",
+         str(output), "--width", "128", "--height", "128", "--spp", "1", "--quiet"],
+        capture_output=True, text=True, timeout=120, cwd=ROOT, preexec_fn=limit_file_size,
+    )  # fmt: skip
+    assert result.returncode == 2, result.stderr
+    reason = os.strerror(errno.EFBIG)
+    assert result.stderr == f"embree-rt: error: {output}: cannot write: {reason}\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]

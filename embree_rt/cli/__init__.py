@@ -7,7 +7,15 @@ from __future__ import annotations
 import sys
 import traceback
 
-from embree_rt.cli.errors import BUG_REPORT, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED
+from embree_rt.cli.errors import (
+    BUG_REPORT,
+    EXIT_BAD_INPUT,
+    EXIT_BUG,
+    EXIT_INTERRUPTED,
+    EXIT_TERMINATED,
+    Terminated,
+    sigterm_as_interrupt,
+)
 from embree_rt.cli.info import command_info
 from embree_rt.cli.parser import SPHERE_CHOICES, build_parser
 from embree_rt.cli.render import command_random, command_render
@@ -19,6 +27,7 @@ __all__ = [
     "EXIT_BAD_INPUT",
     "EXIT_BUG",
     "EXIT_INTERRUPTED",
+    "EXIT_TERMINATED",
     "SPHERE_CHOICES",
     "build_parser",
     "main",
@@ -40,7 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exit_:
         return int(exit_.code or 0)
     try:
-        COMMANDS[args.command](args)
+        with sigterm_as_interrupt():
+            COMMANDS[args.command](args)
+    except Terminated:
+        print("embree-rt: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print("embree-rt: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

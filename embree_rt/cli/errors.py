@@ -3,11 +3,17 @@ when the fault is ours."""
 
 from __future__ import annotations
 
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 from embree_rt.errors import InputError
 
 EXIT_BUG = 1
 EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a process Ctrl-C ended
+EXIT_TERMINATED = 143  # 128 + SIGTERM
 BUG_REPORT = (
     "embree-rt: internal error: this is a bug in embree_rt, not a problem with your input; "
     "please report it with the traceback above"
@@ -16,3 +22,28 @@ BUG_REPORT = (
 
 class UsageError(InputError):
     """Bad input found by the command itself; printed as one line, exit code 2."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread as Ctrl-C is: whatever Ctrl-C undoes (batches
+    cancelled, temporary files removed) is undone for it too."""
+
+
+@contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While inside, SIGTERM raises ``Terminated`` in the main thread (once: a second SIGTERM
+    during the clean-up is ignored rather than interrupting it). Off the main thread, where
+    Python cannot take signals, nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum, frame) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
