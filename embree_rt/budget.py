@@ -57,8 +57,9 @@ class MemoryBudgetError(InputError, ValueError):
     """An input that would need more memory than the machine has available: a request the
     machine cannot meet, so bad input (the command names the flag or key at fault).
 
-    ``needs`` maps what needs memory (``"spheres"``, ``"image"``) to (bytes, description);
-    ``largest`` is the key of the biggest need, so a caller can name the input at fault.
+    ``needs`` maps what needs memory (``"spheres"``, ``"image"``, ``"samples"``) to (bytes,
+    description); ``largest`` is the key of the biggest need, so a caller can name the input
+    at fault.
     """
 
     def __init__(self, needs: Mapping[str, tuple[int, str]], available: int) -> None:
@@ -121,10 +122,19 @@ def bvh_bytes(
 
 def image_bytes(width: int, height: int, spp: int, batch_size: int, workers: int) -> int:
     """What rendering a ``width`` x ``height`` image at ``spp`` samples per pixel needs: the film
-    and the image, and the batches of ``batch_size`` samples that ``workers`` hold at once."""
-    pixels = width * height
-    in_flight = min(pixels * spp, batch_size * BATCHES_IN_FLIGHT_PER_WORKER * workers)
-    return pixels * FILM_BYTES_PER_PIXEL + in_flight * BYTES_PER_SAMPLE_IN_FLIGHT
+    and the image, and the batches that ``workers`` hold at once (``batch_bytes``)."""
+    return width * height * FILM_BYTES_PER_PIXEL + batch_bytes(
+        width * height, spp, batch_size, workers
+    )
+
+
+def batch_bytes(pixels: int, spp: int, batch_size: int, workers: int) -> int:
+    """What the batches of a render of ``pixels`` pixels at ``spp`` samples per pixel need,
+    ``workers`` holding a few each: a batch holds ``batch_size`` samples in whole pixels, so
+    at least one pixel's ``spp`` (``batches.batch_ranges``)."""
+    batch = max(1, batch_size // spp) * spp
+    in_flight = min(pixels * spp, batch * BATCHES_IN_FLIGHT_PER_WORKER * workers)
+    return in_flight * BYTES_PER_SAMPLE_IN_FLIGHT
 
 
 def bvh_needs(sphere_count: int, spheres: str) -> dict[str, tuple[int, str]]:
@@ -154,12 +164,17 @@ def render_needs(
     from embree_rt.aovs import aov_bytes
 
     width, height, spp = settings.width, settings.height, settings.spp
-    image = image_bytes(width, height, spp, batch_size, worker_count(threads))
-    text = f"a {width}x{height} image at {spp} spp"
+    image = width * height * FILM_BYTES_PER_PIXEL
+    text = f"a {width}x{height} image"
     if aovs:
         image += aov_bytes(width, height, aovs)
         text += " with AOVs"
-    return {**bvh_needs(sphere_count, spheres), "image": (image, text)}
+    batches = batch_bytes(width * height, spp, batch_size, worker_count(threads))
+    return {
+        **bvh_needs(sphere_count, spheres),
+        "image": (image, text),
+        "samples": (batches, f"the samples in flight at {spp} spp"),
+    }
 
 
 def require(needs: Mapping[str, tuple[int, str]]) -> None:

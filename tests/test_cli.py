@@ -684,3 +684,55 @@ def test_a_file_size_limit_is_said_with_its_errno(tmp_path: Path) -> None:
     reason = os.strerror(errno.EFBIG)
     assert result.stderr == f"embree-rt: error: {output}: cannot write: {reason}\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
+
+
+# -- flag values beyond what a render can number or hold -------------------------------------------
+
+THREE_SPHERES = str(ROOT / "scenes" / "three_spheres.toml")  # 1280x720 in its file
+HUGE_FLAGS = {
+    "spp beyond int64": (
+        ["render", THREE_SPHERES, "--spp", str(2**63)],
+        ["--spp: must be <= 9223372036854775807, got 9223372036854775808"],
+    ),
+    "seed beyond uint64": (
+        ["render", THREE_SPHERES, "--seed", str(2**64)],
+        ["--seed: must be <= 18446744073709551615"],
+    ),
+    "samples beyond int64 with the file's size": (
+        ["render", THREE_SPHERES, "--spp", str(2**62)],
+        ["--spp: a 1280x720 image at 4611686018427387904 spp", "more than", "int64"],
+    ),
+    "samples beyond int64, the width a flag": (
+        ["random", "--count", "5", "--width", str(2**62), "--height", "4"],
+        ["--width, --height: a 4611686018427387904x4 image", "int64"],
+    ),
+    "one pixel of 2**62 samples": (
+        ["render", THREE_SPHERES, "--spp", str(2**62), "--width", "1", "--height", "1"],
+        ["--spp: the samples in flight at 4611686018427387904 spp would need", "available"],
+    ),
+    "one pixel of 1e11 samples, random": (
+        ["random", "--count", "5", "--spp", str(10**11), "--width", "1", "--height", "1"],
+        ["--spp: the samples in flight at 100000000000 spp would need", "available"],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HUGE_FLAGS))
+def test_flag_values_beyond_what_a_render_can_number_or_hold_are_refused(
+    tmp_path: Path, case: str
+) -> None:
+    """Checked once the flags override the file's settings, before anything is allocated: a
+    pixel's samples all go in one batch, so a million-billion of them is refused for memory."""
+    argv, needles = HUGE_FLAGS[case]
+    output = tmp_path / "out.npy"
+    result = run_cli(*argv, "-o", str(output), "--quiet", timeout=60)
+    assert_one_line_error(result, needles)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_file_asking_one_pixel_too_many_samples_is_blamed_on_its_spp(tmp_path: Path) -> None:
+    scene = tmp_path / "scene.toml"
+    scene.write_text(f"[render]\nwidth = 1\nheight = 1\nspp = {10**12}\n" + SPHERE)
+    result = run_cli("render", str(scene), "-o", str(tmp_path / "out.npy"), "--quiet")
+    assert_one_line_error(result, [f"{scene}: render.spp: the samples in flight", "would need"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]

@@ -46,9 +46,26 @@ def writing(path: str, write) -> None:
         raise UsageError(f"{path}: cannot write: {error.strerror or error}") from None
 
 
+def check_render_settings(settings, args: argparse.Namespace) -> None:
+    """The scene's render settings with the flags' overrides (``render_overrides``) checked as
+    a scene file's are (``render_problem``): a UsageError naming the flags that set them."""
+    from embree_rt.scene.model import render_problem
+
+    if (problem := render_problem(settings)) is None:
+        return
+    field, text = problem
+    flags = [f"--{name}" for name in ("width", "height", "spp") if getattr(args, name) is not None]
+    scene_file = getattr(args, "scene", None)
+    raise UsageError(f"{', '.join(flags) or f'{scene_file}: render.{field}'}: {text}")
+
+
 def memory_key(error, args: argparse.Namespace) -> str:
     """The input to blame for a ``MemoryBudgetError``: the flags or the scene file's keys."""
     scene_file = getattr(args, "scene", None)
+    if error.largest == "samples":
+        if scene_file is None or args.spp is not None:
+            return "--spp"
+        return f"{scene_file}: render.spp"
     if error.largest == "image":
         if scene_file is None or args.width is not None or args.height is not None:
             return "--width, --height"

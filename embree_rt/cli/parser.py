@@ -7,6 +7,7 @@ import math
 import sys
 
 from embree_rt.cli.errors import EXIT_BAD_INPUT
+from embree_rt.scene.limits import INTEGER_LIMIT, SEED_LIMIT
 
 # geometry.SPHERE_MODES, spelled out so that --help does not load Embree and numba.
 SPHERE_CHOICES = ("analytic", "point", "mesh")
@@ -21,8 +22,8 @@ class Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_BAD_INPUT)
 
 
-def int_at_least(low: int):
-    """An argparse type: an integer >= ``low``."""
+def int_at_least(low: int, high: int = INTEGER_LIMIT):
+    """An argparse type: an integer in [``low``, ``high``] (by default what int64 holds)."""
 
     # argparse prefixes the message with the flag ("argument --width: ..."), so it is not repeated.
     def parse(text: str) -> int:
@@ -32,6 +33,8 @@ def int_at_least(low: int):
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if value < low:
             raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be <= {high}, got {value}")
         return value
 
     return parse
@@ -81,7 +84,7 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=positive)
     parser.add_argument("--spp", type=positive, help="samples per pixel")
     parser.add_argument("--max-depth", type=non_negative)
-    parser.add_argument("--seed", type=non_negative)
+    parser.add_argument("--seed", type=int_at_least(0, SEED_LIMIT))
     parser.add_argument("--threads", type=positive, help="default: all cores")
     parser.add_argument(
         "--spheres",

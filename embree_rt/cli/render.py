@@ -10,7 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
-from embree_rt.cli.checks import check_library, check_output, memory_key, writing
+from embree_rt.cli.checks import (
+    check_library,
+    check_output,
+    check_render_settings,
+    memory_key,
+    writing,
+)
 from embree_rt.cli.errors import UsageError
 from embree_rt.cli.parser import render_overrides
 
@@ -47,6 +53,7 @@ def command_random(args: argparse.Namespace) -> None:
         raise UsageError(f"--{error.name}: {error.problem}") from None
     scene = field_scene(plan)
     scene.render = scene.render.with_overrides(**render_overrides(args))
+    check_render_settings(scene.render, args)
     mesh = None if args.instance is None else instance_mesh(args.instance)
     require_memory_for_field(plan.count, scene.render, args)
     # A cluster's workers generate a plain field themselves, from its plan; a field of
@@ -74,6 +81,7 @@ def render_and_save(
     from embree_rt.budget import MemoryBudgetError
 
     scene.render = scene.render.with_overrides(**render_overrides(args))
+    check_render_settings(scene.render, args)
     check_library()
     framed = args.frames or "{frame" in args.output  # an animation's pattern, or a mistake
     if scene.animation is not None or args.cluster or args.scheduler or framed:
