@@ -24,6 +24,7 @@ import hashlib
 import logging
 import os
 import pickle
+import signal
 import sys
 import threading
 import time
@@ -527,12 +528,53 @@ WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
 def local_cluster(workers: int, **options) -> distributed.LocalCluster:
     """A ``LocalCluster`` of ``workers`` processes of one thread each, with ``WORKER_CONFIG``
     and no memory limit (the BVH is memory Dask does not manage: a limit would have the nanny
-    kill a worker for holding a big scene); ``options`` go to ``LocalCluster``."""
+    kill a worker for holding a big scene), whose workers leave Ctrl-C to this process
+    (``dask_setup``); ``options`` go to ``LocalCluster``.
+
+    With no dashboard the scheduler still serves its health routes over HTTP, by default on
+    port 8787, warning when another cluster holds it: here on any free port of 127.0.0.1."""
+    scheduler_options = {"dashboard_address": "127.0.0.1:0", **options.pop("scheduler_kwargs", {})}
     with dask.config.set(WORKER_CONFIG):  # the nannies hand it to their worker processes
         return distributed.LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-            memory_limit=0, **options,
+            memory_limit=0, preload=[__name__], scheduler_kwargs=scheduler_options, **options,
         )  # fmt: skip
+
+
+def dask_setup(worker: distributed.Worker) -> None:
+    """Run by Dask in each worker process ``local_cluster`` starts (its preload, once the worker
+    has started): SIGINT is ignored there. A terminal's Ctrl-C reaches every process of the
+    command's group; the command alone ends the render, cancelling the batches and closing the
+    cluster, where each worker would die of it printing its own traceback."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextmanager
+def local_client(workers: int) -> Iterator[distributed.Client]:
+    """A client on a ``local_cluster`` of ``workers``, closed afterwards. A Ctrl-C while the
+    cluster starts is held until it has (and is then closed again): interrupted half-way, it
+    would be left to Dask's exit hook, which fails on it with a traceback."""
+    held: list[int] = []
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+
+    def take_held() -> None:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+        if held:
+            raise KeyboardInterrupt
+
+    try:
+        cluster = local_cluster(workers, silence_logs=logging.ERROR)
+    except BaseException:
+        take_held()
+        raise
+    with cluster:
+        take_held()
+        with distributed.Client(cluster) as client:
+            yield client
 
 
 @contextmanager
@@ -544,10 +586,7 @@ def connect(
     answer as a Dask scheduler within ``timeout_s`` (``check_scheduler``). Bad values and
     unreachable or silent schedulers are ``InputError``s naming the flag."""
     if cluster is not None:
-        count = local_worker_count(cluster)
-        with local_cluster(count, silence_logs=logging.ERROR) as local, distributed.Client(
-            local
-        ) as client:
+        with local_client(local_worker_count(cluster)) as client:
             yield client
         return
     check_scheduler(scheduler, timeout_s)

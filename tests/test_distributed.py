@@ -330,33 +330,64 @@ def test_command_on_dask_scheduler_and_worker_processes(tmp_path: Path) -> None:
 
 
 def test_ctrl_c_on_a_local_cluster_exits_130_and_writes_nothing(tmp_path: Path) -> None:
+    """Ctrl-C at a terminal reaches the command's whole process group, the worker processes
+    too: the command alone says one line (no worker's traceback, no Dask warning)."""
     import psutil  # distributed's own dependency
 
     output = tmp_path / "out.png"
     process = subprocess.Popen(
         [sys.executable, "-m", "embree_rt", "random", "--count", "1000", "-o", str(output),
-         "--width", "1920", "--height", "1080", "--spp", "64", "--quiet", "--cluster", "local:1"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+         "--width", "1920", "--height", "1080", "--spp", "64", "--quiet", "--cluster", "local:2"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )  # fmt: skip
     try:
-        # Until the worker process has worked a while: the render is under way.
+        # Until both workers have started (they take SIGINT as ignored then) and worked a
+        # while: the render is under way.
         deadline = time.monotonic() + TIMEOUT_S
         while time.monotonic() < deadline and process.poll() is None:
             children = psutil.Process(process.pid).children(recursive=True)
-            busy = sum(sum(c.cpu_times()[:2]) for c in children if c.is_running())
-            if len(children) >= 1 and busy > 2.5:
+            workers = [c for c in children if "spawn_main" in " ".join(c.cmdline())]
+            busy = sum(sum(c.cpu_times()[:2]) for c in workers if c.is_running())
+            if len(workers) == 2 and all(map(ignores_sigint, workers)) and busy > 2.5:
                 break
             time.sleep(0.2)
         assert process.poll() is None, "the render ended before it could be interrupted"
-        process.send_signal(signal.SIGINT)
+        os.killpg(process.pid, signal.SIGINT)  # as a terminal's Ctrl-C: to the whole group
         _, stderr = process.communicate(timeout=60)
     finally:
         if process.poll() is None:
-            process.kill()
+            os.killpg(process.pid, signal.SIGKILL)
             process.wait()
     assert process.returncode == 130, stderr
-    assert "Traceback" not in stderr
+    assert stderr == "embree-rt: interrupted\n"
     assert list(tmp_path.iterdir()) == []
+    # The workers, which leave SIGINT to the command, were closed by it: none outlives it.
+    deadline = time.monotonic() + 15
+    while session_members(process.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert session_members(process.pid) == []
+
+
+def ignores_sigint(process) -> bool:
+    """Whether the (psutil) process ignores SIGINT, by the SigIgn mask of /proc/PID/status."""
+    for line in Path(f"/proc/{process.pid}/status").read_text().splitlines():
+        if line.startswith("SigIgn:"):
+            return bool(int(line.split()[1], 16) >> (signal.SIGINT - 1) & 1)
+    return False
+
+
+def session_members(session: int) -> list[int]:
+    """Processes still running in the session ``session`` (a test's ``start_new_session``)."""
+    import psutil
+
+    members = []
+    for candidate in psutil.process_iter():
+        try:
+            if os.getsid(candidate.pid) == session and candidate.status() != "zombie":
+                members.append(candidate.pid)
+        except (OSError, psutil.Error):
+            continue
+    return members
 
 
 def test_command_with_an_unreachable_scheduler_fails_in_one_line(tmp_path: Path) -> None:
