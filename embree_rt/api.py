@@ -23,6 +23,7 @@ from embree_rt import budget, film
 from embree_rt.aovs import check_aov_names, render_aovs, save_with_aovs
 from embree_rt.camera import Camera, camera_frame
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, Integrator, RenderStats
+from embree_rt.scene.loader import check_scene_values
 from embree_rt.scene.model import RenderSettings, Scene
 
 
@@ -68,8 +69,22 @@ class Renderer(Integrator):
     context manager) to free the BVH.
 
     An ``Integrator`` (which holds the BVH and traces the batches) with the one method a user
-    needs, ``render``.
+    needs, ``render``. A scene built in Python is first held to a scene file's limits
+    (``scene.loader.check_scene_values``): a value no file could hold, a light of intensity
+    1e39 say, raises the ``SceneError`` the file would (a ValueError) instead of putting NaN in
+    the image.
     """
+
+    def __init__(
+        self,
+        scene: Scene,
+        *,
+        spheres: str = "analytic",
+        threads: int | None = None,
+        batch_size: int = DEFAULT_BATCH_SIZE,
+    ) -> None:
+        check_scene_values(scene)
+        super().__init__(scene, spheres=spheres, threads=threads, batch_size=batch_size)
 
     def render(
         self,

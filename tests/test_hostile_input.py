@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from embree_rt import Scene, load_scene, render
+from embree_rt.materials import Checker, Material
 from embree_rt.scene import SceneError
 
 SPHERE = "[[spheres]]\ncenter = [0, 1, 0]\nradius = 1\n"
@@ -250,6 +251,88 @@ def test_the_python_api_holds_spheres_and_meshes_to_the_same_limits() -> None:
     with pytest.raises(ValueError, match=r"transforms: row 2: places the mesh 3e\+10"):
         scene.add_instances(triangle, placements)
     assert scene.meshes == [] and scene.instances == []
+
+
+def _lit_sphere() -> Scene:
+    from embree_rt.scene.model import PointLight
+
+    scene = Scene(lights=[PointLight((0.0, 5.0, 3.0))])
+    scene.add_sphere((0.0, 1.0, 0.0), 1.0)
+    return scene
+
+
+def _set_light(field: str, value):
+    def change(scene: Scene) -> None:
+        setattr(scene.lights[0], field, value)
+
+    return change
+
+
+def _set_floor(change):
+    def apply(scene: Scene) -> None:
+        change(scene.floor)
+
+    return apply
+
+
+# A scene built in Python with one value a file could not hold: (change, its key in a file).
+PYTHON_VALUES = {
+    "light intensity 1e39": (_set_light("intensity", 1e39), "lights[0].intensity"),
+    "light intensity 2e6": (_set_light("intensity", 2e6), "lights[0].intensity"),
+    "light colour 1e39": (_set_light("color", (1e39, 1.0, 1.0)), "lights[0].color"),
+    "light at 1e39": (_set_light("position", (1e39, 5.0, 0.0)), "lights[0].position"),
+    "light intensity NaN": (_set_light("intensity", float("nan")), "lights[0].intensity"),
+    "material colour 1e39": (
+        lambda scene: scene.add_material("hot", Material(color=(1e39, 0.5, 0.5))),
+        "materials.hot.color",
+    ),
+    "sky 1e39": (
+        lambda scene: setattr(scene.background, "horizon", (1e39, 1.0, 1.0)),
+        "background.horizon",
+    ),
+    "floor at 1e39": (_set_floor(lambda floor: setattr(floor, "height", 1e39)), "floor.height"),
+    "floor square 1e-320": (
+        _set_floor(lambda floor: setattr(floor, "checker", Checker(size=1e-320))),
+        "floor.size",
+    ),
+    "floor colour 1e39": (
+        _set_floor(lambda floor: setattr(floor, "checker", Checker(color_a=(1e39, 0.0, 0.0)))),
+        "floor.color_a",
+    ),
+    "camera at 1e39": (
+        lambda scene: setattr(scene.camera, "position", (0.0, 1e39, 5.0)),
+        "camera.position",
+    ),
+    "sphere centres set to 1e39": (
+        lambda scene: setattr(scene, "sphere_centers", np.array([[1e39, 1.0, 0.0]])),
+        "spheres",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(PYTHON_VALUES))
+def test_python_built_values_are_held_to_a_files_limits_before_rendering(case: str) -> None:
+    """``PointLight(intensity=1e39)`` made an image with NaN at exit 0: the renderer now reads
+    a scene built in Python back through the scene-file readers, so it is refused as the same
+    value in a file is, naming the key a file would use."""
+    change, key = PYTHON_VALUES[case]
+    scene = _lit_sphere()
+    change(scene)
+    with pytest.raises(SceneError) as caught:
+        render(scene, width=8, height=8, spp=1)
+    assert caught.value.file == "scene" and caught.value.key == key, str(caught.value)
+
+
+def test_python_built_values_at_the_limits_render_without_nan() -> None:
+    from embree_rt.scene.limits import RADIANCE_LIMIT
+
+    scene = _lit_sphere()
+    scene.lights[0].intensity = RADIANCE_LIMIT
+    scene.lights[0].color = (RADIANCE_LIMIT,) * 3
+    scene.add_material("hot", Material(color=(RADIANCE_LIMIT,) * 3))
+    scene.add_sphere((2.5, 1.0, 0.0), 1.0, "hot")
+    image = render(scene, width=16, height=16, spp=1).image
+    assert np.isfinite(image).all() and image.max() > 1e12
 
 
 def test_a_scene_at_every_limit_renders_without_nan_or_inf(tmp_path: Path) -> None:

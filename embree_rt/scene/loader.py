@@ -118,6 +118,19 @@ def load_scene(path: str | Path) -> Scene:
     return SceneReader(path, read_document(path)).build()
 
 
+def check_scene_values(scene: Scene, name: str = "scene") -> None:
+    """Hold a scene built in Python to a scene file's limits (``scene.limits``): its camera,
+    sky, lights, materials and floor are written out as a file would hold them and read back by
+    this module's readers, and its sphere arrays checked as a file's are. A value a file could
+    not hold (a light of intensity 1e39, which float32 shading turns into inf and then NaN)
+    raises the ``SceneError`` a file's would, ``name`` standing for the file."""
+    from embree_rt.scene.writer import look_document, plain_values
+
+    SceneReader(Path(name), plain_values(look_document(scene)))
+    if (problem := spheres_problem(scene.sphere_centers, scene.sphere_radii)) is not None:
+        raise SceneError(name, "spheres", problem)
+
+
 def _check_unpacking(
     path: Path, fail: Callable[[str], Exception], cost: Callable[[Headers], tuple[int, str]]
 ) -> None:

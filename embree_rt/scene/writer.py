@@ -21,44 +21,9 @@ from embree_rt.scene.model import Scene
 
 def scene_document(scene: Scene, path: Path) -> dict:
     """The scene as a plain dict in the file schema, writing its bulk data beside ``path``."""
-    document: dict = {
-        "render": asdict(scene.render),
-        "camera": {
-            "position": list(scene.camera.position),
-            "look_at": list(scene.camera.look_at),
-            "up": list(scene.camera.up),
-            "fov": float(scene.camera.fov),
-        },
-        "background": {
-            "horizon": list(scene.background.horizon),
-            "zenith": list(scene.background.zenith),
-        },
-        "lights": [
-            {"position": list(lt.position), "color": list(lt.color), "intensity": lt.intensity}
-            for lt in scene.lights
-        ],
-    }
+    document: dict = {"render": asdict(scene.render), **look_document(scene)}
     if scene.animation is not None:
         document["animation"] = animation_document(scene.animation)
-    materials = {
-        name: _material_dict(material)
-        for name, material in scene.materials.items()
-        if PRESETS.get(name) != material
-    }
-    if materials:
-        document["materials"] = materials
-    if scene.floor is None:
-        document["floor"] = False
-    else:
-        floor = scene.floor
-        document["floor"] = {
-            "height": floor.height,
-            "color_a": list(floor.checker.color_a),
-            "color_b": list(floor.checker.color_b),
-            "size": floor.checker.size,
-            **_material_dict(floor.material),
-        }
-        document["floor"].pop("preset")
     if len(scene.sphere_radii):
         spheres_path = path.with_suffix(".spheres.npz")
         names = np.asarray(scene.material_names)
@@ -106,6 +71,47 @@ def scene_document(scene: Scene, path: Path) -> dict:
     return document
 
 
+def look_document(scene: Scene) -> dict:
+    """The scene's camera, sky, lights, materials and floor in the file schema: what the
+    renderer reads of a scene besides its render settings, animation and geometry."""
+    document: dict = {
+        "camera": {
+            "position": list(scene.camera.position),
+            "look_at": list(scene.camera.look_at),
+            "up": list(scene.camera.up),
+            "fov": float(scene.camera.fov),
+        },
+        "background": {
+            "horizon": list(scene.background.horizon),
+            "zenith": list(scene.background.zenith),
+        },
+        "lights": [
+            {"position": list(lt.position), "color": list(lt.color), "intensity": lt.intensity}
+            for lt in scene.lights
+        ],
+    }
+    materials = {
+        name: _material_dict(material)
+        for name, material in scene.materials.items()
+        if PRESETS.get(name) != material
+    }
+    if materials:
+        document["materials"] = materials
+    if scene.floor is None:
+        document["floor"] = False
+    else:
+        floor = scene.floor
+        document["floor"] = {
+            "height": floor.height,
+            "color_a": list(floor.checker.color_a),
+            "color_b": list(floor.checker.color_b),
+            "size": floor.checker.size,
+            **_material_dict(floor.material),
+        }
+        document["floor"].pop("preset")
+    return document
+
+
 def _material_dict(material) -> dict:
     fields = asdict(material)
     fields["color"] = list(fields["color"])
@@ -119,7 +125,7 @@ def save_scene(scene: Scene, path: str | Path) -> None:
     suffix = path.suffix.lower()
     if suffix not in (".toml", ".json"):
         raise ValueError(f"{path}: expected a .toml or .json file name")
-    document = _plain(scene_document(scene, path))
+    document = plain_values(scene_document(scene, path))
     if suffix == ".json":
         text = json.dumps(document, indent=2) + "\n"
     else:
@@ -153,13 +159,13 @@ def inline_short_arrays(text: str) -> str:
     return _NUMBER_ARRAY.sub(inline, text)
 
 
-def _plain(value):
+def plain_values(value):
     """``value`` with NumPy scalars and tuples turned into the Python types TOML/JSON writers
     accept (a scene built in Python may hold ``np.float32`` coordinates)."""
     if isinstance(value, dict):
-        return {str(key): _plain(item) for key, item in value.items()}
+        return {str(key): plain_values(item) for key, item in value.items()}
     if isinstance(value, list | tuple | np.ndarray):
-        return [_plain(item) for item in value]
+        return [plain_values(item) for item in value]
     if isinstance(value, bool | np.bool_):
         return bool(value)
     if isinstance(value, int | np.integer):
