@@ -53,21 +53,34 @@ def camera_problem(camera: Camera) -> tuple[str, str] | None:
         if vector is None or vector.shape != (3,) or not np.isfinite(vector).all():
             return name, f"expected three finite numbers, got {value!r}"
         vectors[name] = vector
-    view = vectors["position"] - vectors["look_at"]
-    distance = np.linalg.norm(view)
-    if not distance > 0.0:
-        return "look_at", f"must differ from camera.position, both are {list(camera.look_at)}"
-    up_length = np.linalg.norm(vectors["up"])
-    if not up_length > 0.0:
-        return "up", "must not be the zero vector"
-    sine = np.linalg.norm(np.cross(vectors["up"] / up_length, view / distance))
-    if not sine >= MIN_UP_SINE:
-        return "up", (
-            f"{list(camera.up)} is parallel to the viewing direction (from "
-            f"{list(camera.position)} to {list(camera.look_at)})"
-        )
-    return None
+    found = view_problem(vectors["position"][None], vectors["look_at"][None], vectors["up"])
+    return None if found is None else found[1:]
 
+
+def view_problem(positions: np.ndarray, looks: np.ndarray, up) -> tuple[int, str, str] | None:
+    """The first of n cameras at (n, 3) float64 finite ``positions`` looking at (n, 3)
+    ``looks``, all with the finite (3,) ``up``, whose image ``camera_problem``'s rule refuses
+    (``look_at`` at ``position``, ``up`` zero or within ``MIN_UP_SINE`` of the view), as
+    (index, field, problem), or None: the rule over a whole camera path at once."""
+    up = np.asarray(up, np.float64)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        view = positions - looks
+        distance = np.linalg.norm(view, axis=1)
+        up_length = np.linalg.norm(up)
+        sine = np.linalg.norm(np.cross(up / up_length, view / distance[:, None]), axis=1)
+    refused = ~(distance > 0.0) | ~(up_length > 0.0) | ~(sine >= MIN_UP_SINE)
+    if not refused.any():
+        return None
+    i = int(np.flatnonzero(refused)[0])
+    if not distance[i] > 0.0:
+        return i, "look_at", f"must differ from camera.position, both are {looks[i].tolist()}"
+    if not up_length > 0.0:
+        return i, "up", "must not be the zero vector"
+    problem = (
+        f"{up.tolist()} is parallel to the viewing direction (from {positions[i].tolist()} to "
+        f"{looks[i].tolist()})"
+    )
+    return i, "up", problem
 
 
 @dataclass(frozen=True, eq=False)

@@ -189,6 +189,8 @@ def checker(points: np.ndarray, checker: Checker) -> np.ndarray:
     # float64 so the square a point falls in does not depend on float32 rounding of x / size.
     x = np.asarray(points[0], np.float64)
     z = np.asarray(points[2], np.float64)
-    odd = (np.floor(x / checker.size) + np.floor(z / checker.size)).astype(np.int64) & 1
+    # The parity taken in float64, not through int64: a far hit (a grazing ray meets the floor
+    # at any distance) over a small square passes 2**63 squares; beyond 2**53 all are even.
+    odd = np.fmod(np.floor(x / checker.size) + np.floor(z / checker.size), 2.0) != 0.0
     palette = np.array([checker.color_a, checker.color_b], np.float32).T  # (3, 2): even, odd
-    return np.take(palette, odd, axis=1)
+    return np.take(palette, odd.astype(np.intp), axis=1)

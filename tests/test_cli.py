@@ -90,7 +90,7 @@ CASES = {
         "scene.toml", SPHERE + SECOND_SPHERE + 'radius = "big"\n', ["spheres[1].radius", "'big'"]
     ),
     "negative radius": Case(
-        "scene.toml", SPHERE + SECOND_SPHERE + "radius = -0.5\n", ["spheres[1].radius", "> 0"]
+        "scene.toml", SPHERE + SECOND_SPHERE + "radius = -0.5\n", ["spheres[1].radius", ">= 1e-18"]
     ),
     "nan in json": Case("scene.json", _nan_json(), ["scene.json", "spheres[1].radius", "finite"]),
     "nan in toml": Case(

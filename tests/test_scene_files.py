@@ -522,8 +522,8 @@ BAD = {
         "spheres[0].radius",
         "expected a number",
     ),
-    "radius zero": ("s.toml", SPHERE + "radius = 0", "spheres[0].radius", "> 0"),
-    "radius negative": ("s.toml", SPHERE + "radius = -1", "spheres[0].radius", "> 0"),
+    "radius zero": ("s.toml", SPHERE + "radius = 0", "spheres[0].radius", ">= 1e-18"),
+    "radius negative": ("s.toml", SPHERE + "radius = -1", "spheres[0].radius", ">= 1e-18"),
     "radius nan": ("s.toml", SPHERE + "radius = nan", "spheres[0].radius", "finite"),
     "radius missing": ("s.toml", SPHERE, "spheres[0].radius", "required"),
     "center inf": (
@@ -615,7 +615,7 @@ BAD = {
         "true or false",
     ),
     "floor a number": ("s.toml", "floor = 3", "floor", "expected a table"),
-    "floor size zero": ("s.toml", "[floor]\nsize = 0", "floor.size", "> 0"),
+    "floor size zero": ("s.toml", "[floor]\nsize = 0", "floor.size", ">= 1e-18"),
     "floor reflectivity": ("s.toml", "[floor]\nreflectivity = -0.1", "floor.reflectivity", ">= 0"),
     "undefined sphere material": (
         "s.toml",

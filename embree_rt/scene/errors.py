@@ -10,13 +10,28 @@ from embree_rt.errors import InputError
 
 class SceneError(InputError, ValueError):
     """A problem with a scene file (bad input, and a ValueError to the Python API). ``key`` is a
-    dotted path such as ``spheres[3].radius``."""
+    dotted path such as ``spheres[3].radius``. The message stays on one line whatever the file
+    holds: a file name or key with a newline (or any other character that does not print) is
+    shown quoted, by ``repr``, and such a character in the problem is shown escaped."""
 
     def __init__(self, file: object, key: str, problem: str) -> None:
         self.file = str(file)
         self.key = key
         self.problem = problem
-        super().__init__(f"{self.file}: {key}: {problem}")
+        super().__init__(f"{quoted(self.file)}: {quoted(key)}: {escaped(problem)}")
+
+
+def quoted(name: str) -> str:
+    """``name`` as it is when every character prints, else its ``repr`` (quoted, one line)."""
+    return name if name.isprintable() else repr(name)
+
+
+def escaped(text: str) -> str:
+    """``text`` with each character that does not print (a newline, a NUL) written as its
+    escape, so a message that quotes a file's words stays one line."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def unknown_key_message(key: str, known: Iterable[str]) -> str:

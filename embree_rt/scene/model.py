@@ -8,15 +8,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.camera import Camera, Vec3
+from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
+from embree_rt.scene.limits import INTEGER_LIMIT, placed_mesh_problem, spheres_problem
 from embree_rt.transforms import as_affine
 
 if TYPE_CHECKING:  # trimesh (and SciPy behind it) loads in ~1 s: only scenes with meshes pay
     import trimesh
-
 
 
 @dataclass
@@ -57,20 +57,23 @@ class RenderSettings:
     max_depth: int = 6
     seed: int = 0
 
-    def with_overrides(
-        self,
-        *,
-        width: int | None = None,
-        height: int | None = None,
-        spp: int | None = None,
-        max_depth: int | None = None,
-        seed: int | None = None,
-    ) -> RenderSettings:
-        """These settings with every value that is not None replaced: the one rule by which
-        flags and keyword arguments override a scene's ``render`` table."""
-        given = {"width": width, "height": height, "spp": spp, "max_depth": max_depth,
-                 "seed": seed}  # fmt: skip
-        return replace(self, **{name: value for name, value in given.items() if value is not None})
+    def with_overrides(self, **values: int | None) -> RenderSettings:
+        """These settings with each field named in ``values`` (width, height, spp, max_depth,
+        seed) replaced, unless its value is None: the one rule by which flags and keyword
+        arguments override a scene's ``render`` table. An unknown name raises TypeError."""
+        return replace(self, **{name: value for name, value in values.items() if value is not None})
+
+
+def render_problem(settings: RenderSettings) -> tuple[str, str] | None:
+    """What keeps ``settings`` from numbering its samples, as (field, problem), or None: the
+    samples of an image (width × height × spp) are numbered in int64."""
+    samples = settings.width * settings.height * settings.spp
+    if samples > INTEGER_LIMIT:
+        return "spp", (
+            f"a {settings.width}x{settings.height} image at {settings.spp} spp is {samples:.3g} "
+            f"samples, more than the {INTEGER_LIMIT:.3g} int64 can number"
+        )
+    return None
 
 
 @dataclass
@@ -219,11 +222,19 @@ class Scene:
 
         ``copy=False`` hands the arrays over: when the scene holds no spheres yet and they are
         already (n, 3) float32, (n,) float32 and (n,) int32, it keeps them as they are (no copy
-        of a hundred million spheres); do not modify them afterwards."""
-        centers = np.asarray(centers, np.float32).reshape(-1, 3)
-        radii = np.asarray(radii, np.float32).reshape(-1)
+        of a hundred million spheres); do not modify them afterwards. Centres and radii must lie
+        within ``scene.limits``' bounds (ValueError naming the first bad row)."""
+        centers, radii = np.asarray(centers), np.asarray(radii)
+        if centers.dtype.kind not in "fiu" or radii.dtype.kind not in "fiu":
+            centers, radii = np.asarray(centers, np.float64), np.asarray(radii, np.float64)
+        centers, radii = centers.reshape(-1, 3), radii.reshape(-1)
         if len(radii) != len(centers):
             raise ValueError(f"radii: {len(radii)} values for {len(centers)} centers")
+        # Checked before the cast: a float64 1e39 or 1e-320 would become inf or 0 in float32.
+        if (problem := spheres_problem(centers, radii)) is not None:
+            raise ValueError(problem)
+        centers = centers.astype(np.float32, copy=False)
+        radii = radii.astype(np.float32, copy=False)
         ids = self.material_ids(materials, len(centers), "centers")
         if not copy and len(self.sphere_radii) == 0:
             self.sphere_centers, self.sphere_radii, self.sphere_materials = centers, radii, ids
@@ -284,6 +295,8 @@ class Scene:
         if len(transforms) == 0:
             raise ValueError("transforms: expected at least one placement, got none")
         child = single_mesh(mesh)
+        if (problem := placed_mesh_problem(child.vertices, transforms)) is not None:
+            raise ValueError(f"transforms: row {problem[0]}: {problem[1]}")
         if materials is None:
             ids = self.material_ids(self._mesh_material(child), len(transforms), "transforms")
         else:
@@ -334,6 +347,9 @@ class Scene:
         if isinstance(mesh, trimesh.Scene):  # a node's transform may spoil the placement
             for matrix in placements:
                 as_affine(matrix, "transform")
+        for (part, _), matrix in zip(parts, placements, strict=True):
+            if (problem := placed_mesh_problem(part.vertices, matrix[None])) is not None:
+                raise ValueError(f"transform: {problem[1]}")
         added = [
             MeshObject(
                 mesh=part,

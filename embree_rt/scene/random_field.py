@@ -20,7 +20,6 @@ memory).
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -28,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from embree_rt import budget
+from embree_rt.batches import worker_count
 from embree_rt.camera import Camera
 from embree_rt.materials import PRESETS, preset
 from embree_rt.scene.model import PointLight, RenderSettings, Scene
@@ -210,7 +210,7 @@ def add_field_spheres(scene: Scene, plan: FieldPlan, *, threads: int | None = No
             rows = slice(plan.heroes + ring.first, plan.heroes + ring.first + ring.count)
             make(ring, centers[rows], radii[rows], materials[rows])
 
-        with ThreadPoolExecutor(max_workers=threads or os.cpu_count() or 1) as pool:
+        with ThreadPoolExecutor(max_workers=worker_count(threads)) as pool:
             for _ in pool.map(fill, rings):  # re-raises a ring's error
                 pass
     scene.add_spheres(centers, radii, materials, copy=False)
@@ -244,7 +244,7 @@ def add_field_spheres_where(
             return (rows + (plan.heroes + ring.first), centers[rows], radii[rows],
                     materials[rows])  # fmt: skip
 
-        with ThreadPoolExecutor(max_workers=threads or os.cpu_count() or 1) as pool:
+        with ThreadPoolExecutor(max_workers=worker_count(threads)) as pool:
             pieces.extend(pool.map(fill, rings))
     ids, centers, radii, materials = (np.concatenate(part) for part in zip(*pieces, strict=True))
     del pieces
