@@ -167,10 +167,20 @@ def _render_on_cluster(
             source = distributed.SceneFile(str(source.resolve()))
         else:  # every worker generates the field itself
             source = distributed.FieldRecipe(source)
-        renderer = distributed.ClusterRenderer(source, client, spheres=args.spheres)
+        if args.partition is None:
+            renderer = distributed.ClusterRenderer(source, client, spheres=args.spheres)
+        else:  # data-parallel: each worker holds bricks of the scene
+            from embree_rt.bricks.cluster import PartitionedRenderer
+
+            renderer = PartitionedRenderer(
+                source, client, partition=args.partition, spheres=args.spheres
+            )
         total = settings.width * settings.height * settings.spp * len(cameras)
-        with distributed.progress_bar(total, args.quiet) as show:
-            renderer.render_frames(settings, cameras, write, progress=show)
+        try:
+            with distributed.progress_bar(total, args.quiet) as show:
+                renderer.render_frames(settings, cameras, write, progress=show)
+        finally:
+            renderer.release()
         workers = len(client.nthreads())
     where = f"on {workers} Dask worker{'s' if workers != 1 else ''}"
     return renderer.stats.total_rays, renderer.stats.render_s, where

@@ -75,6 +75,13 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
     cluster = parser.add_mutually_exclusive_group()  # embree_rt/distributed.py
     cluster.add_argument("--cluster", metavar="local:N", help="render on N local Dask workers")
     cluster.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="render on a Dask cluster")
+    parser.add_argument(
+        "--partition",
+        type=positive,
+        metavar="K",
+        help="with --cluster or --scheduler: cut the scene into K spatial bricks, each held by "
+        "one worker (scenes bigger than one machine's memory; shading on this machine)",
+    )
     parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
     parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
 

@@ -48,10 +48,11 @@ def command_random(args: argparse.Namespace) -> None:
     scene = field_scene(plan)
     scene.render = scene.render.with_overrides(**render_overrides(args))
     mesh = None if args.instance is None else instance_mesh(args.instance)
-    require_memory_for_field(plan.count, scene.render, args)
     # A cluster's workers generate a plain field themselves, from its plan; a field of
     # instances, or one to be saved, is made here.
     on_workers = bool(args.cluster or args.scheduler) and args.save_scene is None and mesh is None
+    if not (on_workers and args.partition):  # in bricks, each worker checks its own
+        require_memory_for_field(plan.count, scene.render, args)
     if not on_workers:
         add_field_spheres(scene, plan)
     if mesh is not None:
@@ -74,6 +75,9 @@ def render_and_save(
     from embree_rt.budget import MemoryBudgetError
 
     scene.render = scene.render.with_overrides(**render_overrides(args))
+    if args.partition is not None and not (args.cluster or args.scheduler):
+        raise UsageError("--partition: bricks are held by Dask workers: add --cluster local:N or "
+                         "--scheduler ADDRESS")  # fmt: skip
     check_library()
     framed = args.frames or "{frame" in args.output  # an animation's pattern, or a mistake
     if scene.animation is not None or args.cluster or args.scheduler or framed:
