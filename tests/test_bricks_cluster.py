@@ -19,6 +19,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -39,10 +40,6 @@ from embree_rt.scene.random_field import plan_field  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
 SMALL = {"width": 160, "height": 90, "spp": 1}
-
-
-def scheduler_plugins(dask_scheduler) -> list[str]:
-    return list(dask_scheduler.worker_plugins)
 
 
 def assert_same_image(renderer: bc.PartitionedRenderer, image, expected) -> None:
@@ -71,13 +68,14 @@ def test_data_parallel_image_is_bitwise_the_local_image(cluster, name, as_path, 
                        partition=bricks, batch_size=4096)  # fmt: skip
     try:
         image = bounded(renderer.render, settings, scene.camera)
-        assert sorted(renderer.builds().values()) == ([1, 1] if bricks == 2 else [1, 2])
+        assert sorted(renderer.bricks_held().values()) == ([1, 1] if bricks == 2 else [1, 2])
     finally:
         renderer.release()
     assert_same_image(renderer, image, rt.render(scene, **SMALL).image)
-    name = bc.plugin_name(renderer.plan.key)
-    held = client.run(lambda dask_worker, name=name: name in dask_worker.plugins)
-    assert not any(held.values())  # released: the workers hold no bricks of it
+    deadline = time.monotonic() + TIMEOUT_S  # released: the workers let the bricks go
+    while any(client.run(bc.bricks_held).values()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(client.run(bc.bricks_held).values())
 
 
 def test_a_field_of_1e6_spheres_made_brick_by_brick_is_bitwise_the_local_image(cluster) -> None:  # noqa: F811
@@ -115,7 +113,7 @@ def test_a_worker_killed_mid_render_changes_no_pixel(cluster) -> None:  # noqa: 
 
 
 def test_bricks_too_big_for_the_workers_memory_limits_are_refused_up_front() -> None:
-    plan = bc.BrickPlan("key", split_points(np.zeros((1, 3)), 2), "point", (40_000_000, 40_000_000))
+    plan = bc.BrickPlan(split_points(np.zeros((1, 3)), 2), "point", (40_000_000, 40_000_000))
     assignment = {0: "tcp://a:1", 1: "tcp://b:1"}
     limits = {"tcp://a:1": 4 << 30, "tcp://b:1": 4 << 30}
     bc.require_bricks_fit(plan, "field", assignment, limits)  # 2 x ~2.9 GB: fits
@@ -140,8 +138,7 @@ def test_a_partition_too_big_for_a_workers_limit_is_refused_before_anything_is_b
     ) as client:  # fmt: skip
         with pytest.raises(InputError, match=r"--partition 1: worker .* needing ~1\.\d+ GB"):
             bc.PartitionedRenderer(rd.FieldRecipe(plan_field(20_000_000)), client, partition=1)
-        plugins = client.run_on_scheduler(scheduler_plugins)
-        assert not [name for name in plugins if name.startswith("embree-rt-bricks")]
+        assert not any(client.run(bc.bricks_held).values())
 
 
 def test_command_renders_data_parallel_and_refuses_partition_without_a_cluster(tmp_path) -> None:

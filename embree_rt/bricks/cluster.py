@@ -7,19 +7,20 @@ nearest hit over bricks wins (``nearest``: ties go to the lower global object id
 segment is blocked if any brick blocks it. The image is bitwise the local render's.
 
 Where the bricks are: brick b is assigned to one worker (round robin over the workers, by
-address) and its tasks carry Dask worker restrictions to it. The worker builds it on the first
-task that needs it, in ``BrickHolderPlugin`` (registered under a key made from the scene, the
-sphere mode and the partition), from the scene's source: a random field's recipe (the worker
-generates only that brick's spheres: ``contents.field_brick``), a scene file's path, or a
-``Scene`` scattered once to every worker. A partition whose bricks cannot fit in their workers'
-memory limits is refused before anything is built (``require_bricks_fit``). When a worker is
-lost, each brick it held is assigned to the live worker holding the fewest, which builds it again
-on its first task, and the brick's pending tasks are submitted there: no pixel changes.
+address) and made there as a Dask actor (``BrickActor``, created with a worker restriction to
+it), whose methods the client calls on that worker directly: one round trip a query, not a
+task's trip through the scheduler. The actor makes its brick from the scene's source: a random
+field's recipe (the worker generates only that brick's spheres: ``contents.field_brick``), a
+scene file's path, or a ``Scene`` scattered once to every worker. A partition whose bricks
+cannot fit in their workers' memory limits is refused before anything is built
+(``require_bricks_fit``). When a worker is lost, each brick it held is made again on the live
+worker holding the fewest, and the calls it had not answered are made there: no pixel changes.
 """
 
 from __future__ import annotations
 
-import hashlib
+import contextlib
+import gc
 import math
 import os
 import threading
@@ -53,7 +54,6 @@ from embree_rt.distributed import (
     SceneSource,
     WorkerSceneError,
     progress_bar,
-    scene_key,
 )
 from embree_rt.errors import InputError
 from embree_rt.geometry import sphere_kind
@@ -72,19 +72,14 @@ NO_WORKERS_TIMEOUT_S = 30.0
 
 @dataclass(frozen=True)
 class BrickPlan:
-    """What any worker needs to make a brick of one scene: ``key`` (the plugin's), the
-    ``partition``, the ``spheres`` mode the bricks build with (``brick_sphere_mode``) and
-    ``counts`` (K,) the objects expected in each brick (exact for a scene, estimated for a
-    random field: ``field_brick_counts``), for the memory budget."""
+    """What any worker needs to make a brick of one scene: the ``partition``, the ``spheres``
+    mode the bricks build with (``brick_sphere_mode``) and ``counts`` (K,) the objects expected
+    in each brick (exact for a scene, estimated for a random field: ``field_brick_counts``), for
+    the memory budget."""
 
-    key: str
     partition: Partition
     spheres: str
     counts: tuple[int, ...]
-
-
-def plugin_name(key: str) -> str:
-    return f"embree-rt-bricks-{key}"
 
 
 def brick_needs(plan: BrickPlan, index: int, source_kind: str) -> dict[str, tuple[int, str]]:
@@ -136,37 +131,33 @@ def require_bricks_fit(
 # -- on the workers --------------------------------------------------------------------------
 
 
-class BrickHolderPlugin(distributed.WorkerPlugin):
-    """The bricks of one scene that a worker holds, each built on the first task that needs
-    it (in a task thread) and closed when the plugin is removed. ``builds`` counts builds."""
+class BrickActor:
+    """One brick on the worker holding it, a Dask actor: the client calls its methods on that
+    worker directly, one round trip, not through the scheduler (a task's two hops and its
+    bookkeeping took twice as long). Made from ``source`` on creation; a brick that cannot fit
+    in the worker's memory is refused (``WorkerSceneError``) before it is made."""
 
-    def __init__(self, key: str) -> None:
-        self.key = key
+    def __init__(self, source: SceneSource | Scene, plan: BrickPlan, index: int) -> None:
+        kind = "field" if isinstance(source, FieldRecipe) else "scene"
+        try:
+            budget.require(brick_needs(plan, index, kind))
+            contents = _brick_contents(source, plan.partition, index)
+        except InputError as error:
+            raise WorkerSceneError(f"worker cannot make brick {index}: {error}") from None
+        self.brick = Brick(contents, plan.spheres)
 
-    def setup(self, worker: distributed.Worker) -> None:
-        self._lock = threading.Lock()
-        self.bricks: dict[int, Brick] = {}
-        self.builds = 0
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float64 the brick's box."""
+        return self.brick.bounds
 
-    def teardown(self, worker: distributed.Worker) -> None:
-        for brick in self.bricks.values():
-            brick.close()
-        self.bricks = {}
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, coherent: bool) -> BrickHits:
+        return self.brick.intersect(origins, directions, coherent)
 
-    def brick(self, source: SceneSource | Scene, plan: BrickPlan, index: int) -> Brick:
-        """Brick ``index``, made from ``source`` the first time; one that cannot fit in this
-        machine's memory is refused (``WorkerSceneError``) before it is made."""
-        with self._lock:
-            if index not in self.bricks:
-                kind = "field" if isinstance(source, FieldRecipe) else "scene"
-                try:
-                    budget.require(brick_needs(plan, index, kind))
-                    contents = _brick_contents(source, plan.partition, index)
-                except InputError as error:
-                    raise WorkerSceneError(f"worker cannot make brick {index}: {error}") from None
-                self.bricks[index] = Brick(contents, plan.spheres)
-                self.builds += 1
-            return self.bricks[index]
+    def occluded(self, points: np.ndarray, target: np.ndarray) -> np.ndarray:
+        return self.brick.occluded(points, target)
+
+    def close(self) -> None:
+        self.brick.close()
 
 
 def _brick_contents(source: SceneSource | Scene, partition: Partition, index: int):
@@ -176,36 +167,24 @@ def _brick_contents(source: SceneSource | Scene, partition: Partition, index: in
     return scene_brick(scene, partition, index)
 
 
-def _holder(key: str) -> BrickHolderPlugin:
-    worker = distributed.get_worker()
-    plugin = worker.plugins.get(plugin_name(key))
-    if plugin is None:  # released while a render of the scene still ran
-        raise ClusterError(f"worker {worker.address} holds no bricks of scene {key}")
-    return plugin
-
-
-def build_brick(source, plan: BrickPlan, index: int) -> np.ndarray:
-    """The Dask task that makes brick ``index`` on its worker: its (2, 3) float64 box."""
-    return _holder(plan.key).brick(source, plan, index).bounds
-
-
-def brick_intersect(source, plan: BrickPlan, index: int, origins, directions, coherent):
-    """The Dask task: brick ``index``'s ``BrickHits`` for rays (3, k) float32."""
-    return _holder(plan.key).brick(source, plan, index).intersect(origins, directions, coherent)
-
-
-def brick_occluded(source, plan: BrickPlan, index: int, points, target) -> np.ndarray:
-    """The Dask task: (k,) bool whether brick ``index`` blocks each segment."""
-    return _holder(plan.key).brick(source, plan, index).occluded(points, target)
-
-
 # -- on the client ---------------------------------------------------------------------------
 
 
+@dataclass
+class PlacedBrick:
+    """Brick ``index``'s actor on ``worker``: the future that made it (Dask keeps the actor while
+    it lives) and the handle its methods are called through."""
+
+    index: int
+    worker: str
+    future: distributed.Future
+    actor: distributed.Actor | None = None
+
+
 class DaskBricks:
-    """``BrickQueries`` on the workers of ``client``: brick b's tasks go to
-    ``assignment[b]``; a brick whose worker is lost moves to a live one, and its tasks with it
-    (``moves`` counts the moves)."""
+    """``BrickQueries`` on the workers of ``client``: brick b is a ``BrickActor`` on
+    ``assignment[b]``; a brick whose worker is lost is made again on the live worker holding
+    the fewest, and the calls it had not answered are made there (``moves`` counts them)."""
 
     def __init__(
         self,
@@ -218,87 +197,121 @@ class DaskBricks:
         self.client = client
         self.source = source
         self.plan = plan
-        self.assignment = dict(assignment)
         self.no_workers_timeout_s = no_workers_timeout_s
         self.moves = 0
         self._lock = threading.Lock()
+        self.placed = {index: self._place(index, worker) for index, worker in assignment.items()}
+
+    @property
+    def assignment(self) -> dict[int, str]:
+        """Each brick's worker."""
+        return {index: placed.worker for index, placed in self.placed.items()}
+
+    def _place(self, index: int, worker: str) -> PlacedBrick:
+        future = self.client.submit(
+            BrickActor, self.source, self.plan, index, actor=True, workers=[worker],
+            allow_other_workers=False, pure=False,
+        )  # fmt: skip
+        return PlacedBrick(index, worker, future)
 
     def build(self) -> np.ndarray:
-        """Make every brick on its worker: (K, 2, 3) float64 their boxes."""
-        jobs = [(index, ()) for index in range(self.plan.partition.bricks)]
-        return np.array(self._run(build_brick, jobs))
+        """Wait for every brick to be made on its worker: (K, 2, 3) float64 their boxes."""
+        jobs = [(index, "bounds", ()) for index in range(self.plan.partition.bricks)]
+        return np.array(self._run(jobs))
 
     def intersect(self, requests: list[IntersectRequest]) -> list[BrickHits]:
-        return self._run(brick_intersect, [(b, (o, d, coherent)) for b, o, d, coherent in requests])
+        return self._run([(b, "intersect", (o, d, coherent)) for b, o, d, coherent in requests])
 
     def occluded(self, requests: list[OccludedRequest]) -> list[np.ndarray]:
-        return self._run(brick_occluded, [(b, (points, target)) for b, points, target in requests])
+        return self._run([(b, "occluded", (points, target)) for b, points, target in requests])
 
     def close(self) -> None:
-        pass
+        """Close every brick's BVH on its worker and let the actors go."""
+        with self._lock:
+            placed, self.placed = list(self.placed.values()), {}
+        calls = []
+        for brick in placed:
+            if brick.actor is not None and brick.worker in self.client.nthreads():
+                calls.append(brick.actor.close())
+        for call in calls:
+            # a worker gone meanwhile took its bricks along
+            with contextlib.suppress(OSError, TimeoutError):
+                call.result(timeout=self.no_workers_timeout_s)
+        del calls
+        for brick in placed:
+            brick.future.release()
+            brick.actor = brick.future = None
+        # Dask keeps an actor while any handle to it lives, and handles linger in reference
+        # cycles (the closures of Dask's finished method calls): collect them, so the workers
+        # free the bricks now rather than at some later collection.
+        gc.collect()
 
-    def _submit(self, function: Callable, index: int, arguments: tuple) -> distributed.Future:
-        return self.client.submit(
-            function, self.source, self.plan, index, *arguments,
-            workers=[self.assignment[index]], allow_other_workers=False, pure=False,
-        )  # fmt: skip
+    def _actor(self, index: int) -> PlacedBrick:
+        """Brick ``index`` placed, its actor made (waiting for it), moved if its worker is lost."""
+        while True:
+            with self._lock:
+                placed = self.placed[index]
+            if placed.actor is not None:
+                return placed
+            try:
+                actor = placed.future.result(timeout=POLL_S)
+            except (TimeoutError, distributed.TimeoutError):
+                self._move_if_lost(placed)
+                continue
+            except distributed.client.FutureCancelledError:
+                self._move_if_lost(placed, lost=True)
+                continue
+            except distributed.scheduler.KilledWorker as error:
+                raise ClusterError(
+                    f"making brick {index} killed the workers that tried ({error}); is their "
+                    "memory too small for it?"
+                ) from None
+            with self._lock:
+                if self.placed[index] is placed:
+                    placed.actor = actor
 
-    def _run(self, function: Callable, jobs: list[tuple[int, tuple]]) -> list:
-        """``function`` on each job's brick, with its arguments, on the brick's worker; the
-        results in the jobs' order. A job whose worker is lost is run again where its brick
-        moves."""
+    def _run(self, jobs: list[tuple[int, str, tuple]]) -> list:
+        """Call method ``name`` with ``arguments`` of each job's brick ``(index, name,
+        arguments)``, all at once; the results in the jobs' order. A call whose brick's worker
+        is lost is made again where the brick moves."""
+        calls = {}
+        for job, (index, name, arguments) in enumerate(jobs):
+            placed = self._actor(index)
+            calls[job] = (placed, getattr(placed.actor, name)(*arguments))
         results: list = [None] * len(jobs)
-        # each future's job and the worker it was sent to
-        pending = {}
-        for job, (index, arguments) in enumerate(jobs):
-            worker = self.assignment[index]
-            pending[self._submit(function, index, arguments)] = (job, worker)
-        try:
-            while pending:
+        for job, (index, name, arguments) in enumerate(jobs):
+            placed, call = calls[job]
+            while True:
                 try:
-                    done, _ = distributed.wait(
-                        list(pending), timeout=POLL_S, return_when="FIRST_COMPLETED"
-                    )
-                except distributed.TimeoutError:
-                    done = set()
-                finished = [future for future in done if future.status == "finished"]
-                for future, value in zip(finished, _gather(self.client, finished), strict=True):
-                    results[pending.pop(future)[0]] = value
-                for future in done:
-                    if future.status == "error":
-                        _raise_task_error(future)
-                if len(finished) < len(done) or not done:  # cancelled, or nothing yet
-                    self._resubmit_lost(pending, function, jobs)
-        finally:
-            if pending:
-                self.client.cancel(list(pending), force=True)
+                    results[job] = call.result(timeout=POLL_S)
+                    break
+                except (TimeoutError, distributed.TimeoutError):
+                    if not self._move_if_lost(placed):
+                        continue
+                except OSError:  # "Unable to contact Actor's worker"
+                    self._move_if_lost(placed, lost=True)
+                placed = self._actor(index)
+                call = getattr(placed.actor, name)(*arguments)
         return results
 
-    def _resubmit_lost(self, pending: dict, function: Callable, jobs: list) -> None:
-        """Submit again the pending jobs sent to a worker that is gone (or whose task was
-        cancelled), their brick moved to a live worker."""
+    def _move_if_lost(self, placed: PlacedBrick, lost: bool = False) -> bool:
+        """Whether brick ``placed`` has moved (now or by another thread): when its worker is
+        gone (or ``lost``), it is made again on the live worker holding the fewest bricks."""
         live = self._live_workers()
-        for future, (job, worker) in list(pending.items()):
-            if worker in live and future.status != "cancelled":
-                continue
-            index, arguments = jobs[job]
-            self._move(index, live)
-            del pending[future]
-            future.cancel()
-            with self._lock:
-                worker = self.assignment[index]
-            pending[self._submit(function, index, arguments)] = (job, worker)
-
-    def _move(self, index: int, live: dict[str, int]) -> None:
         with self._lock:
-            if self.assignment[index] in live:  # another thread moved it already
-                return
-            held = {worker: 0 for worker in live}
-            for worker in self.assignment.values():
-                if worker in held:
-                    held[worker] += 1
-            self.assignment[index] = min(sorted(held), key=held.__getitem__)
+            if self.placed[placed.index] is not placed:
+                return True
+            if placed.worker in live and not lost:
+                return False
+            held = dict.fromkeys(live, 0)
+            for other in self.placed.values():
+                if other.worker in held:
+                    held[other.worker] += 1
+            worker = min(sorted(held), key=held.__getitem__)
+            self.placed[placed.index] = self._place(placed.index, worker)
             self.moves += 1
+        placed.future.release()
+        return True
 
     def _live_workers(self) -> dict[str, int]:
         return live_workers(self.client, self.no_workers_timeout_s)
@@ -316,25 +329,6 @@ def live_workers(client: distributed.Client, timeout_s: float) -> dict[str, int]
             )
         time.sleep(POLL_S)
     return workers
-
-
-def _gather(client: distributed.Client, futures: list) -> list:
-    if not futures:
-        return []
-    try:
-        return client.gather(futures)
-    except distributed.client.FutureCancelledError:
-        raise ClusterError("a brick's task was cancelled on the cluster") from None
-
-
-def _raise_task_error(future: distributed.Future) -> None:
-    error = future.exception()
-    if isinstance(error, distributed.scheduler.KilledWorker):
-        raise ClusterError(
-            f"a brick's tasks killed the workers that ran them ({error}); is their memory too "
-            "small for the brick?"
-        ) from None
-    raise error
 
 
 def assign_bricks(bricks: int, workers: Sequence[str]) -> dict[int, str]:
@@ -370,21 +364,17 @@ class PartitionedRenderer:
         started = time.perf_counter()
         self.scene, plan, kind = _plan(scene, partition, spheres)
         self.plan = plan
-        self.registered = False
         self.integrator: Integrator | None = None
+        self.bricks: DaskBricks | None = None
         workers = live_workers(client, no_workers_timeout_s)
         assignment = assign_bricks(partition, list(workers))
         info = client.scheduler_info(n_workers=-1)["workers"]
         limits = {address: int(info.get(address, {}).get("memory_limit") or 0)
                   for address in workers}  # fmt: skip
         require_bricks_fit(plan, kind, assignment, limits)
-        name = plugin_name(plan.key)
-        self.registered = not client.run_on_scheduler(_has_worker_plugin, name=name)
-        if self.registered:
-            client.register_plugin(BrickHolderPlugin(plan.key), name=name)
         source = client.scatter(scene, broadcast=True, hash=False) if kind == "held" else scene
-        self.bricks = DaskBricks(client, source, plan, assignment, no_workers_timeout_s)
         try:
+            self.bricks = DaskBricks(client, source, plan, assignment, no_workers_timeout_s)
             bounds = self.bricks.build()
             self.brick_set = BrickSet(self.scene, bounds, self.bricks)
             self.integrator = Integrator(
@@ -396,17 +386,17 @@ class PartitionedRenderer:
         self.stats.build_s = time.perf_counter() - started
 
     def release(self) -> None:
-        """Free the workers' bricks of this scene (if this renderer made them)."""
+        """Free the workers' bricks."""
         if self.integrator is not None:
-            self.integrator.close()
+            self.integrator.close()  # and its tracer, the brick set, and so the bricks
             self.integrator = None
-        if self.registered:
-            self.client.unregister_worker_plugin(plugin_name(self.plan.key))
-            self.registered = False
+        elif self.bricks is not None:
+            self.bricks.close()
+        self.bricks = None
 
-    def builds(self) -> dict[str, int]:
-        """Bricks built per worker address."""
-        return self.client.run(_plugin_builds, name=plugin_name(self.plan.key))
+    def bricks_held(self) -> dict[str, int]:
+        """Bricks (of any scene) held by each worker."""
+        return self.client.run(bricks_held)
 
     def render(
         self,
@@ -469,22 +459,13 @@ def _plan(source: Scene | SceneSource, bricks: int, spheres: str) -> tuple[Scene
         partition = split_points(centers, bricks)
         counts = np.bincount(partition.brick_of(centers), minlength=bricks)
         total = len(scene.sphere_radii)
-    mode = brick_sphere_mode(total, spheres)
-    digest = hashlib.sha256(scene_key(source, mode).encode())
-    for array in (partition.axis, partition.value, partition.left, partition.right):
-        digest.update(array.tobytes())
-    key = digest.hexdigest()[:16]
-    plan = BrickPlan(key, partition, mode, tuple(int(c) for c in counts))
+    plan = BrickPlan(partition, brick_sphere_mode(total, spheres), tuple(int(c) for c in counts))
     return scene, plan, kind
 
 
-def _has_worker_plugin(dask_scheduler, name: str) -> bool:
-    return name in dask_scheduler.worker_plugins
-
-
-def _plugin_builds(dask_worker, name: str) -> int:
-    plugin = dask_worker.plugins.get(name)
-    return 0 if plugin is None else plugin.builds
+def bricks_held(dask_worker) -> int:
+    """The ``BrickActor``s a worker holds (run on it by ``client.run``)."""
+    return sum(isinstance(actor, BrickActor) for actor in dask_worker.state.actors.values())
 
 
 def render(
