@@ -32,7 +32,7 @@ from embree_rt.bricks.ray_boxes import boxes_reached
 from embree_rt.camera import camera_frame
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.integrator import Integrator
-from embree_rt.scene.random_field import plan_field
+from embree_rt.scene.random_field import add_field_spheres_where, field_scene, plan_field
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 SIZE = {"width": 160, "height": 90, "spp": 2}
@@ -101,6 +101,21 @@ def test_a_fields_bricks_generated_from_its_recipe_are_the_fields_spheres() -> N
         assert abs(estimate[index] - len(made.object_ids)) <= 0.02 * len(made.object_ids)
         seen.append(made.object_ids)
     assert np.array_equal(np.sort(np.concatenate(seen)), np.arange(30_000))
+    # A brick away from the centre of a field of 8 rings skips the rings that cannot reach it.
+    plan = plan_field(2_000_000, seed=5)
+    partition = field_partition(plan, 8)
+    index = int(partition.brick_of(np.array([[plan.extent * 0.9, 0.0, 0.0]]))[0])
+    low, high = partition.region(index)
+    calls = []
+
+    def keep(centers):
+        calls.append(len(centers))
+        return partition.brick_of(centers) == index
+
+    part = rt.Scene(materials=field_scene(plan).materials)
+    ids = add_field_spheres_where(part, plan, keep, within=((low[0], low[2]), (high[0], high[2])))
+    assert np.array_equal(ids, field_brick(plan, partition, index).object_ids)
+    assert sum(calls[1:]) < 0.9 * plan.small  # heroes first, then the rings generated
     # Planes on cell boundaries: no small sphere reaches across one.
     for axis, value in zip(partition.axis, partition.value, strict=True):
         centers, radii = scene.sphere_centers[3:, axis], scene.sphere_radii[3:]

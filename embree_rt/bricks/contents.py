@@ -81,9 +81,14 @@ def scene_brick(scene: Scene, partition: Partition, index: int) -> BrickContents
 
 def field_brick(plan, partition: Partition, index: int) -> BrickContents:
     """Brick ``index`` of a random field (a ``FieldPlan``), generated from its recipe: only this
-    brick's spheres are ever held (``add_field_spheres_where``)."""
+    brick's spheres are ever held (``add_field_spheres_where``), and only the rings of the field
+    that reach the brick's region are generated."""
     from embree_rt.scene.random_field import add_field_spheres_where, field_scene
 
     part = without_objects(field_scene(plan))
-    ids = add_field_spheres_where(part, plan, lambda centers: partition.brick_of(centers) == index)
+    low, high = partition.region(index)
+    ids = add_field_spheres_where(
+        part, plan, lambda centers: partition.brick_of(centers) == index,
+        within=((low[0], low[2]), (high[0], high[2])),
+    )  # fmt: skip
     return BrickContents(index, part, ids)

@@ -55,6 +55,30 @@ class Partition:
             np.ascontiguousarray(centers), self.axis, self.value, self.left, self.right
         )
 
+    def region(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """(3,) float64 low and high corners of brick ``index``'s region of space (-inf, inf
+        where the tree leaves it open): every centre in the brick lies in it."""
+        low, high = np.full(3, -np.inf), np.full(3, np.inf)
+        target = -1 - index
+        path = _path_to(self, 0, target) if self.bricks > 1 else []
+        for node, went_left in path:
+            axis, value = self.axis[node], self.value[node]
+            if went_left:
+                high[axis] = min(high[axis], value)
+            else:
+                low[axis] = max(low[axis], value)
+        return low, high
+
+
+def _path_to(partition: Partition, node: int, target: int) -> list[tuple[int, bool]]:
+    """The (node, went left) steps from ``node`` down to leaf ``target`` (empty: not below)."""
+    for went_left, child in ((True, partition.left[node]), (False, partition.right[node])):
+        if child == target:
+            return [(node, went_left)]
+        if child >= 0 and (path := _path_to(partition, int(child), target)):
+            return [(node, went_left), *path]
+    return []
+
 
 @njit(nogil=True, cache=True)
 def _brick_of(centers, axis, value, left, right):

@@ -221,12 +221,15 @@ def add_field_spheres_where(
     plan: FieldPlan,
     keep: Callable[[np.ndarray], np.ndarray],
     *,
+    within: tuple[tuple[float, float], tuple[float, float]] | None = None,
     threads: int | None = None,
 ) -> np.ndarray:
     """Generate the field's spheres as ``add_field_spheres`` does, but add to ``scene`` only
     those whose (k, 3) float32 centres ``keep`` accepts ((k,) bool), in the field's order:
     bit for bit the spheres of the whole field, with no more memory than the kept ones and a
-    ring per thread. Returns (m,) int64 their rows in the whole field (their object ids)."""
+    ring per thread. ``within``: ((x0, z0), (x1, z1)), a box (bounds may be infinite) holding
+    every centre ``keep`` accepts: the rings that cannot reach it are not generated. Returns
+    (m,) int64 the kept spheres' rows in the whole field (their object ids)."""
     heroes = (np.empty((plan.heroes, 3), np.float32), np.empty(plan.heroes, np.float32),
               np.empty(plan.heroes, np.int32))  # fmt: skip
     _hero_spheres(scene, plan, *heroes)
@@ -234,6 +237,8 @@ def add_field_spheres_where(
     pieces = [(np.flatnonzero(kept).astype(np.int64), *(part[kept] for part in heroes))]
     if plan.small:
         rings, make = _ring_maker(scene, plan)
+        if within is not None:
+            rings = [ring for ring in rings if _ring_reaches(ring, within, plan.spacing)]
 
         def fill(ring: _Ring) -> tuple[np.ndarray, ...]:
             centers = np.empty((ring.count, 3), np.float32)
@@ -250,6 +255,20 @@ def add_field_spheres_where(
     del pieces
     scene.add_spheres(centers, radii, materials, copy=False)
     return ids
+
+
+def _ring_reaches(
+    ring: _Ring, box: tuple[tuple[float, float], tuple[float, float]], spacing: float
+) -> bool:
+    """Whether a sphere of ``ring`` can have its centre in the (x, z) ``box``: some cell centre
+    of the ring (a sphere strays less than half a cell from it) within a cell of the box."""
+    (x0, z0), (x1, z1) = box
+    x0, z0, x1, z1 = x0 - spacing, z0 - spacing, x1 + spacing, z1 + spacing
+    near_x = max(x0, 0.0, -x1)
+    near_z = max(z0, 0.0, -z1)
+    far_x = max(abs(x0), abs(x1))
+    far_z = max(abs(z0), abs(z1))
+    return near_x * near_x + near_z * near_z < ring.high and far_x**2 + far_z**2 >= ring.low
 
 
 def _hero_spheres(scene: Scene, plan: FieldPlan, centers, radii, materials) -> None:
