@@ -17,6 +17,9 @@ their own looks:
 
 from __future__ import annotations
 
+import io
+import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -165,6 +168,111 @@ def node_scaled() -> trimesh.Scene:
     box = trimesh.creation.box(extents=(100.0, 100.0, 100.0))
     scene.add_geometry(box, node_name="scaled", transform=np.diag([0.01, 0.01, 0.01, 1.0]))
     return scene
+
+
+class GltfWriter:
+    """A small glTF 2.0 writer, for files whose every field is spelled out (trimesh's exporter
+    writes no samplers, extensions or second UV set): meshes of triangles with any attributes,
+    materials given as the JSON they are, PNG images; ``glb()`` is the binary file."""
+
+    def __init__(self) -> None:
+        self.json: dict = {"asset": {"version": "2.0", "generator": "embree_rt make_assets"},
+                           "scene": 0, "scenes": [{"nodes": []}], "nodes": [], "meshes": [],
+                           "materials": [], "textures": [], "images": [], "samplers": [],
+                           "accessors": [], "bufferViews": [], "buffers": []}  # fmt: skip
+        self.blob = bytearray()
+
+    def _view(self, data: bytes) -> int:
+        while len(self.blob) % 4:
+            self.blob.append(0)
+        self.json["bufferViews"].append(
+            {"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(data)}
+        )
+        self.blob += data
+        return len(self.json["bufferViews"]) - 1
+
+    def accessor(self, values: np.ndarray) -> int:
+        """An accessor of (n, k) float32 values (k = 1..4) or (n,) uint32 indices."""
+        values = np.asarray(values)
+        if values.dtype.kind in "iu":
+            values = np.ascontiguousarray(values.reshape(-1), np.uint32)
+            entry = {"componentType": 5125, "type": "SCALAR"}
+        else:
+            values = np.ascontiguousarray(values, np.float32).reshape(len(values), -1)
+            entry = {"componentType": 5126, "type": ("SCALAR", "VEC2", "VEC3", "VEC4")[
+                values.shape[1] - 1]}  # fmt: skip
+            entry["min"] = values.min(axis=0).tolist()
+            entry["max"] = values.max(axis=0).tolist()
+        entry.update(bufferView=self._view(values.tobytes()), count=len(values))
+        self.json["accessors"].append(entry)
+        return len(self.json["accessors"]) - 1
+
+    def texture(self, image: Image.Image, sampler: dict | None = None) -> int:
+        """A texture of ``image`` (stored as PNG) read through ``sampler`` (glTF's JSON)."""
+        stream = io.BytesIO()
+        image.save(stream, format="PNG")
+        self.json["images"].append({"bufferView": self._view(stream.getvalue()),
+                                    "mimeType": "image/png"})  # fmt: skip
+        texture = {"source": len(self.json["images"]) - 1}
+        if sampler is not None:
+            self.json["samplers"].append(sampler)
+            texture["sampler"] = len(self.json["samplers"]) - 1
+        self.json["textures"].append(texture)
+        return len(self.json["textures"]) - 1
+
+    def material(self, material: dict) -> int:
+        self.json["materials"].append(material)
+        return len(self.json["materials"]) - 1
+
+    def mesh(self, vertices: np.ndarray, faces: np.ndarray, material: int | None = None,
+             translation=(0.0, 0.0, 0.0), **attributes: np.ndarray) -> int:  # fmt: skip
+        """A mesh of one triangle primitive placed by a node at ``translation``; ``attributes``
+        by glTF name (NORMAL, TEXCOORD_0, TEXCOORD_1, TANGENT, COLOR_0), (n, k) float32."""
+        primitive = {
+            "attributes": {"POSITION": self.accessor(vertices),
+                           **{name: self.accessor(a) for name, a in attributes.items()}},
+            "indices": self.accessor(np.asarray(faces, np.uint32)),
+        }  # fmt: skip
+        if material is not None:
+            primitive["material"] = material
+        self.json["meshes"].append({"primitives": [primitive]})
+        self.json["nodes"].append({"mesh": len(self.json["meshes"]) - 1,
+                                   "translation": [float(t) for t in translation]})  # fmt: skip
+        self.json["scenes"][0]["nodes"].append(len(self.json["nodes"]) - 1)
+        return len(self.json["meshes"]) - 1
+
+    def glb(self) -> bytes:
+        document = {key: value for key, value in self.json.items() if value != []}
+        used = sorted({name for m in self.json["materials"] for name in m.get("extensions", {})}
+                      | {name for m in self.json["materials"] for info in _texture_infos(m)
+                         for name in info.get("extensions", {})})  # fmt: skip
+        if used:
+            document["extensionsUsed"] = used
+        while len(self.blob) % 4:
+            self.blob.append(0)
+        document["buffers"] = [{"byteLength": len(self.blob)}]
+        text = json.dumps(document, separators=(",", ":")).encode()
+        text += b" " * (-len(text) % 4)
+        body = (struct.pack("<I4s", len(text), b"JSON") + text
+                + struct.pack("<I4s", len(self.blob), b"BIN\x00") + bytes(self.blob))  # fmt: skip
+        return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+def _texture_infos(material: dict) -> list[dict]:
+    """Every textureInfo a glTF material holds (its own, its pbr block's, its extensions')."""
+    blocks = [material, material.get("pbrMetallicRoughness", {}),
+              *material.get("extensions", {}).values()]  # fmt: skip
+    return [value for block in blocks for key, value in block.items()
+            if key.endswith("Texture") and isinstance(value, dict)]  # fmt: skip
+
+
+def quad(size: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A square in the xy-plane centred at the origin facing +z: (4, 3) vertices, (2, 3) faces
+    (counter-clockwise seen from +z) and (4, 2) glTF UVs (v down: (0, 0) at the top left)."""
+    h = size / 2
+    vertices = np.array([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]], np.float32)
+    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+    return vertices, np.array([[0, 1, 2], [0, 2, 3]]), uv
 
 
 def main(directory: Path = HERE) -> None:

@@ -137,6 +137,21 @@ class Renderer:
         self.reflect_share = (table.reflectivity * (1.0 - table.transparency)).astype(np.float32)
         # Which materials are metals; None when none is (nothing to tint).
         self.metallic = table.metallic if table.metallic.any() else None
+        self.specular = table.specular
+        self.transparency = table.transparency
+        # Unlit materials show their colour alone: all of it as "ambient", nothing else, and
+        # no shadow rays (``lit``: None when every material is lit).
+        self.lit = None
+        if table.unlit.any():
+            self.lit = ~table.unlit
+            self.ambient_share = np.where(table.unlit, 1.0, self.ambient_share).astype(np.float32)
+            for name in ("diffuse_share", "reflect_share", "specular", "transparency"):
+                setattr(self, name, np.where(table.unlit, 0.0, getattr(self, name)).astype(
+                    np.float32))  # fmt: skip
+        # (3, m) glow and Beer–Lambert absorption per unit length; None when no material has any.
+        self.emission = np.ascontiguousarray(table.emission.T) if table.emission.any() else None
+        absorbs = (table.absorption > 0).any()
+        self.absorption = np.ascontiguousarray(table.absorption.T) if absorbs else None
         lights = scene.lights
         self.light_positions = np.array([lt.position for lt in lights], np.float32).reshape(-1, 3)
         self.light_rgb = np.array(
@@ -271,12 +286,16 @@ class Renderer:
         into ``work``; returns their reflection and refraction children."""
         d = rays.directions
         normal, face_normal, entering = self.facing_the_ray(d, surfaces)
+        material = surfaces.material
+        if self.absorption is not None:
+            self._absorb_inside(rays.weight, surfaces.t, material, entering)
         color = self.surface_color(surfaces)
         offset = surface_offset(surfaces.scale)
+        passing = self._see_through(rays, surfaces, face_normal, offset, work, spawn)
         outside = surfaces.position + face_normal * offset
-        material = surfaces.material
         radiance = np.take(self.ambient_share, material) * color
         self._add_direct_light(radiance, outside, normal, -d, color, material, work)
+        self._add_emission(radiance, surfaces)
         work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
             return NO_RAYS
@@ -288,10 +307,57 @@ class Renderer:
             rays, outside, normal, color, reflect_share, material, work
         )
         children.insert(0, reflected)
+        children.append(passing)
         children = [batch for batch in children if len(batch)]
         return RayBatch.concatenate(children) if children else NO_RAYS
 
     # -- the stages of shading --------------------------------------------------------------
+
+    def _absorb_inside(self, weight, t, material, entering) -> None:
+        """Beer–Lambert: a ray that reaches a glass surface from inside (not ``entering``) has
+        crossed ``t`` (k,) of that glass; its ``weight`` (3, k) is multiplied in place by
+        ``exp(-absorption · t)`` of the material's (3, m) absorption per unit length."""
+        absorption = np.take(self.absorption, material, axis=1)
+        inside = np.flatnonzero(~entering & (column_max(absorption) > 0))
+        if len(inside) == 0:
+            return
+        with np.errstate(invalid="ignore"):  # inf absorption over t = 0 absorbs nothing
+            optical_depth = np.take(absorption, inside, axis=1) * t[inside]
+        optical_depth = np.nan_to_num(optical_depth, nan=0.0)
+        weight[:, inside] *= np.exp(-optical_depth)
+
+    def _add_emission(self, radiance, surfaces: SurfaceHits) -> None:
+        """Add to ``radiance`` (3, k) the light the surfaces give off themselves: their
+        material's ``emission``, or per hit a mesh's emissive texture's."""
+        if self.emission is None:
+            return
+        emission = np.take(self.emission, surfaces.material, axis=1)
+        looks = surfaces.looks
+        if looks is not None and looks.emission is not None:
+            scatter(emission, looks.rows, looks.emission)
+        radiance += emission
+
+    def _see_through(self, rays, surfaces, face_normal, offset, work, spawn) -> RayBatch:
+        """See-through (glTF BLEND) hits of coverage a: the surface keeps ``a`` of each ray's
+        weight (scaled in place, so all it shows and spawns is weighed by it), and ``1 − a``
+        goes straight on past it, as a ray started just beyond the surface: returned (no rays
+        when none pass, or ``spawn`` is False)."""
+        looks = surfaces.looks
+        if looks is None or looks.coverage is None:
+            return NO_RAYS
+        rows = looks.rows
+        weight = np.take(rays.weight, rows, axis=1)
+        rays.weight[:, rows] = weight * looks.coverage
+        if not spawn:
+            return NO_RAYS
+        weight *= np.float32(1.0) - looks.coverage
+        keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
+        through = rows[keep]
+        beyond = np.take(surfaces.position, through, axis=1)
+        beyond -= np.take(face_normal, through, axis=1) * offset[through]
+        work.rays["refraction"] += len(keep)
+        return RayBatch(beyond, np.take(rays.directions, through, axis=1), rays.pixel[through],
+                        np.take(weight, keep, axis=1))  # fmt: skip
 
     @staticmethod
     def facing_the_ray(d: np.ndarray, surfaces: SurfaceHits):
@@ -321,7 +387,7 @@ class Renderer:
         returns the refracted rays, started just inside the surface, tinted by the glass."""
         table = self.materials
         material = surfaces.material
-        transparency = np.take(table.transparency, material)
+        transparency = np.take(self.transparency, material)
         glass = np.flatnonzero(transparency > 0)
         if len(glass) == 0:
             return []
@@ -392,11 +458,14 @@ class Renderer:
         # Shadow rays only where the light is in front of the surface: the segment from the
         # point to the light, which the Embree layer builds from the points' columns.
         diffuse = np.take(self.diffuse_share, material)
-        specular = np.take(self.materials.specular, material)
+        specular = np.take(self.specular, material)
+        # Unlit surfaces take no light: no shadow rays for them.
+        takes_light = None if self.lit is None else np.take(self.lit, material)
         shininess = np.take(self.materials.shininess, material)
         for light, position in enumerate(self.light_positions):
             to_light = position[:, None] - points
-            facing = np.flatnonzero(shading.dot(to_light, normal) > 0)
+            facing = shading.dot(to_light, normal) > 0
+            facing = np.flatnonzero(facing if takes_light is None else facing & takes_light)
             visible = ~self.geometry.occluded_toward(points, facing, position)
             work.rays["shadow"] += len(facing)
             lit = facing[visible]

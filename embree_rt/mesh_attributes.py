@@ -8,15 +8,20 @@ Everything here works on whole batches of hits, in the mesh's own space.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from embree_rt.columns import scatter
+from embree_rt.scene.gltf_materials import LOOKS_KEY
 from embree_rt.scene.model import MeshObject
-from embree_rt.textures import sample_bilinear
+from embree_rt.textures import DEFAULT_SAMPLER, sample_texture
 
 if TYPE_CHECKING:  # mesh import loads trimesh (~1 s): only scenes with meshes pay for it
+    import trimesh
+
+    from embree_rt.embree.alpha_filter import TriangleFilter
     from embree_rt.scene.meshes import MeshSurface
 
 # A vertex normal shorter than this has no direction to give: trimesh's average of the faces
@@ -77,10 +82,23 @@ def blend_normals(
     return blend
 
 
-def surface_colors(
+@dataclass
+class HitLooks:
+    """What k hits on meshes with per-point looks show, beyond one material per mesh: ``rows``
+    (k,) int64 the hits' columns in their ``SurfaceHits``; ``color`` (3, k) float32 linear base
+    colour; ``emission`` (3, k) float32 (None: the material's own); ``coverage`` (k,) float32
+    alpha of see-through (BLEND) surfaces (None: opaque)."""
+
+    rows: np.ndarray
+    color: np.ndarray
+    emission: np.ndarray | None = None
+    coverage: np.ndarray | None = None
+
+
+def surface_looks(
     surface: MeshSurface, faces: np.ndarray, face: np.ndarray, u: np.ndarray, v: np.ndarray
-) -> np.ndarray:
-    """(3, k) float32 linear base colours of k hits on a mesh with per-point colours.
+) -> HitLooks:
+    """The looks of k hits on a mesh with per-point looks (``rows`` left empty).
 
     ``faces`` (f, 3) int64 the mesh's triangles; ``face`` (k,) the triangle each hit is on and
     ``u``, ``v`` (k,) float32 its Embree barycentrics.
@@ -95,15 +113,57 @@ def surface_colors(
         out += np.take(columns, corners[:, 2], axis=1) * v
         return out
 
+    looks = surface.looks
     color = np.empty((3, len(face)), np.float32)
     color[:] = surface.factor[:, None]
+    alpha = None
     if surface.texels is not None:
-        color *= sample_bilinear(surface.texels, blend(surface.uv))
+        sample = sample_texture(surface.texels, blend(surface.uv), surface.sampler)
+        color *= sample[:3]
+        alpha = sample[3]
     if surface.vertex_colors is not None:
         color *= blend(surface.vertex_colors)
     if surface.face_colors is not None:
         color *= np.take(surface.face_colors, face, axis=1)
-    return color
+    result = HitLooks(np.zeros(0, np.int64), color)
+    if looks is None:
+        return result
+    if looks.alpha_mode == "BLEND":
+        coverage = np.full(len(face), looks.base_color_factor[3], np.float32)
+        if alpha is not None:
+            coverage *= alpha
+        if looks.vertex_alpha is not None:
+            coverage *= blend(looks.vertex_alpha[None, :])[0]
+        result.coverage = np.clip(coverage, np.float32(0.0), np.float32(1.0))
+    if looks.emissive is not None:
+        slot = looks.emissive
+        result.emission = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[:3]
+        result.emission *= looks.emissive_factor[:, None]
+    return result
+
+
+def mesh_hit_filter(mesh: trimesh.Trimesh) -> TriangleFilter | None:
+    """The Embree hit filter a mesh's glTF material asks for (``alpha_filter``): cutouts where
+    its alpha is low (MASK, BLEND) and, unless it is double-sided, no back. None for every
+    other mesh, glass included (a refracted ray must leave through the back of the surface)."""
+    looks = mesh.metadata.get(LOOKS_KEY)
+    if looks is None:
+        return None
+    from embree_rt.embree.alpha_filter import triangle_filter
+
+    base = looks.base_color
+    return triangle_filter(
+        np.asarray(mesh.faces),
+        one_sided=not looks.double_sided and not looks.material.is_glass,
+        alpha_mode=looks.alpha_mode,
+        cutoff=looks.alpha_cutoff,
+        alpha=float(looks.base_color_factor[3]),
+        uv=None if base is None else base.uv,
+        texels=None if base is None else base.texels,
+        wrap=(DEFAULT_SAMPLER if base is None else base.sampler).wrap_s_t,
+        nearest=base is not None and base.sampler.nearest,
+        vertex_alpha=looks.vertex_alpha,
+    )
 
 
 class MeshColors:
@@ -141,28 +201,53 @@ class MeshColors:
     def __bool__(self) -> bool:
         return len(self._instance_surface) > 0
 
-    def hit_colors(
+    def hit_looks(
         self, inst: np.ndarray, prim: np.ndarray, u: np.ndarray, v: np.ndarray, first_row: int
-    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    ) -> HitLooks | None:
         """For k instance hits (``inst`` (k,) instance geometry ids, ``prim`` (k,) triangles,
-        ``u``, ``v`` (k,) float32 barycentrics): the (j,) int64 rows ``first_row + i`` of the
-        hits that have their own colour, and their (3, j) float32 linear colours; (None, None)
-        when no hit has."""
+        ``u``, ``v`` (k,) float32 barycentrics): the looks of the hits that have their own,
+        their ``rows`` being ``first_row + i``; None when no hit has."""
         table = self._instance_surface
         known = inst < len(table)
         which = np.where(known, np.take(table, np.minimum(inst, len(table) - 1)), -1)
         painted = np.flatnonzero(which >= 0)
         if len(painted) == 0:
-            return None, None
-        colors = np.empty((3, len(painted)), np.float32)
+            return None
         surface_of_hit = which[painted]
+        parts = []
         for index in np.unique(surface_of_hit):
             surface, faces = self._surfaces[index]
             mine = np.flatnonzero(surface_of_hit == index) if len(self._surfaces) > 1 else None
             rows = painted if mine is None else painted[mine]
-            part = surface_colors(surface, faces, prim[rows], u[rows], v[rows])
-            if mine is None:
-                colors = part
-            else:
-                scatter(colors, mine, part)
-        return painted + first_row, colors
+            part = surface_looks(surface, faces, prim[rows], u[rows], v[rows])
+            part.rows = np.arange(len(painted)) if mine is None else mine
+            parts.append((part, surface))
+        if len(parts) > 1 and any(part.emission is not None for part, _ in parts):
+            for part, surface in parts:  # the others glow as their material says
+                if part.emission is None:
+                    own = (0.0,) * 3 if surface.looks is None else surface.looks.material.emission
+                    part.emission = np.empty((3, len(part.rows)), np.float32)
+                    part.emission[:] = np.asarray(own, np.float32)[:, None]
+        parts = [part for part, _ in parts]
+        looks = parts[0] if len(parts) == 1 else _gather_looks(parts, len(painted))
+        looks.rows = painted + first_row
+        return looks
+
+
+def _gather_looks(parts: list[HitLooks], count: int) -> HitLooks:
+    """One ``HitLooks`` of ``count`` hits from parts whose ``rows`` say where each goes; a
+    coverage some part lacks is 1 there (opaque); emission is given by all parts or none."""
+    color = np.empty((3, count), np.float32)
+    for part in parts:
+        scatter(color, part.rows, part.color)
+    looks = HitLooks(np.zeros(0, np.int64), color)
+    if parts[0].emission is not None:
+        looks.emission = np.empty((3, count), np.float32)
+        for part in parts:
+            scatter(looks.emission, part.rows, part.emission)
+    if any(part.coverage is not None for part in parts):
+        looks.coverage = np.ones(count, np.float32)
+        for part in parts:
+            if part.coverage is not None:
+                looks.coverage[part.rows] = part.coverage
+    return looks

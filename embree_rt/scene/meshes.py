@@ -12,7 +12,8 @@ import trimesh
 
 from embree_rt.materials import RGB, Material
 from embree_rt.scene.errors import SceneError
-from embree_rt.textures import texels_from_image
+from embree_rt.scene.gltf_materials import LOOKS_KEY, GltfLooks
+from embree_rt.textures import DEFAULT_SAMPLER, Sampler, texels_from_image
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
@@ -49,6 +50,8 @@ def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Tr
         loaded = trimesh.load(str(path), process=False)
     except Exception as error:  # trimesh raises many kinds for a file it cannot parse
         raise SceneError(file, key, f"{path}: cannot read mesh: {error}") from None
+    if path.suffix.lower() in (".glb", ".gltf"):
+        read_gltf_looks(path, loaded)
     parts = mesh_parts(loaded) if isinstance(loaded, trimesh.Trimesh | trimesh.Scene) else []
     if not parts:
         raise SceneError(file, key, f"{path}: the mesh has no triangles")
@@ -63,6 +66,20 @@ def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Tr
                 file, key, f"{path}: a face indexes a vertex outside [0, {len(mesh.vertices)})"
             )
     return parts
+
+
+def read_gltf_looks(path: Path, loaded: trimesh.Trimesh | trimesh.Scene) -> None:
+    """Attach to each of ``loaded``'s meshes what the glTF file ``path`` says of its material
+    beyond what trimesh keeps (``gltf_materials.attach_gltf_looks``); a file whose materials
+    cannot be read that way keeps trimesh's reading, with a one-line warning."""
+    from embree_rt.scene import gltf_materials
+
+    meshes = list(loaded.geometry.values()) if isinstance(loaded, trimesh.Scene) else [loaded]
+    try:
+        gltf_materials.attach_gltf_looks(path, meshes)
+    except (OSError, ValueError, KeyError, IndexError, TypeError) as error:
+        gltf_materials.warn(f"{path}: glTF materials read as trimesh reads them only "
+                            f"({type(error).__name__}: {error})")  # fmt: skip
 
 
 # -- what a mesh looks like ----------------------------------------------------------------------
@@ -93,6 +110,8 @@ class MeshSurface:
     uv: np.ndarray | None = None
     vertex_colors: np.ndarray | None = None
     face_colors: np.ndarray | None = None
+    sampler: Sampler = DEFAULT_SAMPLER
+    looks: GltfLooks | None = None
 
 
 def _rgb(rgba: object) -> np.ndarray:
@@ -176,6 +195,8 @@ def mesh_material(mesh: trimesh.Trimesh) -> Material | None:
     with ``Ns 0``). Colours are linear: glTF defines its factors and vertex colours so, and
     8-bit vertex colours of other formats are read the same way.
     """
+    if (looks := mesh.metadata.get(LOOKS_KEY)) is not None:
+        return looks.material
     visual = mesh.visual
     if isinstance(visual, trimesh.visual.TextureVisuals) and visual.material is not None:
         material = visual.material
@@ -229,7 +250,16 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
         factor, vertex_colors = factor * vertex_colors[0], None
     if face_colors is not None and np.ptp(face_colors, axis=0).max() == 0:
         factor, face_colors = factor * face_colors[0], None
-    if texels is None and vertex_colors is None and face_colors is None:
+    sampler = DEFAULT_SAMPLER
+    looks = mesh.metadata.get(LOOKS_KEY)
+    if looks is not None:  # the glTF file's own reading of its base colour
+        factor = looks.base_color_factor[:3].astype(np.float64)
+        texels = uv = None
+        if (base := looks.base_color) is not None:
+            texels, uv, sampler = base.texels, base.uv, base.sampler
+        if not looks.per_point:
+            looks = None
+    if texels is None and vertex_colors is None and face_colors is None and looks is None:
         return None
     return MeshSurface(
         factor=factor.astype(np.float32),
@@ -237,6 +267,8 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
         uv=uv,
         vertex_colors=_columns(vertex_colors),
         face_colors=_columns(face_colors),
+        sampler=sampler,
+        looks=looks,
     )
 
 

@@ -1,0 +1,390 @@
+"""glTF materials as the file states them: what trimesh keeps of a glTF material is its core
+metallic-roughness fields and a base-colour texture read through its first UV set, so the rest
+(emission strength, transmission, index of refraction, volume absorption, unlit, samplers' wrap
+modes and filters, KHR_texture_transform, texCoord 1, tangents, vertex alpha) is read here from
+the file's own JSON and buffers, and attached to each loaded primitive as ``GltfLooks``.
+
+Primitives are matched to trimesh's meshes by order: trimesh makes one mesh per primitive, in
+the order of the file's meshes and their primitives (points, lines, triangles and strips alike),
+and keeps the vertices in accessor order (``process=False``). A file where the counts do not
+agree keeps trimesh's reading, with a one-line warning.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import math
+import struct
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import unquote
+
+import numpy as np
+
+from embree_rt.materials import Material
+from embree_rt.textures import (
+    DEFAULT_SAMPLER,
+    NEAREST,
+    REPEAT,
+    WRAP_MODES,
+    Sampler,
+    texels_from_image,
+)
+
+# Extensions with no counterpart in a Blinn-Phong + Whitted model: named in one warning line.
+IGNORED_EXTENSIONS = (
+    "KHR_materials_clearcoat",
+    "KHR_materials_sheen",
+    "KHR_materials_specular",
+    "KHR_materials_iridescence",
+    "KHR_materials_anisotropy",
+    "KHR_materials_dispersion",
+    "KHR_materials_diffuse_transmission",
+)
+# glTF primitive modes trimesh turns into a mesh, point cloud or path (one entry each).
+LOADED_MODES = (0, 1, 4, 5)
+TRIANGLE_MODES = (4, 5)
+# componentType → NumPy dtype, and the divisor of normalised integers (glTF 2.0 §3.11).
+COMPONENT_TYPES = {
+    5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
+    5126: np.float32,
+}  # fmt: skip
+COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+DEFAULT_IOR = 1.5
+
+
+def warn(text: str) -> None:
+    """One warning line on stderr."""
+    print(f"embree-rt: warning: {text}", file=sys.stderr)
+
+
+@dataclass(frozen=True)
+class TextureSlot:
+    """One texture of a material as a primitive reads it: ``texels`` (h, w, 4) float32 (see
+    ``embree_rt.textures.texels_from_image``), ``uv`` (2, v) float32 per vertex in trimesh's
+    convention (v up) with the texture's KHR_texture_transform already applied (an affine map
+    commutes with the barycentric blend), and its ``sampler``."""
+
+    texels: np.ndarray
+    uv: np.ndarray
+    sampler: Sampler = DEFAULT_SAMPLER
+
+
+@dataclass(frozen=True)
+class GltfLooks:
+    """What a glTF primitive's material says beyond one Blinn-Phong ``material`` per mesh.
+
+    Per-point factors multiply their texture's sample: the base colour (RGB and alpha, alpha
+    also by the vertex colours' ``vertex_alpha`` (v,) float32), ``emissive`` (RGB, the factor
+    times KHR_materials_emissive_strength), ``transmission`` (R), ``metallic_roughness``
+    (B metallic, G roughness), ``occlusion`` (R, blended toward 1 by ``occlusion_strength``)
+    and the tangent-space ``normal`` map (scaled in x and y by ``normal_scale``), with
+    ``tangents`` (4, v) float32 from the file (xyz and the bitangent's sign) or None.
+    ``alpha_mode`` is "OPAQUE", "MASK" (cut out below ``alpha_cutoff``) or "BLEND";
+    ``double_sided`` False hides the back of the surface.
+    """
+
+    material: Material
+    base_color: TextureSlot | None = None
+    base_color_factor: np.ndarray = field(default_factory=lambda: np.ones(4, np.float32))
+    vertex_alpha: np.ndarray | None = None
+    alpha_mode: str = "OPAQUE"
+    alpha_cutoff: float = 0.5
+    double_sided: bool = False
+    emissive: TextureSlot | None = None
+    emissive_factor: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+    transmission: TextureSlot | None = None
+    transmission_factor: float = 0.0
+    metallic_roughness: TextureSlot | None = None
+    metallic_factor: float = 1.0
+    roughness_factor: float = 1.0
+    normal: TextureSlot | None = None
+    normal_scale: float = 1.0
+    occlusion: TextureSlot | None = None
+    occlusion_strength: float = 1.0
+    tangents: np.ndarray | None = None
+
+    @property
+    def per_point(self) -> bool:
+        """Whether shading needs anything from it per hit besides the base colour."""
+        return (self.alpha_mode == "BLEND" or self.emissive is not None
+                or self.transmission is not None or self.metallic_roughness is not None
+                or self.normal is not None or self.occlusion is not None)  # fmt: skip
+
+    @property
+    def has_alpha(self) -> bool:
+        """Whether any point can be less than opaque (a cutout or a see-through blend)."""
+        return self.alpha_mode in ("MASK", "BLEND")
+
+
+class GltfDocument:
+    """A glTF or GLB file's JSON and the bytes of its buffers, images decoded on demand."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        data = path.read_bytes()
+        binary = None
+        if data[:4] == b"glTF":
+            # GLB: 12-byte header, then chunks (length, type, bytes): JSON first, BIN next.
+            offset, chunks = 12, {}
+            while offset + 8 <= len(data):
+                length, kind = struct.unpack_from("<I4s", data, offset)
+                chunks.setdefault(kind, data[offset + 8 : offset + 8 + length])
+                offset += 8 + length
+            self.json = json.loads(chunks[b"JSON"].decode("utf-8"))
+            binary = chunks.get(b"BIN\x00")
+        else:
+            self.json = json.loads(data.decode("utf-8"))
+        self.buffers = [self._buffer(entry, binary) for entry in self.json.get("buffers", [])]
+        self._texels: dict[tuple[int, bool], np.ndarray] = {}
+
+    def _buffer(self, entry: dict, binary: bytes | None) -> bytes:
+        uri = entry.get("uri")
+        if uri is None:
+            return binary or b""
+        if uri.startswith("data:"):
+            return base64.b64decode(uri.split(",", 1)[1])
+        return (self.path.parent / unquote(uri)).read_bytes()
+
+    def view_bytes(self, index: int) -> memoryview:
+        view = self.json["bufferViews"][index]
+        start = view.get("byteOffset", 0)
+        return memoryview(self.buffers[view["buffer"]])[start : start + view["byteLength"]]
+
+    def accessor(self, index: int) -> np.ndarray:
+        """(count, components) values of accessor ``index``: float32 for floats and normalised
+        integers (divided as glTF says), the integer type otherwise; sparse entries applied."""
+        accessor = self.json["accessors"][index]
+        dtype = np.dtype(COMPONENT_TYPES[accessor["componentType"]])
+        width = COMPONENTS[accessor["type"]]
+        count = accessor["count"]
+        values = np.zeros((count, width), dtype)
+        if "bufferView" in accessor:
+            stride = self.json["bufferViews"][accessor["bufferView"]].get("byteStride")
+            stride = stride or dtype.itemsize * width
+            raw = self.view_bytes(accessor["bufferView"])
+            offset = accessor.get("byteOffset", 0)
+            values = np.ndarray((count, width), dtype, raw, offset, (stride, dtype.itemsize)).copy()
+        sparse = accessor.get("sparse")
+        if sparse:
+            indices, replaced = sparse["indices"], sparse["values"]
+            at = np.frombuffer(self.view_bytes(indices["bufferView"]),
+                               COMPONENT_TYPES[indices["componentType"]], sparse["count"],
+                               indices.get("byteOffset", 0))  # fmt: skip
+            values[at] = np.frombuffer(
+                self.view_bytes(replaced["bufferView"]), dtype, sparse["count"] * width,
+                replaced.get("byteOffset", 0),
+            ).reshape(-1, width)  # fmt: skip
+        if accessor.get("normalized") and dtype.kind in "iu":
+            scaled = values / np.float32(np.iinfo(dtype).max)
+            return np.maximum(scaled, np.float32(-1.0)).astype(np.float32)
+        return values
+
+    def texels(self, image_index: int, srgb: bool) -> np.ndarray:
+        """(h, w, 4) float32 texels of image ``image_index`` (decoded once per colour space)."""
+        key = (image_index, srgb)
+        if key not in self._texels:
+            from PIL import Image
+
+            image = self.json["images"][image_index]
+            if "bufferView" in image:
+                blob = bytes(self.view_bytes(image["bufferView"]))
+            elif image["uri"].startswith("data:"):
+                blob = base64.b64decode(image["uri"].split(",", 1)[1])
+            else:
+                blob = (self.path.parent / unquote(image["uri"])).read_bytes()
+            self._texels[key] = texels_from_image(Image.open(io.BytesIO(blob)), srgb)
+        return self._texels[key]
+
+
+def _sampler(document: GltfDocument, texture: dict) -> Sampler:
+    if "sampler" not in texture:
+        return DEFAULT_SAMPLER
+    sampler = document.json["samplers"][texture["sampler"]]
+    wrap_s = sampler.get("wrapS", REPEAT)
+    wrap_t = sampler.get("wrapT", REPEAT)
+    return Sampler(
+        wrap_s=wrap_s if wrap_s in WRAP_MODES else REPEAT,
+        wrap_t=wrap_t if wrap_t in WRAP_MODES else REPEAT,
+        nearest=sampler.get("magFilter") == NEAREST,
+    )
+
+
+def texture_transform_matrix(transform: dict) -> np.ndarray:
+    """(3, 3) float64 matrix of a KHR_texture_transform: ``T(offset) · R(rotation) ·
+    S(scale)`` acting on glTF's (u, v, 1) columns, the extension's own definition."""
+    offset = transform.get("offset", (0.0, 0.0))
+    angle = transform.get("rotation", 0.0)
+    scale = transform.get("scale", (1.0, 1.0))
+    c, s = math.cos(angle), math.sin(angle)
+    translation = np.array([[1, 0, offset[0]], [0, 1, offset[1]], [0, 0, 1]], np.float64)
+    rotation = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]], np.float64)
+    scaling = np.diag([scale[0], scale[1], 1.0])
+    return translation @ rotation @ scaling
+
+
+class _PrimitiveReader:
+    """Reads one triangle primitive's texture slots (its UV sets read once each)."""
+
+    def __init__(self, document: GltfDocument, primitive: dict) -> None:
+        self.document = document
+        self.attributes = primitive.get("attributes", {})
+        self._uv_sets: dict[int, np.ndarray | None] = {}
+
+    def uv_set(self, index: int) -> np.ndarray | None:
+        """(v, 2) float32 TEXCOORD_index in glTF's convention (v down), None if absent."""
+        if index not in self._uv_sets:
+            name = f"TEXCOORD_{index}"
+            values = None
+            if name in self.attributes:
+                values = self.document.accessor(self.attributes[name])[:, :2]
+            self._uv_sets[index] = values
+        return self._uv_sets[index]
+
+    def slot(self, info: dict | None, srgb: bool) -> TextureSlot | None:
+        """The texture a material's textureInfo ``info`` names, or None (absent, or its UV
+        set missing: then the factor alone applies, as for a texture that is not there)."""
+        if not info or "index" not in info:
+            return None
+        texture = self.document.json["textures"][info["index"]]
+        if "source" not in texture:
+            return None
+        transform = info.get("extensions", {}).get("KHR_texture_transform", {})
+        uv = self.uv_set(transform.get("texCoord", info.get("texCoord", 0)))
+        if uv is None:
+            return None
+        if transform:
+            matrix = texture_transform_matrix(transform)
+            uv = uv.astype(np.float64) @ matrix[:2, :2].T + matrix[:2, 2]
+        uv = np.nan_to_num(np.asarray(uv, np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        # trimesh's convention, v up, computed as trimesh computes it (float32 1 − v).
+        columns = np.empty((2, len(uv)), np.float32)
+        columns[0] = uv[:, 0]
+        columns[1] = np.float32(1.0) - uv[:, 1]
+        return TextureSlot(
+            self.document.texels(texture["source"], srgb), columns,
+            _sampler(self.document, texture),
+        )  # fmt: skip
+
+
+def material_from_gltf(material: dict) -> Material:
+    """The Blinn-Phong ``Material`` of a glTF material (``embree_rt.scene.meshes.
+    metallic_roughness_material`` for its factors), with its emission (factor × strength),
+    KHR_materials_transmission as transparency (its IOR from KHR_materials_ior, 1.5 when
+    absent, the base colour its tint), KHR_materials_volume as Beer–Lambert absorption (none
+    when thicknessFactor is 0: a thin wall) and KHR_materials_unlit."""
+    from embree_rt.scene.meshes import metallic_roughness_material
+
+    pbr = material.get("pbrMetallicRoughness", {})
+    extensions = material.get("extensions", {})
+    color = tuple(float(c) for c in pbr.get("baseColorFactor", (1.0, 1.0, 1.0, 1.0))[:3])
+    base = metallic_roughness_material(
+        color, float(pbr.get("metallicFactor", 1.0)), float(pbr.get("roughnessFactor", 1.0))
+    )
+    strength = float(extensions.get("KHR_materials_emissive_strength", {}).get(
+        "emissiveStrength", 1.0))  # fmt: skip
+    emission = tuple(float(c) * strength for c in material.get("emissiveFactor", (0, 0, 0)))
+    fields: dict = {"emission": emission}
+    if "KHR_materials_unlit" in extensions:
+        fields["unlit"] = True
+    transmission = extensions.get("KHR_materials_transmission")
+    if transmission is not None and transmission.get("transmissionFactor", 0.0) > 0.0:
+        fields["transparency"] = float(np.clip(transmission["transmissionFactor"], 0.0, 1.0))
+        fields["ior"] = max(1.0, float(extensions.get("KHR_materials_ior", {}).get(
+            "ior", DEFAULT_IOR)))  # fmt: skip
+        volume = extensions.get("KHR_materials_volume", {})
+        if volume.get("thicknessFactor", 0.0) > 0.0:
+            fields["attenuation_color"] = tuple(
+                float(np.clip(c, 0.0, 1.0)) for c in volume.get("attenuationColor", (1, 1, 1))
+            )
+            fields["attenuation_distance"] = float(volume.get("attenuationDistance", math.inf))
+    return Material(**{**base.__dict__, **fields})
+
+
+def primitive_looks(
+    document: GltfDocument, primitive: dict, vertex_count: int
+) -> GltfLooks | None:
+    """The ``GltfLooks`` of a triangle primitive with a material, or None without one."""
+    if "material" not in primitive:
+        return None
+    material = document.json["materials"][primitive["material"]]
+    reader = _PrimitiveReader(document, primitive)
+    pbr = material.get("pbrMetallicRoughness", {})
+    extensions = material.get("extensions", {})
+    factor = np.asarray(pbr.get("baseColorFactor", (1.0, 1.0, 1.0, 1.0)), np.float32)
+    alpha_mode = material.get("alphaMode", "OPAQUE")
+    vertex_alpha = tangents = None
+    if "COLOR_0" in reader.attributes and alpha_mode != "OPAQUE":
+        colors = document.accessor(reader.attributes["COLOR_0"])
+        if colors.shape[1] == 4 and (colors[:, 3] < 1).any():
+            vertex_alpha = np.ascontiguousarray(colors[:, 3], np.float32)
+    normal_info = material.get("normalTexture")
+    normal = reader.slot(normal_info, srgb=False)
+    if normal is not None and "TANGENT" in reader.attributes:
+        tangents = np.ascontiguousarray(document.accessor(reader.attributes["TANGENT"]).T,
+                                        np.float32)  # fmt: skip
+    occlusion_info = material.get("occlusionTexture") or {}
+    transmission = extensions.get("KHR_materials_transmission", {})
+    strength = float(extensions.get("KHR_materials_emissive_strength", {}).get(
+        "emissiveStrength", 1.0))  # fmt: skip
+    looks = GltfLooks(
+        material=material_from_gltf(material),
+        base_color=reader.slot(pbr.get("baseColorTexture"), srgb=True),
+        base_color_factor=factor,
+        vertex_alpha=vertex_alpha,
+        alpha_mode=alpha_mode if alpha_mode in ("MASK", "BLEND") else "OPAQUE",
+        alpha_cutoff=float(material.get("alphaCutoff", 0.5)),
+        double_sided=bool(material.get("doubleSided", False)),
+        emissive=reader.slot(material.get("emissiveTexture"), srgb=True),
+        emissive_factor=np.asarray(material.get("emissiveFactor", (0, 0, 0)), np.float32)
+        * np.float32(strength),
+        transmission=reader.slot(transmission.get("transmissionTexture"), srgb=False),
+        transmission_factor=float(transmission.get("transmissionFactor", 0.0)),
+        metallic_roughness=reader.slot(pbr.get("metallicRoughnessTexture"), srgb=False),
+        metallic_factor=float(pbr.get("metallicFactor", 1.0)),
+        roughness_factor=float(pbr.get("roughnessFactor", 1.0)),
+        normal=normal,
+        normal_scale=float((normal_info or {}).get("scale", 1.0)),
+        occlusion=reader.slot(occlusion_info, srgb=False),
+        occlusion_strength=float(occlusion_info.get("strength", 1.0)),
+        tangents=tangents,
+    )
+    for slot in (looks.base_color, looks.emissive, looks.transmission, looks.metallic_roughness,
+                 looks.normal, looks.occlusion):  # fmt: skip
+        if slot is not None and slot.uv.shape[1] != vertex_count:
+            return None
+    return looks
+
+
+LOOKS_KEY = "gltf_looks"
+
+
+def attach_gltf_looks(path: Path, meshes: list) -> None:
+    """Read ``path``'s glTF materials and store each triangle primitive's ``GltfLooks`` in the
+    ``metadata[LOOKS_KEY]`` of its trimesh mesh; ``meshes`` are trimesh's loaded geometries in
+    its order (``trimesh.Scene.geometry``'s values). Warns in one line about extensions that
+    are ignored, or when the file's primitives cannot be matched to trimesh's meshes."""
+    document = GltfDocument(path)
+    ignored = sorted(set(document.json.get("extensionsUsed", [])) & set(IGNORED_EXTENSIONS))
+    if ignored:
+        warn(f"{path}: glTF extensions ignored (no Blinn-Phong counterpart): "
+             f"{', '.join(ignored)}")  # fmt: skip
+    primitives = [
+        primitive
+        for mesh in document.json.get("meshes", [])
+        for primitive in mesh.get("primitives", [])
+        if primitive.get("mode", 4) in LOADED_MODES
+    ]
+    if len(primitives) != len(meshes):
+        warn(f"{path}: {len(primitives)} glTF primitives for {len(meshes)} loaded meshes; "
+             "emission, transmission, alpha, samplers, texture transforms not read")  # fmt: skip
+        return
+    for primitive, mesh in zip(primitives, meshes, strict=True):
+        if primitive.get("mode", 4) not in TRIANGLE_MODES:
+            continue
+        looks = primitive_looks(document, primitive, len(mesh.vertices))
+        if looks is not None:
+            mesh.metadata[LOOKS_KEY] = looks
