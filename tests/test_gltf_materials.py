@@ -8,6 +8,7 @@ names.
 from __future__ import annotations
 
 import importlib.util
+import math
 from pathlib import Path
 
 import numpy as np
@@ -160,3 +161,141 @@ def test_new_material_keys_survive_saving_and_loading(tmp_path: Path) -> None:
     loaded = rt.load_scene(tmp_path / "saved.toml")
     assert loaded.materials["glow"] == glow and loaded.materials["tinted"] == tinted
     assert "emission" not in (tmp_path / "saved.toml").read_text().split("[materials.tinted]")[1]
+
+
+# -- transmission, glass and Beer–Lambert --------------------------------------------------------
+
+SCHLICK_R0 = ((1.5 - 1.0) / (1.5 + 1.0)) ** 2  # reflectance at normal incidence, IOR 1.5
+
+
+def slab(writer, thickness: float, material: int) -> None:
+    """A 2 x 2 x ``thickness`` box centred at the origin, faces flat (own vertices, normals)."""
+    import trimesh
+
+    box = trimesh.creation.box(extents=(2.0, 2.0, thickness))
+    box.unmerge_vertices()
+    normals = np.repeat(box.face_normals, 3, axis=0)
+    writer.mesh(box.vertices, box.faces, material, NORMAL=normals)
+
+
+def test_light_through_a_glass_slab_is_absorbed_by_beer_lambert(tmp_path: Path) -> None:
+    """Head-on through a slab of thickness L with KHR_materials_volume: the pixel is the sky
+    (white) reflected at the front, plus what both surfaces transmit times ``c^(L/d)``
+    (attenuationColor c, attenuationDistance d). max_depth 2 stops after one pass through."""
+    thickness, color, distance = 0.4, np.array([0.5, 0.8, 0.95]), 0.5
+    images = {}
+    for name, volume in (("absorbing", {"thicknessFactor": thickness,
+                                        "attenuationColor": color.tolist(),
+                                        "attenuationDistance": distance}),
+                         ("thin", {"attenuationColor": color.tolist(),
+                                   "attenuationDistance": distance})):  # fmt: skip
+        writer = MAKE.GltfWriter()
+        material = writer.material({
+            "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0},
+            "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+                           "KHR_materials_volume": volume},
+        })  # fmt: skip
+        slab(writer, thickness, material)
+        glb = write_glb(tmp_path / f"{name}.glb", writer)
+        white = "\n[background]\nhorizon = [1.0, 1.0, 1.0]\nzenith = [1.0, 1.0, 1.0]\n"
+        text = scene_text([glb], depth=2).replace(
+            "[background]\nhorizon = [0.0, 0.0, 0.0]\nzenith = [0.0, 0.0, 0.0]\n", white)
+        images[name] = render_text(tmp_path, text, f"{name}.toml")[SIZE // 2, SIZE // 2]
+    transmitted = (1 - SCHLICK_R0) ** 2
+    np.testing.assert_allclose(
+        images["absorbing"], SCHLICK_R0 + transmitted * color ** (thickness / distance), rtol=2e-4
+    )
+    # thicknessFactor 0 (the default) is a thin wall: nothing is absorbed.
+    np.testing.assert_allclose(images["thin"], SCHLICK_R0 + transmitted, rtol=2e-4)
+
+
+def test_scene_file_glass_absorbs_along_the_path_inside(tmp_path: Path) -> None:
+    """A glass sphere of radius r seen through its centre: the path inside is 2r (a narrow
+    field of view keeps the centre pixel's ray within 0.007 of the axis, where the chord is
+    shorter by less than 1e-5 of itself)."""
+    radius, color, distance = 0.7, np.array([0.3, 0.6, 0.9]), 0.8
+    text = scene_text([], depth=2).replace("horizon = [0.0, 0.0, 0.0]\nzenith = [0.0, 0.0, 0.0]",
+                                           "horizon = [1.0, 1.0, 1.0]\nzenith = [1.0, 1.0, 1.0]")
+    text = text.replace("fov = 30.0", "fov = 2.0")
+    text += f"""
+[materials.tinted]
+color = [1.0, 1.0, 1.0]
+ambient = 0.0
+diffuse = 0.0
+transparency = 1.0
+ior = 1.5
+attenuation_color = {color.tolist()}
+attenuation_distance = {distance}
+
+[[spheres]]
+center = [0.0, 0.0, 0.0]
+radius = {radius}
+material = "tinted"
+"""
+    pixel = render_text(tmp_path, text)[SIZE // 2, SIZE // 2]
+    expected = SCHLICK_R0 + (1 - SCHLICK_R0) ** 2 * color ** (2 * radius / distance)
+    np.testing.assert_allclose(pixel, expected, rtol=2e-4)
+
+
+def test_transmission_makes_a_gltf_material_glass_with_its_ior_and_tint() -> None:
+    from embree_rt.scene.gltf_materials import material_from_gltf
+
+    glass = material_from_gltf({
+        "pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.9, 0.4, 1.0]},
+        "extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.8},
+                       "KHR_materials_ior": {"ior": 1.33}},
+    })  # fmt: skip
+    assert glass.is_glass and glass.transparency == 0.8 and glass.ior == 1.33
+    assert glass.color == pytest.approx((0.2, 0.9, 0.4))
+    default = material_from_gltf({"extensions": {"KHR_materials_transmission": {
+        "transmissionFactor": 1.0}}})  # fmt: skip
+    assert default.ior == 1.5 and default.attenuation_distance == math.inf
+
+
+# -- one-sided surfaces --------------------------------------------------------------------------
+
+
+def lamp_world(tmp_path: Path, meshes: list[Path], name: str) -> np.ndarray:
+    """An emissive ball behind where the meshes go, on the black world, and a light."""
+    text = scene_text(meshes) + """
+[[lights]]
+position = [4.0, 0.5, -1.0]
+
+[materials.lamp]
+color = [0.4, 0.4, 0.4]
+emission = [0.2, 0.6, 0.3]
+
+[[spheres]]
+center = [0.0, 0.0, -2.0]
+radius = 1.0
+material = "lamp"
+"""
+    return render_text(tmp_path, text, name)
+
+
+def facing_quad(tmp_path: Path, name: str, facing: float, **material) -> Path:
+    """A 1.2-wide quad at z = 0 facing +z (``facing`` 1, toward the camera) or -z (-1)."""
+    writer = MAKE.GltfWriter()
+    vertices, faces, uv = MAKE.quad(1.2)
+    if facing < 0:
+        faces = faces[:, ::-1]
+    index = writer.material({"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.5, 0.1, 1]},
+                             **material})  # fmt: skip
+    writer.mesh(vertices, faces, index, TEXCOORD_0=uv)
+    return write_glb(tmp_path / f"{name}.glb", writer)
+
+
+def test_a_one_sided_plane_seen_from_behind_is_not_there(tmp_path: Path) -> None:
+    """Bitwise: the filter rejects every hit on the back, so each ray finds the very hit it
+    finds without the plane (Embree's triangle test does not depend on what else is in the
+    BVH). The light is beside the ball, so that no shadow ray crosses the plane (one-sided
+    surfaces still cast shadows both ways)."""
+    without = lamp_world(tmp_path, [], "without.toml")
+    back = lamp_world(tmp_path, [facing_quad(tmp_path, "back", -1.0)], "back.toml")
+    np.testing.assert_array_equal(back, without)
+    front = lamp_world(tmp_path, [facing_quad(tmp_path, "front", 1.0)], "front.toml")
+    both = lamp_world(tmp_path, [facing_quad(tmp_path, "both", -1.0, doubleSided=True)],
+                      "both.toml")  # fmt: skip
+    centre = (SIZE // 2, SIZE // 2)
+    assert not np.array_equal(front[centre], without[centre])
+    assert not np.array_equal(both[centre], without[centre])
