@@ -299,3 +299,109 @@ def test_a_one_sided_plane_seen_from_behind_is_not_there(tmp_path: Path) -> None
     centre = (SIZE // 2, SIZE // 2)
     assert not np.array_equal(front[centre], without[centre])
     assert not np.array_equal(both[centre], without[centre])
+
+
+# -- alpha: cutouts and see-through --------------------------------------------------------------
+
+
+def alpha_quad(tmp_path: Path, name: str, alpha_codes: np.ndarray, **material) -> Path:
+    """A 1.2-wide double-sided orange quad at z = 0 whose base colour texture is white with
+    alpha ``alpha_codes`` (h, w) uint8, read nearest."""
+    writer = MAKE.GltfWriter()
+    h, w = alpha_codes.shape
+    rgba = np.concatenate([np.full((h, w, 3), 255, np.uint8), alpha_codes[..., None]], axis=2)
+    texture = writer.texture(Image.fromarray(rgba, "RGBA"), {"magFilter": 9728})
+    index = writer.material({"pbrMetallicRoughness": {
+        "baseColorFactor": [0.9, 0.5, 0.1, 1], "baseColorTexture": {"index": texture},
+        "metallicFactor": 0.0}, "doubleSided": True, **material})  # fmt: skip
+    vertices, faces, uv = MAKE.quad(1.2)
+    writer.mesh(vertices, faces, index, TEXCOORD_0=uv)
+    return write_glb(tmp_path / f"{name}.glb", writer)
+
+
+# Alpha 0 in the middle column of a 3 x 3 grid, 255 elsewhere.
+SLOT = np.array([[255, 0, 255]] * 3, np.uint8)
+
+
+def test_a_cutout_shows_what_is_behind_it_where_alpha_is_below_the_cutoff(tmp_path) -> None:
+    """MASK: pixels whose rays pass the cut-out middle third equal the render without the quad
+    (bitwise: the filter rejects those hits, so the rays find what they find without it);
+    pixels over the solid thirds show the quad."""
+    without = lamp_world(tmp_path, [], "without.toml")
+    masked = lamp_world(tmp_path, [alpha_quad(tmp_path, "mask", SLOT, alphaMode="MASK")],
+                        "mask.toml")  # fmt: skip
+    opaque = lamp_world(tmp_path, [alpha_quad(tmp_path, "opaque", SLOT)], "opaque.toml")
+    # The quad spans x in [-0.6, 0.6] at z = 0; its middle third |x| < 0.2 is cut out. In the
+    # image (fov 30 at distance 6), 0.2 is 0.2 / (6 tan 15°) of the half width: 2 pixels.
+    middle = slice(SIZE // 2 - 1, SIZE // 2 + 1)
+    np.testing.assert_array_equal(masked[middle, middle], without[middle, middle])
+    side = (SIZE // 2, SIZE // 2 + 3)
+    np.testing.assert_array_equal(masked[side], opaque[side])
+    assert not np.array_equal(masked[side], without[side])
+
+
+def test_a_cutout_casts_a_shadow_with_the_hole(tmp_path: Path) -> None:
+    """A masked quad held level 1 above the floor, the light far up and behind: the quad's
+    shadow falls beside it, and the floor in the shadow of the hole is lit exactly as with no
+    quad at all (bitwise: the shadow rays' filter rejects the hole's hits), the floor in the
+    shadow of the solid part is not."""
+    glb = alpha_quad(tmp_path, "leaf", SLOT, alphaMode="MASK", alphaCutoff=0.5)
+
+    def render(meshes: list[Path]) -> np.ndarray:
+        text = f"""
+[render]
+width = {SIZE}
+height = {SIZE}
+spp = 1
+max_depth = 1
+
+[camera]
+position = [0.0, 6.0, 0.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, -1.0]
+fov = 30.0
+
+[[lights]]
+position = [0.0, 40.0, 40.0]
+
+[floor]
+color_a = [0.8, 0.8, 0.8]
+color_b = [0.8, 0.8, 0.8]
+reflectivity = 0.0
+"""
+        for mesh in meshes:  # the quad turned level (facing up), 1 above the floor
+            text += f'\n[[meshes]]\nfile = "{mesh}"\nrotate = [-90.0, 0.0, 0.0]\n'
+            text += "translate = [0.0, 1.0, 0.0]\n"
+        path = tmp_path / f"shadow{len(meshes)}.toml"
+        path.write_text(text, encoding="utf-8")
+        return rt.render(rt.load_scene(path)).astype(np.float64)
+
+    bare, shaded = render([]), render([glb])
+    # A quad point (x, 1, z) shadows the floor at (40/39) (x, 0, z - 1) (seen from the light);
+    # the floor at z = -1.2 is in the shadow's span, and its camera ray passes y = 1 at
+    # z = -1.0, clear of the quad. The image's right is +x and its top -z, 9.95 pixels a unit.
+    scale = SIZE / (2 * 6.0 * math.tan(math.radians(15)))
+    row = int(SIZE / 2 - 1.2 * scale)
+    hole = (row, SIZE // 2)  # x in [0, 0.1]: in the shadow of the cut-out middle, |x| < 0.2
+    solid = (row, int(SIZE / 2 + 0.35 * scale))  # x in [0.3, 0.4]: shadow of the solid third
+    np.testing.assert_array_equal(shaded[hole], bare[hole])
+    assert shaded[solid].max() < 0.5 * bare[solid].max()
+    # The same quad opaque (alphaMode absent) shadows the floor there too.
+    whole = render([alpha_quad(tmp_path, "whole", SLOT)])
+    assert whole[hole].max() < 0.5 * bare[hole].max()
+
+
+def test_blend_lets_one_minus_alpha_through(tmp_path: Path) -> None:
+    """BLEND with coverage a = factor alpha × texture alpha over an emissive ball: the pixel is
+    a × the quad's own colour (unlit: its base colour) + (1 − a) × the ball behind."""
+    alpha_code = 102  # 0.4
+    codes = np.full((1, 1), alpha_code, np.uint8)
+    glb = alpha_quad(tmp_path, "veil", codes, alphaMode="BLEND",
+                     extensions={"KHR_materials_unlit": {}})  # fmt: skip
+    without = lamp_world(tmp_path, [], "without.toml")
+    veiled = lamp_world(tmp_path, [glb], "veiled.toml")
+    a = alpha_code / 255.0
+    centre = (SIZE // 2, SIZE // 2)
+    np.testing.assert_allclose(
+        veiled[centre], a * np.array([0.9, 0.5, 0.1]) + (1 - a) * without[centre], rtol=1e-5
+    )
