@@ -16,6 +16,15 @@ import pytest
 from PIL import Image
 
 import embree_rt as rt
+from embree_rt.scene.gltf_materials import texture_transform_matrix
+from embree_rt.textures import (
+    CLAMP_TO_EDGE,
+    MIRRORED_REPEAT,
+    REPEAT,
+    Sampler,
+    sample_texture,
+    texels_from_image,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -405,3 +414,138 @@ def test_blend_lets_one_minus_alpha_through(tmp_path: Path) -> None:
     np.testing.assert_allclose(
         veiled[centre], a * np.array([0.9, 0.5, 0.1]) + (1 - a) * without[centre], rtol=1e-5
     )
+
+
+# -- texture addressing --------------------------------------------------------------------------
+
+
+def spec_texel(i: int, size: int, mode: int) -> int:
+    """The texel index the OpenGL 4.6 spec (§8.14.2, which glTF's samplers follow) names for
+    integer texel coordinate ``i`` on an axis of ``size`` texels."""
+    if mode == REPEAT:
+        return i % size
+    if mode == CLAMP_TO_EDGE:
+        return min(max(i, 0), size - 1)
+
+    def mirror(a: int) -> int:
+        return a if a >= 0 else -(1 + a)
+
+    return (size - 1) - mirror((i % (2 * size)) - size)
+
+
+@pytest.mark.parametrize("mode", [REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT])
+@pytest.mark.parametrize("nearest", [True, False])
+def test_wrap_modes_sample_the_texels_the_spec_names(mode: int, nearest: bool) -> None:
+    """A 5 x 1 texture of distinct texels sampled along u from -3 to 3 (v in the row): each
+    sample is the spec's texel (nearest; samples on a boundary between texels left out) or
+    the spec's two neighbours blended by the distance to their centres (linear), in float64."""
+    width = 5
+    texels = np.zeros((1, width, 4), np.float32)
+    texels[0, :, 0] = np.arange(width) + 1.0  # texel i holds i + 1
+    texels[0, :, 3] = 1.0
+    u = np.linspace(-3, 3, 601, dtype=np.float32)
+    uv = np.stack([u, np.full_like(u, 0.5)])
+    got = sample_texture(texels, uv, Sampler(wrap_s=mode, nearest=nearest))[0]
+    for value, coordinate in zip(got, u.astype(np.float64), strict=True):
+        if nearest:
+            if abs(coordinate * width - round(coordinate * width)) < 1e-4:
+                continue  # on a texel boundary: float32 rounding decides (either is right)
+            expected = spec_texel(math.floor(coordinate * width), width, mode) + 1.0
+        else:
+            x = coordinate * width - 0.5
+            i0 = math.floor(x)
+            f = x - i0
+            expected = (1 - f) * (spec_texel(i0, width, mode) + 1) + f * (
+                spec_texel(i0 + 1, width, mode) + 1)  # fmt: skip
+        assert value == pytest.approx(expected, abs=2e-4), (coordinate, mode)
+
+
+def test_wrap_modes_reach_the_renderer(tmp_path: Path) -> None:
+    """A quad with UVs 0..3 across, a 2 x 1 texture (red, blue) read nearest: per wrap mode, the
+    colour of each sixth of the quad (u in [k/2, (k+1)/2)) is the texel the spec names."""
+    codes = np.array([[[255, 0, 0], [0, 0, 255]]], np.uint8)
+    palette = srgb_to_linear(codes[0]) * np.array([1.0, 1.0, 1.0])
+    vertices, faces, uv = MAKE.quad(1.2)
+    uv = uv * np.array([3.0, 1.0], np.float32)
+    for mode in (REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT):
+        writer = MAKE.GltfWriter()
+        texture = writer.texture(rgb_image(codes), {"magFilter": 9728, "wrapS": mode})
+        index = writer.material({"pbrMetallicRoughness": {"baseColorTexture": {"index": texture}},
+                                 "extensions": {"KHR_materials_unlit": {}}})  # fmt: skip
+        writer.mesh(vertices, faces, index, TEXCOORD_0=uv)
+        glb = write_glb(tmp_path / f"wrap{mode}.glb", writer)
+        image = render_text(tmp_path, scene_text([glb]), f"wrap{mode}.toml")
+        scale = SIZE / (2 * 6.0 * math.tan(math.radians(15)))
+        for sixth in range(6):
+            x = -0.6 + 0.2 * (sixth + 0.5)  # the middle of the sixth, in the scene
+            column = int(SIZE / 2 + x * scale)
+            texel = spec_texel(sixth, 2, mode)  # u·w = sixth + ½: integer part `sixth`
+            np.testing.assert_allclose(image[SIZE // 2, column], palette[texel], rtol=1e-6,
+                                       err_msg=f"mode {mode}, sixth {sixth}")  # fmt: skip
+
+
+def test_texture_transform_and_texcoord_1_choose_what_is_sampled(tmp_path: Path) -> None:
+    """KHR_texture_transform with scale (0.5, 1) and offset (0.5, 0) maps the quad's u in [0, 1]
+    onto the texture's right half: the quad is the right texel all over. With texCoord 1 the
+    texture follows TEXCOORD_1 (here u reversed), which trimesh does not keep."""
+    codes = np.array([[[255, 0, 0], [0, 0, 255]]], np.uint8)
+    red, blue = srgb_to_linear(codes[0])
+    vertices, faces, uv = MAKE.quad(1.2)
+    scale = SIZE / (2 * 6.0 * math.tan(math.radians(15)))
+    left, right = int(SIZE / 2 - 0.45 * scale), int(SIZE / 2 + 0.45 * scale)
+    cases = {
+        "transform": (
+            {"extensions": {"KHR_texture_transform": {"offset": [0.5, 0.0], "scale": [0.5, 1]}}},
+            (blue, blue),
+        ),
+        "second_set": ({"texCoord": 1}, (blue, red)),
+        "first_set": ({}, (red, blue)),
+    }
+    for name, (info, (want_left, want_right)) in cases.items():
+        writer = MAKE.GltfWriter()
+        texture = writer.texture(rgb_image(codes), {"magFilter": 9728})
+        index = writer.material({"pbrMetallicRoughness": {"baseColorTexture": {
+            "index": texture, **info}}, "extensions": {"KHR_materials_unlit": {}}})  # fmt: skip
+        reversed_u = uv * np.array([-1.0, 1.0], np.float32) + np.array([1.0, 0.0], np.float32)
+        writer.mesh(vertices, faces, index, TEXCOORD_0=uv, TEXCOORD_1=reversed_u)
+        glb = write_glb(tmp_path / f"{name}.glb", writer)
+        image = render_text(tmp_path, scene_text([glb]), f"{name}.toml")
+        np.testing.assert_allclose(image[SIZE // 2, left], want_left, rtol=1e-6, err_msg=name)
+        np.testing.assert_allclose(image[SIZE // 2, right], want_right, rtol=1e-6, err_msg=name)
+
+
+def test_texture_transform_matrix_follows_the_extension() -> None:
+    """The extension's example: rotation by θ, then scale, then offset, applied to (u, v)."""
+    theta = 0.3
+    matrix = texture_transform_matrix({"offset": [0.1, -0.2], "rotation": theta,
+                                       "scale": [2.0, 0.5]})  # fmt: skip
+    u, v = 0.25, 0.75
+    su, sv = 2.0 * u, 0.5 * v
+    # KHR_texture_transform's rotation matrix: [[cos, sin], [-sin, cos]] on (u, v).
+    ru = math.cos(theta) * su + math.sin(theta) * sv
+    rv = -math.sin(theta) * su + math.cos(theta) * sv
+    np.testing.assert_allclose(matrix @ [u, v, 1.0], [ru + 0.1, rv - 0.2, 1.0], atol=1e-12)
+
+
+def test_texels_keep_their_alpha_and_data_textures_stay_linear() -> None:
+    codes = np.array([[[10, 128, 255, 51]]], np.uint8)
+    colour = texels_from_image(Image.fromarray(codes, "RGBA"))
+    data = texels_from_image(Image.fromarray(codes, "RGBA"), srgb=False)
+    want = [*srgb_to_linear(codes[0, 0, :3]), 0.2]
+    np.testing.assert_allclose(colour[0, 0], want, rtol=1e-6)
+    np.testing.assert_allclose(data[0, 0], codes[0, 0] / 255.0, rtol=1e-6)
+
+
+def test_ignored_extensions_are_named_in_one_warning_line(tmp_path: Path, capsys) -> None:
+    writer = MAKE.GltfWriter()
+    vertices, faces, _ = MAKE.quad(1.0)
+    index = writer.material({"extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 1},
+                                            "KHR_materials_sheen": {}}})  # fmt: skip
+    writer.mesh(vertices, faces, index)
+    glb = write_glb(tmp_path / "coated.glb", writer)
+    path = tmp_path / "coated.toml"
+    path.write_text(scene_text([glb]), encoding="utf-8")
+    rt.load_scene(path)
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1
+    assert str(glb) in lines[0] and "KHR_materials_clearcoat, KHR_materials_sheen" in lines[0]
