@@ -403,7 +403,22 @@ class SceneGeometry:
             )  # fmt: skip
             if looks is not None:
                 surfaces.colored, surfaces.color, surfaces.looks = looks.rows, looks.color, looks
+                if looks.normal is not None:
+                    self._apply_normal_maps(surfaces, records, looks)
         return records.rays, surfaces
+
+    def _apply_normal_maps(self, surfaces: SurfaceHits, records, looks: HitLooks) -> None:
+        """Replace the shading normals of the hits a normal map turns (``looks.normal``, in
+        their mesh's space) by those normals taken to world space."""
+        rows = looks.rows[looks.normal_at]
+        inst, inst_prim = records.inst_id[rows], records.inst_prim_id[rows]
+        world = np.einsum("nij,nj->in", self.instance_normal_matrix[inst], looks.normal.T)
+        if self._arrays:
+            world = self.bvh.instance_normals(inst, inst_prim, world)
+        if surfaces.flat:
+            surfaces.normal = surfaces.normal.copy()
+            surfaces.flat = False
+        surfaces.normal[:, rows] = _unit(np.ascontiguousarray(world, np.float32))
 
     def _smooth_normals(self, inst, inst_prim, prim, u, v, face_normal) -> np.ndarray:
         """(3, k) unit world shading normals of k mesh hits: the vertex normals interpolated at

@@ -294,6 +294,8 @@ class Renderer:
         passing = self._see_through(rays, surfaces, face_normal, offset, work, spawn)
         outside = surfaces.position + face_normal * offset
         radiance = np.take(self.ambient_share, material) * color
+        if surfaces.looks is not None and surfaces.looks.occlusion is not None:
+            radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
         self._add_direct_light(radiance, outside, normal, -d, color, material, work)
         self._add_emission(radiance, surfaces)
         work.block.add(rays.pixel, rays.weight * radiance)

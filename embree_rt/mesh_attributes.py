@@ -87,12 +87,18 @@ class HitLooks:
     """What k hits on meshes with per-point looks show, beyond one material per mesh: ``rows``
     (k,) int64 the hits' columns in their ``SurfaceHits``; ``color`` (3, k) float32 linear base
     colour; ``emission`` (3, k) float32 (None: the material's own); ``coverage`` (k,) float32
-    alpha of see-through (BLEND) surfaces (None: opaque)."""
+    alpha of see-through (BLEND) surfaces (None: opaque); ``normal`` (3, j) float32 unit
+    shading normals a normal map gives, in the mesh's own space, of the hits at positions
+    ``normal_at`` (j,) int64 among these (None: the usual normals); ``occlusion`` (k,) float32
+    the share of ambient light that reaches each point (None: all)."""
 
     rows: np.ndarray
     color: np.ndarray
     emission: np.ndarray | None = None
     coverage: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    normal_at: np.ndarray | None = None
+    occlusion: np.ndarray | None = None
 
 
 def surface_looks(
@@ -139,7 +145,52 @@ def surface_looks(
         slot = looks.emissive
         result.emission = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[:3]
         result.emission *= looks.emissive_factor[:, None]
+    if looks.occlusion is not None:
+        slot = looks.occlusion
+        sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[0]
+        result.occlusion = np.float32(1.0) + np.float32(looks.occlusion_strength) * (
+            np.clip(sample, np.float32(0.0), np.float32(1.0)) - np.float32(1.0))  # fmt: skip
+    if looks.normal is not None and surface.frame is not None:
+        slot = looks.normal
+        sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[:3]
+        result.normal = mapped_normals(sample, looks.normal_scale, surface.frame, face, blend)
+        result.normal_at = np.arange(len(face))
     return result
+
+
+def mapped_normals(sample, scale: float, frame, face: np.ndarray, blend) -> np.ndarray:
+    """(3, k) float32 unit normals, in the mesh's space, of k hits whose normal map reads
+    ``sample`` (3, k) (codes / 255: the map's tangent-space normal is 2·sample − 1, its x and y
+    times ``scale``, glTF's normalTexture.scale), in the hits' tangent ``frame``
+    (``embree_rt.scene.meshes.TangentFrame``): ``normalize(x T + y B + z N)`` with N the
+    blended vertex normal, T the tangent made perpendicular to N and B = ±N × T, its sign the
+    file's (tangent w) or that of the UVs' own bitangent (mirrored UVs flip it). ``blend``
+    blends per-vertex columns at the hits."""
+    mapped = np.float32(2.0) * sample - np.float32(1.0)
+    mapped[:2] *= np.float32(scale)
+    normal = _unit_columns(blend(frame.vertex_normals))
+    if frame.tangents is not None:
+        tangent = blend(frame.tangents[:3])
+        sign = np.where(blend(frame.tangents[3:])[0] < 0, np.float32(-1.0), np.float32(1.0))
+    else:
+        tangent = np.take(frame.face_tangents, face, axis=1)
+        bitangent = np.take(frame.face_bitangents, face, axis=1)
+        sign = np.where(_dot(np.cross(normal.T, tangent.T).T, bitangent) < 0,
+                        np.float32(-1.0), np.float32(1.0))  # fmt: skip
+    tangent = _unit_columns(tangent - _dot(tangent, normal) * normal)
+    bitangent = sign * np.cross(normal.T, tangent.T).T
+    return _unit_columns(mapped[0] * tangent + mapped[1] * bitangent + mapped[2] * normal)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _unit_columns(vectors: np.ndarray) -> np.ndarray:
+    """(3, k) float32 unit columns of (3, k) ``vectors`` (zero columns stay zero)."""
+    vectors = np.asarray(vectors, np.float32)
+    length = np.sqrt(_dot(vectors, vectors))
+    return vectors / np.maximum(length, np.float32(1e-30))
 
 
 def mesh_hit_filter(mesh: trimesh.Trimesh) -> TriangleFilter | None:
@@ -236,7 +287,8 @@ class MeshColors:
 
 def _gather_looks(parts: list[HitLooks], count: int) -> HitLooks:
     """One ``HitLooks`` of ``count`` hits from parts whose ``rows`` say where each goes; a
-    coverage some part lacks is 1 there (opaque); emission is given by all parts or none."""
+    coverage or occlusion some part lacks is 1 there; emission is given by all parts or none;
+    normals only where a part has them."""
     color = np.empty((3, count), np.float32)
     for part in parts:
         scatter(color, part.rows, part.color)
@@ -245,6 +297,15 @@ def _gather_looks(parts: list[HitLooks], count: int) -> HitLooks:
         looks.emission = np.empty((3, count), np.float32)
         for part in parts:
             scatter(looks.emission, part.rows, part.emission)
+    normals = [part for part in parts if part.normal is not None]
+    if normals:
+        looks.normal = np.concatenate([part.normal for part in normals], axis=1)
+        looks.normal_at = np.concatenate([part.rows[part.normal_at] for part in normals])
+    if any(part.occlusion is not None for part in parts):
+        looks.occlusion = np.ones(count, np.float32)
+        for part in parts:
+            if part.occlusion is not None:
+                looks.occlusion[part.rows] = part.occlusion
     if any(part.coverage is not None for part in parts):
         looks.coverage = np.ones(count, np.float32)
         for part in parts:

@@ -549,3 +549,60 @@ def test_ignored_extensions_are_named_in_one_warning_line(tmp_path: Path, capsys
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1
     assert str(glb) in lines[0] and "KHR_materials_clearcoat, KHR_materials_sheen" in lines[0]
+
+
+# -- normal maps and occlusion -------------------------------------------------------------------
+
+
+def normal_codes(normal) -> np.ndarray:
+    """The 8-bit RGB code of a tangent-space normal, as a normal map stores it."""
+    return np.round((np.asarray(normal) + 1) / 2 * 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("tangent", [None, (0.0, 1.0, 0.0, 1.0)])
+def test_a_normal_map_turns_the_shading_normal_by_its_angle(tmp_path: Path, tangent) -> None:
+    """A constant normal map tilted by θ toward the tangent: the shading normal of the quad
+    (facing +z) turns by θ toward T, which is +x (increasing u) from the UVs, or the file's
+    TANGENT (+y here); the bitangent is N × T (times w). Read from the normal AOV."""
+    theta = math.radians(25.0)
+    code = normal_codes([math.sin(theta), 0.0, math.cos(theta)])
+    decoded = code / 255.0 * 2 - 1  # what the map holds after 8 bits
+    writer = MAKE.GltfWriter()
+    texture = writer.texture(rgb_image(code[None, None, :]))
+    index = writer.material({"normalTexture": {"index": texture}})
+    vertices, faces, uv = MAKE.quad(2.0)
+    attributes = {"TEXCOORD_0": uv, "NORMAL": np.tile([0.0, 0.0, 1.0], (4, 1))}
+    if tangent is not None:
+        attributes["TANGENT"] = np.tile(tangent, (4, 1))
+    writer.mesh(vertices, faces, index, **attributes)
+    glb = write_glb(tmp_path / "bumpy.glb", writer)
+    path = tmp_path / "bumpy.toml"
+    path.write_text(scene_text([glb]), encoding="utf-8")
+    _, layers = rt.render(rt.load_scene(path), aovs=["normal"])
+    got = layers["normal"][SIZE // 2, SIZE // 2].astype(np.float64)
+    t_axis = np.array([1.0, 0, 0]) if tangent is None else np.array(tangent[:3])
+    b_axis = np.cross([0.0, 0, 1], t_axis)
+    expected = decoded[0] * t_axis + decoded[1] * b_axis + decoded[2] * np.array([0.0, 0, 1])
+    expected /= np.linalg.norm(expected)
+    np.testing.assert_allclose(got, expected, atol=2e-6)
+    assert math.degrees(math.acos(got[2])) == pytest.approx(25.0, abs=0.3)  # 8-bit rounding
+
+
+def test_occlusion_scales_the_ambient_term(tmp_path: Path) -> None:
+    """No lights, black world: the quad shows ambient × colour alone, and an occlusion map of
+    value o with strength s scales it by 1 + s (o − 1)."""
+    images = {}
+    for name, occlusion in (("open", None), ("occluded", {"strength": 0.8})):
+        writer = MAKE.GltfWriter()
+        material = {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.6, 0.3, 1]}}
+        if occlusion is not None:
+            texture = writer.texture(rgb_image([[[102, 0, 0]]]))  # o = 0.4 in the red channel
+            material["occlusionTexture"] = {"index": texture, **occlusion}
+        vertices, faces, uv = MAKE.quad(2.0)
+        writer.mesh(vertices, faces, writer.material(material), TEXCOORD_0=uv)
+        glb = write_glb(tmp_path / f"{name}.glb", writer)
+        images[name] = render_text(tmp_path, scene_text([glb]), f"{name}.toml")
+    centre = (SIZE // 2, SIZE // 2)
+    assert images["open"][centre].min() > 0
+    np.testing.assert_allclose(images["occluded"][centre],
+                               images["open"][centre] * (1 + 0.8 * (0.4 - 1)), rtol=1e-6)

@@ -100,9 +100,12 @@ class MeshSurface:
 
     A point's base colour is ``factor`` × the texture at its interpolated UV × its interpolated
     vertex colour (or its face's colour), each factor present or not: ``factor`` (3,) float32;
-    ``texels`` (h, w, 4) float32, linear RGB and padding (``embree_rt.textures``), with ``uv``
+    ``texels`` (h, w, 4) float32, linear RGB and alpha (``embree_rt.textures``), with ``uv``
     (2, v) float32 per vertex; ``vertex_colors`` (3, v) float32; ``face_colors`` (3, f) float32.
-    Per-vertex arrays hold one vertex per column, so that gathers at the hits come out (3, n).
+    The texture is read as ``sampler`` says; ``looks`` is what a glTF file says besides
+    (emissive texture, alpha, ...: ``gltf_materials.GltfLooks``), and ``frame`` the tangent
+    frame its normal map is read in. Per-vertex arrays hold one vertex per column, so that
+    gathers at the hits come out (3, n).
     """
 
     factor: np.ndarray
@@ -112,6 +115,7 @@ class MeshSurface:
     face_colors: np.ndarray | None = None
     sampler: Sampler = DEFAULT_SAMPLER
     looks: GltfLooks | None = None
+    frame: TangentFrame | None = None
 
 
 def _rgb(rgba: object) -> np.ndarray:
@@ -261,6 +265,9 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
             looks = None
     if texels is None and vertex_colors is None and face_colors is None and looks is None:
         return None
+    frame = None
+    if looks is not None and looks.normal is not None:
+        frame = tangent_frame(mesh, looks.normal.uv, looks.tangents)
     return MeshSurface(
         factor=factor.astype(np.float32),
         texels=texels,
@@ -269,7 +276,53 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
         face_colors=_columns(face_colors),
         sampler=sampler,
         looks=looks,
+        frame=frame,
     )
+
+
+@dataclass(frozen=True)
+class TangentFrame:
+    """Where a tangent-space normal map points, in the mesh's own space: ``vertex_normals``
+    (3, v) float32 unit, and either the file's ``tangents`` (4, v) float32 (xyz, and w the
+    sign of the bitangent N × T) or ``face_tangents``, ``face_bitangents`` (3, f) float32, the
+    directions of increasing u and v (v up) across each triangle, derived from its UVs."""
+
+    vertex_normals: np.ndarray
+    tangents: np.ndarray | None = None
+    face_tangents: np.ndarray | None = None
+    face_bitangents: np.ndarray | None = None
+
+
+def tangent_frame(
+    mesh: trimesh.Trimesh, uv: np.ndarray, tangents: np.ndarray | None
+) -> TangentFrame:
+    """The ``TangentFrame`` of ``mesh`` for a normal map read through ``uv`` (2, v) (v up):
+    the file's tangents when it has them (glTF's TANGENT), else per triangle the solution of
+    ``p1 − p0 = Δu1 T + Δv1 B``, ``p2 − p0 = Δu2 T + Δv2 B`` (a triangle whose UVs have no
+    area gets any tangent perpendicular to its normal)."""
+    from embree_rt.mesh_attributes import unit_vertex_normals
+
+    normals, _ = unit_vertex_normals(mesh.vertex_normals)
+    normals = np.ascontiguousarray(normals.T)
+    if tangents is not None and tangents.shape == (4, len(mesh.vertices)):
+        return TangentFrame(normals, tangents=tangents)
+    faces = np.asarray(mesh.faces)
+    points = np.asarray(mesh.vertices, np.float64)[faces]  # (f, 3 corners, 3)
+    corner_uv = np.asarray(uv, np.float64).T[faces]  # (f, 3 corners, 2)
+    e1, e2 = points[:, 1] - points[:, 0], points[:, 2] - points[:, 0]
+    d1, d2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    flat = np.abs(det) < 1e-20
+    det = np.where(flat, 1.0, det)[:, None]
+    tangent = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / det
+    bitangent = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) / det
+    if flat.any():  # any frame in the plane of the triangle
+        normal = np.asarray(mesh.face_normals, np.float64)[flat]
+        helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+        tangent[flat] = np.cross(helper, normal)
+        bitangent[flat] = np.cross(normal, tangent[flat])
+    return TangentFrame(normals, face_tangents=_columns(tangent),
+                        face_bitangents=_columns(bitangent))  # fmt: skip
 
 
 def _columns(rows: np.ndarray | None) -> np.ndarray | None:
