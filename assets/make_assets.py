@@ -12,7 +12,9 @@ their own looks:
   (metallic 0, roughness 1: no highlight, no reflection);
 - painted_ball.ply, an icosphere with a colour per vertex;
 - zero_normals.obj, an icosphere whose file gives every vertex the normal (0, 0, 0);
-- node_scaled.glb, a 100-unit box whose glTF node scales it by 0.01 (as Duck.glb's does).
+- node_scaled.glb, a 100-unit box whose glTF node scales it by 0.01 (as Duck.glb's does);
+- gltf_materials.glb, the glTF material gallery: an emissive panel, a glass ball absorbing
+  toward blue-green, cut-out leaves and a normal-mapped panel (written by ``GltfWriter``).
 """
 
 from __future__ import annotations
@@ -275,6 +277,99 @@ def quad(size: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return vertices, np.array([[0, 1, 2], [0, 2, 3]]), uv
 
 
+def _placed(vertices: np.ndarray, rotate_x: float = 0.0, rotate_y: float = 0.0,
+            translate=(0.0, 0.0, 0.0)) -> np.ndarray:  # fmt: skip
+    """``vertices`` (n, 3) turned about x, then y (degrees), then moved."""
+    matrix = trimesh.transformations.euler_matrix(np.radians(rotate_x), np.radians(rotate_y), 0,
+                                                  "sxyz")  # fmt: skip
+    return (vertices @ matrix[:3, :3].T + np.asarray(translate)).astype(np.float32)
+
+
+def leaf_alpha(size: int = 64) -> Image.Image:
+    """RGBA, white, opaque inside a pointed leaf with a round hole in it, clear elsewhere."""
+    y, x = np.mgrid[0:size, 0:size] / (size - 1) * 2 - 1  # x right, y down, in [-1, 1]
+    inside = np.abs(x) < 0.55 * (1 - y**2)
+    hole = (x**2 + (y + 0.25) ** 2) < 0.15**2
+    alpha = np.where(inside & ~hole, 255, 0).astype(np.uint8)
+    return Image.fromarray(np.dstack([np.full((size, size, 3), 255, np.uint8), alpha]), "RGBA")
+
+
+def bump_normals(size: int = 64, cells: int = 6) -> Image.Image:
+    """A tangent-space normal map (x right, y up, as glTF's) of a grid of round bumps."""
+    row, column = np.mgrid[0:size, 0:size] + 0.5
+    x = (column / size * cells) % 1 - 0.5
+    y = ((size - row) / size * cells) % 1 - 0.5  # up the image
+    r2 = x**2 + y**2
+    radius2 = 0.4**2
+    bump = r2 < radius2
+    height = np.sqrt(np.maximum(radius2 - r2, 1e-6))  # a spherical cap: dh/dx = -x / h
+    normal = np.dstack([np.where(bump, x / height, 0), np.where(bump, y / height, 0),
+                        np.ones_like(x)])  # fmt: skip
+    normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+    return Image.fromarray(np.round((normal + 1) / 2 * 255).astype(np.uint8), "RGB")
+
+
+def glowing_rings(size: int = 64) -> Image.Image:
+    """Concentric rings fading from warm to dark: the emissive texture of the gallery's panel."""
+    y, x = np.mgrid[0:size, 0:size] / (size - 1) * 2 - 1
+    glow = 0.5 + 0.5 * np.cos(np.sqrt(x**2 + y**2) * 4 * 2 * np.pi)
+    pixels = glow[..., None] * np.array([255, 190, 90]) + (1 - glow[..., None]) * [40, 10, 60]
+    return Image.fromarray(np.round(pixels).astype(np.uint8), "RGB")
+
+
+def gltf_materials_gallery() -> bytes:
+    """A GLB of the glTF material features together: an emissive panel (emissive texture and
+    strength), a glass ball (transmission, IOR, volume absorption), cut-out leaves (MASK, with
+    a hole in each) that cast leaf-shaped shadows, and a panel of bumps (normal map)."""
+    writer = GltfWriter()
+    linear = {"magFilter": 9729, "minFilter": 9729}
+    # The emissive panel, upright, facing the camera.
+    vertices, faces, uv = quad(1.3)
+    glow = writer.material({
+        "pbrMetallicRoughness": {"baseColorFactor": [0.05, 0.05, 0.05, 1], "metallicFactor": 0},
+        "emissiveFactor": [1.0, 1.0, 1.0],
+        "emissiveTexture": {"index": writer.texture(glowing_rings(), linear)},
+        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 1.5}},
+    })  # fmt: skip
+    writer.mesh(_placed(vertices, rotate_y=25, translate=(-1.9, 0.75, -0.6)), faces, glow,
+                TEXCOORD_0=uv)  # fmt: skip
+    # The glass ball, absorbing toward blue-green.
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.65)
+    glass = writer.material({
+        "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0,
+                                 "roughnessFactor": 0.05},
+        "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+                       "KHR_materials_ior": {"ior": 1.5},
+                       "KHR_materials_volume": {"thicknessFactor": 1.3,
+                                                "attenuationColor": [0.35, 0.8, 0.7],
+                                                "attenuationDistance": 0.6}},
+    })  # fmt: skip
+    writer.mesh(_placed(ball.vertices, translate=(0.0, 0.65, 0.2)), ball.faces, glass,
+                NORMAL=ball.vertex_normals)  # fmt: skip
+    # Leaves, tilted over the floor: cut out by MASK, seen from both sides.
+    leaf = writer.material({
+        "pbrMetallicRoughness": {"baseColorFactor": [0.25, 0.6, 0.15, 1], "metallicFactor": 0,
+                                 "baseColorTexture": {"index": writer.texture(leaf_alpha(),
+                                                                              linear)}},
+        "alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True,
+    })  # fmt: skip
+    for tilt, turn, place in ((-60, 20, (1.0, 1.2, 1.3)), (-70, -35, (0.45, 1.35, 1.8)),
+                              (-50, 70, (1.6, 1.05, 1.0))):  # fmt: skip
+        vertices, faces, uv = quad(0.8)
+        writer.mesh(_placed(vertices, rotate_x=tilt, rotate_y=turn, translate=place), faces, leaf,
+                    TEXCOORD_0=uv)  # fmt: skip
+    # The panel of bumps: flat geometry, its normals from the map.
+    vertices, faces, uv = quad(1.3)
+    bumps = writer.material({
+        "pbrMetallicRoughness": {"baseColorFactor": [0.85, 0.8, 0.75, 1], "metallicFactor": 0,
+                                 "roughnessFactor": 0.4},
+        "normalTexture": {"index": writer.texture(bump_normals(), linear)},
+    })  # fmt: skip
+    writer.mesh(_placed(vertices, rotate_y=-30, translate=(1.95, 0.75, -0.7)), faces, bumps,
+                TEXCOORD_0=uv)  # fmt: skip
+    return writer.glb()
+
+
 def main(directory: Path = HERE) -> None:
     """Write every asset into ``directory`` (this script's own by default)."""
     torus().export(directory / "torus.obj")
@@ -290,6 +385,7 @@ def main(directory: Path = HERE) -> None:
     painted_ball().export(directory / "painted_ball.ply")
     write_zero_normals_obj(directory / "zero_normals.obj")
     node_scaled().export(directory / "node_scaled.glb")
+    (directory / "gltf_materials.glb").write_bytes(gltf_materials_gallery())
 
 
 if __name__ == "__main__":
