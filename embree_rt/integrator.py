@@ -25,7 +25,7 @@ from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.embree import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits, sphere_kind
-from embree_rt.materials import MaterialTable
+from embree_rt.materials import MaterialTable, shading_shares
 from embree_rt.scene.model import Camera, Scene
 
 DEFAULT_BATCH_SIZE = 1 << 18
@@ -130,11 +130,10 @@ class Renderer:
             [*scene.materials.values(), *([scene.floor.material] if scene.floor else [])]
         )
         # Per material: the seed article's blend of local shading, reflection and transmission.
-        local = (1.0 - table.reflectivity) * (1.0 - table.transparency)
         self.material_color = np.ascontiguousarray(table.color.T)  # (3, m)
-        self.ambient_share = (table.ambient * local).astype(np.float32)
-        self.diffuse_share = (table.diffuse * local).astype(np.float32)
-        self.reflect_share = (table.reflectivity * (1.0 - table.transparency)).astype(np.float32)
+        self.ambient_share, self.diffuse_share, self.reflect_share = shading_shares(
+            table.ambient, table.diffuse, table.reflectivity, table.transparency
+        )
         # Which materials are metals; None when none is (nothing to tint).
         self.metallic = table.metallic if table.metallic.any() else None
         self.specular = table.specular
@@ -293,20 +292,20 @@ class Renderer:
         offset = surface_offset(surfaces.scale)
         passing = self._see_through(rays, surfaces, face_normal, offset, work, spawn)
         outside = surfaces.position + face_normal * offset
-        radiance = np.take(self.ambient_share, material) * color
+        radiance = self._per_hit(self.ambient_share, surfaces, "ambient_share") * color
         if surfaces.looks is not None and surfaces.looks.occlusion is not None:
             radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
-        self._add_direct_light(radiance, outside, normal, -d, color, material, work)
+        self._add_direct_light(radiance, outside, normal, -d, color, surfaces, work)
         self._add_emission(radiance, surfaces)
         work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
             return NO_RAYS
-        reflect_share = np.take(self.reflect_share, material)
+        reflect_share = self._per_hit(self.reflect_share, surfaces, "reflect_share")
         children = self._refraction_children(
             rays, surfaces, normal, face_normal, entering, color, offset, reflect_share, work
         )
         reflected = self._reflection_children(
-            rays, outside, normal, color, reflect_share, material, work
+            rays, outside, normal, color, reflect_share, surfaces, work
         )
         children.insert(0, reflected)
         children.append(passing)
@@ -314,6 +313,16 @@ class Renderer:
         return RayBatch.concatenate(children) if children else NO_RAYS
 
     # -- the stages of shading --------------------------------------------------------------
+
+    @staticmethod
+    def _per_hit(table: np.ndarray, surfaces: SurfaceHits, name: str) -> np.ndarray:
+        """(k,) values of a per-material ``table`` at the hits' materials, with the hits'
+        own where a mesh's textures vary it (``HitLooks.shading[name]``)."""
+        values = np.take(table, surfaces.material)
+        looks = surfaces.looks
+        if looks is not None and looks.shading is not None:
+            values[looks.rows[looks.shading_at]] = looks.shading[name]
+        return values
 
     def _absorb_inside(self, weight, t, material, entering) -> None:
         """Beer–Lambert: a ray that reaches a glass surface from inside (not ``entering``) has
@@ -389,7 +398,7 @@ class Renderer:
         returns the refracted rays, started just inside the surface, tinted by the glass."""
         table = self.materials
         material = surfaces.material
-        transparency = np.take(self.transparency, material)
+        transparency = self._per_hit(self.transparency, surfaces, "transparency")
         glass = np.flatnonzero(transparency > 0)
         if len(glass) == 0:
             return []
@@ -423,16 +432,18 @@ class Renderer:
         ]
 
     def _reflection_children(
-        self, rays, outside, normal, color, reflect_share, material, work
+        self, rays, outside, normal, color, reflect_share, surfaces, work
     ) -> RayBatch:
         """Mirrors, metals and glass's Fresnel share reflect: the mirror rays whose weight can
         still show, started just outside the surface. Most hits reflect a little, so the
         weights are formed on every row and only the rows kept are gathered."""
         weight = rays.weight * reflect_share
-        if self.metallic is not None:
+        looks = surfaces.looks
+        if self.metallic is not None or (looks is not None and looks.shading is not None):
             # Metals tint what they reflect by their colour; the rest reflect untinted. (Metals
             # are few: three row passes over them beat a tint factor formed on every row.)
-            metals = np.flatnonzero(np.take(self.metallic, material))
+            metallic = self.metallic if self.metallic is not None else self.materials.metallic
+            metals = np.flatnonzero(self._per_hit(metallic, surfaces, "metallic"))
             for row in range(3):
                 weight[row, metals] *= color[row, metals]
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
@@ -450,7 +461,7 @@ class Renderer:
         )
 
     def _add_direct_light(
-        self, radiance, points, normal, to_viewer, color, material, work: BatchWork
+        self, radiance, points, normal, to_viewer, color, surfaces, work: BatchWork
     ) -> None:
         """Add to ``radiance`` (3, n) the Blinn-Phong light from every point light that the
         ``points`` (3, n) see."""
@@ -459,11 +470,12 @@ class Renderer:
             return
         # Shadow rays only where the light is in front of the surface: the segment from the
         # point to the light, which the Embree layer builds from the points' columns.
-        diffuse = np.take(self.diffuse_share, material)
-        specular = np.take(self.specular, material)
+        material = surfaces.material
+        diffuse = self._per_hit(self.diffuse_share, surfaces, "diffuse_share")
+        specular = self._per_hit(self.specular, surfaces, "specular")
         # Unlit surfaces take no light: no shadow rays for them.
         takes_light = None if self.lit is None else np.take(self.lit, material)
-        shininess = np.take(self.materials.shininess, material)
+        shininess = self._per_hit(self.materials.shininess, surfaces, "shininess")
         for light, position in enumerate(self.light_positions):
             to_light = position[:, None] - points
             facing = shading.dot(to_light, normal) > 0

@@ -108,6 +108,21 @@ def preset(name: str, **overrides: object) -> Material:
     return replace(base, **overrides)
 
 
+def shading_shares(
+    ambient: np.ndarray, diffuse: np.ndarray, reflectivity: np.ndarray, transparency: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The seed article's blend of local shading, mirror reflection and transmission, per
+    material or per hit ((n,) float32 each): the (n,) float32 shares of ambient and diffuse
+    light, ``ambient · local`` and ``diffuse · local`` with ``local = (1 − reflectivity)(1 −
+    transparency)``, and the mirror's share ``reflectivity · (1 − transparency)``."""
+    local = (1.0 - reflectivity) * (1.0 - transparency)
+    return (
+        (ambient * local).astype(np.float32),
+        (diffuse * local).astype(np.float32),
+        (reflectivity * (1.0 - transparency)).astype(np.float32),
+    )
+
+
 @dataclass(frozen=True)
 class Checker:
     """A procedural checkerboard in the xz-plane: squares of side ``size`` alternate two colors."""

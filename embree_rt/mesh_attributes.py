@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt.columns import scatter
-from embree_rt.scene.gltf_materials import LOOKS_KEY
+from embree_rt.materials import shading_shares
+from embree_rt.scene.gltf_materials import LOOKS_KEY, metallic_roughness_parameters
 from embree_rt.scene.model import MeshObject
 from embree_rt.textures import DEFAULT_SAMPLER, sample_texture
 
@@ -90,7 +91,11 @@ class HitLooks:
     alpha of see-through (BLEND) surfaces (None: opaque); ``normal`` (3, j) float32 unit
     shading normals a normal map gives, in the mesh's own space, of the hits at positions
     ``normal_at`` (j,) int64 among these (None: the usual normals); ``occlusion`` (k,) float32
-    the share of ambient light that reaches each point (None: all)."""
+    the share of ambient light that reaches each point (None: all); ``shading`` the Blinn-Phong
+    parameters that metallic-roughness and transmission textures vary, by name (the
+    integrator's per-material tables': "ambient_share", "diffuse_share", "reflect_share",
+    "specular", "shininess", "transparency" (j,) float32 and "metallic" (j,) bool), of the hits
+    at positions ``shading_at`` (j,) int64 among these (None: the materials')."""
 
     rows: np.ndarray
     color: np.ndarray
@@ -99,12 +104,16 @@ class HitLooks:
     normal: np.ndarray | None = None
     normal_at: np.ndarray | None = None
     occlusion: np.ndarray | None = None
+    shading: dict[str, np.ndarray] | None = None
+    shading_at: np.ndarray | None = None
 
 
 def surface_looks(
-    surface: MeshSurface, faces: np.ndarray, face: np.ndarray, u: np.ndarray, v: np.ndarray
+    surface: MeshSurface, faces: np.ndarray, face: np.ndarray, u: np.ndarray, v: np.ndarray,
+    frame: TangentFrame | None = None,
 ) -> HitLooks:
-    """The looks of k hits on a mesh with per-point looks (``rows`` left empty).
+    """The looks of k hits on a mesh with per-point looks (``rows`` left empty); ``frame``
+    the tangent frame its normal map, if any, is read in (``tangent_frame``).
 
     ``faces`` (f, 3) int64 the mesh's triangles; ``face`` (k,) the triangle each hit is on and
     ``u``, ``v`` (k,) float32 its Embree barycentrics.
@@ -150,19 +159,55 @@ def surface_looks(
         sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[0]
         result.occlusion = np.float32(1.0) + np.float32(looks.occlusion_strength) * (
             np.clip(sample, np.float32(0.0), np.float32(1.0)) - np.float32(1.0))  # fmt: skip
-    if looks.normal is not None and surface.frame is not None:
+    if (looks.metallic_roughness is not None or looks.transmission is not None) and not (
+        looks.material.unlit
+    ):
+        result.shading = textured_shading(looks, blend)
+        result.shading_at = np.arange(len(face))
+    if looks.normal is not None and frame is not None:
         slot = looks.normal
         sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[:3]
-        result.normal = mapped_normals(sample, looks.normal_scale, surface.frame, face, blend)
+        result.normal = mapped_normals(sample, looks.normal_scale, frame, face, blend)
         result.normal_at = np.arange(len(face))
     return result
+
+
+def textured_shading(looks, blend) -> dict[str, np.ndarray]:
+    """The per-hit parameters (``HitLooks.shading``) of hits on a glTF surface whose
+    metallic-roughness texture (B metallic, G roughness, times the factors) or transmission
+    texture (R, times the factor) varies them: the material mapping's own rule
+    (``metallic_roughness_parameters``) and the shares' (``shading_shares``), per hit."""
+    material = looks.material
+    slot = looks.metallic_roughness
+    if slot is not None:
+        sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler).astype(np.float64)
+        values = metallic_roughness_parameters(looks.metallic_factor * sample[2],
+                                               looks.roughness_factor * sample[1])  # fmt: skip
+    else:
+        count = blend(looks.transmission.uv).shape[1]
+        names = ("diffuse", "specular", "shininess", "reflectivity", "metallic")
+        values = {name: np.full(count, getattr(material, name)) for name in names}
+    transparency = np.full(len(values["diffuse"]), material.transparency, np.float32)
+    if looks.transmission is not None:
+        slot = looks.transmission
+        sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[0]
+        transparency = np.clip(np.float32(looks.transmission_factor) * sample, 0.0, 1.0)
+    f32 = {name: np.asarray(values[name], np.float32) for name in
+           ("diffuse", "specular", "shininess", "reflectivity")}  # fmt: skip
+    ambient, diffuse, reflect = shading_shares(np.float32(material.ambient), f32["diffuse"],
+                                               f32["reflectivity"], transparency)  # fmt: skip
+    return {
+        "ambient_share": ambient, "diffuse_share": diffuse, "reflect_share": reflect,
+        "specular": f32["specular"], "shininess": f32["shininess"],
+        "transparency": transparency.astype(np.float32), "metallic": np.asarray(values["metallic"]),
+    }  # fmt: skip
 
 
 def mapped_normals(sample, scale: float, frame, face: np.ndarray, blend) -> np.ndarray:
     """(3, k) float32 unit normals, in the mesh's space, of k hits whose normal map reads
     ``sample`` (3, k) (codes / 255: the map's tangent-space normal is 2·sample − 1, its x and y
     times ``scale``, glTF's normalTexture.scale), in the hits' tangent ``frame``
-    (``embree_rt.scene.meshes.TangentFrame``): ``normalize(x T + y B + z N)`` with N the
+    (``TangentFrame``): ``normalize(x T + y B + z N)`` with N the
     blended vertex normal, T the tangent made perpendicular to N and B = ±N × T, its sign the
     file's (tangent w) or that of the UVs' own bitangent (mirrored UVs flip it). ``blend``
     blends per-vertex columns at the hits."""
@@ -191,6 +236,54 @@ def _unit_columns(vectors: np.ndarray) -> np.ndarray:
     vectors = np.asarray(vectors, np.float32)
     length = np.sqrt(_dot(vectors, vectors))
     return vectors / np.maximum(length, np.float32(1e-30))
+
+
+@dataclass(frozen=True)
+class TangentFrame:
+    """Where a tangent-space normal map points, in the mesh's own space: ``vertex_normals``
+    (3, v) float32 unit, and either the file's ``tangents`` (4, v) float32 (xyz, and w the
+    sign of the bitangent N × T) or ``face_tangents``, ``face_bitangents`` (3, f) float32, the
+    directions of increasing u and v (v up) across each triangle, derived from its UVs."""
+
+    vertex_normals: np.ndarray
+    tangents: np.ndarray | None = None
+    face_tangents: np.ndarray | None = None
+    face_bitangents: np.ndarray | None = None
+
+
+def tangent_frame(
+    mesh: trimesh.Trimesh, uv: np.ndarray, tangents: np.ndarray | None
+) -> TangentFrame:
+    """The ``TangentFrame`` of ``mesh`` for a normal map read through ``uv`` (2, v) (v up):
+    the file's tangents when it has them (glTF's TANGENT), else per triangle the solution of
+    ``p1 − p0 = Δu1 T + Δv1 B``, ``p2 − p0 = Δu2 T + Δv2 B`` (a triangle whose UVs have no
+    area gets any tangent perpendicular to its normal)."""
+    normals, _ = unit_vertex_normals(mesh.vertex_normals)
+    normals = np.ascontiguousarray(normals.T)
+    if tangents is not None and tangents.shape == (4, len(mesh.vertices)):
+        return TangentFrame(normals, tangents=tangents)
+    faces = np.asarray(mesh.faces)
+    points = np.asarray(mesh.vertices, np.float64)[faces]  # (f, 3 corners, 3)
+    corner_uv = np.asarray(uv, np.float64).T[faces]  # (f, 3 corners, 2)
+    e1, e2 = points[:, 1] - points[:, 0], points[:, 2] - points[:, 0]
+    d1, d2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    flat = np.abs(det) < 1e-20
+    det = np.where(flat, 1.0, det)[:, None]
+    tangent = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / det
+    bitangent = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) / det
+    if flat.any():  # any frame in the plane of the triangle
+        normal = np.asarray(mesh.face_normals, np.float64)[flat]
+        helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+        tangent[flat] = np.cross(helper, normal)
+        bitangent[flat] = np.cross(normal, tangent[flat])
+    return TangentFrame(normals, face_tangents=_columns(tangent),
+                        face_bitangents=_columns(bitangent))  # fmt: skip
+
+
+def _columns(rows: np.ndarray) -> np.ndarray:
+    """(3, n) float32 C-contiguous columns of (n, 3) ``rows``."""
+    return np.ascontiguousarray(rows.T, np.float32)
 
 
 def mesh_hit_filter(mesh: trimesh.Trimesh) -> TriangleFilter | None:
@@ -226,7 +319,7 @@ class MeshColors:
 
     def __init__(self, placements: list[MeshObject], geom_ids: list[int]) -> None:
         """``placements`` and the instance geometry id each was given, in the same order."""
-        self._surfaces: list[tuple[MeshSurface, np.ndarray]] = []
+        self._surfaces: list[tuple[MeshSurface, np.ndarray, TangentFrame | None]] = []
         index_of_mesh: dict[int, int] = {}
         instance_surface: dict[int, int] = {}
         for placement, geom_id in zip(placements, geom_ids, strict=True):
@@ -240,7 +333,11 @@ class MeshColors:
                 index_of_mesh[key] = len(self._surfaces) if surface is not None else -1
                 if surface is not None:
                     faces = np.asarray(placement.mesh.faces, np.int64)
-                    self._surfaces.append((surface, faces))
+                    looks = surface.looks
+                    frame = None
+                    if looks is not None and looks.normal is not None:
+                        frame = tangent_frame(placement.mesh, looks.normal.uv, looks.tangents)
+                    self._surfaces.append((surface, faces, frame))
             if index_of_mesh[key] >= 0:
                 instance_surface[geom_id] = index_of_mesh[key]
         # Per instance geometry id: index into _surfaces, -1 for a placement without colours.
@@ -267,10 +364,10 @@ class MeshColors:
         surface_of_hit = which[painted]
         parts = []
         for index in np.unique(surface_of_hit):
-            surface, faces = self._surfaces[index]
+            surface, faces, frame = self._surfaces[index]
             mine = np.flatnonzero(surface_of_hit == index) if len(self._surfaces) > 1 else None
             rows = painted if mine is None else painted[mine]
-            part = surface_looks(surface, faces, prim[rows], u[rows], v[rows])
+            part = surface_looks(surface, faces, prim[rows], u[rows], v[rows], frame)
             part.rows = np.arange(len(painted)) if mine is None else mine
             parts.append((part, surface))
         if len(parts) > 1 and any(part.emission is not None for part, _ in parts):
@@ -301,6 +398,11 @@ def _gather_looks(parts: list[HitLooks], count: int) -> HitLooks:
     if normals:
         looks.normal = np.concatenate([part.normal for part in normals], axis=1)
         looks.normal_at = np.concatenate([part.rows[part.normal_at] for part in normals])
+    shaded = [part for part in parts if part.shading is not None]
+    if shaded:
+        looks.shading = {name: np.concatenate([part.shading[name] for part in shaded])
+                         for name in shaded[0].shading}  # fmt: skip
+        looks.shading_at = np.concatenate([part.rows[part.shading_at] for part in shaded])
     if any(part.occlusion is not None for part in parts):
         looks.occlusion = np.ones(count, np.float32)
         for part in parts:

@@ -622,3 +622,92 @@ def test_the_gallery_file_holds_every_feature_it_shows() -> None:
                for item in looks)  # fmt: skip
     assert sum(item.alpha_mode == "MASK" for item in looks) == 3
     assert any(item.normal is not None for item in looks)
+
+
+# -- textures that vary the Blinn-Phong parameters -----------------------------------------------
+
+
+def split_quad(tmp_path: Path, name: str, material: dict, textures: dict) -> Path:
+    """A 2-wide quad facing the camera; ``textures`` maps a material path ("pbr.<key>" or an
+    extension's key) to 2 x 1 RGB codes (left texel, right texel), read nearest."""
+    writer = MAKE.GltfWriter()
+    material = {key: (dict(value) if isinstance(value, dict) else value)
+                for key, value in material.items()}  # fmt: skip
+    for where, codes in textures.items():
+        index = writer.texture(rgb_image(codes), {"magFilter": 9728})
+        block, key = where.split(".")
+        if block == "pbr":
+            material.setdefault("pbrMetallicRoughness", {})[key] = {"index": index}
+        else:
+            material["extensions"][block][key] = {"index": index}
+    vertices, faces, uv = MAKE.quad(2.0)
+    writer.mesh(vertices, faces, writer.material(material), TEXCOORD_0=uv,
+                NORMAL=np.tile([0.0, 0.0, 1.0], (4, 1)))  # fmt: skip
+    return write_glb(tmp_path / f"{name}.glb", writer)
+
+
+def test_a_metallic_roughness_texture_varies_the_surface_per_point(tmp_path: Path) -> None:
+    """Left texel: metallic 0, roughness 1; right: metallic 1, roughness 0.2 (B and G). Each
+    half renders as the same quad with those values as constant factors (the per-material
+    mapping), with a light for highlights and a ball to reflect."""
+    extra = """
+[[lights]]
+position = [1.5, 2.0, 6.0]
+
+[materials.lamp]
+color = [0.2, 0.5, 0.9]
+emission = [0.3, 0.6, 0.9]
+
+[[spheres]]
+center = [0.0, 0.0, 4.0]
+radius = 0.5
+material = "lamp"
+"""
+    base = {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.6, 0.3, 1]}}
+    textured = split_quad(tmp_path, "mr", base, {"pbr.metallicRoughnessTexture":
+                                                 [[[0, 255, 0], [0, 51, 255]]]})  # fmt: skip
+    image = render_text(tmp_path, scene_text([textured], extra=extra), "mr.toml")
+    scale = SIZE / (2 * 6.0 * math.tan(math.radians(15)))
+    for column, (metallic, roughness) in ((int(SIZE / 2 - 0.3 * scale), (0.0, 1.0)),
+                                          (int(SIZE / 2 + 0.3 * scale), (1.0, 0.2))):  # fmt: skip
+        constant = {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.6, 0.3, 1],
+                                             "metallicFactor": metallic,
+                                             "roughnessFactor": roughness}}  # fmt: skip
+        glb = split_quad(tmp_path, f"constant{metallic}", constant, {})
+        reference = render_text(tmp_path, scene_text([glb], extra=extra), f"c{metallic}.toml")
+        np.testing.assert_allclose(image[:, column], reference[:, column], rtol=2e-5, atol=1e-6)
+    assert not np.allclose(image[:, int(SIZE / 2 - 0.3 * scale)],
+                           image[:, int(SIZE / 2 + 0.3 * scale)])  # fmt: skip
+
+
+def test_a_transmission_texture_makes_glass_where_it_is_white(tmp_path: Path) -> None:
+    """Transmission texture R = 1 on the left, 0 on the right, factor 1: the left half renders
+    as the quad with transmission 1 everywhere, the right as the opaque quad."""
+    extra = """
+[materials.lamp]
+color = [0.2, 0.5, 0.9]
+emission = [0.3, 0.6, 0.9]
+
+[[spheres]]
+center = [0.0, 0.0, -2.0]
+radius = 1.5
+material = "lamp"
+"""
+
+    def material(factor: float) -> dict:
+        transmission = {"KHR_materials_transmission": {"transmissionFactor": factor}}
+        return {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.9, 0.9, 1],
+                                         "metallicFactor": 0.0},
+                "doubleSided": True, "extensions": transmission}  # fmt: skip
+
+    textured = split_quad(tmp_path, "tx", material(1.0), {
+        "KHR_materials_transmission.transmissionTexture": [[[255, 0, 0], [0, 0, 0]]]})  # fmt: skip
+    image = render_text(tmp_path, scene_text([textured], extra=extra), "tx.toml")
+    scale = SIZE / (2 * 6.0 * math.tan(math.radians(15)))
+    left, right = int(SIZE / 2 - 0.3 * scale), int(SIZE / 2 + 0.3 * scale)
+    for column, factor in ((left, 1.0), (right, 0.0)):
+        glb = split_quad(tmp_path, f"plain{factor}", material(factor), {})
+        reference = render_text(tmp_path, scene_text([glb], extra=extra), f"p{factor}.toml")
+        np.testing.assert_allclose(image[SIZE // 2, column], reference[SIZE // 2, column],
+                                   rtol=2e-5, atol=1e-6)  # fmt: skip
+    assert not np.allclose(image[SIZE // 2, left], image[SIZE // 2, right])

@@ -24,7 +24,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from embree_rt.materials import Material
+from embree_rt.materials import RGB, Material
 from embree_rt.textures import (
     DEFAULT_SAMPLER,
     NEAREST,
@@ -54,6 +54,11 @@ COMPONENT_TYPES = {
 }  # fmt: skip
 COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 DEFAULT_IOR = 1.5
+# glTF's metallic-roughness model → Blinn-Phong: highlight exponent range, and the mirror
+# reflectance at normal incidence of a dielectric (plastics, paint: about 4%) and of a metal.
+SHININESS_RANGE = (1.0, 4096.0)
+DIELECTRIC_REFLECTIVITY = 0.04
+METAL_REFLECTIVITY = 0.9
 
 
 def warn(text: str) -> None:
@@ -270,14 +275,61 @@ class _PrimitiveReader:
         )  # fmt: skip
 
 
+def metallic_roughness_material(color: RGB, metallic: float, roughness: float) -> Material:
+    """A Blinn-Phong ``Material`` that looks like glTF's metallic-roughness surface.
+
+    With smoothness ``s = 1 − roughness`` and ``m = metallic`` (both clipped to [0, 1]):
+
+    - ``shininess = 2 / α² − 2`` with ``α = roughness²``, the Blinn-Phong exponent whose lobe
+      matches a Beckmann/GGX lobe of width α (Walter et al. 2007), clipped to [1, 4096];
+    - ``specular = s · (0.5 + 0.4 m)``: no highlight on a fully rough surface, 0.5 (the glossy
+      preset) on a smooth dielectric, 0.9 (the metal preset) on a smooth metal;
+    - ``reflectivity = s² · (0.04 (1 − m) + 0.9 m)``: a smooth dielectric mirrors about 4% of
+      the scene, a smooth metal 90% (the mirror preset); roughness blurs a real reflection
+      away, which a sharp mirror bounce can only fade;
+    - ``diffuse = 0.85 · (1 − m · s)``: dielectrics keep the matte preset's diffuse, a smooth
+      metal has none (its colour is in what it reflects), a rough metal scatters like a matte
+      surface of its colour;
+    - ``metallic`` is ``m >= 0.5`` (metals tint their reflections and highlights' bounce).
+    """
+    values = metallic_roughness_parameters(np.float64(metallic), np.float64(roughness))
+    return Material(
+        color=color,
+        diffuse=float(values["diffuse"]),
+        specular=float(values["specular"]),
+        shininess=float(values["shininess"]),
+        reflectivity=float(values["reflectivity"]),
+        metallic=bool(values["metallic"]),
+    )
+
+
+def metallic_roughness_parameters(metallic: np.ndarray, roughness: np.ndarray) -> dict:
+    """The Blinn-Phong parameters of ``metallic_roughness_material``'s mapping for float64
+    ``metallic`` and ``roughness`` (any shape, e.g. (k,) per hit of a metallic-roughness
+    texture): float64 arrays "diffuse", "specular", "shininess", "reflectivity" and bool
+    "metallic", of that shape."""
+    m = np.clip(metallic, 0.0, 1.0)
+    roughness = np.clip(roughness, 0.0, 1.0)
+    s = 1.0 - roughness
+    alpha = roughness * roughness
+    low, high = SHININESS_RANGE
+    with np.errstate(divide="ignore"):
+        shininess = np.where(alpha == 0.0, high, np.clip(2.0 / alpha**2 - 2.0, low, high))
+    return {
+        "diffuse": 0.85 * (1.0 - m * s),
+        "specular": s * (0.5 + 0.4 * m),
+        "shininess": shininess,
+        "reflectivity": s * s * (DIELECTRIC_REFLECTIVITY * (1.0 - m) + METAL_REFLECTIVITY * m),
+        "metallic": m >= 0.5,
+    }
+
+
 def material_from_gltf(material: dict) -> Material:
-    """The Blinn-Phong ``Material`` of a glTF material (``embree_rt.scene.meshes.
-    metallic_roughness_material`` for its factors), with its emission (factor × strength),
+    """The Blinn-Phong ``Material`` of a glTF material (``metallic_roughness_material`` for its
+    factors), with its emission (factor × strength),
     KHR_materials_transmission as transparency (its IOR from KHR_materials_ior, 1.5 when
     absent, the base colour its tint), KHR_materials_volume as Beer–Lambert absorption (none
     when thicknessFactor is 0: a thin wall) and KHR_materials_unlit."""
-    from embree_rt.scene.meshes import metallic_roughness_material
-
     pbr = material.get("pbrMetallicRoughness", {})
     extensions = material.get("extensions", {})
     color = tuple(float(c) for c in pbr.get("baseColorFactor", (1.0, 1.0, 1.0, 1.0))[:3])

@@ -10,9 +10,15 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from embree_rt.materials import RGB, Material
+from embree_rt.materials import Material
 from embree_rt.scene.errors import SceneError
-from embree_rt.scene.gltf_materials import LOOKS_KEY, GltfLooks
+from embree_rt.scene.gltf_materials import (
+    LOOKS_KEY,
+    GltfLooks,
+    attach_gltf_looks,
+    metallic_roughness_material,
+    warn,
+)
 from embree_rt.textures import DEFAULT_SAMPLER, Sampler, texels_from_image
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -72,14 +78,12 @@ def read_gltf_looks(path: Path, loaded: trimesh.Trimesh | trimesh.Scene) -> None
     """Attach to each of ``loaded``'s meshes what the glTF file ``path`` says of its material
     beyond what trimesh keeps (``gltf_materials.attach_gltf_looks``); a file whose materials
     cannot be read that way keeps trimesh's reading, with a one-line warning."""
-    from embree_rt.scene import gltf_materials
-
     meshes = list(loaded.geometry.values()) if isinstance(loaded, trimesh.Scene) else [loaded]
     try:
-        gltf_materials.attach_gltf_looks(path, meshes)
+        attach_gltf_looks(path, meshes)
     except (OSError, ValueError, KeyError, IndexError, TypeError) as error:
-        gltf_materials.warn(f"{path}: glTF materials read as trimesh reads them only "
-                            f"({type(error).__name__}: {error})")  # fmt: skip
+        warn(f"{path}: glTF materials read as trimesh reads them only "
+             f"({type(error).__name__}: {error})")  # fmt: skip
 
 
 # -- what a mesh looks like ----------------------------------------------------------------------
@@ -87,13 +91,6 @@ def read_gltf_looks(path: Path, loaded: trimesh.Trimesh | trimesh.Scene) -> None
 # trimesh fills an MTL material's missing ``Kd`` with this grey; beside a ``map_Kd`` texture it
 # is read as no ``Kd`` at all (factor 1), or every such texture would render at 40% brightness.
 _TRIMESH_DEFAULT_RGBA = (102, 102, 102, 255)
-# glTF's metallic-roughness model → Blinn-Phong: highlight exponent range, and the mirror
-# reflectance at normal incidence of a dielectric (plastics, paint: about 4%) and of a metal.
-SHININESS_RANGE = (1.0, 4096.0)
-DIELECTRIC_REFLECTIVITY = 0.04
-METAL_REFLECTIVITY = 0.9
-
-
 @dataclass(frozen=True)
 class MeshSurface:
     """The colour a mesh gives each point of its surface, linear RGB.
@@ -103,9 +100,8 @@ class MeshSurface:
     ``texels`` (h, w, 4) float32, linear RGB and alpha (``embree_rt.textures``), with ``uv``
     (2, v) float32 per vertex; ``vertex_colors`` (3, v) float32; ``face_colors`` (3, f) float32.
     The texture is read as ``sampler`` says; ``looks`` is what a glTF file says besides
-    (emissive texture, alpha, ...: ``gltf_materials.GltfLooks``), and ``frame`` the tangent
-    frame its normal map is read in. Per-vertex arrays hold one vertex per column, so that
-    gathers at the hits come out (3, n).
+    (emissive texture, alpha, ...: ``gltf_materials.GltfLooks``). Per-vertex arrays hold one
+    vertex per column, so that gathers at the hits come out (3, n).
     """
 
     factor: np.ndarray
@@ -115,7 +111,6 @@ class MeshSurface:
     face_colors: np.ndarray | None = None
     sampler: Sampler = DEFAULT_SAMPLER
     looks: GltfLooks | None = None
-    frame: TangentFrame | None = None
 
 
 def _rgb(rgba: object) -> np.ndarray:
@@ -152,39 +147,6 @@ def _base_color_factor(material: object) -> np.ndarray:
     if _texture_image(material) is not None and tuple(diffuse) == _TRIMESH_DEFAULT_RGBA:
         return np.ones(3)
     return _rgb(diffuse)
-
-
-def metallic_roughness_material(color: RGB, metallic: float, roughness: float) -> Material:
-    """A Blinn-Phong ``Material`` that looks like glTF's metallic-roughness surface.
-
-    With smoothness ``s = 1 − roughness`` and ``m = metallic`` (both clipped to [0, 1]):
-
-    - ``shininess = 2 / α² − 2`` with ``α = roughness²``, the Blinn-Phong exponent whose lobe
-      matches a Beckmann/GGX lobe of width α (Walter et al. 2007), clipped to [1, 4096];
-    - ``specular = s · (0.5 + 0.4 m)``: no highlight on a fully rough surface, 0.5 (the glossy
-      preset) on a smooth dielectric, 0.9 (the metal preset) on a smooth metal;
-    - ``reflectivity = s² · (0.04 (1 − m) + 0.9 m)``: a smooth dielectric mirrors about 4% of
-      the scene, a smooth metal 90% (the mirror preset); roughness blurs a real reflection
-      away, which a sharp mirror bounce can only fade;
-    - ``diffuse = 0.85 · (1 − m · s)``: dielectrics keep the matte preset's diffuse, a smooth
-      metal has none (its colour is in what it reflects), a rough metal scatters like a matte
-      surface of its colour;
-    - ``metallic`` is ``m >= 0.5`` (metals tint their reflections and highlights' bounce).
-    """
-    m = float(np.clip(metallic, 0.0, 1.0))
-    roughness = float(np.clip(roughness, 0.0, 1.0))
-    s = 1.0 - roughness
-    alpha = roughness * roughness
-    low, high = SHININESS_RANGE
-    shininess = high if alpha == 0.0 else float(np.clip(2.0 / alpha**2 - 2.0, low, high))
-    return Material(
-        color=color,
-        diffuse=0.85 * (1.0 - m * s),
-        specular=s * (0.5 + 0.4 * m),
-        shininess=shininess,
-        reflectivity=s * s * (DIELECTRIC_REFLECTIVITY * (1.0 - m) + METAL_REFLECTIVITY * m),
-        metallic=m >= 0.5,
-    )
 
 
 def mesh_material(mesh: trimesh.Trimesh) -> Material | None:
@@ -265,9 +227,7 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
             looks = None
     if texels is None and vertex_colors is None and face_colors is None and looks is None:
         return None
-    frame = None
-    if looks is not None and looks.normal is not None:
-        frame = tangent_frame(mesh, looks.normal.uv, looks.tangents)
+
     return MeshSurface(
         factor=factor.astype(np.float32),
         texels=texels,
@@ -276,53 +236,7 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
         face_colors=_columns(face_colors),
         sampler=sampler,
         looks=looks,
-        frame=frame,
     )
-
-
-@dataclass(frozen=True)
-class TangentFrame:
-    """Where a tangent-space normal map points, in the mesh's own space: ``vertex_normals``
-    (3, v) float32 unit, and either the file's ``tangents`` (4, v) float32 (xyz, and w the
-    sign of the bitangent N × T) or ``face_tangents``, ``face_bitangents`` (3, f) float32, the
-    directions of increasing u and v (v up) across each triangle, derived from its UVs."""
-
-    vertex_normals: np.ndarray
-    tangents: np.ndarray | None = None
-    face_tangents: np.ndarray | None = None
-    face_bitangents: np.ndarray | None = None
-
-
-def tangent_frame(
-    mesh: trimesh.Trimesh, uv: np.ndarray, tangents: np.ndarray | None
-) -> TangentFrame:
-    """The ``TangentFrame`` of ``mesh`` for a normal map read through ``uv`` (2, v) (v up):
-    the file's tangents when it has them (glTF's TANGENT), else per triangle the solution of
-    ``p1 − p0 = Δu1 T + Δv1 B``, ``p2 − p0 = Δu2 T + Δv2 B`` (a triangle whose UVs have no
-    area gets any tangent perpendicular to its normal)."""
-    from embree_rt.mesh_attributes import unit_vertex_normals
-
-    normals, _ = unit_vertex_normals(mesh.vertex_normals)
-    normals = np.ascontiguousarray(normals.T)
-    if tangents is not None and tangents.shape == (4, len(mesh.vertices)):
-        return TangentFrame(normals, tangents=tangents)
-    faces = np.asarray(mesh.faces)
-    points = np.asarray(mesh.vertices, np.float64)[faces]  # (f, 3 corners, 3)
-    corner_uv = np.asarray(uv, np.float64).T[faces]  # (f, 3 corners, 2)
-    e1, e2 = points[:, 1] - points[:, 0], points[:, 2] - points[:, 0]
-    d1, d2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
-    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
-    flat = np.abs(det) < 1e-20
-    det = np.where(flat, 1.0, det)[:, None]
-    tangent = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / det
-    bitangent = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) / det
-    if flat.any():  # any frame in the plane of the triangle
-        normal = np.asarray(mesh.face_normals, np.float64)[flat]
-        helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-        tangent[flat] = np.cross(helper, normal)
-        bitangent[flat] = np.cross(normal, tangent[flat])
-    return TangentFrame(normals, face_tangents=_columns(tangent),
-                        face_bitangents=_columns(bitangent))  # fmt: skip
 
 
 def _columns(rows: np.ndarray | None) -> np.ndarray | None:
