@@ -286,19 +286,32 @@ def _columns(rows: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(rows.T, np.float32)
 
 
+def is_closed(mesh: trimesh.Trimesh) -> bool:
+    """Whether ``mesh`` is a closed surface once its vertices are merged by position (glTF
+    splits vertices along UV and normal seams, which leaves a closed model looking open)."""
+    merged = mesh.copy()
+    merged.merge_vertices(merge_tex=True, merge_norm=True)
+    return bool(merged.is_watertight)
+
+
 def mesh_hit_filter(mesh: trimesh.Trimesh) -> TriangleFilter | None:
     """The Embree hit filter a mesh's glTF material asks for (``alpha_filter``): cutouts where
     its alpha is low (MASK, BLEND) and, unless it is double-sided, no back. None for every
-    other mesh, glass included (a refracted ray must leave through the back of the surface)."""
+    other mesh, so that they trace at no extra cost: glass (a refracted ray must leave through
+    the back of the surface) and closed surfaces (``is_closed``: their backs face inward, seen
+    from outside only through a hole that is not there) are never one-sided."""
     looks = mesh.metadata.get(LOOKS_KEY)
     if looks is None:
+        return None
+    one_sided = not looks.double_sided and not looks.material.is_glass
+    if one_sided and not looks.has_alpha and is_closed(mesh):
         return None
     from embree_rt.embree.alpha_filter import triangle_filter
 
     base = looks.base_color
     return triangle_filter(
         np.asarray(mesh.faces),
-        one_sided=not looks.double_sided and not looks.material.is_glass,
+        one_sided=one_sided and not is_closed(mesh),
         alpha_mode=looks.alpha_mode,
         cutoff=looks.alpha_cutoff,
         alpha=float(looks.base_color_factor[3]),

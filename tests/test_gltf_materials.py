@@ -711,3 +711,25 @@ material = "lamp"
         np.testing.assert_allclose(image[SIZE // 2, column], reference[SIZE // 2, column],
                                    rtol=2e-5, atol=1e-6)  # fmt: skip
     assert not np.allclose(image[SIZE // 2, left], image[SIZE // 2, right])
+
+
+def test_only_meshes_that_need_a_filter_get_one() -> None:
+    """Opaque closed meshes (the glTF cube, single-sided as glTF's default is) and meshes of
+    other formats trace with no filter; an open one-sided quad and a cut-out get one."""
+    from embree_rt.mesh_attributes import mesh_hit_filter
+    from embree_rt.scene.gltf_materials import LOOKS_KEY
+    from embree_rt.scene.meshes import load_mesh_parts
+
+    def filters(name: str) -> list:
+        parts = load_mesh_parts(ROOT / "assets" / name, "scene.toml", "file")
+        return [(mesh_hit_filter(mesh), mesh.metadata.get(LOOKS_KEY)) for mesh, _ in parts]
+
+    assert [f for f, _ in filters("quadrant_cube.glb")] == [None]
+    assert [f for f, _ in filters("torus.obj")] == [None]
+    gallery = filters("gltf_materials.glb")  # panel, ball, three leaves, bumps: open but glass
+    for hit_filter, looks in gallery:
+        if looks.material.is_glass:
+            assert hit_filter is None
+        else:
+            assert hit_filter is not None and hit_filter.shadows == (looks.alpha_mode == "MASK")
+    assert sum(f is None for f, _ in gallery) == 1
