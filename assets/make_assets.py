@@ -14,7 +14,10 @@ their own looks:
 - zero_normals.obj, an icosphere whose file gives every vertex the normal (0, 0, 0);
 - node_scaled.glb, a 100-unit box whose glTF node scales it by 0.01 (as Duck.glb's does);
 - gltf_materials.glb, the glTF material gallery: an emissive panel, a glass ball absorbing
-  toward blue-green, cut-out leaves and a normal-mapped panel (written by ``GltfWriter``).
+  toward blue-green, cut-out leaves and a normal-mapped panel (written by ``GltfWriter``);
+- still_life.glb, a multi-part glTF model (a table whose four legs are one mesh under four
+  nodes, a polished metal ball, a glossy torus, a painted ball, the textured cube), each part
+  in its own metallic-roughness material: what ``embree-rt render still_life.glb`` shows.
 """
 
 from __future__ import annotations
@@ -370,6 +373,50 @@ def gltf_materials_gallery() -> bytes:
     return writer.glb()
 
 
+def _pbr(mesh: trimesh.Trimesh, color, metallic: float, roughness: float) -> trimesh.Trimesh:
+    """``mesh`` in a glTF metallic-roughness material of linear ``color`` (RGB)."""
+    material = trimesh.visual.material.PBRMaterial(baseColorFactor=[*color, 1.0],
+                                                   metallicFactor=metallic,
+                                                   roughnessFactor=roughness)  # fmt: skip
+    mesh.visual = trimesh.visual.TextureVisuals(material=material)
+    return mesh
+
+
+def still_life(texture: Image.Image) -> trimesh.Scene:
+    """A table (top, and one leg mesh under four nodes) with things on it, in metres."""
+    scene = trimesh.Scene()
+    top = _pbr(trimesh.creation.box(extents=(1.6, 0.06, 0.9)), (0.45, 0.25, 0.12), 0.0, 0.55)
+    scene.add_geometry(top, node_name="top", transform=_moved(0.0, 0.72, 0.0))
+    leg = _pbr(trimesh.creation.cylinder(radius=0.035, height=0.69, sections=24),
+               (0.08, 0.08, 0.09), 0.0, 0.4)  # fmt: skip
+    upright = trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0])
+    scene.add_geometry(leg, geom_name="leg", node_name="leg0",
+                       transform=_moved(-0.72, 0.345, -0.37) @ upright)  # fmt: skip
+    for i, (x, z) in enumerate([(0.72, -0.37), (-0.72, 0.37), (0.72, 0.37)], start=1):
+        # the other three nodes name the same mesh: one glTF mesh placed four times
+        scene.graph.update(frame_to=f"leg{i}", geometry="leg",
+                           matrix=_moved(x, 0.345, z) @ upright)  # fmt: skip
+    metal = _pbr(trimesh.creation.icosphere(subdivisions=3, radius=0.16), (0.95, 0.8, 0.5), 1.0,
+                 0.05)  # fmt: skip
+    scene.add_geometry(metal, node_name="metal_ball", transform=_moved(-0.45, 0.91, 0.1))
+    ring = _pbr(torus(), (0.7, 0.05, 0.05), 0.0, 0.2)
+    ring.apply_scale(0.25)
+    scene.add_geometry(ring, node_name="torus", transform=_moved(0.0, 0.955, -0.22)
+                       @ trimesh.transformations.rotation_matrix(0.5, [0, 1, 0]))  # fmt: skip
+    ball = painted_ball()
+    ball.apply_scale(0.3)
+    scene.add_geometry(ball, node_name="painted_ball", transform=_moved(0.5, 0.9, 0.2))
+    cube = textured_gltf_cube(texture)
+    cube.apply_scale(0.22)
+    scene.add_geometry(cube, node_name="cube", transform=_moved(0.45, 0.86, -0.25)
+                       @ trimesh.transformations.rotation_matrix(0.6, [0, 1, 0]))  # fmt: skip
+    return scene
+
+
+def _moved(x: float, y: float, z: float) -> np.ndarray:
+    return trimesh.transformations.translation_matrix([x, y, z])
+
+
 def main(directory: Path = HERE) -> None:
     """Write every asset into ``directory`` (this script's own by default)."""
     torus().export(directory / "torus.obj")
@@ -386,6 +433,7 @@ def main(directory: Path = HERE) -> None:
     write_zero_normals_obj(directory / "zero_normals.obj")
     node_scaled().export(directory / "node_scaled.glb")
     (directory / "gltf_materials.glb").write_bytes(gltf_materials_gallery())
+    still_life(texture).export(directory / "still_life.glb")
 
 
 if __name__ == "__main__":

@@ -23,7 +23,8 @@ import time
 
 import numpy as np
 
-from embree_rt.integrator import DEFAULT_BATCH_SIZE, Renderer
+from embree_rt import Renderer
+from embree_rt.integrator import DEFAULT_BATCH_SIZE
 from embree_rt.scene import random_field
 
 
@@ -59,12 +60,13 @@ class RecordingGeometry:
 
 def record_queries(renderer: Renderer, image: dict) -> list:
     """Every ray query one render of ``image`` makes."""
-    geometry = renderer.geometry
-    renderer.geometry = recorder = RecordingGeometry(geometry)
+    integrator = renderer.integrator
+    geometry = integrator.geometry
+    integrator.geometry = recorder = RecordingGeometry(geometry)
     try:
         renderer.render(**image)
     finally:
-        renderer.geometry = geometry
+        integrator.geometry = geometry
     return recorder.log
 
 
@@ -72,8 +74,8 @@ def replay(renderer: Renderer, log: list, threads: int | None = None) -> float:
     """Seconds the bare BVH takes to answer every query of ``log`` again (Embree's traversal
     and nothing else: no hit records, no floor plane), on ``threads`` threads (by default as
     many as the render had)."""
-    bvh = renderer.geometry.bvh
-    bvh.threads = renderer.workers if threads is None else threads
+    bvh = renderer.integrator.geometry.bvh
+    bvh.threads = renderer.integrator.workers if threads is None else threads
     # Compile and warm the kernels this thread count uses, outside the timing.
     # (numba compiles per memory layout: these are Fortran-ordered (n, 3) views, as logged.)
     _, origins, directions, _, _ = log[0]
@@ -103,19 +105,17 @@ def run(count: int, args: argparse.Namespace) -> dict:
     with Renderer(scene, threads=args.threads, batch_size=args.batch_size) as renderer:
         # Compile and warm the kernels on a tiny image so the timed render measures rendering.
         renderer.render(width=16, height=9, spp=1, max_depth=args.max_depth, seed=args.seed)
-        renderer.stats.rays = dict.fromkeys(renderer.stats.rays, 0)
-        renderer.render(**image)
+        stats = renderer.render(**image).stats
         peak_rss = peak_rss_mb()  # before the log below holds every ray in memory
-        rays_by_kind = dict(renderer.stats.rays)
-        render_s = [renderer.stats.render_s]
+        rays_by_kind = dict(stats.rays)
+        render_s = [stats.render_s]
         # Once more, logging every query (not timed).
         log = record_queries(renderer, image)
         # Timed renders, each followed at once by a replay of its rays: the machine's load
         # changes slowly, so each pair's ratio is a fair one even when the load does change.
         raw_s = []
         for _ in range(args.repeat):
-            renderer.render(**image)
-            render_s.append(renderer.stats.render_s)
+            render_s.append(renderer.render(**image).stats.render_s)
             raw_s.append(replay(renderer, log))
         efficiency = float(np.median(np.divide(raw_s, render_s[1:])))
         best_s = min(render_s)
@@ -126,9 +126,9 @@ def run(count: int, args: argparse.Namespace) -> dict:
             "height": args.height,
             "spp": args.spp,
             "max_depth": args.max_depth,
-            "threads": renderer.workers,
-            "batch_size": renderer.batch_size,
-            "build_s": round(renderer.stats.build_s, 4),
+            "threads": renderer.integrator.workers,
+            "batch_size": renderer.integrator.batch_size,
+            "build_s": round(stats.build_s, 4),
             "render_s": round(best_s, 3),
             "render_s_all": [round(x, 3) for x in render_s],
             "rays": rays_by_kind,

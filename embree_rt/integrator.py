@@ -9,8 +9,6 @@ The seed article's recursion ``color = local·(1−r) + r·trace(reflected)`` (a
 
 from __future__ import annotations
 
-import os
-import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -18,15 +16,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from embree_rt import budget, shading
-from embree_rt.batches import batch_ranges, ordered_results
-from embree_rt.camera import CameraFrame, camera_frame, sample_rays, tiled_samples
+from embree_rt import shading
+from embree_rt.batches import batch_ranges, ordered_results, worker_count
+from embree_rt.camera import CameraFrame, sample_rays, tiled_samples
 from embree_rt.columns import column_max, scatter, scatter_add
-from embree_rt.embree import retain_freed_memory
+from embree_rt.compiled import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
-from embree_rt.geometry import SceneGeometry, SurfaceHits, sphere_kind
+from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.materials import MaterialTable, shading_shares
-from embree_rt.scene.model import Camera, Scene
+from embree_rt.scene.model import Scene
 
 DEFAULT_BATCH_SIZE = 1 << 18
 # A child whose every channel weighs less than half an 8-bit step cannot change the picture.
@@ -100,8 +98,10 @@ def surface_offset(scale: np.ndarray) -> np.ndarray:
     return (np.float32(RELATIVE_OFFSET) * (np.float32(1.0) + scale)).astype(np.float32, copy=False)
 
 
-class Renderer:
-    """Renders one scene: builds its BVH once, then ``render()`` traces the image in batches."""
+class Integrator:
+    """The Whitted integrator of one scene: builds its BVH once, then traces and shades batches
+    of camera samples (``render_image``, ``trace_batch``, ``trace_pixels``). ``embree_rt.Renderer``
+    is the public face above it; Dask workers and the browser preview call it directly."""
 
     def __init__(
         self,
@@ -115,16 +115,13 @@ class Renderer:
             raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
         self.scene = scene
         self.batch_size = int(batch_size)
-        if threads is not None and (int(threads) != threads or threads < 1):
-            raise ValueError(f"threads: must be a positive integer, got {threads!r}")
         # Parallel over batches: each worker traces and shades its own batch, calling Embree
         # through single-threaded kernels, so NumPy shading and traversal fill every core.
-        self.workers = int(threads) if threads is not None else (os.cpu_count() or 1)
-        self.stats = RenderStats()
+        self.workers = worker_count(threads)
         retain_freed_memory()
         start = time.perf_counter()
         self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
-        self.stats.build_s = time.perf_counter() - start
+        self.build_s = time.perf_counter() - start
         # Material ids are the scene's materials in order, then the floor's.
         self.materials = table = MaterialTable.from_materials(
             [*scene.materials.values(), *([scene.floor.material] if scene.floor else [])]
@@ -162,30 +159,30 @@ class Renderer:
     def close(self) -> None:
         self.geometry.close()
 
-    def __enter__(self) -> Renderer:
+    def __enter__(self) -> Integrator:
         return self
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
 
-    def render(
+    def render_image(
         self,
+        frame: CameraFrame,
         *,
-        width: int,
-        height: int,
         spp: int,
         max_depth: int,
         seed: int,
-        progress: Callable[[int, int], None] | None = None,
-        camera: Camera | None = None,
-    ) -> np.ndarray:
-        """The (height, width, 3) float32 linear image. ``progress(done, total)`` counts samples;
-        ``camera`` (default the scene's) lets one BVH serve every frame of a camera path."""
+        progress: Callable[[int, int, RenderStats], None] | None = None,
+    ) -> tuple[np.ndarray, RenderStats]:
+        """The (height, width, 3) float32 linear image of the camera ``frame`` (its size is the
+        image's), and what tracing it took (``build_s`` is the BVH's, built once for every
+        image). ``progress(done, total, stats so far)`` counts samples."""
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
         if max_depth < 0:
             raise ValueError(f"max_depth: must be >= 0, got {max_depth}")
-        frame = camera_frame(self.scene.camera if camera is None else camera, width, height)
+        width, height = frame.width, frame.height
+        stats = RenderStats(build_s=self.build_s)
         film = Film(width, height)
         total = width * height * spp
         # Batches hold whole pixels and each batch sums into its own block, in ray order, so
@@ -209,15 +206,15 @@ class Renderer:
             for work in results:
                 film.add_block(work.block)
                 for kind, n in work.rays.items():
-                    self.stats.rays[kind] += n
+                    stats.rays[kind] += n
                 done += work.block.count * spp
-                self.stats.render_s = time.perf_counter() - began
+                stats.render_s = time.perf_counter() - began
                 if progress is not None:
-                    progress(done, total)
+                    progress(done, total, stats)
         finally:
             # On Ctrl-C or an error, drop the batches not yet started instead of finishing them.
             pool.shutdown(wait=True, cancel_futures=True)
-        return film.image(spp)
+        return film.image(spp), stats
 
     def trace_pixels(
         self, frame: CameraFrame, spp: int, seed: int, sample: int, first: int, count: int,
@@ -404,14 +401,9 @@ class Renderer:
             return []
         d_glass = np.take(rays.directions, glass, axis=1)
         normal_glass = np.take(normal, glass, axis=1)
-        ior = table.ior[material[glass]]
-        entering_glass = entering[glass]
-        n1 = np.where(entering_glass, np.float32(1.0), ior)
-        n2 = np.where(entering_glass, ior, np.float32(1.0))
-        refracted, total_internal = shading.refract(d_glass, normal_glass, n1 / n2)
-        cos_incident = np.clip(-shading.dot(d_glass, normal_glass), 0.0, 1.0)
-        fresnel = shading.fresnel_schlick(cos_incident, n1, n2)
-        fresnel[total_internal] = 1.0
+        refracted, _, fresnel = shading.dielectric_split(
+            d_glass, normal_glass, entering[glass], table.ior[material[glass]]
+        )
         reflect_share[glass] += transparency[glass] * fresnel
         # Glass tints what passes through it (the green marble), not what it reflects.
         weight = np.take(rays.weight, glass, axis=1)
@@ -512,80 +504,3 @@ class Renderer:
                 ),
             )
 
-
-def render(
-    scene: Scene,
-    *,
-    width: int | None = None,
-    height: int | None = None,
-    spp: int | None = None,
-    max_depth: int | None = None,
-    seed: int | None = None,
-    threads: int | None = None,
-    spheres: str = "analytic",
-    batch_size: int = DEFAULT_BATCH_SIZE,
-    quiet: bool = True,
-    stats: RenderStats | None = None,
-    aovs: list[str] | tuple[str, ...] | None = None,
-) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Render ``scene`` to a (height, width, 3) float32 linear image.
-
-    Arguments left as None come from ``scene.render``. With ``quiet=False`` a progress bar runs
-    on stderr (when it is a terminal). Pass a ``RenderStats`` to receive ray counts and timings.
-    With ``aovs`` (names from ``embree_rt.aovs.AOV_NAMES``) it returns the image, bitwise the
-    same, and a dict of those AOVs (``embree_rt.aovs.render_aovs``).
-    """
-    if aovs is not None:
-        from embree_rt.aovs import aov_bytes, check_aov_names
-
-        aovs = check_aov_names(aovs)
-    settings = scene.render
-    width = settings.width if width is None else width
-    height = settings.height if height is None else height
-    spp = settings.spp if spp is None else spp
-    max_depth = settings.max_depth if max_depth is None else max_depth
-    seed = settings.seed if seed is None else seed
-    # Refuse what cannot fit before building or allocating anything (MemoryBudgetError).
-    count = len(scene.sphere_radii)
-    needs = budget.render_needs(
-        count, sphere_kind(count, spheres), width, height, spp, batch_size,
-        workers=threads or os.cpu_count() or 1,
-    )  # fmt: skip
-    if aovs:
-        size, text = needs["image"]
-        needs["image"] = (size + aov_bytes(width, height, aovs), f"{text} with AOVs")
-    budget.require(needs)
-    with Renderer(scene, spheres=spheres, threads=threads, batch_size=batch_size) as renderer:
-        bar = None
-        if not quiet and sys.stderr.isatty():
-            from tqdm import tqdm
-
-            bar = tqdm(total=width * height * spp, unit="sample", unit_scale=True, file=sys.stderr)
-
-        def progress(done: int, total: int) -> None:
-            if bar is not None:
-                bar.update(done - bar.n)
-                bar.set_postfix_str(f"{renderer.stats.rays_per_s / 1e6:.1f} Mrays/s", refresh=False)
-
-        try:
-            image = renderer.render(
-                width=width, height=height, spp=spp, max_depth=max_depth, seed=seed,
-                progress=progress,
-            )  # fmt: skip
-        finally:
-            if bar is not None:
-                bar.close()
-        if stats is not None:
-            stats.rays = dict(renderer.stats.rays)
-            stats.build_s = renderer.stats.build_s
-            stats.render_s = renderer.stats.render_s
-        if aovs is None:
-            return image
-        from embree_rt.aovs import render_aovs
-
-        began = time.perf_counter()
-        layers = render_aovs(renderer, width=width, height=height, names=aovs)
-        if stats is not None:
-            stats.rays["aov"] = width * height  # one pixel-centre ray per pixel
-            stats.render_s += time.perf_counter() - began
-    return image, layers

@@ -59,6 +59,26 @@ def refract(d: np.ndarray, n: np.ndarray, eta: float | np.ndarray) -> tuple[np.n
     return normalize(directions), total_internal
 
 
+def dielectric_split(
+    d: np.ndarray, n: np.ndarray, entering: np.ndarray, ior: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where light meets a dielectric of index ``ior`` (scalar or (k,)) from outside (index 1):
+    (3, k) unit directions ``d`` through (3, k) unit normals ``n`` turned towards the rays,
+    ``entering`` (k,) bool whether each ray goes into the dielectric (else leaves it).
+
+    Returns the (3, k) float32 refracted directions (the mirror ones on total internal
+    reflection, as ``refract``), the (k,) bool total internal reflection, and the (k,) float32
+    Fresnel reflectance (``fresnel_schlick``; exactly 1 on total internal reflection): the share
+    that reflects, the rest refracting."""
+    n1 = np.where(entering, np.float32(1.0), ior)
+    n2 = np.where(entering, ior, np.float32(1.0))
+    refracted, total_internal = refract(d, n, n1 / n2)
+    cos_incident = np.clip(-dot(d, n), 0.0, 1.0)
+    fresnel = fresnel_schlick(cos_incident, n1, n2)
+    fresnel[total_internal] = 1.0
+    return refracted, total_internal, fresnel
+
+
 def fresnel_schlick(
     cos_incident: np.ndarray, n1: float | np.ndarray, n2: float | np.ndarray
 ) -> np.ndarray:

@@ -1,5 +1,5 @@
 """The all-hits query's coherent tracing order and its parallel passes change no answer: rays
-traced sorted (embree_rt.embree.local_frame, ray_order.segment_key) against rays traced as
+traced sorted (embree_rt.trimesh_ray.local_frame, ray_order.segment_key) against rays traced as
 given, the settling, float64 and finishing passes on one thread against two, and the keys
 against their definition."""
 
@@ -11,13 +11,13 @@ import trimesh
 from numba import njit
 from trimesh.constants import tol
 
-from embree_rt import trimesh_ray
-from embree_rt.embree.depth_order import finished_hits
-from embree_rt.embree.edge_hits import decided_hits
-from embree_rt.embree.local_frame import local_rays, ordered_local_rays
-from embree_rt.embree.ray_order import box_cells, segment_key
-from embree_rt.embree.settled_hits import settled_hits
-from embree_rt.trimesh_ray import RayMeshIntersector
+from embree_rt.trimesh_ray import RayMeshIntersector, intersector, local_scene
+from embree_rt.trimesh_ray.decided_hits import decided_hits
+from embree_rt.trimesh_ray.finished_hits import finished_hits
+from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
+from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
+from embree_rt.trimesh_ray.ray_order import box_cells, segment_key
+from embree_rt.trimesh_ray.settled_hits import settled_hits
 
 
 @njit(cache=False)
@@ -97,13 +97,13 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
     inner.apply_scale(0.5 * scale)
     mesh = trimesh.util.concatenate([mesh, inner])
     origins, directions = _hard_rays(mesh, scale, 1400, seed=11)
-    monkeypatch.setattr(trimesh_ray, "_REORDER_FACES", 0)
+    monkeypatch.setattr(local_scene, "REORDER_FACES", 0)
     ordered = RayMeshIntersector(mesh)
     assert ordered._scene.bounds is not None  # built now (lazily), while every mesh is big
-    monkeypatch.setattr(trimesh_ray, "_REORDER_FACES", 1 << 40)
+    monkeypatch.setattr(local_scene, "REORDER_FACES", 1 << 40)
     given = RayMeshIntersector(mesh)
     assert given._scene.bounds is None
-    monkeypatch.setattr(trimesh_ray, "_FIRST_ROOM", 2)  # overflowing rays traced again
+    monkeypatch.setattr(intersector, "FIRST_ROOM", 2)  # overflowing rays traced again
     for kwargs in ({}, {"max_hits": 3}, {"tnear": 0.0}, {"return_locations": True}):
         a = ordered.intersects_id(origins, directions, **kwargs)
         b = given.intersects_id(origins, directions, **kwargs)
@@ -114,7 +114,7 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
 
 def test_non_finite_rays_traced_in_order_are_refused_naming_their_row(monkeypatch):
     """The row as given, not its place in the tracing order (which sorts a NaN ray first)."""
-    monkeypatch.setattr(trimesh_ray, "_REORDER_FACES", 0)
+    monkeypatch.setattr(local_scene, "REORDER_FACES", 0)
     ours = RayMeshIntersector(trimesh.creation.icosphere(subdivisions=2))
     origins = np.tile([0.0, 0.0, -5.0], (3000, 1))
     directions = np.tile([0.0, 0.0, 1.0], (3000, 1))
@@ -140,18 +140,16 @@ def test_settled_decided_and_finished_hits_are_the_same_on_one_thread_and_two():
     near = 16 * np.finfo(np.float32).eps * magnitude / scene.scale
     result = scene.bvh.all_hits(local_origins, local_directions,
                                 (near * scene.scale * 0.5).astype(np.float32), np.inf, 4)
-    answers = [settled_hits(result, True, magnitude, near, False, origins, directions,
-                            scene.planes, scene.min_altitude,
-                            scene.floor_altitude, 8 * np.finfo(np.float32).eps, 1e-3, 1e-5,
-                            threads) for threads in (1, 2)]  # fmt: skip
+    rays = world_rays(origins, directions, magnitude, near, False)
+    rules = tolerances(8 * np.finfo(np.float32).eps, 1e-3, 1e-5, tol.zero)
+    answers = [settled_hits(result, True, rays, scene.tables, rules, threads)
+               for threads in (1, 2)]  # fmt: skip
     assert answers[0][3].sum() > 100  # messy rays (left to the float64 pass) in the batch
     assert len(answers[0][0]) > len(origins)
     for x, y in zip(*answers, strict=True):
         np.testing.assert_array_equal(x, y)
     messy = np.flatnonzero(answers[0][3])
-    decided = [decided_hits(messy, messy, result, magnitude, near, False, origins, directions,
-                            scene.planes, scene.triangles, scene.min_altitude,
-                            8 * np.finfo(np.float32).eps, 1e-3, 1e-5, tol.zero, scene.fans(),
+    decided = [decided_hits(messy, messy, result, rays, scene.tables, rules, scene.fans(),
                             threads) for threads in (1, 2)]  # fmt: skip
     assert len(decided[0][0]) > len(messy)
     for x, y in zip(*decided, strict=True):

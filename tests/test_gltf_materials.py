@@ -73,7 +73,7 @@ def scene_text(meshes: list[str], *, camera_z: float = 6.0, depth: int = 4, extr
 def render_text(tmp_path: Path, text: str, name: str = "scene.toml") -> np.ndarray:
     path = tmp_path / name
     path.write_text(text, encoding="utf-8")
-    return rt.render(rt.load_scene(path)).astype(np.float64)
+    return rt.render(rt.load_scene(path)).image.astype(np.float64)
 
 
 def rgb_image(codes) -> Image.Image:
@@ -166,7 +166,7 @@ def test_new_material_keys_survive_saving_and_loading(tmp_path: Path) -> None:
     tinted = rt.preset("glass", attenuation_color=(0.5, 0.8, 1.0), attenuation_distance=0.3)
     scene.add_material("glow", glow)
     scene.add_material("tinted", tinted)
-    scene.save(tmp_path / "saved.toml")
+    rt.save_scene(scene, tmp_path / "saved.toml")
     loaded = rt.load_scene(tmp_path / "saved.toml")
     assert loaded.materials["glow"] == glow and loaded.materials["tinted"] == tinted
     assert "emission" not in (tmp_path / "saved.toml").read_text().split("[materials.tinted]")[1]
@@ -383,7 +383,7 @@ reflectivity = 0.0
             text += "translate = [0.0, 1.0, 0.0]\n"
         path = tmp_path / f"shadow{len(meshes)}.toml"
         path.write_text(text, encoding="utf-8")
-        return rt.render(rt.load_scene(path)).astype(np.float64)
+        return rt.render(rt.load_scene(path)).image.astype(np.float64)
 
     bare, shaded = render([]), render([glb])
     # A quad point (x, 1, z) shadows the floor at (40/39) (x, 0, z - 1) (seen from the light);
@@ -578,7 +578,7 @@ def test_a_normal_map_turns_the_shading_normal_by_its_angle(tmp_path: Path, tang
     glb = write_glb(tmp_path / "bumpy.glb", writer)
     path = tmp_path / "bumpy.toml"
     path.write_text(scene_text([glb]), encoding="utf-8")
-    _, layers = rt.render(rt.load_scene(path), aovs=["normal"])
+    layers = rt.render(rt.load_scene(path), aovs=["normal"]).aovs
     got = layers["normal"][SIZE // 2, SIZE // 2].astype(np.float64)
     t_axis = np.array([1.0, 0, 0]) if tangent is None else np.array(tangent[:3])
     b_axis = np.cross([0.0, 0, 1], t_axis)

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import carray, cfunc, njit, types
 
-from embree_rt.embree import pointers
+from embree_rt.compiled import pointers
 from embree_rt.textures import REPEAT, reduce_coordinate, wrap_texel
 
 # RTCFilterFunctionNArguments in 8-byte words

@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import carray, cfunc, njit, types
 
-from embree_rt.embree import pointers
+from embree_rt.compiled import pointers
 from embree_rt.embree.kernels import (
     HIT_GEOM_ID,
     HIT_INST_ID,
@@ -127,8 +127,17 @@ def _unpack(address):
     valid = carray(_ints(args[0]), n)
     user = carray(_words64(args[1]), 2)
     sphere = carray(_floats(user[0] + 16 * slot), 4)
-    return (args, n, user, slot, valid, np.float64(sphere[0]), np.float64(sphere[1]),
-            np.float64(sphere[2]), np.float64(sphere[3]))  # fmt: skip
+    return (
+        args,
+        n,
+        user,
+        slot,
+        valid,
+        np.float64(sphere[0]),
+        np.float64(sphere[1]),
+        np.float64(sphere[2]),
+        np.float64(sphere[3]),
+    )
 
 
 @cfunc(_CALLBACK, nopython=True, cache=True)

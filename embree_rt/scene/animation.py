@@ -19,14 +19,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # the model imports this module: no import of the model at run time
-    from embree_rt.scene.model import Camera
-
-Vec3 = tuple[float, float, float]
+from embree_rt.camera import Camera, Vec3
 
 
 @dataclass

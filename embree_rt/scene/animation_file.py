@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from embree_rt.camera import Camera, camera_problem
 from embree_rt.scene.animation import Animation, Keyframe, frame_cameras
 from embree_rt.scene.fields import Table
-from embree_rt.scene.model import Camera, camera_problem
 
 
 def read_animation(table: Table, camera: Camera) -> Animation:
     """The ``[animation]`` table, checked: every frame's camera must define an image (the rule
-    of ``model.camera_problem``). Raises ``SceneError`` naming the key."""
+    of ``camera.camera_problem``). Raises ``SceneError`` naming the key."""
     table.require("frames")
     frames = table.integer("frames", low=1)
     keyframe_tables = table.tables("keyframes")

@@ -24,3 +24,26 @@ def unknown_key_message(key: str, known: Iterable[str]) -> str:
     close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
     return f"unknown key{hint}; known keys: {', '.join(sorted(known))}"
+
+
+class InputWarning(UserWarning):
+    """Something a file asks for that embree_rt renders differently or leaves out, said in one
+    line (``str()``) naming the file and the key: the picture is still made."""
+
+
+def warn_input(message: str) -> None:
+    """Issue ``message`` as an ``InputWarning`` (the command prints it as one line)."""
+    import warnings
+
+    warnings.warn(InputWarning(message), stacklevel=3)
+
+
+class MeshFileError(ValueError):
+    """A problem inside a mesh file, before it is known which scene file and key named it:
+    ``key`` is the place in the mesh file (``buffers[0].uri``, ``element 'tristrips'``, or
+    "(file)"), ``problem`` what is wrong there. The loader reports it as a ``SceneError``."""
+
+    def __init__(self, key: str, problem: str) -> None:
+        self.key = key
+        self.problem = problem
+        super().__init__(f"{key}: {problem}")

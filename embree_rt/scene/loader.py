@@ -16,20 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
+from embree_rt.camera import Camera, camera_problem
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.archives import read_archive
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
-from embree_rt.scene.model import (
-    Background,
-    Camera,
-    Floor,
-    PointLight,
-    RenderSettings,
-    Scene,
-    camera_problem,
-)
+from embree_rt.scene.model import Background, Floor, PointLight, RenderSettings, Scene
 from embree_rt.scene.random_field import (
     FieldParameterError,
     FieldPlan,
@@ -37,7 +30,7 @@ from embree_rt.scene.random_field import (
     field_scene,
     plan_field,
 )
-from embree_rt.transforms import affine_problem
+from embree_rt.transforms import affine_array_problem, affine_problem
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -161,21 +154,19 @@ class SceneReader:
         # Step 2: the files the scene names, each checked before anything is generated.
         arrays = [self._read_sphere_array(entry) for entry in self.sphere_arrays]
         placements = [self._read_placements(entry) for entry in self.instances]
-        parts: dict[Path, list] = {}
-        for entry in self.instances:
-            if entry.path not in parts:
-                from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
+        models: dict[Path, object] = {}  # one load per file: its placements share the meshes
+        for entry in [*self.instances, *self.meshes]:
+            if entry.path not in models:
+                from embree_rt.scene.meshes import load_model  # trimesh: ~1 s to import
 
-                parts[entry.path] = load_mesh_parts(entry.path, self.path, entry.key)
-            for _, node_transform in parts[entry.path]:
+                models[entry.path] = load_model(entry.path, self.path, entry.key)
+        for entry in self.instances:
+            for _, node_transform in models[entry.path].every_placement():
                 if (problem := affine_problem(node_transform)) is not None:
                     raise SceneError(self.path, entry.key, f"{entry.path}: a node {problem}")
         for entry in self.meshes:
-            if entry.path not in parts:  # one load per file: its placements share the Trimesh
-                from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
-
-                parts[entry.path] = load_mesh_parts(entry.path, self.path, entry.key)
-            for _, node_transform in parts[entry.path]:
+            model = models[entry.path]
+            for _, node_transform in model.parts:
                 if np.array_equal(node_transform, np.eye(4)):
                     continue  # the placement alone, checked when it was read
                 if (problem := affine_problem(node_transform)) is not None:
@@ -184,6 +175,10 @@ class SceneReader:
                     raise SceneError(
                         self.path, entry.placement_key, f"with the file's node transforms {problem}"
                     )
+            for _, transforms in model.instanced:
+                if (problem := affine_array_problem(entry.placement @ transforms)) is not None:
+                    raise SceneError(self.path, entry.placement_key, f"with the file's "
+                                     f"EXT_mesh_gpu_instancing copy {problem[0]}: {problem[1]}")
         # Step 3: build.
         if self.field is not None:
             add_field_spheres(scene, self.field)
@@ -193,16 +188,20 @@ class SceneReader:
         for centers, radii, materials in arrays:
             scene.add_spheres(centers, radii, materials)
         for entry in self.meshes:
-            for mesh, node_transform in parts[entry.path]:
+            model = models[entry.path]
+            for mesh, node_transform in model.parts:
                 # The node's own transform first, then the user's placement of the whole file.
                 scene.add_mesh(mesh, entry.material, entry.placement @ node_transform, entry.smooth)
+            for mesh, transforms in model.instanced:
+                scene.add_instances(mesh, entry.placement @ transforms, entry.material,
+                                    entry.smooth)  # fmt: skip
         if self.instances:
             from embree_rt.scene.instances import mesh_from_parts
 
             baked: dict[Path, object] = {}  # one mesh per file: entries sharing it share a child
             for entry, (transforms, materials) in zip(self.instances, placements, strict=True):
                 if entry.path not in baked:
-                    baked[entry.path] = mesh_from_parts(parts[entry.path])
+                    baked[entry.path] = mesh_from_parts(models[entry.path].every_placement())
                 scene.add_instances(baked[entry.path], transforms,
                                     entry.material if materials is None else materials,
                                     entry.smooth)  # fmt: skip

@@ -4,21 +4,25 @@ and its per-point colours (base-colour texture, vertex or face colours)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import io
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
 from embree_rt.materials import Material
-from embree_rt.scene.errors import SceneError
+from embree_rt.scene.errors import MeshFileError, SceneError, warn_input
+from embree_rt.scene.gltf import MESH_INDEX_TAG, FileCamera, FileLight, PreparedGltf, prepare_gltf
 from embree_rt.scene.gltf_materials import (
     LOOKS_KEY,
     GltfLooks,
     attach_gltf_looks,
     metallic_roughness_material,
-    warn,
 )
+from embree_rt.scene.mesh_companions import candidate_paths
+from embree_rt.scene.obj import check_obj_files
+from embree_rt.scene.ply import with_strips
 from embree_rt.textures import DEFAULT_SAMPLER, Sampler, texels_from_image
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -43,35 +47,109 @@ def mesh_parts(
     return [(mesh, transform) for mesh, transform in parts if len(mesh.faces)]
 
 
-def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
-    """The meshes in ``path`` with their (4, 4) float64 node transforms (identity for a plain
-    mesh; a multi-node glTF keeps one part per node). Errors name the scene ``file`` and ``key``."""
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise SceneError(
-            file, key, f"{path}: unsupported mesh format; use one of {', '.join(MESH_SUFFIXES)}"
-        )
+@dataclass
+class LoadedModel:
+    """A mesh file as embree_rt reads it.
+
+    ``parts``: (mesh, (4, 4) float64 node transform) per placed mesh (``mesh_parts``);
+    ``instanced``: (mesh, (n, 4, 4) float64 transforms) per triangle primitive of each glTF node
+    placed by ``EXT_mesh_gpu_instancing``; ``camera`` and ``lights``: a glTF's first camera and
+    its ``KHR_lights_punctual`` lights, as the file places them (``embree_rt.scene.gltf``).
+    """
+
+    parts: list[tuple[trimesh.Trimesh, np.ndarray]]
+    instanced: list[tuple[trimesh.Trimesh, np.ndarray]] = field(default_factory=list)
+    camera: FileCamera | None = None
+    lights: list[FileLight] = field(default_factory=list)
+
+    def meshes(self) -> list[trimesh.Trimesh]:
+        """Every distinct mesh of the file, placed or instanced, in order."""
+        found = [mesh for mesh, _ in self.parts] + [mesh for mesh, _ in self.instanced]
+        return list({id(mesh): mesh for mesh in found}.values())
+
+    def every_placement(self) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
+        """``parts``, then each instanced copy as a part of its own (mesh, (4, 4) float64)."""
+        copies = [(mesh, matrix) for mesh, transforms in self.instanced for matrix in transforms]
+        return self.parts + copies
+
+
+class _NamesAsWritten(trimesh.resolvers.FilePathResolver):
+    """trimesh's resolver for the files a mesh file names, looking where
+    ``mesh_companions.candidate_paths`` says (Windows separators, URI escapes, bare names), as
+    Blender and assimp do; a name may lead outside the mesh's directory (``../textures``)."""
+
+    def get(self, name: str) -> bytes:
+        for path in candidate_paths(Path(self.parent), name):
+            if path.is_file():
+                return path.read_bytes()
+        raise FileNotFoundError(name)
+
+
+def read_model(path: Path) -> LoadedModel:
+    """The meshes of the file at ``path`` (see ``LoadedModel``), checked: finite vertices,
+    faces that index existing vertices, at least one triangle. Raises ``MeshFileError``;
+    what it renders differently or leaves out is an ``InputWarning`` line."""
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise MeshFileError("(file)", f"unsupported mesh format; use one of "
+                            f"{', '.join(MESH_SUFFIXES)}")  # fmt: skip
     if not path.is_file():
-        raise SceneError(file, key, f"{path}: no such file")
+        raise MeshFileError("(file)", "no such file")
+    prepared = prepare_gltf(path) if suffix in (".glb", ".gltf") else PreparedGltf()
+    if suffix == ".obj":
+        check_obj_files(path)
+    resolver = _NamesAsWritten(str(path), allow_anywhere=True)
     try:
-        loaded = trimesh.load(str(path), process=False)
+        if prepared.data is not None:
+            loaded = trimesh.load(io.BytesIO(prepared.data), file_type=suffix[1:],
+                                  resolver=resolver, process=False)  # fmt: skip
+        else:
+            loaded = trimesh.load(str(path), resolver=resolver, process=False)
     except Exception as error:  # trimesh raises many kinds for a file it cannot parse
-        raise SceneError(file, key, f"{path}: cannot read mesh: {error}") from None
-    if path.suffix.lower() in (".glb", ".gltf"):
+        raise MeshFileError("(file)", f"cannot read mesh: {error}") from None
+    if suffix == ".ply":
+        loaded = with_strips(loaded)
+    if suffix in (".glb", ".gltf"):
         read_gltf_looks(path, loaded)
     parts = mesh_parts(loaded) if isinstance(loaded, trimesh.Trimesh | trimesh.Scene) else []
-    if not parts:
-        raise SceneError(file, key, f"{path}: the mesh has no triangles")
-    for mesh, _ in parts:
+    instanced = []
+    for mesh_index, transforms, _ in prepared.instanced:
+        for geometry in loaded.geometry.values():
+            if (isinstance(geometry, trimesh.Trimesh) and len(geometry.faces)
+                    and geometry.metadata.get(MESH_INDEX_TAG) == mesh_index):  # fmt: skip
+                instanced.append((geometry, transforms))
+    model = LoadedModel(parts, instanced, prepared.camera, prepared.lights)
+    if not model.meshes():
+        raise MeshFileError("(file)", "the mesh has no triangles")
+    for mesh in model.meshes():
         if not np.isfinite(mesh.vertices).all():
-            raise SceneError(file, key, f"{path}: vertices contain NaN or inf")
+            raise MeshFileError("(file)", "vertices contain NaN or inf")
         # trimesh loads a face naming a missing vertex without complaint (PLY); catch it here,
-        # where the message can name the scene file and key, not later in the BVH build.
+        # where the message can name the file, not later in the BVH build.
         faces = np.asarray(mesh.faces)
         if faces.min() < 0 or faces.max() >= len(mesh.vertices):
-            raise SceneError(
-                file, key, f"{path}: a face indexes a vertex outside [0, {len(mesh.vertices)})"
-            )
-    return parts
+            raise MeshFileError("(file)", f"a face indexes a vertex outside "
+                                f"[0, {len(mesh.vertices)})")  # fmt: skip
+    return model
+
+
+def load_model(path: Path, file: object = None, key: str | None = None) -> LoadedModel:
+    """``read_model(path)`` with its problems raised as ``SceneError``: naming the scene
+    ``file`` and its ``key`` that named the mesh, or, without them, the mesh file itself."""
+    try:
+        return read_model(path)
+    except MeshFileError as error:
+        if file is None:
+            raise SceneError(path, error.key, error.problem) from None
+        where = "" if error.key == "(file)" else f"{error.key}: "
+        raise SceneError(file, key, f"{path}: {where}{error.problem}") from None
+
+
+def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
+    """The meshes in ``path`` with their (4, 4) float64 node transforms (identity for a plain
+    mesh; a multi-node glTF keeps one part per node), instanced glTF nodes baked as one part
+    per copy. Errors name the scene ``file`` and ``key``."""
+    return load_model(path, file, key).every_placement()
 
 
 def read_gltf_looks(path: Path, loaded: trimesh.Trimesh | trimesh.Scene) -> None:
@@ -82,8 +160,8 @@ def read_gltf_looks(path: Path, loaded: trimesh.Trimesh | trimesh.Scene) -> None
     try:
         attach_gltf_looks(path, meshes)
     except (OSError, ValueError, KeyError, IndexError, TypeError) as error:
-        warn(f"{path}: glTF materials read as trimesh reads them only "
-             f"({type(error).__name__}: {error})")  # fmt: skip
+        warn_input(f"{path}: glTF materials read as trimesh reads them only "
+                   f"({type(error).__name__}: {error})")  # fmt: skip
 
 
 # -- what a mesh looks like ----------------------------------------------------------------------
@@ -91,6 +169,8 @@ def read_gltf_looks(path: Path, loaded: trimesh.Trimesh | trimesh.Scene) -> None
 # trimesh fills an MTL material's missing ``Kd`` with this grey; beside a ``map_Kd`` texture it
 # is read as no ``Kd`` at all (factor 1), or every such texture would render at 40% brightness.
 _TRIMESH_DEFAULT_RGBA = (102, 102, 102, 255)
+
+
 @dataclass(frozen=True)
 class MeshSurface:
     """The colour a mesh gives each point of its surface, linear RGB.
@@ -126,6 +206,28 @@ def _colors_in_unit_range(colors: np.ndarray) -> np.ndarray:
         colors = colors / float(np.iinfo(colors.dtype).max)
     colors = np.nan_to_num(np.asarray(colors, np.float64)[:, :3], nan=0.0, posinf=1.0)
     return np.clip(colors, 0.0, 1.0)
+
+
+def is_placeholder_material(material: object) -> bool:
+    """Whether ``material`` is the stand-in trimesh gives an OBJ with texture coordinates but
+    no material (a 2x2 grey image read from no file, ``trimesh.visual.material.color_image()``):
+    no material at all, not a texture. A texture read from an MTL records its file name."""
+    if not isinstance(material, trimesh.visual.material.SimpleMaterial):
+        return False
+    image = getattr(material, "image", None)
+    if image is None or "file_path" in getattr(image, "info", {}) or image.size != (2, 2):
+        return False
+    placeholder = np.asarray(trimesh.visual.material.color_image())
+    return np.array_equal(np.asarray(image.convert("RGBA")), placeholder)
+
+
+def _file_material(visual: object) -> object | None:
+    """The material a mesh's file gives it: a TextureVisuals' material, None for none or for
+    trimesh's placeholder."""
+    if not isinstance(visual, trimesh.visual.TextureVisuals):
+        return None
+    material = visual.material
+    return None if material is None or is_placeholder_material(material) else material
 
 
 def _texture_image(material: object):
@@ -164,8 +266,7 @@ def mesh_material(mesh: trimesh.Trimesh) -> Material | None:
     if (looks := mesh.metadata.get(LOOKS_KEY)) is not None:
         return looks.material
     visual = mesh.visual
-    if isinstance(visual, trimesh.visual.TextureVisuals) and visual.material is not None:
-        material = visual.material
+    if (material := _file_material(visual)) is not None:
         color = tuple(float(c) for c in _base_color_factor(material))
         if isinstance(material, trimesh.visual.material.PBRMaterial):
             metallic = 1.0 if material.metallicFactor is None else material.metallicFactor
@@ -191,9 +292,9 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
     factor = np.ones(3)
     texels = uv = vertex_colors = face_colors = None
     if isinstance(visual, trimesh.visual.TextureVisuals):
-        if visual.material is not None:
-            factor = _base_color_factor(visual.material)
-            image = _texture_image(visual.material)
+        if (material := _file_material(visual)) is not None:
+            factor = _base_color_factor(material)
+            image = _texture_image(material)
             coordinates = visual.uv
             if (
                 image is not None

@@ -28,8 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from embree_rt import budget
+from embree_rt.camera import Camera
 from embree_rt.materials import PRESETS, preset
-from embree_rt.scene.model import Camera, PointLight, RenderSettings, Scene
+from embree_rt.scene.model import PointLight, RenderSettings, Scene
 
 HERO_RADIUS = 1.0
 HEROES = (  # (x, z) on the floor, material name; the glass one comes first

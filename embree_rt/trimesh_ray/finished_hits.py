@@ -18,8 +18,8 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.pointers import prefetch
-from embree_rt.embree.work_split import parallel_region, threads_for
+from embree_rt.compiled.pointers import prefetch
+from embree_rt.compiled.work_split import parallel_region, threads_for
 
 _EPS64 = np.finfo(np.float64).eps
 _AHEAD = 16
@@ -36,10 +36,12 @@ def _share_a_vertex(canonical, a, b):
 
 
 @njit(nogil=True, cache=True)
-def _merge_chunk(first_ray, stop_ray, starts, capacity, merge_points, canonical, size,
-                 grouped_tris, grouped_distance, kept):  # fmt: skip
+def _merge_chunk(first_ray, stop_ray, starts, capacity, merge, grouped, kept):
     # each ray's hits at one point merged (kept: the run's lowest triangle, in the run's
-    # place), then cut to `capacity`, in place; `kept` hits per ray
+    # place), then cut to `capacity`, in place; `kept` hits per ray. merge: (merge_points,
+    # canonical, size); grouped: (tris, distance) of the hits grouped by ray
+    merge_points, canonical, size = merge
+    grouped_tris, grouped_distance = grouped
     for r in range(first_ray, stop_ray):
         first, stop = starts[r], starts[r + 1]
         out = first
@@ -49,10 +51,13 @@ def _merge_chunk(first_ray, stop_ray, starts, capacity, merge_points, canonical,
             j = k + 1
             # runs of hits on triangles sharing a vertex position at distances equal to within
             # float64 rounding of the mesh's size are one point
-            while merge_points and j < stop and abs(grouped_distance[j]
-                                                    - grouped_distance[j - 1]) <= (
-                    1e3 * _EPS64 * (abs(grouped_distance[j]) + size)) and _share_a_vertex(
-                    canonical, grouped_tris[j - 1], grouped_tris[j]):  # fmt: skip
+            while (
+                merge_points
+                and j < stop
+                and abs(grouped_distance[j] - grouped_distance[j - 1])
+                <= (1e3 * _EPS64 * (abs(grouped_distance[j]) + size))
+                and _share_a_vertex(canonical, grouped_tris[j - 1], grouped_tris[j])
+            ):
                 if grouped_tris[j] < grouped_tris[best]:
                     best = j
                 j += 1
@@ -64,9 +69,12 @@ def _merge_chunk(first_ray, stop_ray, starts, capacity, merge_points, canonical,
 
 
 @njit(nogil=True, cache=True)
-def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped_tris, grouped_distance,
-                 origins, directions, out_rays, out_tris, locations):  # fmt: skip
-    # rays first_ray .. stop_ray; slots[d]: where this chunk's next hit of depth d goes
+def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped, points, out):
+    # rays first_ray .. stop_ray; slots[d]: where this chunk's next hit of depth d goes.
+    # points: (origins, directions, with_locations); out: (rays, tris, locations)
+    grouped_tris, grouped_distance = grouped
+    origins, directions, _with_locations = points
+    out_rays, out_tris, locations = out
     with_locations = locations.shape[0] > 0
     for r in range(first_ray, stop_ray):
         first = starts[r]
@@ -77,14 +85,20 @@ def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped_tris, grouped
             out_tris[slot] = grouped_tris[first + d]
             if with_locations:
                 for axis in range(3):  # NumPy's origins[r] + directions[r] * distance, unfused
-                    locations[slot, axis] = (origins[r, axis]
-                                             + directions[r, axis] * grouped_distance[first + d])
+                    locations[slot, axis] = (
+                        origins[r, axis] + directions[r, axis] * grouped_distance[first + d]
+                    )
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _finish(rays, tris, distance, order, ray_count, capacity, merge_points, canonical, size,
-            origins, directions, with_locations, starts, cursor, kept, grouped_tris,
-            grouped_distance):  # fmt: skip
+def _finish(parts, order, ray_count, capacity, merge, points, scratch):
+    # parts: (rays, tris, distance); merge: (merge_points, canonical, size); points: (origins,
+    # directions, with_locations); scratch: (starts, cursor, kept, grouped_tris,
+    # grouped_distance)
+    rays, tris, distance = parts
+    with_locations = points[2]
+    starts, cursor, kept, grouped_tris, grouped_distance = scratch
+    grouped = (grouped_tris, grouped_distance)
     reordered = order.shape[0] > 0
     # 1. counting sort by ray; in traced order, the counters of each hit's ray are scattered:
     # fetched _AHEAD hits early, so that their loads overlap
@@ -109,8 +123,9 @@ def _finish(rays, tris, distance, order, ray_count, capacity, merge_points, cano
     # 2. in parallel over chunks of rays: merged and cut, in each ray's own range
     n_chunks = (ray_count + CHUNK - 1) // CHUNK
     for c in prange(n_chunks):
-        _merge_chunk(c * CHUNK, min(ray_count, (c + 1) * CHUNK), starts, capacity, merge_points,
-                     canonical, size, grouped_tris, grouped_distance, kept)  # fmt: skip
+        _merge_chunk(
+            c * CHUNK, min(ray_count, (c + 1) * CHUNK), starts, capacity, merge, grouped, kept
+        )
     # 3. depth-major: rays with more than d hits, ascending, for each depth d; each chunk's
     # hits of depth d follow the earlier chunks' (a prefix sum over chunks, depth by depth), so
     # the placement is the serial one on any number of threads
@@ -131,11 +146,12 @@ def _finish(rays, tris, distance, order, ray_count, capacity, merge_points, cano
     out_rays = np.empty(total, np.int64)
     out_tris = np.empty(total, np.int64)
     locations = np.empty((total if with_locations else 0, 3), np.float64)
+    out = (out_rays, out_tris, locations)
     for c in prange(n_chunks):
-        _place_chunk(c * CHUNK, min(ray_count, (c + 1) * CHUNK), slots[c], starts, kept,
-                     grouped_tris, grouped_distance, origins, directions, out_rays, out_tris,
-                     locations)  # fmt: skip
-    return out_rays, out_tris, locations
+        _place_chunk(
+            c * CHUNK, min(ray_count, (c + 1) * CHUNK), slots[c], starts, kept, grouped, points, out
+        )
+    return out
 
 
 def finished_hits(
@@ -169,21 +185,37 @@ def finished_hits(
     the same for any).
     """
     if scratch is None:
+
         def scratch(name, size, dtype):
             return np.empty(size, dtype)
+
     k = len(rays)
-    arguments = (
-        np.ascontiguousarray(rays, np.int64), np.ascontiguousarray(tris, np.int64),
+    parts = (
+        np.ascontiguousarray(rays, np.int64),
+        np.ascontiguousarray(tris, np.int64),
         np.ascontiguousarray(distance, np.float64),
-        np.zeros(0, np.int64) if order is None else np.ascontiguousarray(order, np.int64),
-        int(ray_count), max(1, int(capacity)), canonical is not None,
-        np.zeros((1, 3), np.int64) if canonical is None else canonical, float(size),
-        np.ascontiguousarray(origins, np.float64), np.ascontiguousarray(directions, np.float64),
-        bool(with_locations), scratch("starts", ray_count + 1, np.int64),
-        scratch("cursor", ray_count, np.int64), scratch("kept", ray_count, np.int64),
-        scratch("grouped_tris", k, np.int64), scratch("grouped_distance", k, np.float64),
-    )  # fmt: skip
+    )
+    merge = (
+        canonical is not None,
+        np.zeros((1, 3), np.int64) if canonical is None else canonical,
+        float(size),
+    )
+    points = (
+        np.ascontiguousarray(origins, np.float64),
+        np.ascontiguousarray(directions, np.float64),
+        bool(with_locations),
+    )
+    work = (
+        scratch("starts", ray_count + 1, np.int64),
+        scratch("cursor", ray_count, np.int64),
+        scratch("kept", ray_count, np.int64),
+        scratch("grouped_tris", k, np.int64),
+        scratch("grouped_distance", k, np.float64),
+    )
+    order = np.zeros(0, np.int64) if order is None else np.ascontiguousarray(order, np.int64)
     with parallel_region:
         numba.set_num_threads(threads_for(int(ray_count), threads))
-        out_rays, out_tris, locations = _finish(*arguments)
+        out_rays, out_tris, locations = _finish(
+            parts, order, int(ray_count), max(1, int(capacity)), merge, points, work
+        )
     return out_rays, out_tris, locations if with_locations else None

@@ -16,7 +16,7 @@ Conventions, those of trimesh's pure-NumPy ``ray_triangle``:
 - A ray through an edge or a vertex hits every triangle there that ``ray_triangle``'s float64
   test accepts (barycentrics within ``tol.zero`` of the triangle): ``intersects_id`` returns each
   of them, as ``ray_triangle`` does. Embree's float32 test may accept one or both near an edge,
-  so every Embree hit within float32 reach of an edge (``_edge_band``), or grazing its triangle,
+  so every Embree hit within float32 reach of an edge (``local_scene``), or grazing its triangle,
   is decided again in float64 against the triangles around it (those sharing a vertex position
   with it) by ``ray_triangle``'s own formulas. Triangles meeting only at T-junctions (no
   shared vertex position) are not looked up.
@@ -42,159 +42,43 @@ from __future__ import annotations
 
 import functools
 import inspect
-import threading
 
 import numpy as np
 import trimesh
 from trimesh import caching, util
 from trimesh.constants import tol
 
-from embree_rt.embree import BVH
-from embree_rt.embree.depth_order import finished_hits
-from embree_rt.embree.edge_hits import decided_hits
-from embree_rt.embree.local_frame import local_rays, ordered_local_rays
-from embree_rt.embree.plane_distances import plane_distances
-from embree_rt.embree.settled_hits import settled_hits
 from embree_rt.embree.validation import as_points
+from embree_rt.trimesh_ray.decided_hits import decided_hits
+from embree_rt.trimesh_ray.finished_hits import finished_hits
+from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
+from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
+from embree_rt.trimesh_ray.local_scene import BAND_ULPS, EDGE_BAND_SCALE, EPS32, LocalScene
+from embree_rt.trimesh_ray.plane_distances import plane_distances
+from embree_rt.trimesh_ray.screened_nearest import screened_nearest
+from embree_rt.trimesh_ray.settled_hits import settled_hits
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
 # near an edge or along a face to trust their parity.
-_CONTAINS_DIRECTIONS = np.array([
-    [0.4395064455, 0.617598629942, 0.652231566745],
-    [-0.5773502691896258, 0.7071067811865476, -0.4082482904638631],
-    [0.8017837257372732, -0.2672612419124244, -0.5345224838248488],
-])  # fmt: skip
+_CONTAINS_DIRECTIONS = np.array(
+    [
+        [0.4395064455, 0.617598629942, 0.652231566745],
+        [-0.5773502691896258, 0.7071067811865476, -0.4082482904638631],
+        [0.8017837257372732, -0.2672612419124244, -0.5345224838248488],
+    ]
+)
 # trimesh.intersections.planes_lines: a ray and a plane with |cos| at most this do not meet.
 _PARALLEL_COS = 1e-5
 # Hits at a smaller |cos| (float32) are decided again in float64: near _PARALLEL_COS, Embree's
 # float32 cosine may fall on either side.
 _GRAZE_COS = 1e-3
-_EPS32 = float(np.finfo(np.float32).eps)
-# Embree's float32 barycentrics and distances err by a few ulps of the largest coordinate
-# involved; these multiples leave a wide margin.
-_BAND_ULPS = 8.0
+# Embree's float32 distances err by a few ulps of the largest coordinate involved: hits within
+# this many of the origin are decided in float64.
 _TNEAR_ULPS = 16.0
 # Rays traced per call, and rays x room for hits: bounded memory, reused from block to block.
 _BLOCK_RAYS = 1 << 17  # 21 MB of hit buffers at 8 hits a ray, kept by the scene
-_FIRST_ROOM = 8
+FIRST_ROOM = 8  # hits of room a ray on the first trace (rays that overflow it are traced again)
 _BLOCK_HITS = 1 << 21
-_REORDER_FACES = 1 << 15
-_SCRATCH_ITEMS = 1 << 22
-
-
-class _LocalScene:
-    """The mesh in Embree: vertices shifted to the bounding box's corner and scaled by ``scale``
-    (float64, then rounded to float32 once), the BVH, and what the float64 refinement needs."""
-
-    def __init__(self, mesh: trimesh.Trimesh, scale: float) -> None:
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        faces = np.asarray(mesh.faces, dtype=np.int64)
-        self.origin = vertices.min(axis=0) if len(vertices) else np.zeros(3)
-        self.scale = float(scale)
-        local = ((vertices - self.origin) * self.scale).astype(np.float32)
-        self.extent = float(np.abs(local).max()) if len(local) else 0.0
-        # Rays are traced in the order of where they enter the mesh's box (ray_order) on meshes
-        # whose BVH outgrows the caches: 1.4-1.6x the rate on 1e5 and 1.3e6 triangles; on a
-        # small mesh (2,304 triangles) the sort cost more than the order saved.
-        self.bounds = (np.array([vertices.min(axis=0), vertices.max(axis=0)])
-                       if len(faces) >= _REORDER_FACES else None)  # fmt: skip
-        # single rays: trimesh's queries are rarely coherent, and packets of incoherent rays
-        # traced 10-15% slower here
-        self.bvh = BVH(lanes=1, robust=True, filters=True)
-        self.bvh.add_triangles(local, faces)
-        self.bvh.commit()
-        self.triangles = np.asarray(mesh.triangles, dtype=np.float64)
-        # each triangle's first vertex and unit normal side by side in one (k, 6) table: the
-        # float64 distance of a hit reads both, and on a big mesh each read is a cache miss
-        self.planes = np.hstack([self.triangles[:, 0], np.asarray(mesh.face_normals, np.float64)])
-        self.faces = faces
-        self.vertices = vertices
-        self.face_count = len(faces)
-        self.min_altitude = _min_altitudes(self.triangles, np.asarray(mesh.area_faces)) * scale
-        # 0 when any triangle is degenerate: then every hit's own altitude is looked up
-        self.floor_altitude = float(self.min_altitude.min()) if self.face_count else 0.0
-        # contains_points' rays reach twice the mesh's extent
-        self.contains_band = _edge_band(self, np.arange(self.face_count),
-                                        np.full(self.face_count, 2 * self.extent)
-                                        ).astype(np.float32)  # fmt: skip
-        self._fans: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        # all_hits' buffers and working space (megabytes), kept from query to query, one set a
-        # thread: fresh arrays of that size come from the kernel a page fault a 4 KiB page at a
-        # time (measured on the torus, 100k rays: 4,000 faults and 14 ms of system time, a
-        # fifth of the query)
-        self._buffers = threading.local()
-
-    def hit_buffers(self, capacity: int) -> tuple[np.ndarray, ...] | None:
-        """This thread's all_hits buffers of ``capacity`` hits a ray from its last query, or
-        None."""
-        kept = getattr(self._buffers, "arrays", None)
-        return kept if kept is not None and kept[0].shape[1] == capacity else None
-
-    def scratch(self, name: str, size: int, dtype) -> np.ndarray:
-        """(size,) array of ``dtype``: this thread's working space ``name``, kept from query to
-        query up to _SCRATCH_ITEMS (larger ones are new each time), contents undefined."""
-        pool = self._buffers.__dict__.setdefault("pool", {})
-        array = pool.get(name)
-        if array is None or len(array) < size:
-            array = np.empty(size, dtype)
-            if size <= _SCRATCH_ITEMS:
-                pool[name] = array
-        return array[:size]
-
-    def keep_hit_buffers(self, capacity: int, buffers: tuple[np.ndarray, ...]) -> None:
-        """Keep ``buffers`` (all_hits' arrays, ``capacity`` hits a ray) for this thread's next
-        query when they are at least as large as those kept."""
-        kept = self.hit_buffers(capacity)
-        if kept is None or len(buffers[0]) > len(kept[0]):
-            self._buffers.arrays = buffers
-
-    def to_local(self, points: np.ndarray) -> np.ndarray:
-        """(n, 3) float64 world points → (n, 3) float32 in the BVH's frame."""
-        return ((points - self.origin) * self.scale).astype(np.float32)
-
-    def fans(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Faces around each vertex position, CSR: (canonical faces (k, 3), starts (m + 1,),
-        faces (3k,)); vertices at the same position count as one (unmerged STL meshes)."""
-        if self._fans is None:
-            canonical = _position_ids(self.vertices)[self.faces]
-            flat = canonical.reshape(-1)
-            order = np.argsort(flat, kind="stable")
-            starts = np.searchsorted(flat[order], np.arange(flat.max() + 2 if len(flat) else 1))
-            self._fans = (canonical, starts, order // 3)
-        return self._fans
-
-
-def _position_ids(vertices: np.ndarray) -> np.ndarray:
-    """(m,) int64 for (m, 3) float64 ``vertices``: equal ids exactly where positions are equal
-    (as ``np.unique(vertices, axis=0)`` groups them, -0.0 and 0.0 alike). A lexsort of the
-    columns: 10x faster than ``np.unique``'s sort of rows as records (1.2 s on 655k vertices)."""
-    if len(vertices) == 0:
-        return np.zeros(0, np.int64)
-    order = np.lexsort(vertices.T[::-1])
-    ordered = vertices[order]
-    starts = np.ones(len(order), bool)
-    starts[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
-    ids = np.empty(len(order), np.int64)
-    ids[order] = np.cumsum(starts) - 1
-    return ids
-
-
-def _min_altitudes(triangles: np.ndarray, areas: np.ndarray) -> np.ndarray:
-    """(k,) smallest altitude of each of (k, 3, 3) triangles of ``areas`` (k,) (0 for
-    degenerate ones): twice the area over the longest side."""
-    longest = np.zeros(len(triangles))
-    for a, b in ((0, 1), (1, 2), (2, 0)):
-        side = triangles[:, b] - triangles[:, a]
-        longest = np.maximum(longest, np.sqrt(np.einsum("ij,ij->i", side, side)))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(longest > 0, 2 * areas / np.where(longest > 0, longest, 1), 0.0)
-
-
-def _edge_band(scene: _LocalScene, faces: np.ndarray, magnitude: np.ndarray) -> np.ndarray:
-    """Barycentric distance from an edge within which Embree's float32 answer for ``faces``
-    (k,) may be wrong, for rays whose coordinates reach ``magnitude`` (k,) in the local frame."""
-    with np.errstate(divide="ignore"):
-        return _BAND_ULPS * _EPS32 * magnitude / scene.min_altitude[faces]
 
 
 def _ray_arrays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
@@ -227,24 +111,25 @@ class _HitList:
     """The multi-hit query's hits, part after part, in arrays lent by the scene (grown as
     needed): (rays, tris) int64 and distance float64, so that no part is copied twice."""
 
-    def __init__(self, scene: _LocalScene, size: int) -> None:
+    def __init__(self, scene: LocalScene, size: int) -> None:
         self._scene = scene
         self._arrays = self._lent(max(size, 1))
         self._count = 0
 
     def _lent(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return tuple(self._scene.scratch(f"hits_{k}", size, dtype)
-                     for k, dtype in enumerate((np.int64, np.int64, np.float64)))  # fmt: skip
+        return tuple(
+            self._scene.scratch(f"hits_{k}", size, dtype)
+            for k, dtype in enumerate((np.int64, np.int64, np.float64))
+        )
 
     def room(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Views of the next ``size`` places, to write a part into (then ``filled``)."""
         if self._count + size > len(self._arrays[0]):
-            grown = tuple(np.empty(2 * (self._count + size), array.dtype)
-                          for array in self._arrays)  # fmt: skip
+            grown = tuple(np.empty(2 * (self._count + size), array.dtype) for array in self._arrays)
             for old, new in zip(self._arrays, grown, strict=True):
-                new[:self._count] = old[:self._count]
+                new[: self._count] = old[: self._count]
             self._arrays = grown
-        return tuple(array[self._count:self._count + size] for array in self._arrays)
+        return tuple(array[self._count : self._count + size] for array in self._arrays)
 
     def filled(self, size: int) -> None:
         """The next ``size`` places now hold a part."""
@@ -258,7 +143,7 @@ class _HitList:
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rays, tris, distance) of every part so far."""
-        return tuple(array[:self._count] for array in self._arrays)
+        return tuple(array[: self._count] for array in self._arrays)
 
 
 class RayMeshIntersector:
@@ -280,8 +165,8 @@ class RayMeshIntersector:
         return 1.0
 
     @caching.cache_decorator
-    def _scene(self) -> _LocalScene:
-        return _LocalScene(self.mesh, self._scale)
+    def _scene(self) -> LocalScene:
+        return LocalScene(self.mesh, self._scale)
 
     # -- queries ------------------------------------------------------------------------------
 
@@ -291,14 +176,22 @@ class RayMeshIntersector:
         when ``tnear`` is given, ``inclusive``); by default near is a few float32 ulps of
         ``magnitude`` (n,), each ray's largest local coordinate (its origin's or the mesh's)."""
         if tnear is None:
-            return _TNEAR_ULPS * _EPS32 * magnitude / scene.scale, False
+            return _TNEAR_ULPS * EPS32 * magnitude / scene.scale, False
         near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(magnitude),))
         if not np.isfinite(near).all() or (near < 0).any():
             raise ValueError("tnear: must be finite and >= 0")
         return near, True
 
-    def _hits(self, origins, directions, max_hits, tnear, one_per_point=False, reorder=False,
-              with_locations=False):
+    def _hits(
+        self,
+        origins,
+        directions,
+        max_hits,
+        tnear,
+        one_per_point=False,
+        reorder=False,
+        with_locations=False,
+    ):
         """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
         ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
         ``with_locations``, the points (k, 3) float64 (else None); each ray's hits by distance,
@@ -313,19 +206,35 @@ class RayMeshIntersector:
         given_origins, given_directions = origins, directions
         traced_order = None
         if reorder and scene.bounds is not None:
-            (traced_order, origins, directions, local_origins, local_directions, magnitude,
-             finite) = ordered_local_rays(origins, directions, scene.origin, scene.scale,
-                                          scene.extent, scene.bounds, scene.bvh.threads)
+            (
+                traced_order,
+                origins,
+                directions,
+                local_origins,
+                local_directions,
+                magnitude,
+                finite,
+            ) = ordered_local_rays(
+                origins,
+                directions,
+                scene.origin,
+                scene.scale,
+                scene.extent,
+                scene.bounds,
+                scene.bvh.threads,
+            )
             if not finite:  # named by its row as given
-                given = local_rays(given_origins, given_directions, scene.origin, scene.scale,
-                                   scene.extent)  # fmt: skip
+                given = local_rays(
+                    given_origins, given_directions, scene.origin, scene.scale, scene.extent
+                )
                 as_points(given[0], "origins")
                 as_points(given[1], "directions")
             if tnear is not None and np.ndim(tnear):
                 tnear = np.broadcast_to(np.asarray(tnear, np.float64), (n,))[traced_order]
         else:
             local_origins, local_directions, magnitude = local_rays(
-                origins, directions, scene.origin, scene.scale, scene.extent)
+                origins, directions, scene.origin, scene.scale, scene.extent
+            )
         near, inclusive = self._resolve_tnear(scene, magnitude, tnear)
         capacity = max(1, int(max_hits))
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
@@ -333,73 +242,95 @@ class RayMeshIntersector:
         room = capacity + 4
         # Most rays hit a few triangles: trace with a little room first and again, with all of
         # it, only the rays that overflowed (so the hit arrays stay small).
-        first_room = min(room, _FIRST_ROOM)
+        first_room = min(room, FIRST_ROOM)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
         buffers = scene.hit_buffers(first_room)
         hits, pending_parts = _HitList(scene, 2 * n), []
-        band_scale = _BAND_ULPS * _EPS32
+        rules = tolerances(EDGE_BAND_SCALE, _GRAZE_COS, _PARALLEL_COS, tol.zero)
+        world = world_rays(origins, directions, magnitude, near, inclusive)
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
             # Embree from the local frame's tnear (inclusive, a little short of ours): which
             # hits count as at the origin is decided below in float64.
             block_near = (near[rows] * scene.scale * 0.5).astype(np.float32)
-            result = scene.bvh.all_hits(local_origins[rows], local_directions[rows], block_near,
-                                        np.inf, first_room, out=buffers)  # fmt: skip
+            result = scene.bvh.all_hits(
+                local_origins[rows],
+                local_directions[rows],
+                block_near,
+                np.inf,
+                first_room,
+                out=buffers,
+            )
             scene.keep_hit_buffers(first_room, result)
             buffers = result
             # rays clear of edges and grazing settled in one compiled pass; the others go to the
             # float64 path below, those that overflowed `first_room` traced again first
             recorded = int(result[5].sum())
             rays, tris, distance, messy = settled_hits(
-                result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
-                directions[rows], scene.planes, scene.min_altitude,
-                scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS, scene.bvh.threads,
-                tuple(scene.scratch(f"settle_{k}", recorded, dtype) for k, dtype in
-                      enumerate((np.int64, np.int64, np.float64))),
-                hits.room(recorded), first,
-            )  # fmt: skip
+                result,
+                room > first_room,
+                world_rays(origins[rows], directions[rows], magnitude[rows], near[rows], inclusive),
+                scene.tables,
+                rules,
+                scene.bvh.threads,
+                tuple(
+                    scene.scratch(f"settle_{k}", recorded, dtype)
+                    for k, dtype in enumerate((np.int64, np.int64, np.float64))
+                ),
+                hits.room(recorded),
+                first,
+            )
             hits.filled(len(rays))
             # Messy rays whose hits all fit are complete: decided in float64 now, from the
             # buffers as traced (a second trace with more room records the same hits in the same
             # order); the others are traced again first.
             overflowed = result[6] if room > first_room else np.zeros(len(messy), bool)
             complete_rows = np.flatnonzero(messy & ~overflowed)
-            hits.append(self._decided(complete_rows, first + complete_rows, result, magnitude,
-                                      near, inclusive, origins, directions))  # fmt: skip
+            hits.append(self._decided(complete_rows, first + complete_rows, result, world, rules))
             pending_parts.append(first + np.flatnonzero(messy & overflowed))
         pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
         for first in range(0, len(pending), block):
-            which = pending[first:first + block]
+            which = pending[first : first + block]
             block_near = (near[which] * scene.scale * 0.5).astype(np.float32)
-            result = scene.bvh.all_hits(local_origins[which], local_directions[which], block_near,
-                                        np.inf, room)  # fmt: skip
-            hits.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
-                                      inclusive, origins, directions))  # fmt: skip
+            result = scene.bvh.all_hits(
+                local_origins[which], local_directions[which], block_near, np.inf, room
+            )
+            hits.append(self._decided(np.arange(len(which)), which, result, world, rules))
         rays, tris, distance = hits.arrays()
-        return finished_hits(rays, tris, distance, traced_order, n, capacity,
-                             scene.fans()[0] if one_per_point else None,
-                             scene.extent / scene.scale, given_origins, given_directions,
-                             with_locations, scene.scratch, scene.bvh.threads)  # fmt: skip
+        return finished_hits(
+            rays,
+            tris,
+            distance,
+            traced_order,
+            n,
+            capacity,
+            scene.fans()[0] if one_per_point else None,
+            scene.extent / scene.scale,
+            given_origins,
+            given_directions,
+            with_locations,
+            scene.scratch,
+            scene.bvh.threads,
+        )
 
-    def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
+    def _decided(self, rows, positions, result, world, rules):
         """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
-        decides them, against all the triangles around them (``edge_hits.decided_hits``)."""
+        decides them, against all the triangles around them (``decided_hits``)."""
         scene = self._scene
         if not len(rows):
             return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-        return decided_hits(rows, positions, result, magnitude, near, inclusive, origins,
-                            directions, scene.planes, scene.triangles,
-                            scene.min_altitude, _BAND_ULPS * _EPS32, _GRAZE_COS, _PARALLEL_COS,
-                            tol.zero, scene.fans(), scene.bvh.threads)  # fmt: skip
+        return decided_hits(
+            rows, positions, result, world, scene.tables, rules, scene.fans(), scene.bvh.threads
+        )
 
     def _first_hits(self, origins, directions, tnear) -> np.ndarray:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
         float64 (directions not necessarily unit) hits, -1 for none. Embree's nearest-hit query
         answers, in one compiled pass with the frame change, every ray whose hit lies clear of
-        edges, of grazing and of the origin (``BVH.screened_nearest``; on big meshes in the order
+        edges, of grazing and of the origin (``screened_nearest``; on big meshes in the order
         of where the rays enter the mesh's box, which changes no answer, see
-        ``embree_rt.embree.screened_nearest``); the others (under 1% on the benchmark's meshes)
+        ``embree_rt.trimesh_ray.screened_nearest``); the others (under 1% on the benchmark's meshes)
         go through ``_hits``, which decides them in float64."""
         scene = self._scene
         near = None
@@ -407,17 +338,32 @@ class RayMeshIntersector:
             near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(origins),))
             if not np.isfinite(near).all() or (near < 0).any():
                 raise ValueError("tnear: must be finite and >= 0")
-        prim, suspect = scene.bvh.screened_nearest(
-            origins, directions, shift=scene.origin, scale=scene.scale, extent=scene.extent,
-            bounds=scene.bounds, near=near, near_ulps=_TNEAR_ULPS,
-            altitude=scene.min_altitude, floor_altitude=scene.floor_altitude, band_ulps=_BAND_ULPS,
-            graze=_GRAZE_COS, near_factor=4.0,
-        )  # fmt: skip
+        prim, suspect = screened_nearest(
+            scene.bvh,
+            origins,
+            directions,
+            shift=scene.origin,
+            scale=scene.scale,
+            extent=scene.extent,
+            bounds=scene.bounds,
+            near=near,
+            near_ulps=_TNEAR_ULPS,
+            altitude=scene.min_altitude,
+            floor_altitude=scene.floor_altitude,
+            band_ulps=BAND_ULPS,
+            graze=_GRAZE_COS,
+            near_factor=4.0,
+        )
         first = prim.astype(np.int64)
         again = np.flatnonzero(suspect)
         if len(again):
-            more = self._hits(origins[again], util.unitize(directions[again]), 1,
-                              None if near is None else near[again], True)  # fmt: skip
+            more = self._hits(
+                origins[again],
+                util.unitize(directions[again]),
+                1,
+                None if near is None else near[again],
+                True,
+            )
             first[again] = -1
             first[again[more[0]]] = more[1]
         return first
@@ -452,25 +398,36 @@ class RayMeshIntersector:
             if not return_locations:
                 return tris, rays
             directions = util.unitize(given_directions[rays])
-            distance = _plane_distance(self._scene, origins[rays], directions,
-                                       np.arange(len(rays)), tris)[0]  # fmt: skip
+            distance = _plane_distance(
+                self._scene, origins[rays], directions, np.arange(len(rays)), tris
+            )[0]
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, locations = self._hits(origins, directions, max_hits, tnear,
-                                           one_per_point=return_locations, reorder=True,
-                                           with_locations=return_locations)  # fmt: skip
+        rays, tris, locations = self._hits(
+            origins,
+            directions,
+            max_hits,
+            tnear,
+            one_per_point=return_locations,
+            reorder=True,
+            with_locations=return_locations,
+        )
         if return_locations:
             return tris, rays, locations
         return tris, rays
 
-    def intersects_location(self, ray_origins, ray_directions, multiple_hits: bool = True,
-                            *, tnear=None):  # fmt: skip
+    def intersects_location(
+        self, ray_origins, ray_directions, multiple_hits: bool = True, *, tnear=None
+    ):
         """Where rays hit: ``(locations (m, 3) float64, index_ray (m,) int64, index_tri (m,)
         int64)``, each point once (see ``intersects_id``)."""
         index_tri, index_ray, locations = self.intersects_id(
-            ray_origins, ray_directions, multiple_hits=multiple_hits, return_locations=True,
+            ray_origins,
+            ray_directions,
+            multiple_hits=multiple_hits,
+            return_locations=True,
             tnear=tnear,
-        )  # fmt: skip
+        )
         return locations, index_ray, index_tri
 
     def intersects_first(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
@@ -508,8 +465,7 @@ class RayMeshIntersector:
         pending = np.arange(len(candidates))
         for k, direction in enumerate(_CONTAINS_DIRECTIONS):
             directions = np.tile(direction.astype(np.float32), (len(pending), 1))
-            odd, clear = scene.bvh.crossing_parity(local[pending], directions, band,
-                                                   _GRAZE_COS)  # fmt: skip
+            odd, clear = scene.bvh.crossing_parity(local[pending], directions, band, _GRAZE_COS)
             last = k == len(_CONTAINS_DIRECTIONS) - 1
             votes[pending] += odd
             settled = clear | last
