@@ -52,13 +52,13 @@ def main() -> None:
     with Renderer(scene, threads=args.threads) as renderer:
         # Compile and warm both paths on a small image, outside the timing.
         renderer.render(**{**image, "width": 64, "height": 36})
-        render_aovs(renderer.integrator, camera_frame(scene.camera, 64, 36), AOV_NAMES)
+        render_aovs(renderer, camera_frame(scene.camera, 64, 36), AOV_NAMES)
         beauty = {"wall": [], "cpu": []}
         aov_pass = {"wall": [], "cpu": []}
         for turn in range(args.turns):
             steps = [
                 (beauty, lambda: renderer.render(**image)),
-                (aov_pass, lambda: render_aovs(renderer.integrator, frame, AOV_NAMES)),
+                (aov_pass, lambda: render_aovs(renderer, frame, AOV_NAMES)),
             ]
             for times, step in steps if turn % 2 == 0 else steps[::-1]:
                 wall, cpu = timed(step)
@@ -74,7 +74,7 @@ def main() -> None:
             "height": args.height,
             "spp": args.spp,
             "max_depth": args.max_depth,
-            "threads": renderer.integrator.workers,
+            "threads": renderer.workers,
             "aovs": list(AOV_NAMES),
             "turns": args.turns,
             "beauty_s": [round(x, 3) for x in beauty["wall"]],

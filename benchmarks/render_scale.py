@@ -60,13 +60,12 @@ class RecordingGeometry:
 
 def record_queries(renderer: Renderer, image: dict) -> list:
     """Every ray query one render of ``image`` makes."""
-    integrator = renderer.integrator
-    geometry = integrator.geometry
-    integrator.geometry = recorder = RecordingGeometry(geometry)
+    geometry = renderer.geometry
+    renderer.geometry = recorder = RecordingGeometry(geometry)
     try:
         renderer.render(**image)
     finally:
-        integrator.geometry = geometry
+        renderer.geometry = geometry
     return recorder.log
 
 
@@ -74,8 +73,8 @@ def replay(renderer: Renderer, log: list, threads: int | None = None) -> float:
     """Seconds the bare BVH takes to answer every query of ``log`` again (Embree's traversal
     and nothing else: no hit records, no floor plane), on ``threads`` threads (by default as
     many as the render had)."""
-    bvh = renderer.integrator.geometry.bvh
-    bvh.threads = renderer.integrator.workers if threads is None else threads
+    bvh = renderer.geometry.bvh
+    bvh.threads = renderer.workers if threads is None else threads
     # Compile and warm the kernels this thread count uses, outside the timing.
     # (numba compiles per memory layout: these are Fortran-ordered (n, 3) views, as logged.)
     _, origins, directions, _, _ = log[0]
@@ -126,8 +125,8 @@ def run(count: int, args: argparse.Namespace) -> dict:
             "height": args.height,
             "spp": args.spp,
             "max_depth": args.max_depth,
-            "threads": renderer.integrator.workers,
-            "batch_size": renderer.integrator.batch_size,
+            "threads": renderer.workers,
+            "batch_size": renderer.batch_size,
             "build_s": round(stats.build_s, 4),
             "render_s": round(best_s, 3),
             "render_s_all": [round(x, 3) for x in render_s],

@@ -56,36 +56,20 @@ class RenderResult:
         return save_with_aovs(self.image, self.aovs, path)
 
 
-class Renderer:
-    """Renders many views of one scene on one BVH, built once here: the way to render the
-    frames of a camera path, or an image and then its AOVs at another size.
+class Renderer(Integrator):
+    """Renders many views of one scene on one BVH, built once when it is made: the way to
+    render the frames of a camera path, or an image and then its AOVs at another size.
 
-    ``spheres`` is how spheres enter the BVH: "analytic" (compiled user geometry, exact),
+    ``Renderer(scene, *, spheres="analytic", threads=None, batch_size=DEFAULT_BATCH_SIZE)``:
+    ``spheres`` is how spheres enter the BVH, "analytic" (compiled user geometry, exact),
     "point" (Embree's own point spheres) or "mesh" (instanced icospheres); ``threads`` the
     worker threads (None: every core); ``batch_size`` the camera samples a batch traces. The
     image is bitwise the same for any ``threads`` and ``batch_size``. Close it (or use it as a
     context manager) to free the BVH.
+
+    An ``Integrator`` (which holds the BVH and traces the batches) with the one method a user
+    needs, ``render``.
     """
-
-    def __init__(
-        self,
-        scene: Scene,
-        *,
-        spheres: str = "analytic",
-        threads: int | None = None,
-        batch_size: int = DEFAULT_BATCH_SIZE,
-    ) -> None:
-        self.scene = scene
-        self.integrator = Integrator(scene, spheres=spheres, threads=threads, batch_size=batch_size)
-
-    def close(self) -> None:
-        self.integrator.close()
-
-    def __enter__(self) -> Renderer:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     def render(
         self,
@@ -113,7 +97,7 @@ class Renderer:
             self.scene.camera if camera is None else camera, settings.width, settings.height
         )
         with progress_bar(settings, quiet, progress) as show:
-            image, stats = self.integrator.render_image(
+            image, stats = self.render_image(
                 frame,
                 spp=settings.spp,
                 max_depth=settings.max_depth,
@@ -123,7 +107,7 @@ class Renderer:
         if not names:
             return RenderResult(image, {}, stats)
         began = time.perf_counter()
-        layers = render_aovs(self.integrator, frame, names)
+        layers = render_aovs(self, frame, names)
         stats.rays["aov"] = settings.width * settings.height  # one pixel-centre ray per pixel
         stats.render_s += time.perf_counter() - began
         return RenderResult(image, layers, stats)

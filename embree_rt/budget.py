@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from embree_rt.batches import worker_count
 from embree_rt.errors import InputError
 
 if TYPE_CHECKING:
@@ -96,7 +97,7 @@ def available_memory() -> int | None:
 def field_bytes(count: int) -> int:
     """What generating a random field of ``count`` spheres on all cores (as ``random_field``
     does) needs: its arrays and a ring in the making on each core."""
-    return count * SCENE_BYTES_PER_SPHERE + (os.cpu_count() or 1) * FIELD_RING_BYTES
+    return count * SCENE_BYTES_PER_SPHERE + worker_count(None) * FIELD_RING_BYTES
 
 
 def geometry_bytes(count: int, kind: str) -> int:
@@ -149,7 +150,6 @@ def render_needs(
     ``sphere_count`` spheres in mode ``spheres``, and the image with its batches of
     ``batch_size`` samples on ``threads`` (None: every core) and its ``aovs``' arrays."""
     from embree_rt.aovs import aov_bytes
-    from embree_rt.batches import worker_count
 
     width, height, spp = settings.width, settings.height, settings.spp
     image = image_bytes(width, height, spp, batch_size, worker_count(threads))

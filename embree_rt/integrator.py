@@ -101,7 +101,11 @@ def surface_offset(scale: np.ndarray) -> np.ndarray:
 class Integrator:
     """The Whitted integrator of one scene: builds its BVH once, then traces and shades batches
     of camera samples (``render_image``, ``trace_batch``, ``trace_pixels``). ``embree_rt.Renderer``
-    is the public face above it; Dask workers and the browser preview call it directly."""
+    adds the public ``render`` to it; Dask workers and the browser preview use it as it is.
+
+    ``spheres``: how spheres enter the BVH (``geometry.SPHERE_MODES``); ``threads``: the worker
+    threads (None: every core, ``batches.worker_count``); ``batch_size``: camera samples a batch
+    traces at most."""
 
     def __init__(
         self,

@@ -102,28 +102,24 @@ _SCRATCH_WORDS = 2 * (2 + _RAYHIT_WORDS64 + ARGS_WORDS + CONTEXT_WORDS)  # 4-byt
 CHUNK = 64  # rays per parallel iteration
 
 _FILTER_SIGNATURE = types.void(types.uintp)
-_words64 = pointers.words64
-_words32 = pointers.words32
-_floats = pointers.floats
-_ints = pointers.ints
 
 
 @cfunc(_FILTER_SIGNATURE, nopython=True, cache=True)
 def _record_and_reject(address):
     """Argument filter: record each candidate hit in the context's buffers, then reject it."""
-    args = carray(_words64(address), 6)
+    args = carray(pointers.words64(address), 6)
     n = np.int64(args[FILTER_N] & 0xFFFFFFFF)
-    valid = carray(_ints(args[FILTER_VALID]), n)
-    context = carray(_words64(args[FILTER_CONTEXT]), CONTEXT_WORDS)
-    ray = carray(_floats(args[FILTER_RAY]), 12 * n)
-    hit = carray(_floats(args[FILTER_HIT]), 9 * n)
-    hit_words = carray(_words32(args[FILTER_HIT]), 9 * n)
+    valid = carray(pointers.ints(args[FILTER_VALID]), n)
+    context = carray(pointers.words64(args[FILTER_CONTEXT]), CONTEXT_WORDS)
+    ray = carray(pointers.floats(args[FILTER_RAY]), 12 * n)
+    hit = carray(pointers.floats(args[FILTER_HIT]), 9 * n)
+    hit_words = carray(pointers.words32(args[FILTER_HIT]), 9 * n)
     capacity = np.int64(context[CONTEXT_CAPACITY])
-    t_buffer = carray(_floats(context[CONTEXT_T]), capacity)
-    prim_buffer = carray(_ints(context[CONTEXT_PRIM]), capacity)
-    u_buffer = carray(_floats(context[CONTEXT_U]), capacity)
-    v_buffer = carray(_floats(context[CONTEXT_V]), capacity)
-    cos_buffer = carray(_floats(context[CONTEXT_COS]), capacity)
+    t_buffer = carray(pointers.floats(context[CONTEXT_T]), capacity)
+    prim_buffer = carray(pointers.ints(context[CONTEXT_PRIM]), capacity)
+    u_buffer = carray(pointers.floats(context[CONTEXT_U]), capacity)
+    v_buffer = carray(pointers.floats(context[CONTEXT_V]), capacity)
+    cos_buffer = carray(pointers.floats(context[CONTEXT_COS]), capacity)
     for lane in range(n):
         if valid[lane] == 0:
             continue

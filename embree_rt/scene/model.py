@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.camera import Camera, Vec3
+from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
@@ -57,20 +57,11 @@ class RenderSettings:
     max_depth: int = 6
     seed: int = 0
 
-    def with_overrides(
-        self,
-        *,
-        width: int | None = None,
-        height: int | None = None,
-        spp: int | None = None,
-        max_depth: int | None = None,
-        seed: int | None = None,
-    ) -> RenderSettings:
-        """These settings with every value that is not None replaced: the one rule by which
-        flags and keyword arguments override a scene's ``render`` table."""
-        given = {"width": width, "height": height, "spp": spp, "max_depth": max_depth,
-                 "seed": seed}  # fmt: skip
-        return replace(self, **{name: value for name, value in given.items() if value is not None})
+    def with_overrides(self, **values: int | None) -> RenderSettings:
+        """These settings with each field named in ``values`` (width, height, spp, max_depth,
+        seed) replaced, unless its value is None: the one rule by which flags and keyword
+        arguments override a scene's ``render`` table. An unknown name raises TypeError."""
+        return replace(self, **{name: value for name, value in values.items() if value is not None})
 
 
 @dataclass

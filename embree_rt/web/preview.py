@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import copy
 import io
-import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from embree_rt.api import Renderer
+from embree_rt.batches import worker_count
 from embree_rt.camera import camera_frame, camera_problem, sample_rays
 from embree_rt.film import Film, FilmBlock, tonemap
 from embree_rt.integrator import Integrator
@@ -68,7 +68,7 @@ class PreviewSession:
         self.render_generation = 0
         self._lock = threading.Lock()
         self._renderer: Integrator | None = None
-        self._pool = ThreadPoolExecutor(max_workers=os.cpu_count() or 1)
+        self._pool = ThreadPoolExecutor(max_workers=worker_count(None))
 
     def close(self) -> None:
         self.generation += 1
