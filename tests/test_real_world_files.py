@@ -22,12 +22,13 @@ import numpy as np
 import pytest
 import trimesh
 from bvh_reference import triangle_hits
+from camera_samples import primary_rays
 from PIL import Image
 from scipy.spatial.transform import Rotation
 from tolerances import RTOL32, assert_close
 
 from embree_rt import Scene, SceneError, load_scene
-from embree_rt.camera import camera_frame, primary_rays
+from embree_rt.camera import camera_frame
 from embree_rt.geometry import SceneGeometry
 from embree_rt.scene.errors import InputWarning
 from embree_rt.scene.meshes import load_model, mesh_material, mesh_surface
