@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ import pytest
 from PIL import Image
 
 import embree_rt as rt
+from embree_rt.scene.errors import InputWarning
 from embree_rt.scene.gltf_materials import texture_transform_matrix
 from embree_rt.textures import (
     CLAMP_TO_EDGE,
@@ -536,19 +538,23 @@ def test_texels_keep_their_alpha_and_data_textures_stay_linear() -> None:
     np.testing.assert_allclose(data[0, 0], codes[0, 0] / 255.0, rtol=1e-6)
 
 
-def test_ignored_extensions_are_named_in_one_warning_line(tmp_path: Path, capsys) -> None:
+def test_ignored_extensions_are_named_in_one_warning_line(tmp_path: Path) -> None:
     writer = MAKE.GltfWriter()
     vertices, faces, _ = MAKE.quad(1.0)
     index = writer.material({"extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 1},
-                                            "KHR_materials_sheen": {}}})  # fmt: skip
+                                            "KHR_materials_sheen": {},
+                                            "KHR_materials_unlit": {}}})  # fmt: skip
     writer.mesh(vertices, faces, index)
     glb = write_glb(tmp_path / "coated.glb", writer)
     path = tmp_path / "coated.toml"
     path.write_text(scene_text([glb]), encoding="utf-8")
-    rt.load_scene(path)
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1
-    assert str(glb) in lines[0] and "KHR_materials_clearcoat, KHR_materials_sheen" in lines[0]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rt.load_scene(path)
+    (line,) = [str(w.message) for w in caught if issubclass(w.category, InputWarning)]
+    assert str(glb) in line and "\n" not in line
+    assert "KHR_materials_clearcoat, KHR_materials_sheen ignored (no counterpart" in line
+    assert "KHR_materials_unlit" not in line  # honoured, not ignored
 
 
 # -- normal maps and occlusion -------------------------------------------------------------------

@@ -47,11 +47,30 @@ SUPPORTED_EXTENSIONS = {
     "EXT_mesh_gpu_instancing": "each instanced node becomes instance arrays",
     "KHR_lights_punctual": "the file's lights, when it is rendered on its own (point; spot and "
     "directional as point lights)",
+    "KHR_materials_emissive_strength": "the emission's strength",
+    "KHR_materials_transmission": "glass of that transparency, tinted by the base colour",
+    "KHR_materials_ior": "the glass's index of refraction",
+    "KHR_materials_volume": "Beer-Lambert absorption inside the glass",
+    "KHR_materials_unlit": "the base colour alone, no lights",
+    "KHR_texture_transform": "offset, rotation, scale and texCoord of each texture",
 }
+# Extensions with no counterpart in Blinn-Phong shading and Whitted rays, which the warning
+# naming what a file uses and embree_rt ignores says of them.
+NO_COUNTERPART_EXTENSIONS = (
+    "KHR_materials_clearcoat",
+    "KHR_materials_sheen",
+    "KHR_materials_specular",
+    "KHR_materials_iridescence",
+    "KHR_materials_anisotropy",
+    "KHR_materials_dispersion",
+    "KHR_materials_diffuse_transmission",
+)
 
 
 def extension_problem(name: str) -> str | None:
     """Why embree_rt cannot honour the glTF extension ``name``, or None when it can."""
+    if name in NO_COUNTERPART_EXTENSIONS:
+        return "no counterpart in embree_rt's Blinn-Phong shading"
     if name not in SUPPORTED_EXTENSIONS:
         return "not supported by embree_rt"
     if name == "KHR_draco_mesh_compression" and importlib.util.find_spec("DracoPy") is None:
@@ -310,10 +329,14 @@ def _check_extensions(path: Path, tree: dict) -> None:
         if (problem := extension_problem(name)) is not None:
             raise MeshFileError(f"extensionsRequired[{index}]",
                                 f"the file requires {name}, {problem}")  # fmt: skip
-    ignored = [name for name in tree.get("extensionsUsed") or [] if extension_problem(name)]
-    if ignored:
-        warn_input(f"{path}: extensionsUsed: {', '.join(ignored)} ignored (not supported by "
-                   "embree_rt); the file renders without them")  # fmt: skip
+    by_problem: dict[str, list[str]] = {}
+    for name in tree.get("extensionsUsed") or []:
+        if (problem := extension_problem(name)) is not None:
+            by_problem.setdefault(problem, []).append(name)
+    if by_problem:
+        ignored = "; ".join(f"{', '.join(names)} ignored ({problem})"
+                            for problem, names in by_problem.items())  # fmt: skip
+        warn_input(f"{path}: extensionsUsed: {ignored}; the file renders without them")
 
 
 def _check_files(path: Path, tree: dict) -> None:

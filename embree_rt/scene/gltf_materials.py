@@ -17,7 +17,6 @@ import io
 import json
 import math
 import struct
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote
@@ -25,6 +24,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from embree_rt.materials import RGB, Material
+from embree_rt.scene.errors import warn_input
 from embree_rt.textures import (
     DEFAULT_SAMPLER,
     NEAREST,
@@ -34,16 +34,6 @@ from embree_rt.textures import (
     texels_from_image,
 )
 
-# Extensions with no counterpart in a Blinn-Phong + Whitted model: named in one warning line.
-IGNORED_EXTENSIONS = (
-    "KHR_materials_clearcoat",
-    "KHR_materials_sheen",
-    "KHR_materials_specular",
-    "KHR_materials_iridescence",
-    "KHR_materials_anisotropy",
-    "KHR_materials_dispersion",
-    "KHR_materials_diffuse_transmission",
-)
 # glTF primitive modes trimesh turns into a mesh, point cloud or path (one entry each).
 LOADED_MODES = (0, 1, 4, 5)
 TRIANGLE_MODES = (4, 5)
@@ -59,11 +49,6 @@ DEFAULT_IOR = 1.5
 SHININESS_RANGE = (1.0, 4096.0)
 DIELECTRIC_REFLECTIVITY = 0.04
 METAL_REFLECTIVITY = 0.9
-
-
-def warn(text: str) -> None:
-    """One warning line on stderr."""
-    print(f"embree-rt: warning: {text}", file=sys.stderr)
 
 
 @dataclass(frozen=True)
@@ -417,13 +402,10 @@ LOOKS_KEY = "gltf_looks"
 def attach_gltf_looks(path: Path, meshes: list) -> None:
     """Read ``path``'s glTF materials and store each triangle primitive's ``GltfLooks`` in the
     ``metadata[LOOKS_KEY]`` of its trimesh mesh; ``meshes`` are trimesh's loaded geometries in
-    its order (``trimesh.Scene.geometry``'s values). Warns in one line about extensions that
-    are ignored, or when the file's primitives cannot be matched to trimesh's meshes."""
+    its order (``trimesh.Scene.geometry``'s values). Warns in one line when the file's
+    primitives cannot be matched to trimesh's meshes (the extensions it ignores are named by
+    ``gltf.prepare_gltf``)."""
     document = GltfDocument(path)
-    ignored = sorted(set(document.json.get("extensionsUsed", [])) & set(IGNORED_EXTENSIONS))
-    if ignored:
-        warn(f"{path}: glTF extensions ignored (no Blinn-Phong counterpart): "
-             f"{', '.join(ignored)}")  # fmt: skip
     primitives = [
         primitive
         for mesh in document.json.get("meshes", [])
@@ -431,8 +413,9 @@ def attach_gltf_looks(path: Path, meshes: list) -> None:
         if primitive.get("mode", 4) in LOADED_MODES
     ]
     if len(primitives) != len(meshes):
-        warn(f"{path}: {len(primitives)} glTF primitives for {len(meshes)} loaded meshes; "
-             "emission, transmission, alpha, samplers, texture transforms not read")  # fmt: skip
+        warn_input(f"{path}: {len(primitives)} glTF primitives for {len(meshes)} loaded "
+                   "meshes; emission, transmission, alpha, samplers, texture transforms not "
+                   "read")  # fmt: skip
         return
     for primitive, mesh in zip(primitives, meshes, strict=True):
         if primitive.get("mode", 4) not in TRIANGLE_MODES:
