@@ -119,9 +119,11 @@ def _filter(address, shadow):
         if valid[lane] == 0:
             continue
         if flags & FLAG_ONE_SIDED and not shadow:
-            facing = (ray[RAY_DIR * n + lane] * hit[HIT_NG * n + lane]
-                      + ray[(RAY_DIR + 1) * n + lane] * hit[(HIT_NG + 1) * n + lane]
-                      + ray[(RAY_DIR + 2) * n + lane] * hit[(HIT_NG + 2) * n + lane])  # fmt: skip
+            facing = (
+                ray[RAY_DIR * n + lane] * hit[HIT_NG * n + lane]
+                + ray[(RAY_DIR + 1) * n + lane] * hit[(HIT_NG + 1) * n + lane]
+                + ray[(RAY_DIR + 2) * n + lane] * hit[(HIT_NG + 2) * n + lane]
+            )
             if facing > 0.0:  # the ray meets the back of the surface
                 valid[lane] = 0
                 continue
@@ -136,18 +138,29 @@ def _filter(address, shadow):
             corners = carray(pointers.ints(block[BLOCK_FACES] + 12 * prim), 3)
             if block[BLOCK_VERTEX_ALPHA] != 0:
                 vertex_alpha = carray(pointers.floats(block[BLOCK_VERTEX_ALPHA]), vertices)
-                alpha *= (w * vertex_alpha[corners[0]] + u * vertex_alpha[corners[1]]
-                          + v * vertex_alpha[corners[2]])  # fmt: skip
+                alpha *= (
+                    w * vertex_alpha[corners[0]]
+                    + u * vertex_alpha[corners[1]]
+                    + v * vertex_alpha[corners[2]]
+                )
             if block[BLOCK_UV] != 0:
                 uv = carray(pointers.floats(block[BLOCK_UV]), 2 * vertices)
                 s = w * uv[corners[0]] + u * uv[corners[1]] + v * uv[corners[2]]
-                t = (w * uv[vertices + corners[0]] + u * uv[vertices + corners[1]]
-                     + v * uv[vertices + corners[2]])  # fmt: skip
+                t = (
+                    w * uv[vertices + corners[0]]
+                    + u * uv[vertices + corners[1]]
+                    + v * uv[vertices + corners[2]]
+                )
                 alpha *= texture_alpha(
-                    block[BLOCK_TEXELS], np.int64(block[BLOCK_HEIGHT]),
-                    np.int64(block[BLOCK_WIDTH]), np.int64(block[BLOCK_WRAP_S]),
-                    np.int64(block[BLOCK_WRAP_T]), block[BLOCK_NEAREST] != 0, s, t,
-                )  # fmt: skip
+                    block[BLOCK_TEXELS],
+                    np.int64(block[BLOCK_HEIGHT]),
+                    np.int64(block[BLOCK_WIDTH]),
+                    np.int64(block[BLOCK_WRAP_S]),
+                    np.int64(block[BLOCK_WRAP_T]),
+                    block[BLOCK_NEAREST] != 0,
+                    s,
+                    t,
+                )
         if flags & FLAG_MASK or shadow:
             if alpha < cutoff:
                 valid[lane] = 0
@@ -179,8 +192,11 @@ class TriangleFilter:
 
     def install(self, lib: ctypes.CDLL, geometry: int) -> None:
         """Set the filters and user pointer on an Embree triangle geometry (before commit)."""
-        for name in ("rtcSetGeometryIntersectFilterFunction",
-                     "rtcSetGeometryOccludedFilterFunction", "rtcSetGeometryUserData"):  # fmt: skip
+        for name in (
+            "rtcSetGeometryIntersectFilterFunction",
+            "rtcSetGeometryOccludedFilterFunction",
+            "rtcSetGeometryUserData",
+        ):
             getattr(lib, name).argtypes = [ctypes.c_void_p, ctypes.c_void_p]
             getattr(lib, name).restype = None
         lib.rtcSetGeometryUserData(geometry, self.block.ctypes.data)
@@ -238,4 +254,3 @@ def triangle_filter(
         block[BLOCK_VERTEX_ALPHA] = vertex_alpha.ctypes.data
         block[BLOCK_VERTICES] = len(vertex_alpha)
     return TriangleFilter(block, tuple(keep), shadows=cutout)
-
