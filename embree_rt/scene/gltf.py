@@ -151,7 +151,7 @@ def _parse_json(data: bytes) -> dict:
     return tree
 
 
-def _uri_path(root: Path, uri: str) -> Path | None:
+def uri_path(root: Path, uri: str) -> Path | None:
     """The file a glTF ``uri`` names, looked for as ``candidate_paths`` says, or None."""
     return next((p for p in candidate_paths(root, uri) if p.is_file()), None)
 
@@ -160,7 +160,7 @@ def _is_data_uri(uri: str) -> bool:
     return uri.startswith("data:")
 
 
-class _Buffers:
+class GltfBuffers:
     """The file's buffers, each read once when first asked for."""
 
     def __init__(self, path: Path, tree: dict, binary: bytes | None) -> None:
@@ -178,7 +178,7 @@ class _Buffers:
             elif _is_data_uri(uri):
                 self.loaded[index] = base64.b64decode(uri.split(",", 1)[1])
             else:
-                self.loaded[index] = _uri_path(self.path.parent, uri).read_bytes()
+                self.loaded[index] = uri_path(self.path.parent, uri).read_bytes()
         return self.loaded[index]
 
 
@@ -294,7 +294,7 @@ def prepare_gltf(path: Path) -> PreparedGltf:
     tree, binary = read_gltf(path)
     _check_extensions(path, tree)
     _check_files(path, tree)
-    buffers = _Buffers(path, tree, binary)
+    buffers = GltfBuffers(path, tree, binary)
     prepared = PreparedGltf()
     rewrite = False
     if any("sparse" in accessor for accessor in tree.get("accessors", [])):
@@ -346,7 +346,7 @@ def _check_files(path: Path, tree: dict) -> None:
             uri = item.get("uri") if isinstance(item, dict) else None
             if not isinstance(uri, str) or _is_data_uri(uri):
                 continue
-            if _uri_path(path.parent, uri) is not None:
+            if uri_path(path.parent, uri) is not None:
                 continue
             if group == "buffers":
                 raise MeshFileError(f"buffers[{index}].uri", f"no such file {uri!r} "
@@ -355,7 +355,7 @@ def _check_files(path: Path, tree: dict) -> None:
                        f"{path.parent}); the materials using it render without it")  # fmt: skip
 
 
-def _densify_sparse(tree: dict, buffers: _Buffers) -> None:
+def _densify_sparse(tree: dict, buffers: GltfBuffers) -> None:
     """Give every sparse accessor its applied values in a new buffer (a data URI appended to
     ``buffers``), so trimesh reads what the file means."""
     blob = bytearray()
@@ -377,7 +377,7 @@ def _densify_sparse(tree: dict, buffers: _Buffers) -> None:
     )
 
 
-def _instance_matrices(tree: dict, buffers: _Buffers, instancing: dict, key: str) -> np.ndarray:
+def _instance_matrices(tree: dict, buffers: GltfBuffers, instancing: dict, key: str) -> np.ndarray:
     """(n, 4, 4) float64 T·R·S of each instance of an ``EXT_mesh_gpu_instancing`` node."""
     attributes = instancing.get("attributes") or {}
     columns = {}

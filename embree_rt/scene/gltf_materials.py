@@ -14,17 +14,15 @@ from __future__ import annotations
 
 import base64
 import io
-import json
 import math
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import unquote
 
 import numpy as np
 
 from embree_rt.materials import RGB, Material
 from embree_rt.scene.errors import warn_input
+from embree_rt.scene.gltf import GltfBuffers, accessor_array, read_gltf, uri_path
 from embree_rt.textures import (
     DEFAULT_SAMPLER,
     NEAREST,
@@ -37,12 +35,6 @@ from embree_rt.textures import (
 # glTF primitive modes trimesh turns into a mesh, point cloud or path (one entry each).
 LOADED_MODES = (0, 1, 4, 5)
 TRIANGLE_MODES = (4, 5)
-# componentType → NumPy dtype, and the divisor of normalised integers (glTF 2.0 §3.11).
-COMPONENT_TYPES = {
-    5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
-    5126: np.float32,
-}  # fmt: skip
-COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 DEFAULT_IOR = 1.5
 # glTF's metallic-roughness model → Blinn-Phong: highlight exponent range, and the mirror
 # reflectance at normal incidence of a dielectric (plastics, paint: about 4%) and of a metal.
@@ -111,82 +103,42 @@ class GltfLooks:
 
 
 class GltfDocument:
-    """A glTF or GLB file's JSON and the bytes of its buffers, images decoded on demand."""
+    """A glTF or GLB file's JSON and buffers (read as ``gltf.read_gltf`` and ``gltf.GltfBuffers``
+    read them), its images decoded on demand."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        data = path.read_bytes()
-        binary = None
-        if data[:4] == b"glTF":
-            # GLB: 12-byte header, then chunks (length, type, bytes): JSON first, BIN next.
-            offset, chunks = 12, {}
-            while offset + 8 <= len(data):
-                length, kind = struct.unpack_from("<I4s", data, offset)
-                chunks.setdefault(kind, data[offset + 8 : offset + 8 + length])
-                offset += 8 + length
-            self.json = json.loads(chunks[b"JSON"].decode("utf-8"))
-            binary = chunks.get(b"BIN\x00")
-        else:
-            self.json = json.loads(data.decode("utf-8"))
-        self.buffers = [self._buffer(entry, binary) for entry in self.json.get("buffers", [])]
-        self._texels: dict[tuple[int, bool], np.ndarray] = {}
-
-    def _buffer(self, entry: dict, binary: bytes | None) -> bytes:
-        uri = entry.get("uri")
-        if uri is None:
-            return binary or b""
-        if uri.startswith("data:"):
-            return base64.b64decode(uri.split(",", 1)[1])
-        return (self.path.parent / unquote(uri)).read_bytes()
-
-    def view_bytes(self, index: int) -> memoryview:
-        view = self.json["bufferViews"][index]
-        start = view.get("byteOffset", 0)
-        return memoryview(self.buffers[view["buffer"]])[start : start + view["byteLength"]]
+        self.json, binary = read_gltf(path)
+        self.buffers = GltfBuffers(path, self.json, binary)
+        self._texels: dict[tuple[int, bool], np.ndarray | None] = {}
 
     def accessor(self, index: int) -> np.ndarray:
-        """(count, components) values of accessor ``index``: float32 for floats and normalised
-        integers (divided as glTF says), the integer type otherwise; sparse entries applied."""
-        accessor = self.json["accessors"][index]
-        dtype = np.dtype(COMPONENT_TYPES[accessor["componentType"]])
-        width = COMPONENTS[accessor["type"]]
-        count = accessor["count"]
-        values = np.zeros((count, width), dtype)
-        if "bufferView" in accessor:
-            stride = self.json["bufferViews"][accessor["bufferView"]].get("byteStride")
-            stride = stride or dtype.itemsize * width
-            raw = self.view_bytes(accessor["bufferView"])
-            offset = accessor.get("byteOffset", 0)
-            values = np.ndarray((count, width), dtype, raw, offset, (stride, dtype.itemsize)).copy()
-        sparse = accessor.get("sparse")
-        if sparse:
-            indices, replaced = sparse["indices"], sparse["values"]
-            at = np.frombuffer(self.view_bytes(indices["bufferView"]),
-                               COMPONENT_TYPES[indices["componentType"]], sparse["count"],
-                               indices.get("byteOffset", 0))  # fmt: skip
-            values[at] = np.frombuffer(
-                self.view_bytes(replaced["bufferView"]), dtype, sparse["count"] * width,
-                replaced.get("byteOffset", 0),
-            ).reshape(-1, width)  # fmt: skip
-        if accessor.get("normalized") and dtype.kind in "iu":
-            scaled = values / np.float32(np.iinfo(dtype).max)
-            return np.maximum(scaled, np.float32(-1.0)).astype(np.float32)
-        return values
+        """(count, components) values of accessor ``index`` (``gltf.accessor_array``, sparse
+        entries applied): float32 for floats and normalised integers, the integer type
+        otherwise."""
+        values = accessor_array(self.json, self.buffers, index, normalized=True)
+        return values.astype(np.float32) if values.dtype.kind == "f" else values
 
-    def texels(self, image_index: int, srgb: bool) -> np.ndarray:
-        """(h, w, 4) float32 texels of image ``image_index`` (decoded once per colour space)."""
+    def texels(self, image_index: int, srgb: bool) -> np.ndarray | None:
+        """(h, w, 4) float32 texels of image ``image_index`` (decoded once per colour space);
+        None for an image file that is not there (``gltf.prepare_gltf`` warned of it)."""
         key = (image_index, srgb)
         if key not in self._texels:
             from PIL import Image
 
             image = self.json["images"][image_index]
+            blob = None
             if "bufferView" in image:
-                blob = bytes(self.view_bytes(image["bufferView"]))
+                view = self.json["bufferViews"][image["bufferView"]]
+                start = view.get("byteOffset", 0)
+                blob = self.buffers[view["buffer"]][start : start + view["byteLength"]]
             elif image["uri"].startswith("data:"):
                 blob = base64.b64decode(image["uri"].split(",", 1)[1])
-            else:
-                blob = (self.path.parent / unquote(image["uri"])).read_bytes()
-            self._texels[key] = texels_from_image(Image.open(io.BytesIO(blob)), srgb)
+            elif (found := uri_path(self.path.parent, image["uri"])) is not None:
+                blob = found.read_bytes()
+            self._texels[key] = None if blob is None else texels_from_image(
+                Image.open(io.BytesIO(blob)), srgb
+            )  # fmt: skip
         return self._texels[key]
 
 
@@ -235,8 +187,8 @@ class _PrimitiveReader:
         return self._uv_sets[index]
 
     def slot(self, info: dict | None, srgb: bool) -> TextureSlot | None:
-        """The texture a material's textureInfo ``info`` names, or None (absent, or its UV
-        set missing: then the factor alone applies, as for a texture that is not there)."""
+        """The texture a material's textureInfo ``info`` names, or None (absent, its image
+        file or its UV set missing: then the factor alone applies, as for no texture)."""
         if not info or "index" not in info:
             return None
         texture = self.document.json["textures"][info["index"]]
@@ -254,10 +206,10 @@ class _PrimitiveReader:
         columns = np.empty((2, len(uv)), np.float32)
         columns[0] = uv[:, 0]
         columns[1] = np.float32(1.0) - uv[:, 1]
-        return TextureSlot(
-            self.document.texels(texture["source"], srgb), columns,
-            _sampler(self.document, texture),
-        )  # fmt: skip
+        texels = self.document.texels(texture["source"], srgb)
+        if texels is None:
+            return None
+        return TextureSlot(texels, columns, _sampler(self.document, texture))
 
 
 def metallic_roughness_material(color: RGB, metallic: float, roughness: float) -> Material:
