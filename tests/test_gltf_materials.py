@@ -557,6 +557,25 @@ def test_ignored_extensions_are_named_in_one_warning_line(tmp_path: Path) -> Non
     assert "KHR_materials_unlit" not in line  # honoured, not ignored
 
 
+def test_a_glb_rendered_on_its_own_reads_its_materials_as_a_scene_file_does(tmp_path) -> None:
+    """Scene.from_file and a scene file naming the glTF read it through one loader: each mesh
+    carries the same glTF looks and gets the same material (emission, glass, absorption)."""
+    from embree_rt.scene.gltf_materials import LOOKS_KEY
+
+    glb = ROOT / "assets" / "gltf_materials.glb"
+    alone = rt.Scene.from_file(glb)
+    path = tmp_path / "named.toml"
+    path.write_text(scene_text([str(glb)]), encoding="utf-8")
+    named = rt.load_scene(path)
+    assert len(alone.meshes) == len(named.meshes) == 6
+    for by_itself, by_name in zip(alone.meshes, named.meshes, strict=True):
+        assert LOOKS_KEY in by_itself.mesh.metadata and LOOKS_KEY in by_name.mesh.metadata
+        assert alone.materials[by_itself.material] == named.materials[by_name.material]
+    materials = [alone.materials[m.material] for m in alone.meshes]
+    assert any(m.emission != (0.0, 0.0, 0.0) for m in materials)
+    assert any(m.is_glass and m.attenuation_distance < math.inf for m in materials)
+
+
 # -- normal maps and occlusion -------------------------------------------------------------------
 
 
