@@ -376,6 +376,18 @@ class SceneReader:
             fields["ior"] = table.number("ior", low=1)
         if table.has("metallic"):
             fields["metallic"] = table.boolean("metallic", False)
+        if table.has("emission"):
+            fields["emission"] = table.color("emission")
+        if table.has("attenuation_color"):
+            fields["attenuation_color"] = table.color("attenuation_color")
+            if max(fields["attenuation_color"]) > 1.0:
+                raise table.error("attenuation_color", "each must lie in [0, 1], got "
+                                  f"{list(fields['attenuation_color'])}")  # fmt: skip
+        if table.has("attenuation_distance"):
+            fields["attenuation_distance"] = table.number("attenuation_distance", low=0,
+                                                          low_open=True)  # fmt: skip
+        if table.has("unlit"):
+            fields["unlit"] = table.boolean("unlit", False)
         return Material(**{**base.__dict__, **fields})
 
     def _material(self, table: Table) -> Material:
