@@ -102,7 +102,7 @@ def closest_on_triangle(px, py, pz, t):
         return t[3], t[4], t[5], False
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = d1 / (d1 - d3)
+        v = d1 / (d1 - d3) if d1 > d3 else 0.0
         return ax + v * abx, ay + v * aby, az + v * abz, False
     cpx, cpy, cpz = px - t[6], py - t[7], pz - t[8]
     d5 = abx * cpx + aby * cpy + abz * cpz
@@ -111,11 +111,12 @@ def closest_on_triangle(px, py, pz, t):
         return t[6], t[7], t[8], False
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = d2 / (d2 - d6)
+        w = d2 / (d2 - d6) if d2 > d6 else 0.0
         return ax + w * acx, ay + w * acy, az + w * acz, False
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        span = (d4 - d3) + (d5 - d6)
+        w = (d4 - d3) / span if span > 0.0 else 0.0
         return (t[3] + w * (t[6] - t[3]), t[4] + w * (t[7] - t[4]), t[5] + w * (t[8] - t[5]),
                 False)  # fmt: skip
     total = va + vb + vc
@@ -134,7 +135,8 @@ def closest_on_triangle(px, py, pz, t):
     return best[0], best[1], best[2], False
 
 
-@cfunc(point_query.CALLBACK_SIGNATURE, nopython=True, cache=True)
+# error_model="numpy": no Python exception can leave a callback Embree calls
+@cfunc(point_query.CALLBACK_SIGNATURE, nopython=True, cache=True, error_model="numpy")
 def _visit(address):
     """Embree's point query callback: the candidate's float64 closest point, kept when within
     the tie tolerance of the best so far; a new best prunes the kept ones and shrinks the
@@ -229,7 +231,7 @@ def _cosine(entries, e, table, px, py, pz):
     return (table[row, 9] * dx + table[row, 10] * dy + table[row, 11] * dz) / length
 
 
-@njit(nogil=True, cache=True)
+@njit(nogil=True, cache=True, error_model="numpy")
 def _closest_chunk(scene, callback, first, stop, points, shift, scale, extent, tolerance,
                    table, capacity, scratch, user, closest, distance, triangle, interior,
                    overflow):  # fmt: skip
@@ -242,6 +244,12 @@ def _closest_chunk(scene, callback, first, stop, points, shift, scale, extent, t
         pz = points[i, 2] - shift[2]
         qx, qy, qz = np.float32(px * scale), np.float32(py * scale), np.float32(pz * scale)
         local = max(extent, abs(np.float64(qx)), abs(np.float64(qy)), abs(np.float64(qz)))
+        reach = point_query.LARGEST_COORDINATE
+        if not (abs(qx) <= reach and abs(qy) <= reach and abs(qz) <= reach):
+            # not finite (NaN compares false), or beyond Embree's reach
+            triangle[i] = -1
+            overflow[i] = False
+            continue
         user[_POINT] = px
         user[_POINT + 1] = py
         user[_POINT + 2] = pz
@@ -257,7 +265,7 @@ def _closest_chunk(scene, callback, first, stop, points, shift, scale, extent, t
                                 user.ctypes.data)  # fmt: skip
         overflow[i] = user[_OVERFLOW] != 0.0
         e = _chosen(user, entries, table)
-        if e < 0:  # nothing found: a non-finite point, or one beyond Embree's reach
+        if e < 0:  # cannot be: every triangle is within an infinite radius
             triangle[i] = -1
             continue
         c = e * _ENTRY
@@ -269,7 +277,7 @@ def _closest_chunk(scene, callback, first, stop, points, shift, scale, extent, t
         interior[i] = entries[c + _E_INTERIOR] != 0.0
 
 
-@njit(parallel=True, nogil=True, cache=True)
+@njit(parallel=True, nogil=True, cache=True, error_model="numpy")
 def _closest(scene, callback, points, shift, scale, extent, tolerance, table, capacity, closest,
              distance, triangle, interior, overflow):  # fmt: skip
     n = points.shape[0]
@@ -282,7 +290,7 @@ def _closest(scene, callback, points, shift, scale, extent, tolerance, table, ca
                        distance, triangle, interior, overflow)  # fmt: skip
 
 
-@njit(nogil=True, cache=True)
+@njit(nogil=True, cache=True, error_model="numpy")
 def _closest_serial(scene, callback, points, shift, scale, extent, tolerance, table, capacity,
                     closest, distance, triangle, interior, overflow):  # fmt: skip
     scratch = np.empty(point_query.SCRATCH_WORDS, np.uint32)
