@@ -123,7 +123,6 @@ class SceneGeometry:
         self._instance_material: list[int] = []
         self._instance_smooth: list[bool] = []
         self._instance_geom_ids: list[int] = []
-        self._instance_normal_matrix: list[np.ndarray] = []
         self._instance_scale: list[float] = []
         self._mesh_bounds: list[np.ndarray] = []
         self._mesh_face_offset: list[int] = []
@@ -172,7 +171,6 @@ class SceneGeometry:
         self._instance_child.append(child)
         self._instance_material.append(material)
         self._instance_smooth.append(smooth)
-        self._instance_normal_matrix.append(np.linalg.inv(transform[:3, :3]).T)
         low, high = self._mesh_bounds[child]
         corners = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1])
                             for z in (low[2], high[2])])  # fmt: skip
@@ -261,14 +259,12 @@ class SceneGeometry:
         self.instance_child = np.full(size, -1, np.int32)
         self.instance_material = np.zeros(size, np.intp)
         self.instance_smooth = np.zeros(size, bool)
-        self.instance_normal_matrix = np.zeros((size, 3, 3), np.float32)
         self.instance_scale = np.zeros(size, np.float32)
         if self._instance_geom_ids:
             ids = np.asarray(self._instance_geom_ids)
             self.instance_child[ids] = self._instance_child
             self.instance_material[ids] = self._instance_material
             self.instance_smooth[ids] = self._instance_smooth
-            self.instance_normal_matrix[ids] = self._instance_normal_matrix
             self.instance_scale[ids] = self._instance_scale
         # Per instance array: its mesh by (geom id, position among the array's children); the
         # transforms themselves stay in the BVH, which takes its hits' normals to world space.
@@ -280,7 +276,6 @@ class SceneGeometry:
             self.instance_child[geom_id] = children[0]
             self.instance_material[geom_id] = materials[0]
             self.instance_smooth[geom_id] = smooth
-            self.instance_normal_matrix[geom_id] = np.eye(3)
             instance_labels[geom_id] = materials
         if self._mesh_faces:
             vertex_offsets = np.cumsum([0] + [len(n) for n in self._mesh_vertex_normals[:-1]])
@@ -412,10 +407,7 @@ class SceneGeometry:
             self.mesh_vertex_normals, self.mesh_missing_normals, corners, u, v,
             self.mesh_face_normals, face,
         )  # fmt: skip
-        world = np.einsum("nij,nj->in", self.instance_normal_matrix[inst], interpolated)
-        if self._arrays:  # instance arrays: M^-T from the BVH's own transforms
-            world = self.bvh.instance_normals(inst, inst_prim, world)
-        world = _unit(world)
+        world = _unit(self.bvh.instance_normals(inst, inst_prim, interpolated))
         return np.where(smooth, world, face_normal)
 
     def occluded_toward(

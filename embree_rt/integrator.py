@@ -22,7 +22,7 @@ from embree_rt import budget, shading
 from embree_rt.batches import batch_ranges, ordered_results
 from embree_rt.camera import CameraFrame, camera_frame, sample_rays, tiled_samples
 from embree_rt.columns import column_max, scatter, scatter_add
-from embree_rt.embree import retain_freed_memory
+from embree_rt.compiled import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits, sphere_kind
 from embree_rt.materials import MaterialTable

@@ -514,3 +514,24 @@ def assert_hits_match(
         assert_close(hits.u[both], ref.u[both], atol=uv_atol, rtol=0.0, err_msg="u differs")
         assert_close(hits.v[both], ref.v[both], atol=uv_atol, rtol=0.0, err_msg="v differs")
     return sure
+
+
+def occluded_or_below_plane(
+    bvh, origins: np.ndarray, directions: np.ndarray, tnear, tfar, plane_y: float
+) -> np.ndarray:
+    """(n,) bool: ``bvh.occluded`` of rays ``origins``, ``directions`` (n, 3) float32 within
+    [tnear, tfar], or the ground plane y = ``plane_y`` crossed there, decided in float32 as the
+    renderer's kernels decide it (``embree_rt.embree.records.plane_crossing``: t = (plane_y -
+    oy) / dy, counted when max(tnear, 0) <= t <= tfar and finite). NumPy's float32 division and
+    comparisons are IEEE's, as the kernel's, so the answers are the kernel's bit for bit on
+    every x86-64 ISA (no fused or reordered arithmetic is involved)."""
+    origins = np.asarray(origins, np.float32)
+    directions = np.asarray(directions, np.float32)
+    count = len(origins)
+    near = np.broadcast_to(np.asarray(tnear, np.float32), (count,))
+    far = np.broadcast_to(np.asarray(tfar, np.float32), (count,))
+    dy = directions[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (np.float32(plane_y) - origins[:, 1]) / dy
+    crossed = (dy != 0) & (t >= np.maximum(near, np.float32(0))) & (t <= far) & (t != np.inf)
+    return bvh.occluded(origins, directions, tnear, tfar) | crossed

@@ -1,5 +1,5 @@
 """The all-hits query's coherent tracing order and its parallel passes change no answer: rays
-traced sorted (embree_rt.embree.local_frame, ray_order.segment_key) against rays traced as
+traced sorted (embree_rt.trimesh_ray.local_frame, ray_order.segment_key) against rays traced as
 given, the settling, float64 and finishing passes on one thread against two, and the keys
 against their definition."""
 
@@ -11,13 +11,12 @@ import trimesh
 from numba import njit
 from trimesh.constants import tol
 
-from embree_rt import trimesh_ray
-from embree_rt.embree.depth_order import finished_hits
-from embree_rt.embree.edge_hits import decided_hits
-from embree_rt.embree.local_frame import local_rays, ordered_local_rays
-from embree_rt.embree.ray_order import box_cells, segment_key
-from embree_rt.embree.settled_hits import settled_hits
-from embree_rt.trimesh_ray import RayMeshIntersector
+from embree_rt.trimesh_ray import RayMeshIntersector, intersector, local_scene
+from embree_rt.trimesh_ray.decided_hits import decided_hits
+from embree_rt.trimesh_ray.finished_hits import finished_hits
+from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
+from embree_rt.trimesh_ray.ray_order import box_cells, segment_key
+from embree_rt.trimesh_ray.settled_hits import settled_hits
 
 
 @njit(cache=False)
@@ -97,13 +96,13 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
     inner.apply_scale(0.5 * scale)
     mesh = trimesh.util.concatenate([mesh, inner])
     origins, directions = _hard_rays(mesh, scale, 1400, seed=11)
-    monkeypatch.setattr(trimesh_ray, "_REORDER_FACES", 0)
+    monkeypatch.setattr(local_scene, "REORDER_FACES", 0)
     ordered = RayMeshIntersector(mesh)
     assert ordered._scene.bounds is not None  # built now (lazily), while every mesh is big
-    monkeypatch.setattr(trimesh_ray, "_REORDER_FACES", 1 << 40)
+    monkeypatch.setattr(local_scene, "REORDER_FACES", 1 << 40)
     given = RayMeshIntersector(mesh)
     assert given._scene.bounds is None
-    monkeypatch.setattr(trimesh_ray, "_FIRST_ROOM", 2)  # overflowing rays traced again
+    monkeypatch.setattr(intersector, "FIRST_ROOM", 2)  # overflowing rays traced again
     for kwargs in ({}, {"max_hits": 3}, {"tnear": 0.0}, {"return_locations": True}):
         a = ordered.intersects_id(origins, directions, **kwargs)
         b = given.intersects_id(origins, directions, **kwargs)
@@ -114,7 +113,7 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
 
 def test_non_finite_rays_traced_in_order_are_refused_naming_their_row(monkeypatch):
     """The row as given, not its place in the tracing order (which sorts a NaN ray first)."""
-    monkeypatch.setattr(trimesh_ray, "_REORDER_FACES", 0)
+    monkeypatch.setattr(local_scene, "REORDER_FACES", 0)
     ours = RayMeshIntersector(trimesh.creation.icosphere(subdivisions=2))
     origins = np.tile([0.0, 0.0, -5.0], (3000, 1))
     directions = np.tile([0.0, 0.0, 1.0], (3000, 1))

@@ -117,7 +117,7 @@ MEASURE = """
 import sys
 from pathlib import Path
 from embree_rt import Scene, render, save_image
-from embree_rt.embree import retain_freed_memory
+from embree_rt.compiled import retain_freed_memory
 from embree_rt.geometry import SceneGeometry
 from embree_rt.scene import random_field
 

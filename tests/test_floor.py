@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from bvh_reference import occluded_or_below_plane
 from tolerances import RTOL32, assert_close, position_atol, ray_t_atol
 
 from embree_rt import Scene
@@ -40,8 +41,8 @@ def crossing(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
 
 def occluded(geometry: SceneGeometry, origins, directions, tnear, tfar) -> np.ndarray:
     """The scene's BVH with its floor, on rays given as (3, n) columns."""
-    return geometry.bvh.occluded(origins.T, directions.T, tnear, tfar,
-                                 plane_y=geometry.labels.plane_y)  # fmt: skip
+    return occluded_or_below_plane(geometry.bvh, origins.T, directions.T, tnear, tfar,
+                                   geometry.labels.plane_y)  # fmt: skip
 
 
 @pytest.fixture(scope="module")

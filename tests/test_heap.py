@@ -8,7 +8,7 @@ import resource
 import numpy as np
 import pytest
 
-from embree_rt.embree import retain_freed_memory
+from embree_rt.compiled import retain_freed_memory
 
 GLIBC = platform.libc_ver()[0] == "glibc"
 

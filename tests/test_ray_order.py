@@ -1,5 +1,5 @@
-"""Rays traced in a coherent order (embree_rt.embree.ray_order) get the answers they get in the
-order given: the radix sort (embree_rt.embree.morton) against NumPy's stable argsort, and first
+"""Rays traced in a coherent order (embree_rt.trimesh_ray.ray_order) get the answers they get in the
+order given: the radix sort (embree_rt.compiled.morton) against NumPy's stable argsort, and first
 hits traced sorted against first hits traced as given, on meshes where many hits are suspect
 (edges, grazing)."""
 
@@ -10,10 +10,10 @@ import pytest
 import trimesh
 from numba import njit
 
-from embree_rt import trimesh_ray
-from embree_rt.embree.morton import radix_order
-from embree_rt.embree.ray_order import box_cells, entry_key
-from embree_rt.trimesh_ray import RayMeshIntersector
+from embree_rt.compiled.morton import radix_order
+from embree_rt.trimesh_ray import RayMeshIntersector, local_scene
+from embree_rt.trimesh_ray.ray_order import box_cells, entry_key
+from embree_rt.trimesh_ray.screened_nearest import screened_nearest
 
 
 @njit(cache=False)
@@ -68,20 +68,20 @@ def test_first_hits_in_the_traced_order_equal_those_in_the_given_order(scale, mo
     start = rng.normal(size=(len(targets), 3))
     origins = 3 * scale * start / np.linalg.norm(start, axis=1)[:, None]
     directions = targets - origins
-    monkeypatch.setattr(trimesh_ray, "_REORDER_FACES", 0)
+    monkeypatch.setattr(local_scene, "REORDER_FACES", 0)
     sorted_first = RayMeshIntersector(mesh)
     scene = sorted_first._scene  # built now (lazily), while every mesh counts as big
-    monkeypatch.setattr(trimesh_ray, "_REORDER_FACES", 1 << 40)
+    monkeypatch.setattr(local_scene, "REORDER_FACES", 1 << 40)
     given_first = RayMeshIntersector(mesh)
     assert scene.bounds is not None and given_first._scene.bounds is None
     screen = dict(shift=scene.origin, scale=scene.scale, extent=scene.extent, near=None,
                   near_ulps=16.0, altitude=scene.min_altitude,
                   floor_altitude=scene.floor_altitude, band_ulps=8.0, graze=1e-3,
                   near_factor=4.0)  # fmt: skip
-    prim_sorted, suspect_sorted = scene.bvh.screened_nearest(origins, directions,
-                                                             bounds=scene.bounds, **screen)
-    prim_given, suspect_given = scene.bvh.screened_nearest(origins, directions, bounds=None,
-                                                           **screen)  # fmt: skip
+    prim_sorted, suspect_sorted = screened_nearest(scene.bvh, origins, directions,
+                                                   bounds=scene.bounds, **screen)
+    prim_given, suspect_given = screened_nearest(scene.bvh, origins, directions, bounds=None,
+                                                 **screen)  # fmt: skip
     assert suspect_given.sum() > 50  # the float64 path is exercised
     np.testing.assert_array_equal(prim_sorted, prim_given)
     np.testing.assert_array_equal(suspect_sorted, suspect_given)

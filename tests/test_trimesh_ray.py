@@ -403,13 +403,13 @@ def test_non_finite_rays_are_refused_naming_the_row():
 def test_vertex_positions_are_grouped_as_numpy_unique_groups_them() -> None:
     # The edge and vertex re-checks find a vertex's neighbours by position (unmerged meshes
     # repeat positions); the fast grouping must give the very classes np.unique gives.
-    from embree_rt.trimesh_ray import _position_ids
+    from embree_rt.trimesh_ray.local_scene import position_ids
 
     rng = np.random.default_rng(5)
     vertices = rng.integers(-3, 4, (5000, 3)).astype(np.float64) * 0.5
     vertices[:10] = [[0.0, 1.0, 2.0]] * 10
     vertices[3, 0] = -0.0  # equal to 0.0
-    ids = _position_ids(vertices)
+    ids = position_ids(vertices)
     _, expected = np.unique(vertices, axis=0, return_inverse=True)
     np.testing.assert_array_equal(ids, expected.reshape(-1))
     assert len(set(ids[:10])) == 1

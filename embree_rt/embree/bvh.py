@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from embree_rt.compiled.work_split import parallel_region
 from embree_rt.embree import device as device_module
 from embree_rt.embree import (
     instance_arrays,
@@ -17,11 +18,11 @@ from embree_rt.embree import (
     library,
     multihit,
     records,
-    screened_nearest,
     segments,
     spatial_order,
     sphere_buffers,
     user_spheres,
+    world_normals,
 )
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
@@ -32,7 +33,6 @@ from embree_rt.embree.validation import (
     as_transform,
     as_triangle_indices,
 )
-from embree_rt.embree.work_split import parallel_region
 from embree_rt.transforms import affine_array_problem
 
 
@@ -67,6 +67,8 @@ SPHERE_KINDS = ("user", "point")
 _NO_SPHERES = (np.zeros((0, 4), np.float32), np.zeros(0, np.int32))
 _IDENTITY_SLOTS = np.zeros(0, np.int32)
 _NO_LABELS = np.zeros(0, np.int32)
+_NO_NORMAL_MATRICES = np.zeros((0, 3, 3), np.float32)
+_NO_ARRAYS = np.zeros((0, instance_arrays.ARRAY_COLUMNS), np.uint64)
 
 _kernel_lock = threading.Lock()
 _symbols_registered = False
@@ -147,8 +149,8 @@ class BVH:
         )
         self._build_quality = library.BUILD_QUALITY[build_quality]
         self._lib.rtcSetSceneBuildQuality(self._scene, self._build_quality)
-        flags = (library.SCENE_FLAG_COMPACT * compact | multihit.SCENE_FLAG_ROBUST * robust
-                 | multihit.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS * filters)  # fmt: skip
+        flags = (library.SCENE_FLAG_COMPACT * compact | library.SCENE_FLAG_ROBUST * robust
+                 | library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS * filters)  # fmt: skip
         if flags:
             self._lib.rtcSetSceneFlags(self._scene, flags)
         self.filters = bool(filters)
@@ -161,14 +163,16 @@ class BVH:
         # The user-geometry spheres' user data (two addresses) and storage order, kept alive
         # here for as long as Embree may call the callbacks.
         self._sphere_user_data: list[tuple[np.ndarray, np.ndarray]] = []
-        # Inverse-transpose of each instance's linear part, by geometry id, for world normals.
+        # Inverse-transpose of each single instance's linear part, by geometry id: one
+        # (g, 3, 3) table at commit (world_normals).
         self._normal_matrices: dict[int, np.ndarray] = {}
-        self._normal_matrix_array: np.ndarray | None = None
+        self._normal_matrix_table = _NO_NORMAL_MATRICES
         # Instance arrays by geometry id: the buffers Embree reads (transforms, child index) and
         # the children's coordinate bounds, all kept alive here; described to the compiled
         # passes by one table at commit (instance_arrays.ARRAY_* columns).
         self._arrays: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray]] = {}
-        self._array_table: np.ndarray | None = None
+        self._array_table = _NO_ARRAYS
+        self._has_instances = False
         self.geometry_count = 0
         self.primitive_count = 0
         self.instance_count = 0  # instances in instance arrays
@@ -407,8 +411,8 @@ class BVH:
         table[:] = np.eye(3, dtype=np.float32)
         for geom_id, matrix in self._normal_matrices.items():
             table[geom_id] = matrix
-        self._normal_matrix_array = table
-        self._has_instances = bool(self._normal_matrices)
+        self._normal_matrix_table = table
+        self._has_instances = bool(self._normal_matrices or self._arrays)
         self._normal_matrices = {}
         if self._arrays:
             table = np.zeros((max(self.geometry_count, 1), instance_arrays.ARRAY_COLUMNS),
@@ -466,16 +470,24 @@ class BVH:
             v=np.empty(n, np.float32),
         )
         # Only instance arrays have copy numbers to copy out; otherwise every hit's is -1.
-        copies = self._array_table is not None
+        copies = bool(self.array_count)
         hits.inst_prim_id = np.empty(n, np.int32) if copies else np.full(n, -1, np.int32)
         if n:
             arguments = (
-                self._live_scene(), kernels.query_arguments(coherent), self.lanes, origins,
-                directions, tnear, tfar, hits.t, hits.normal, hits.u, hits.v, hits.prim_id,
-                hits.geom_id, hits.inst_id, hits.inst_prim_id if copies else None,
-            )  # fmt: skip
+                self._query(coherent), kernels.Rays(origins, directions, tnear, tfar),
+                self._nearest(hits), hits.inst_prim_id if copies else None,
+            )
             self._run_query(kernels.intersect_serial, kernels.intersect, arguments)
         return hits
+
+    def _query(self, coherent: bool) -> kernels.Query:
+        return kernels.Query(self._live_scene(), kernels.query_arguments(coherent), self.lanes)
+
+    @staticmethod
+    def _nearest(hits: Hits) -> kernels.NearestHits:
+        """The kernels' view of ``hits``' arrays."""
+        return kernels.NearestHits(hits.t, hits.normal, hits.u, hits.v, hits.prim_id,
+                                   hits.geom_id, hits.inst_id)  # fmt: skip
 
     def intersect(
         self,
@@ -491,10 +503,9 @@ class BVH:
         """
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         hits = self._raw_hits(origins, directions, tnear, tfar, coherent)
-        self._normals_to_world(hits)
-        if self._array_table is not None:
-            instance_arrays.hits_to_world(hits.inst_id, hits.inst_prim_id, hits.normal,
-                                          self._array_table)  # fmt: skip
+        if self._has_instances:
+            world_normals.hits_to_world(hits.inst_id, hits.inst_prim_id, hits.normal,
+                                        self._normal_matrix_table, self._array_table)  # fmt: skip
         return hits
 
     def intersect_records(
@@ -516,24 +527,23 @@ class BVH:
         spheres, sphere_slot = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
         sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
         has_plane = labels.plane_y is not None
-        fields = records.build_records(
-            origins, directions, near, far, hits.t, hits.geom_id, hits.prim_id, hits.inst_id,
-            hits.normal, hits.u, hits.v, has_plane,
-            np.float32(labels.plane_y if has_plane else 0.0), int(labels.plane_label),
+        record_labels = records.RecordLabels(
+            has_plane, np.float32(labels.plane_y if has_plane else 0.0), int(labels.plane_label),
             int(labels.sphere_geom_id) if len(spheres) else -1, spheres, sphere_slot,
             np.asarray(sphere_label, np.int32), np.asarray(labels.geometry_label, np.int64),
-            np.asarray(labels.geometry_scale, np.float32), self._normal_matrix_array,
-        )  # fmt: skip
+            np.asarray(labels.geometry_scale, np.float32),
+        )
+        fields = records.build_records(
+            origins, directions, near, far, self._nearest(hits), hits.inst_prim_id,
+            record_labels, self._normal_matrix_table, self._array_table,
+        )
         result = HitRecords(*fields)
-        if self._array_table is None:
-            result.inst_prim_id = np.full(len(result.t), -1, np.int32)
-        else:
+        result.inst_prim_id = np.full(len(result.t), -1, np.int32)
+        if self.array_count:
             other = result.group("other")
-            result.inst_prim_id = np.full(len(result.t), -1, np.int32)
             result.inst_prim_id[other] = instance_arrays.finish_records(
                 result.rays, other.start, other.stop, hits.inst_id, hits.inst_prim_id,
-                hits.normal, result.normal, result.label, result.scale,
-                self._labelled_array_table(labels),
+                result.label, result.scale, self._labelled_array_table(labels),
             )  # fmt: skip
         return result
 
@@ -558,20 +568,20 @@ class BVH:
     def instance_normals(
         self, inst_id: np.ndarray, inst_prim_id: np.ndarray, normals: np.ndarray
     ) -> np.ndarray:
-        """(3, k) float32: ``normals`` (3, k) of k hits taken from their child's space to unit
-        world normals where the hit (``inst_id``, ``inst_prim_id`` (k,) int32) is in an
-        instance array; other columns unchanged."""
-        if self._array_table is None:
-            return np.asarray(normals, np.float32)
-        return instance_arrays.normals_to_world(
+        """(3, k) float32 world normals of k instance hits (``inst_id``, ``inst_prim_id`` (k,)
+        int32) from ``normals`` (k, 3) float32 in the instanced object's space, e.g. smooth
+        shading normals: ``world_normals.shading_normals`` (unit length on instance-array hits,
+        unnormalised on single instances)."""
+        return world_normals.shading_normals(
             np.ascontiguousarray(inst_id, np.int32), np.ascontiguousarray(inst_prim_id, np.int32),
-            np.asarray(normals, np.float32), self._array_table,
+            np.ascontiguousarray(normals, np.float32), self._normal_matrix_table,
+            self._array_table,
         )  # fmt: skip
 
     def instance_children(self, inst_id: np.ndarray, inst_prim_id: np.ndarray) -> np.ndarray:
         """(k,) int32: for k hits, the position in its array's ``children`` of the child each
         was in (-1 for hits outside instance arrays)."""
-        if self._array_table is None:
+        if not self.array_count:
             return np.full(len(inst_id), -1, np.int32)
         return instance_arrays.child_of_hits(
             np.ascontiguousarray(inst_id, np.int32), np.ascontiguousarray(inst_prim_id, np.int32),
@@ -584,20 +594,16 @@ class BVH:
         directions: np.ndarray,
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
-        plane_y: float | None = None,
         coherent: bool = False,
     ) -> np.ndarray:
-        """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``; with
-        ``plane_y``, the ground plane y = plane_y too. ``origins``, ``directions`` (n, 3)."""
+        """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``.
+        ``origins``, ``directions`` (n, 3)."""
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         blocked = np.zeros(len(origins), bool)
         if len(origins):
-            arguments = (self._live_scene(), kernels.query_arguments(coherent), self.lanes,
-                         origins, directions, tnear, tfar, blocked)  # fmt: skip
+            arguments = (self._query(coherent), kernels.Rays(origins, directions, tnear, tfar),
+                         blocked)
             self._run_query(kernels.occluded_serial, kernels.occluded, arguments)
-        if plane_y is not None:
-            records.block_by_plane(origins.T, directions.T, tnear, tfar, np.float32(plane_y),
-                                   blocked)  # fmt: skip
         return blocked
 
     def occluded_toward(
@@ -622,9 +628,9 @@ class BVH:
         blocked = np.zeros(len(rows), bool)
         if len(rows):
             has_plane = plane_y is not None
-            arguments = (self._live_scene(), kernels.query_arguments(False), self.lanes, points,
-                         rows, target, has_plane, np.float32(plane_y if has_plane else 0.0),
-                         blocked)  # fmt: skip
+            shadow = segments.Segments(points, rows, target, has_plane,
+                                       np.float32(plane_y if has_plane else 0.0))
+            arguments = (self._query(False), shadow, blocked)
             self._run_query(segments.occluded_toward_serial, segments.occluded_toward, arguments)
         return blocked
 
@@ -635,8 +641,8 @@ class BVH:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
         capacity: int = 16,
-        out: tuple[np.ndarray, ...] | None = None,
-    ) -> tuple[np.ndarray, ...]:
+        out: multihit.HitBuffers | None = None,
+    ) -> multihit.HitBuffers:
         """Up to ``capacity`` nearest hits of each ray, each primitive once (a ``filters=True``
         BVH of one geometry, no instances): see ``multihit.all_hits`` for what it returns."""
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
@@ -658,32 +664,13 @@ class BVH:
             return multihit.crossing_parity(self._live_scene(), origins, directions, edge_band,
                                             graze, self.threads)  # fmt: skip
 
-    def screened_nearest(self, origins: np.ndarray, directions: np.ndarray,
-                         **screen) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-        """Nearest hits of float64 rays, moved to this BVH's frame and screened for float32
-        doubt in the same compiled pass: ``(prim (n,) int32, suspect (n,) bool)``; ``screen``
-        is ``screened_nearest.screened_nearest``'s keywords after ``directions``. A BVH of one
-        triangle geometry, no instances."""
+    def committed_scene(self) -> int:
+        """The committed Embree scene's handle (``RTCScene``), for a compiled pass that calls
+        Embree's nearest-hit query itself (``kernels.intersect_chunk``) on this BVH; refuses
+        before ``commit`` or after ``close``."""
         self._ready_to_query()
-        with parallel_region:
-            prim, suspect, finite = screened_nearest.screened_nearest(
-                self._live_scene(), self.lanes, self.threads, origins, directions, **screen
-            )
-        if not finite:
-            as_points(origins, "origins")  # raises, naming the first bad row
-            as_points(directions, "directions")
-            raise ValueError("rays: not finite in the BVH's frame (coordinates too large)")
-        return prim, suspect
+        return self._live_scene()
 
     def _require_filters(self) -> None:
         if not self.filters:
             raise RuntimeError("build the BVH with filters=True to collect every hit")
-
-    def _normals_to_world(self, hits: Hits) -> None:
-        # Embree reports an instance hit's normal in the instanced object's own space.
-        if not self._has_instances:
-            return
-        rows = np.flatnonzero(hits.inst_id >= 0)
-        if len(rows):
-            matrices = self._normal_matrix_array[hits.inst_id[rows]]
-            hits.normal[rows] = np.einsum("nij,nj->ni", matrices, hits.normal[rows])

@@ -10,6 +10,8 @@ registered in LLVM's symbol table, so the compiled kernels can be cached on disk
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import llvmlite.binding as llvm
 import numpy as np
 from numba import njit, prange, types
@@ -59,6 +61,41 @@ def query_arguments(coherent: bool) -> int:
     """The address of the query arguments the kernels pass to Embree: 0 (Embree's defaults,
     tuned for incoherent rays) or the coherent block above."""
     return _COHERENT_ARGUMENTS.ctypes.data if coherent else 0
+
+
+class Query(NamedTuple):
+    """How a kernel asks Embree: ``scene`` the committed ``RTCScene``, ``arguments`` the address
+    of the query arguments (``query_arguments``) or 0, ``lanes`` 1 (``rtcIntersect1`` on an
+    ``RTCRayHit``) or a packet width, 4, 8 or 16."""
+
+    scene: int
+    arguments: int
+    lanes: int
+
+
+class Rays(NamedTuple):
+    """n rays ``origins + t * directions``, ``tnear <= t <= tfar``: ``origins``, ``directions``
+    (n, 3) float32, ``tnear``, ``tfar`` (n,) float32."""
+
+    origins: np.ndarray
+    directions: np.ndarray
+    tnear: np.ndarray
+    tfar: np.ndarray
+
+
+class NearestHits(NamedTuple):
+    """The nearest-hit kernels' answers for n rays, as Embree gives them: ``t`` (n,) float32
+    (inf on a miss), ``normal`` (n, 3) float32 geometric normal in the hit object's space,
+    ``u``, ``v`` (n,) float32, ``prim``, ``geom``, ``inst`` (n,) int32 (-1 where none)."""
+
+    t: np.ndarray
+    normal: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    prim: np.ndarray
+    geom: np.ndarray
+    inst: np.ndarray
+
 # packet + alignment slack + valid mask, for the widest packet
 SCRATCH_WORDS = PACKET_FIELDS * MAX_LANES + PACKET_ALIGN // 4 + MAX_LANES
 CHUNK = 256  # rays per parallel iteration: small enough to balance, large enough to amortise
@@ -88,27 +125,28 @@ rtc_occluded16 = types.ExternalFunction("rtcOccluded16", _SIGNATURE_N)
 
 
 @njit(inline="always")
-def _aligned_word(row: np.ndarray, alignment: int) -> int:
+def aligned_word(row: np.ndarray, alignment: int) -> int:
     return ((alignment - (row.ctypes.data & (alignment - 1))) & (alignment - 1)) >> 2
 
 
 @njit(inline="always")
-def _store_miss(i, t, normal, u, v, prim, geom, inst):
-    t[i] = np.inf
-    prim[i] = -1
-    geom[i] = -1
-    inst[i] = -1
-    normal[i, 0] = 0.0
-    normal[i, 1] = 0.0
-    normal[i, 2] = 0.0
-    u[i] = 0.0
-    v[i] = 0.0
+def _store_miss(i, hits):
+    hits.t[i] = np.inf
+    hits.prim[i] = -1
+    hits.geom[i] = -1
+    hits.inst[i] = -1
+    hits.normal[i, 0] = 0.0
+    hits.normal[i, 1] = 0.0
+    hits.normal[i, 2] = 0.0
+    hits.u[i] = 0.0
+    hits.v[i] = 0.0
 
 
 @njit(inline="always")
-def _fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar):
-    """Write rays first .. first + count into the packet at word ``b`` (one ray: ``lanes`` 1,
-    an ``RTCRayHit``, whose fields are the same words with one lane)."""
+def fill_packet(words, floats, b, lanes, first, count, rays):
+    """Write ``rays`` (``Rays``) first .. first + count into the packet at word ``b`` (one ray:
+    ``lanes`` 1, an ``RTCRayHit``, whose fields are the same words with one lane)."""
+    origins, directions, tnear, tfar = rays
     valid = b + PACKET_FIELDS * lanes
     for lane in range(lanes):
         i = first + min(lane, count - 1)  # idle lanes repeat a live ray and are masked off
@@ -142,7 +180,7 @@ def _intersect_packet(lanes, valid_address, scene, address, query):
 
 
 @njit(inline="always")
-def _occluded_packet(lanes, valid_address, scene, address, query):
+def occluded_packet(lanes, valid_address, scene, address, query):
     if lanes == 8:
         rtc_occluded8(valid_address, scene, address, query)
     elif lanes == 16:
@@ -153,93 +191,91 @@ def _occluded_packet(lanes, valid_address, scene, address, query):
         rtc_occluded1(scene, address, query)
 
 
-@njit(inline="always")
-def _intersect_chunk(scene, query, lanes, words, first_ray, stop, origins, directions, tnear,
-                     tfar, t, normal, u, v, prim, geom, inst, inst_prim):  # fmt: skip
-    # inst_prim: (n,) int32 for Embree's instPrimID[0] (instance arrays), or None; numba
-    # compiles the None case apart, with the test pruned: the plain loop pays nothing for it.
+@njit(nogil=True, cache=True)
+def intersect_chunk(query, words, first_ray, stop, rays, hits, inst_prim):
+    """Rays first_ray .. stop of ``rays`` (``Rays``) through Embree's nearest-hit query
+    (``query``: a ``Query``), their answers into ``hits`` (``NearestHits``), with ``words`` a
+    uint32 scratch row of ``SCRATCH_WORDS``. ``inst_prim``: (n,) int32 for Embree's
+    instPrimID[0] (instance arrays), or None; numba compiles the None case apart, with the test
+    pruned: the plain loop pays nothing for it."""
+    scene, arguments, lanes = query
     floats = words.view(np.float32)
-    b = _aligned_word(words, PACKET_ALIGN)
+    b = aligned_word(words, PACKET_ALIGN)
     address = words.ctypes.data + 4 * b
     valid_address = address + 4 * PACKET_FIELDS * lanes
     for first in range(first_ray, stop, lanes):
         count = min(lanes, stop - first)
-        _fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar)
-        _intersect_packet(lanes, valid_address, scene, address, query)
+        fill_packet(words, floats, b, lanes, first, count, rays)
+        _intersect_packet(lanes, valid_address, scene, address, arguments)
         for lane in range(count):
             i = first + lane
             if words[b + HIT_GEOM_ID * lanes + lane] == INVALID_ID:
-                _store_miss(i, t, normal, u, v, prim, geom, inst)
+                _store_miss(i, hits)
                 if inst_prim is not None:
                     inst_prim[i] = -1
             else:
-                t[i] = floats[b + RAY_TFAR * lanes + lane]
-                prim[i] = np.int32(words[b + HIT_PRIM_ID * lanes + lane])
-                geom[i] = np.int32(words[b + HIT_GEOM_ID * lanes + lane])
-                inst[i] = np.int32(words[b + HIT_INST_ID * lanes + lane])
+                hits.t[i] = floats[b + RAY_TFAR * lanes + lane]
+                hits.prim[i] = np.int32(words[b + HIT_PRIM_ID * lanes + lane])
+                hits.geom[i] = np.int32(words[b + HIT_GEOM_ID * lanes + lane])
+                hits.inst[i] = np.int32(words[b + HIT_INST_ID * lanes + lane])
                 if inst_prim is not None:
                     inst_prim[i] = np.int32(words[b + HIT_INST_PRIM_ID * lanes + lane])
-                normal[i, 0] = floats[b + HIT_NG * lanes + lane]
-                normal[i, 1] = floats[b + (HIT_NG + 1) * lanes + lane]
-                normal[i, 2] = floats[b + (HIT_NG + 2) * lanes + lane]
-                u[i] = floats[b + HIT_U * lanes + lane]
-                v[i] = floats[b + HIT_V * lanes + lane]
+                hits.normal[i, 0] = floats[b + HIT_NG * lanes + lane]
+                hits.normal[i, 1] = floats[b + (HIT_NG + 1) * lanes + lane]
+                hits.normal[i, 2] = floats[b + (HIT_NG + 2) * lanes + lane]
+                hits.u[i] = floats[b + HIT_U * lanes + lane]
+                hits.v[i] = floats[b + HIT_V * lanes + lane]
 
 
-@njit(inline="always")
-def _occluded_chunk(scene, query, lanes, words, first_ray, stop, origins, directions, tnear, tfar,
-                    blocked):  # fmt: skip
+@njit(nogil=True, cache=True)
+def _occluded_chunk(query, words, first_ray, stop, rays, blocked):
+    scene, arguments, lanes = query
     floats = words.view(np.float32)
-    b = _aligned_word(words, PACKET_ALIGN)
+    b = aligned_word(words, PACKET_ALIGN)
     address = words.ctypes.data + 4 * b
     valid_address = address + 4 * PACKET_FIELDS * lanes
     for first in range(first_ray, stop, lanes):
         count = min(lanes, stop - first)
-        _fill_packet(words, floats, b, lanes, first, count, origins, directions, tnear, tfar)
-        _occluded_packet(lanes, valid_address, scene, address, query)
+        fill_packet(words, floats, b, lanes, first, count, rays)
+        occluded_packet(lanes, valid_address, scene, address, arguments)
         for lane in range(count):
             blocked[first + lane] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
 
-# Drivers: the parallel ones spread chunks over numba's threads; the serial ones run in the
+# Drivers: the parallel ones spread chunks over numba's threads (the chunk bodies are compiled
+# functions of their own, not inlined: numba's parallel lowering loses stores made through a
+# tuple's arrays in an inlined body, and ``hits`` is such a tuple); the serial ones run in the
 # calling thread with no threading layer at all, so several Python threads may call them at once.
-# ``query`` is the address of the query arguments (``query_arguments``) or 0; ``lanes`` is 1
-# (rtcIntersect1 on an RTCRayHit) or a packet width, 4, 8 or 16; ``inst_prim``
-# an (n,) int32 array for the hits' instance-array copy numbers, or None.
+# ``query`` a ``Query``, ``rays`` a ``Rays``, ``hits`` a ``NearestHits`` to fill, ``inst_prim``
+# an (n,) int32 array for the hits' instance-array copy numbers, or None; ``blocked`` (n,) bool.
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def intersect(scene, query, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim, geom,
-              inst, inst_prim):  # fmt: skip
-    n = origins.shape[0]
+def intersect(query, rays, hits, inst_prim):
+    n = rays.origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _intersect_chunk(scene, query, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                         origins, directions, tnear, tfar, t, normal, u, v, prim, geom, inst,
-                         inst_prim)  # fmt: skip
+        intersect_chunk(query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), rays, hits,
+                        inst_prim)
 
 
 @njit(nogil=True, cache=True)
-def intersect_serial(scene, query, lanes, origins, directions, tnear, tfar, t, normal, u, v, prim,
-                     geom, inst, inst_prim):  # fmt: skip
+def intersect_serial(query, rays, hits, inst_prim):
     scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _intersect_chunk(scene, query, lanes, scratch, 0, origins.shape[0], origins, directions, tnear,
-                     tfar, t, normal, u, v, prim, geom, inst, inst_prim)  # fmt: skip
+    intersect_chunk(query, scratch, 0, rays.origins.shape[0], rays, hits, inst_prim)
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def occluded(scene, query, lanes, origins, directions, tnear, tfar, blocked):
-    n = origins.shape[0]
+def occluded(query, rays, blocked):
+    n = rays.origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _occluded_chunk(scene, query, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                        origins, directions, tnear, tfar, blocked)  # fmt: skip
+        _occluded_chunk(query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), rays, blocked)
 
 
 @njit(nogil=True, cache=True)
-def occluded_serial(scene, query, lanes, origins, directions, tnear, tfar, blocked):
+def occluded_serial(query, rays, blocked):
     scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _occluded_chunk(scene, query, lanes, scratch, 0, origins.shape[0], origins, directions, tnear,
-                    tfar, blocked)  # fmt: skip
+    _occluded_chunk(query, scratch, 0, rays.origins.shape[0], rays, blocked)

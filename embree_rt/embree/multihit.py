@@ -36,11 +36,14 @@ Layouts (Embree 4.4 headers; proved by tests/test_multihit_layout.py):
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from numba import carray, cfunc, njit, prange, types
 
+from embree_rt.compiled import pointers
+from embree_rt.compiled.work_split import threads_for
 from embree_rt.embree.kernels import (
     FEATURE_FLAG_ALL,
     HIT_GEOM_ID,
@@ -54,15 +57,12 @@ from embree_rt.embree.kernels import (
     RAY_TFAR,
     RAY_TIME,
     RAY_TNEAR,
+    Rays,
     rtc_intersect1,
 )
-from embree_rt.embree.user_spheres import _floats, _ints, _words32, _words64
-from embree_rt.embree.work_split import threads_for
 
-# rtcore_common.h / rtcore_scene.h
+# rtcore_common.h
 RAY_QUERY_FLAG_INVOKE_ARGUMENT_FILTER = 1 << 1
-SCENE_FLAG_ROBUST = 1 << 2
-SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS = 1 << 3
 
 # RTCIntersectArguments in 8-byte words
 ARGS_FLAGS = 0  # flags | feature_mask << 32
@@ -102,6 +102,10 @@ _SCRATCH_WORDS = 2 * (2 + _RAYHIT_WORDS64 + ARGS_WORDS + CONTEXT_WORDS)  # 4-byt
 CHUNK = 64  # rays per parallel iteration
 
 _FILTER_SIGNATURE = types.void(types.uintp)
+_words64 = pointers.words64
+_words32 = pointers.words32
+_floats = pointers.floats
+_ints = pointers.ints
 
 
 @cfunc(_FILTER_SIGNATURE, nopython=True, cache=True)
@@ -244,8 +248,9 @@ def _sort_hits(count, t, prim, u, v, cos):
 # written inline in the loop body, numba's parallel lowering lost the stores into the scratch row
 # that Embree reads through its address (measured: every ray went out with zero fields).
 @njit(nogil=True, cache=True)
-def _all_hits_chunk(scene, filter_address, words, first, stop, origins, directions, tnear, tfar,
-                    t, prim, u, v, cos, count, more):  # fmt: skip
+def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
+    origins, directions, tnear, tfar = rays
+    t, prim, u, v, cos, count, more = hits
     capacity = t.shape[1]
     rayhit, args, context = _prepare_scratch(words, filter_address)
     buffers = np.empty(5, np.uint64)
@@ -265,20 +270,19 @@ def _all_hits_chunk(scene, filter_address, words, first, stop, origins, directio
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _all_hits(scene, filter_address, origins, directions, tnear, tfar, t, prim, u, v, cos, count,
-              more):  # fmt: skip
-    n = origins.shape[0]
+def _all_hits(scene, filter_address, rays, hits):
+    n = rays.origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
         _all_hits_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                        origins, directions, tnear, tfar, t, prim, u, v, cos, count,
-                        more)  # fmt: skip
+                        rays, hits)
 
 
 @njit(nogil=True, cache=True)
-def _parity_chunk(scene, filter_address, words, first, stop, origins, directions, capacity,
-                  edge_band, graze, odd, clear):  # fmt: skip
+def _parity_chunk(scene, filter_address, words, first, stop, origins, directions, screen, parity):
+    capacity, edge_band, graze = screen
+    odd, clear = parity
     rayhit, args, context = _prepare_scratch(words, filter_address)
     hits = np.empty((4, capacity), np.float32)
     prims = np.empty(capacity, np.int32)
@@ -302,23 +306,36 @@ def _parity_chunk(scene, filter_address, words, first, stop, origins, directions
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _crossing_parity(scene, filter_address, origins, directions, capacity, edge_band, graze,
-                     odd, clear):  # fmt: skip
+def _crossing_parity(scene, filter_address, origins, directions, screen, parity):
+    # screen: (capacity, (primitives,) float32 edge band, float32 graze); parity: (odd, clear)
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
         _parity_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                      origins, directions, capacity, edge_band, graze, odd, clear)  # fmt: skip
+                      origins, directions, screen, parity)
 
 
-def new_hit_buffers(n: int, capacity: int) -> tuple[np.ndarray, ...]:
-    """Empty (t, prim, u, v, cos, count, more) arrays for ``all_hits`` of n rays."""
+class HitBuffers(NamedTuple):
+    """Every hit of n rays, up to ``capacity`` a ray (see ``all_hits``): ``t`` (n, capacity)
+    float32, ``prim`` (n, capacity) int32, ``u``, ``v``, ``cos`` (n, capacity) float32,
+    ``count`` (n,) int64, ``more`` (n,) bool."""
+
+    t: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    cos: np.ndarray
+    count: np.ndarray
+    more: np.ndarray
+
+
+def new_hit_buffers(n: int, capacity: int) -> HitBuffers:
+    """Empty ``HitBuffers`` for ``all_hits`` of n rays."""
     shape = (n, capacity)
-    return (np.empty(shape, np.float32), np.empty(shape, np.int32), np.empty(shape, np.float32),
-            np.empty(shape, np.float32), np.empty(shape, np.float32), np.empty(n, np.int64),
-            np.empty(n, bool))  # fmt: skip
-
+    return HitBuffers(np.empty(shape, np.float32), np.empty(shape, np.int32),
+                      np.empty(shape, np.float32), np.empty(shape, np.float32),
+                      np.empty(shape, np.float32), np.empty(n, np.int64), np.empty(n, bool))
 
 def all_hits(
     scene: int,
@@ -328,29 +345,29 @@ def all_hits(
     tfar: np.ndarray,
     capacity: int,
     threads: int,
-    out: tuple[np.ndarray, ...] | None = None,
-) -> tuple[np.ndarray, ...]:
+    out: HitBuffers | None = None,
+) -> HitBuffers:
     """Up to ``capacity`` nearest hits of each ray, each primitive once, sorted by (t, prim).
 
-    ``scene`` is a committed Embree scene built with ``SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS``
-    (``BVH(filters=True)``); ``origins``, ``directions`` (n, 3) float32, ``tnear``, ``tfar``
-    (n,) float32 (hits with tnear <= t <= tfar). Returns ``t`` (n, capacity) float32, ``prim``
-    (n, capacity) int32, ``u``, ``v`` (n, capacity) float32 barycentrics (weights of the
-    triangle's second and third vertex), ``cos`` (n, capacity) float32 |cos| of the angle
-    between ray and geometric normal, ``count`` (n,) int64 hits kept (row entries past it are
-    undefined), ``more`` (n,) bool: the ray has more hits than ``capacity``. ``out``: arrays of
-    at least those shapes to fill (their leading n rows are returned), so that a caller tracing
+    ``scene`` is a committed Embree scene built with
+    ``library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS`` (``BVH(filters=True)``); ``origins``,
+    ``directions`` (n, 3) float32, ``tnear``, ``tfar`` (n,) float32 (hits with tnear <= t <=
+    tfar). Returns ``HitBuffers``: ``t`` (n, capacity) float32, ``prim`` (n, capacity) int32,
+    ``u``, ``v`` (n, capacity) float32 barycentrics (weights of the triangle's second and third
+    vertex), ``cos`` (n, capacity) float32 |cos| of the angle between ray and geometric normal,
+    ``count`` (n,) int64 hits kept (row entries past it are undefined), ``more`` (n,) bool: the
+    ray has more hits than ``capacity``. ``out``: ``HitBuffers`` of at least those shapes to
+    fill (their leading n rows are returned), so that a caller tracing
     block after block reuses memory that is already mapped.
     """
     n = len(origins)
     if out is None or len(out[0]) < n or out[0].shape[1] != capacity:
         out = new_hit_buffers(n, capacity)
-    t, prim, u, v, cos, count, more = (array[:n] for array in out)
+    hits = HitBuffers(*(array[:n] for array in out))
     if n:
         numba.set_num_threads(threads_for(n, threads))
-        _all_hits(scene, FILTER_ADDRESS, origins, directions, tnear, tfar, t, prim, u, v, cos,
-                  count, more)  # fmt: skip
-    return t, prim, u, v, cos, count, more
+        _all_hits(scene, FILTER_ADDRESS, Rays(origins, directions, tnear, tfar), hits)
+    return hits
 
 
 def crossing_parity(
@@ -376,7 +393,6 @@ def crossing_parity(
     clear = np.zeros(n, bool)
     if n:
         numba.set_num_threads(threads_for(n, threads))
-        _crossing_parity(scene, FILTER_ADDRESS, origins, directions, capacity,
-                         np.ascontiguousarray(edge_band, np.float32), np.float32(graze), odd,
-                         clear)  # fmt: skip
+        screen = (capacity, np.ascontiguousarray(edge_band, np.float32), np.float32(graze))
+        _crossing_parity(scene, FILTER_ADDRESS, origins, directions, screen, (odd, clear))
     return odd, clear

@@ -15,9 +15,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+
+from embree_rt.embree.world_normals import unit_world_normal
 
 GROUPS = ("plane", "spheres", "other")
 
@@ -96,19 +99,38 @@ def plane_crossing(oy, dy, tnear, tfar, plane_y):
     return np.nan
 
 
+class RecordLabels(NamedTuple):
+    """``HitLabels`` as ``build_records`` reads them: with ``has_plane`` the ground plane y =
+    ``plane_y`` (float32) labelled ``plane_label``; ``sphere_geom`` the top-level sphere set's
+    geometry id (-1: none), ``spheres`` (m, 4) float32 its (x, y, z, r) buffer as the BVH stores
+    it, sphere p in slot ``sphere_slot[p]`` ((m,) int32; empty when slot p holds sphere p), and
+    ``sphere_label`` (m,) int32; ``geometry_label`` (g,) int64 and ``geometry_scale`` (g,)
+    float32 by top-level geometry id."""
+
+    has_plane: bool
+    plane_y: np.float32
+    plane_label: int
+    sphere_geom: int
+    spheres: np.ndarray
+    sphere_slot: np.ndarray
+    sphere_label: np.ndarray
+    geometry_label: np.ndarray
+    geometry_scale: np.ndarray
+
+
 @njit(nogil=True, cache=True)
-def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, ng, u, v,
-                  has_plane, plane_y, plane_label, sphere_geom, spheres, sphere_slot, sphere_label,
-                  geometry_label, geometry_scale, normal_matrix):  # fmt: skip
+def build_records(origins, directions, tnear, tfar, hits, inst_prim, labels, normal_matrices,
+                  arrays):  # fmt: skip
     """The compiled pass behind ``BVH.intersect_records``: classify, count, then fill.
 
     Inputs per ray: ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32
-    and the raw hits ``t`` (n,) float32, ``geom``, ``prim``, ``inst`` (n,) int32, ``ng`` (n, 3)
-    float32 object-space normal, ``u``, ``v`` (n,) float32. ``spheres`` (m, 4) float32 is the
-    sphere set's (x, y, z, r) buffer as the BVH stores it, sphere p in slot ``sphere_slot[p]``
-    ((m,) int32; empty when slot p holds sphere p), ``normal_matrix`` (g, 3, 3) float32 the
-    inverse-transpose of each instance's linear part (identity elsewhere).
+    and the raw hits: ``hits`` (``kernels.NearestHits``, normals in the object's space) and
+    ``inst_prim`` (n,) int32. ``labels``: a ``RecordLabels``; ``normal_matrices`` and
+    ``arrays``: the BVH's tables for world normals (``world_normals``).
     """
+    t, ng, u, v, prim, geom, inst = hits
+    (has_plane, plane_y, plane_label, sphere_geom, spheres, sphere_slot, sphere_label,
+     geometry_label, geometry_scale) = labels  # fmt: skip
     n = origins.shape[1]
     kind = np.empty(n, np.uint8)
     plane_t = np.empty(n, np.float32)
@@ -201,30 +223,12 @@ def build_records(origins, directions, tnear, tfar, t, geom, prim, inst, ng, u, 
         position[0, j] = origins[0, i] + dx * ti
         position[1, j] = origins[1, i] + dy * ti
         position[2, j] = origins[2, i] + dz * ti
-        m = normal_matrix[top]
-        gx = ng[i, 0]
-        gy = ng[i, 1]
-        gz = ng[i, 2]
-        wx = m[0, 0] * gx + m[0, 1] * gy + m[0, 2] * gz
-        wy = m[1, 0] * gx + m[1, 1] * gy + m[1, 2] * gz
-        wz = m[2, 0] * gx + m[2, 1] * gy + m[2, 2] * gz
-        length = math.sqrt(np.float64(wx) * wx + np.float64(wy) * wy + np.float64(wz) * wz)
-        if length == 0.0:
-            length = 1.0
-        normal[0, j] = wx / length
-        normal[1, j] = wy / length
-        normal[2, j] = wz / length
+        wx, wy, wz = unit_world_normal(normal_matrices, arrays, top, inst_prim[i], ng[i, 0],
+                                       ng[i, 1], ng[i, 2])  # fmt: skip
+        normal[0, j] = wx
+        normal[1, j] = wy
+        normal[2, j] = wz
         label[j] = geometry_label[top]
         scale[j] = geometry_scale[top]
     return (rays, counts[:3].copy(), out_t, position, normal, label, scale, incoming, out_prim,
             out_inst, out_u, out_v)  # fmt: skip
-
-
-@njit(nogil=True, cache=True)
-def block_by_plane(origins, directions, tnear, tfar, plane_y, blocked):
-    """Mark in ``blocked`` (n,) bool the rays that cross the plane y = plane_y in their window;
-    ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32."""
-    for i in range(origins.shape[1]):
-        if not blocked[i]:
-            t = plane_crossing(origins[1, i], directions[1, i], tnear[i], tfar[i], plane_y)
-            blocked[i] = not math.isnan(t)

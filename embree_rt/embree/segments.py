@@ -12,6 +12,7 @@ segment the plane blocks needs no traversal.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -22,25 +23,38 @@ from embree_rt.embree.kernels import (
     PACKET_FIELDS,
     RAY_TFAR,
     SCRATCH_WORDS,
-    _aligned_word,
-    _fill_packet,
-    _occluded_packet,
+    Rays,
+    aligned_word,
+    fill_packet,
+    occluded_packet,
 )
 from embree_rt.embree.records import plane_crossing
 
 
-@njit(inline="always")
-def _segments_chunk(scene, query, lanes, words, first_row, stop, points, rows, target, has_plane,
-                    plane_y, blocked):  # fmt: skip
+class Segments(NamedTuple):
+    """k segments from surface points to one target: ``points`` (3, n) float32, ``rows`` (k,)
+    int64 the column of each segment's point, ``target`` (3,) float32; with ``has_plane`` the
+    ground plane y = ``plane_y`` (float32) blocks too."""
+
+    points: np.ndarray
+    rows: np.ndarray
+    target: np.ndarray
+    has_plane: bool
+    plane_y: np.float32
+
+
+@njit(nogil=True, cache=True)
+def _segments_chunk(query, words, first_row, stop, segments, blocked):
+    scene, arguments, lanes = query
+    points, rows, target, has_plane, plane_y = segments
     floats = words.view(np.float32)
-    b = _aligned_word(words, PACKET_ALIGN)
+    b = aligned_word(words, PACKET_ALIGN)
     address = words.ctypes.data + 4 * b
     valid_address = address + 4 * PACKET_FIELDS * lanes
-    # One packet's rays at a time, as _fill_packet takes them: (lanes, 3) origins, directions.
+    # One packet's rays at a time, as fill_packet takes them: (lanes, 3) origins, directions.
     origins = np.empty((lanes, 3), np.float32)
     directions = np.empty((lanes, 3), np.float32)
-    near = np.zeros(lanes, np.float32)
-    far = np.ones(lanes, np.float32)
+    packet = Rays(origins, directions, np.zeros(lanes, np.float32), np.ones(lanes, np.float32))
     order = np.empty(lanes, np.int64)  # which segment each filled lane is
     k = first_row
     while k < stop:
@@ -62,29 +76,25 @@ def _segments_chunk(scene, query, lanes, words, first_row, stop, points, rows, t
             k += 1
         if count == 0:
             continue
-        _fill_packet(words, floats, b, lanes, 0, count, origins, directions, near, far)
-        _occluded_packet(lanes, valid_address, scene, address, query)
+        fill_packet(words, floats, b, lanes, 0, count, packet)
+        occluded_packet(lanes, valid_address, scene, address, arguments)
         for lane in range(count):
             blocked[order[lane]] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
 
-# ``points`` (3, n) float32, ``rows`` (k,) int64 indices into its columns, ``target`` (3,)
-# float32, ``blocked`` (k,) bool out; ``query`` and ``lanes`` as in ``kernels``.
+# ``query`` a ``kernels.Query``, ``segments`` a ``Segments``, ``blocked`` (k,) bool out.
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def occluded_toward(scene, query, lanes, points, rows, target, has_plane, plane_y, blocked):
-    n = rows.shape[0]
+def occluded_toward(query, segments, blocked):
+    n = segments.rows.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _segments_chunk(scene, query, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                        points, rows, target, has_plane, plane_y, blocked)  # fmt: skip
+        _segments_chunk(query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), segments, blocked)
 
 
 @njit(nogil=True, cache=True)
-def occluded_toward_serial(scene, query, lanes, points, rows, target, has_plane, plane_y,
-                           blocked):  # fmt: skip
+def occluded_toward_serial(query, segments, blocked):
     scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _segments_chunk(scene, query, lanes, scratch, 0, rows.shape[0], points, rows, target,
-                    has_plane, plane_y, blocked)  # fmt: skip
+    _segments_chunk(query, scratch, 0, segments.rows.shape[0], segments, blocked)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from embree_rt.embree.morton import CELLS, radix_order, spread_bits
+from embree_rt.compiled.morton import CELLS, radix_order, spread_bits
 from embree_rt.embree.sphere_buffers import pack_spheres
 
 

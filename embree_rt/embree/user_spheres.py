@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import carray, cfunc, njit, types
 
-from embree_rt.embree import pointers
+from embree_rt.compiled import pointers
 from embree_rt.embree.kernels import (
     HIT_GEOM_ID,
     HIT_INST_ID,

@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from embree_rt.embree.morton import CELLS, spread_bits
+from embree_rt.compiled.morton import CELLS, spread_bits
 
 
 @njit(inline="always")

@@ -19,24 +19,47 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.morton import radix_order
-from embree_rt.embree.pointers import prefetch
-from embree_rt.embree.ray_order import box_cells, segment_key
-from embree_rt.embree.work_split import parallel_region, threads_for
+from embree_rt.compiled.morton import radix_order
+from embree_rt.compiled.pointers import prefetch
+from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.trimesh_ray.ray_order import box_cells, segment_key
 
 CHUNK = 1024  # rays per parallel iteration of the ordering passes
 _AHEAD = 16
 
 
 @njit(inline="always")
+def local_coordinate(value, shift, scale):
+    """A float64 world coordinate in the local frame, float32: ``(value - shift) * scale`` in
+    float64, rounded once. The one copy of the frame's rule (mesh vertices, points, rays)."""
+    return np.float32((value - shift) * scale)
+
+
+@njit(nogil=True, cache=True)
+def _local_points(points, shift, scale, out):
+    for i in range(points.shape[0]):
+        for k in range(3):
+            out[i, k] = local_coordinate(points[i, k], shift[k], scale)
+
+
+def local_points(points: np.ndarray, shift: np.ndarray, scale: float) -> np.ndarray:
+    """(n, 3) float32: ``points`` (n, 3) float64 in the frame ``(p - shift) * scale``."""
+    points = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+    out = np.empty(points.shape, np.float32)
+    if len(points):
+        _local_points(points, np.ascontiguousarray(shift, np.float64), float(scale), out)
+    return out
+
+
+@njit(inline="always")
 def _to_local(origins, directions, i, shift, scale, extent, local_origins, local_directions,
               magnitude, j):  # fmt: skip
-    """Row i of the float64 rays into row j of the local arrays: the one copy of this
-    arithmetic. Returns whether the local row is finite."""
+    """Row i of the float64 rays into row j of the local arrays. Returns whether the local row
+    is finite."""
     largest = extent
     finite = True
     for k in range(3):
-        local = np.float32((origins[i, k] - shift[k]) * scale)
+        local = local_coordinate(origins[i, k], shift[k], scale)
         local_origins[j, k] = local
         local_directions[j, k] = np.float32(directions[i, k])
         largest = max(largest, abs(np.float64(local)))

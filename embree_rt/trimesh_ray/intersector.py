@@ -16,7 +16,7 @@ Conventions, those of trimesh's pure-NumPy ``ray_triangle``:
 - A ray through an edge or a vertex hits every triangle there that ``ray_triangle``'s float64
   test accepts (barycentrics within ``tol.zero`` of the triangle): ``intersects_id`` returns each
   of them, as ``ray_triangle`` does. Embree's float32 test may accept one or both near an edge,
-  so every Embree hit within float32 reach of an edge (``_edge_band``), or grazing its triangle,
+  so every Embree hit within float32 reach of an edge (``local_scene``), or grazing its triangle,
   is decided again in float64 against the triangles around it (those sharing a vertex position
   with it) by ``ray_triangle``'s own formulas. Triangles meeting only at T-junctions (no
   shared vertex position) are not looked up.
@@ -42,20 +42,20 @@ from __future__ import annotations
 
 import functools
 import inspect
-import threading
 
 import numpy as np
 import trimesh
 from trimesh import caching, util
 from trimesh.constants import tol
 
-from embree_rt.embree import BVH
-from embree_rt.embree.depth_order import finished_hits
-from embree_rt.embree.edge_hits import decided_hits
-from embree_rt.embree.local_frame import local_rays, ordered_local_rays
-from embree_rt.embree.plane_distances import plane_distances
-from embree_rt.embree.settled_hits import settled_hits
 from embree_rt.embree.validation import as_points
+from embree_rt.trimesh_ray.decided_hits import decided_hits
+from embree_rt.trimesh_ray.finished_hits import finished_hits
+from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
+from embree_rt.trimesh_ray.local_scene import BAND_ULPS, EDGE_BAND_SCALE, EPS32, LocalScene
+from embree_rt.trimesh_ray.plane_distances import plane_distances
+from embree_rt.trimesh_ray.screened_nearest import screened_nearest
+from embree_rt.trimesh_ray.settled_hits import settled_hits
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
 # near an edge or along a face to trust their parity.
@@ -69,132 +69,13 @@ _PARALLEL_COS = 1e-5
 # Hits at a smaller |cos| (float32) are decided again in float64: near _PARALLEL_COS, Embree's
 # float32 cosine may fall on either side.
 _GRAZE_COS = 1e-3
-_EPS32 = float(np.finfo(np.float32).eps)
-# Embree's float32 barycentrics and distances err by a few ulps of the largest coordinate
-# involved; these multiples leave a wide margin.
-_BAND_ULPS = 8.0
+# Embree's float32 distances err by a few ulps of the largest coordinate involved: hits within
+# this many of the origin are decided in float64.
 _TNEAR_ULPS = 16.0
 # Rays traced per call, and rays x room for hits: bounded memory, reused from block to block.
 _BLOCK_RAYS = 1 << 17  # 21 MB of hit buffers at 8 hits a ray, kept by the scene
-_FIRST_ROOM = 8
+FIRST_ROOM = 8  # hits of room a ray on the first trace (rays that overflow it are traced again)
 _BLOCK_HITS = 1 << 21
-_REORDER_FACES = 1 << 15
-_SCRATCH_ITEMS = 1 << 22
-
-
-class _LocalScene:
-    """The mesh in Embree: vertices shifted to the bounding box's corner and scaled by ``scale``
-    (float64, then rounded to float32 once), the BVH, and what the float64 refinement needs."""
-
-    def __init__(self, mesh: trimesh.Trimesh, scale: float) -> None:
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        faces = np.asarray(mesh.faces, dtype=np.int64)
-        self.origin = vertices.min(axis=0) if len(vertices) else np.zeros(3)
-        self.scale = float(scale)
-        local = ((vertices - self.origin) * self.scale).astype(np.float32)
-        self.extent = float(np.abs(local).max()) if len(local) else 0.0
-        # Rays are traced in the order of where they enter the mesh's box (ray_order) on meshes
-        # whose BVH outgrows the caches: 1.4-1.6x the rate on 1e5 and 1.3e6 triangles; on a
-        # small mesh (2,304 triangles) the sort cost more than the order saved.
-        self.bounds = (np.array([vertices.min(axis=0), vertices.max(axis=0)])
-                       if len(faces) >= _REORDER_FACES else None)  # fmt: skip
-        # single rays: trimesh's queries are rarely coherent, and packets of incoherent rays
-        # traced 10-15% slower here
-        self.bvh = BVH(lanes=1, robust=True, filters=True)
-        self.bvh.add_triangles(local, faces)
-        self.bvh.commit()
-        self.triangles = np.asarray(mesh.triangles, dtype=np.float64)
-        # each triangle's first vertex and unit normal side by side in one (k, 6) table: the
-        # float64 distance of a hit reads both, and on a big mesh each read is a cache miss
-        self.planes = np.hstack([self.triangles[:, 0], np.asarray(mesh.face_normals, np.float64)])
-        self.faces = faces
-        self.vertices = vertices
-        self.face_count = len(faces)
-        self.min_altitude = _min_altitudes(self.triangles, np.asarray(mesh.area_faces)) * scale
-        # 0 when any triangle is degenerate: then every hit's own altitude is looked up
-        self.floor_altitude = float(self.min_altitude.min()) if self.face_count else 0.0
-        # contains_points' rays reach twice the mesh's extent
-        self.contains_band = _edge_band(self, np.arange(self.face_count),
-                                        np.full(self.face_count, 2 * self.extent)
-                                        ).astype(np.float32)  # fmt: skip
-        self._fans: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        # all_hits' buffers and working space (megabytes), kept from query to query, one set a
-        # thread: fresh arrays of that size come from the kernel a page fault a 4 KiB page at a
-        # time (measured on the torus, 100k rays: 4,000 faults and 14 ms of system time, a
-        # fifth of the query)
-        self._buffers = threading.local()
-
-    def hit_buffers(self, capacity: int) -> tuple[np.ndarray, ...] | None:
-        """This thread's all_hits buffers of ``capacity`` hits a ray from its last query, or
-        None."""
-        kept = getattr(self._buffers, "arrays", None)
-        return kept if kept is not None and kept[0].shape[1] == capacity else None
-
-    def scratch(self, name: str, size: int, dtype) -> np.ndarray:
-        """(size,) array of ``dtype``: this thread's working space ``name``, kept from query to
-        query up to _SCRATCH_ITEMS (larger ones are new each time), contents undefined."""
-        pool = self._buffers.__dict__.setdefault("pool", {})
-        array = pool.get(name)
-        if array is None or len(array) < size:
-            array = np.empty(size, dtype)
-            if size <= _SCRATCH_ITEMS:
-                pool[name] = array
-        return array[:size]
-
-    def keep_hit_buffers(self, capacity: int, buffers: tuple[np.ndarray, ...]) -> None:
-        """Keep ``buffers`` (all_hits' arrays, ``capacity`` hits a ray) for this thread's next
-        query when they are at least as large as those kept."""
-        kept = self.hit_buffers(capacity)
-        if kept is None or len(buffers[0]) > len(kept[0]):
-            self._buffers.arrays = buffers
-
-    def to_local(self, points: np.ndarray) -> np.ndarray:
-        """(n, 3) float64 world points → (n, 3) float32 in the BVH's frame."""
-        return ((points - self.origin) * self.scale).astype(np.float32)
-
-    def fans(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Faces around each vertex position, CSR: (canonical faces (k, 3), starts (m + 1,),
-        faces (3k,)); vertices at the same position count as one (unmerged STL meshes)."""
-        if self._fans is None:
-            canonical = _position_ids(self.vertices)[self.faces]
-            flat = canonical.reshape(-1)
-            order = np.argsort(flat, kind="stable")
-            starts = np.searchsorted(flat[order], np.arange(flat.max() + 2 if len(flat) else 1))
-            self._fans = (canonical, starts, order // 3)
-        return self._fans
-
-
-def _position_ids(vertices: np.ndarray) -> np.ndarray:
-    """(m,) int64 for (m, 3) float64 ``vertices``: equal ids exactly where positions are equal
-    (as ``np.unique(vertices, axis=0)`` groups them, -0.0 and 0.0 alike). A lexsort of the
-    columns: 10x faster than ``np.unique``'s sort of rows as records (1.2 s on 655k vertices)."""
-    if len(vertices) == 0:
-        return np.zeros(0, np.int64)
-    order = np.lexsort(vertices.T[::-1])
-    ordered = vertices[order]
-    starts = np.ones(len(order), bool)
-    starts[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
-    ids = np.empty(len(order), np.int64)
-    ids[order] = np.cumsum(starts) - 1
-    return ids
-
-
-def _min_altitudes(triangles: np.ndarray, areas: np.ndarray) -> np.ndarray:
-    """(k,) smallest altitude of each of (k, 3, 3) triangles of ``areas`` (k,) (0 for
-    degenerate ones): twice the area over the longest side."""
-    longest = np.zeros(len(triangles))
-    for a, b in ((0, 1), (1, 2), (2, 0)):
-        side = triangles[:, b] - triangles[:, a]
-        longest = np.maximum(longest, np.sqrt(np.einsum("ij,ij->i", side, side)))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(longest > 0, 2 * areas / np.where(longest > 0, longest, 1), 0.0)
-
-
-def _edge_band(scene: _LocalScene, faces: np.ndarray, magnitude: np.ndarray) -> np.ndarray:
-    """Barycentric distance from an edge within which Embree's float32 answer for ``faces``
-    (k,) may be wrong, for rays whose coordinates reach ``magnitude`` (k,) in the local frame."""
-    with np.errstate(divide="ignore"):
-        return _BAND_ULPS * _EPS32 * magnitude / scene.min_altitude[faces]
 
 
 def _ray_arrays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
@@ -227,7 +108,7 @@ class _HitList:
     """The multi-hit query's hits, part after part, in arrays lent by the scene (grown as
     needed): (rays, tris) int64 and distance float64, so that no part is copied twice."""
 
-    def __init__(self, scene: _LocalScene, size: int) -> None:
+    def __init__(self, scene: LocalScene, size: int) -> None:
         self._scene = scene
         self._arrays = self._lent(max(size, 1))
         self._count = 0
@@ -280,8 +161,8 @@ class RayMeshIntersector:
         return 1.0
 
     @caching.cache_decorator
-    def _scene(self) -> _LocalScene:
-        return _LocalScene(self.mesh, self._scale)
+    def _scene(self) -> LocalScene:
+        return LocalScene(self.mesh, self._scale)
 
     # -- queries ------------------------------------------------------------------------------
 
@@ -291,7 +172,7 @@ class RayMeshIntersector:
         when ``tnear`` is given, ``inclusive``); by default near is a few float32 ulps of
         ``magnitude`` (n,), each ray's largest local coordinate (its origin's or the mesh's)."""
         if tnear is None:
-            return _TNEAR_ULPS * _EPS32 * magnitude / scene.scale, False
+            return _TNEAR_ULPS * EPS32 * magnitude / scene.scale, False
         near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(magnitude),))
         if not np.isfinite(near).all() or (near < 0).any():
             raise ValueError("tnear: must be finite and >= 0")
@@ -333,11 +214,11 @@ class RayMeshIntersector:
         room = capacity + 4
         # Most rays hit a few triangles: trace with a little room first and again, with all of
         # it, only the rays that overflowed (so the hit arrays stay small).
-        first_room = min(room, _FIRST_ROOM)
+        first_room = min(room, FIRST_ROOM)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
         buffers = scene.hit_buffers(first_room)
         hits, pending_parts = _HitList(scene, 2 * n), []
-        band_scale = _BAND_ULPS * _EPS32
+        band_scale = EDGE_BAND_SCALE
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
             # Embree from the local frame's tnear (inclusive, a little short of ours): which
@@ -384,22 +265,22 @@ class RayMeshIntersector:
 
     def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
         """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
-        decides them, against all the triangles around them (``edge_hits.decided_hits``)."""
+        decides them, against all the triangles around them (``decided_hits``)."""
         scene = self._scene
         if not len(rows):
             return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
         return decided_hits(rows, positions, result, magnitude, near, inclusive, origins,
                             directions, scene.planes, scene.triangles,
-                            scene.min_altitude, _BAND_ULPS * _EPS32, _GRAZE_COS, _PARALLEL_COS,
+                            scene.min_altitude, EDGE_BAND_SCALE, _GRAZE_COS, _PARALLEL_COS,
                             tol.zero, scene.fans(), scene.bvh.threads)  # fmt: skip
 
     def _first_hits(self, origins, directions, tnear) -> np.ndarray:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
         float64 (directions not necessarily unit) hits, -1 for none. Embree's nearest-hit query
         answers, in one compiled pass with the frame change, every ray whose hit lies clear of
-        edges, of grazing and of the origin (``BVH.screened_nearest``; on big meshes in the order
+        edges, of grazing and of the origin (``screened_nearest``; on big meshes in the order
         of where the rays enter the mesh's box, which changes no answer, see
-        ``embree_rt.embree.screened_nearest``); the others (under 1% on the benchmark's meshes)
+        ``embree_rt.trimesh_ray.screened_nearest``); the others (under 1% on the benchmark's meshes)
         go through ``_hits``, which decides them in float64."""
         scene = self._scene
         near = None
@@ -407,10 +288,10 @@ class RayMeshIntersector:
             near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(origins),))
             if not np.isfinite(near).all() or (near < 0).any():
                 raise ValueError("tnear: must be finite and >= 0")
-        prim, suspect = scene.bvh.screened_nearest(
-            origins, directions, shift=scene.origin, scale=scene.scale, extent=scene.extent,
-            bounds=scene.bounds, near=near, near_ulps=_TNEAR_ULPS,
-            altitude=scene.min_altitude, floor_altitude=scene.floor_altitude, band_ulps=_BAND_ULPS,
+        prim, suspect = screened_nearest(
+            scene.bvh, origins, directions, shift=scene.origin, scale=scene.scale,
+            extent=scene.extent, bounds=scene.bounds, near=near, near_ulps=_TNEAR_ULPS,
+            altitude=scene.min_altitude, floor_altitude=scene.floor_altitude, band_ulps=BAND_ULPS,
             graze=_GRAZE_COS, near_factor=4.0,
         )  # fmt: skip
         first = prim.astype(np.int64)

@@ -29,10 +29,20 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, _intersect_chunk
-from embree_rt.embree.morton import radix_order
-from embree_rt.embree.ray_order import box_cells, entry_key
-from embree_rt.embree.work_split import threads_for
+from embree_rt.compiled.morton import radix_order
+from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.embree import BVH
+from embree_rt.embree.kernels import (
+    CHUNK,
+    SCRATCH_WORDS,
+    NearestHits,
+    Query,
+    Rays,
+    intersect_chunk,
+)
+from embree_rt.embree.validation import as_points
+from embree_rt.trimesh_ray.local_frame import local_coordinate
+from embree_rt.trimesh_ray.ray_order import box_cells, entry_key
 
 _EPS32 = np.float64(np.finfo(np.float32).eps)
 # trimesh.util.unitize leaves vectors no longer than this as they are
@@ -43,7 +53,7 @@ _UNIT_THRESHOLD = 1e-12
 def _frame_chunk(first, stop, origins, directions, shift, scale, extent, near_world, near_ulps,
                  near_factor, lower, upper, cells_per_unit, rays, limits, keys,
                  bad):  # fmt: skip
-    # the local frame, as trimesh_ray._LocalScene.to_local and trimesh.util.unitize compute it:
+    # the local frame (local_frame.local_coordinate) and trimesh.util.unitize's unit direction:
     # rays[i] = local origin, unit direction (float32), limits[i] = Embree's tnear, the
     # screening's origin limit; and with keys, ray i's tracing-order key
     given = near_world.shape[0] > 0
@@ -51,7 +61,7 @@ def _frame_chunk(first, stop, origins, directions, shift, scale, extent, near_wo
         magnitude = extent
         finite = True
         for k in range(3):
-            local = np.float32((origins[i, k] - shift[k]) * scale)
+            local = local_coordinate(origins[i, k], shift[k], scale)
             rays[i, k] = local
             finite = finite and math.isfinite(local)
             magnitude = max(magnitude, abs(np.float64(local)))
@@ -95,8 +105,9 @@ def _trace_chunk(scene, lanes, words, first, stop, origins, directions, limits, 
     for i in range(first, stop):
         tnear[i] = np.float32(limits[i, 0])
         tfar[i] = np.inf
-    _intersect_chunk(scene, 0, lanes, words, first, stop, origins, directions, tnear, tfar, t,
-                     normal, u, v, prim, geom, inst, None)  # fmt: skip
+    intersect_chunk(Query(scene, 0, lanes), words, first, stop,
+                    Rays(origins, directions, tnear, tfar),
+                    NearestHits(t, normal, u, v, prim, geom, inst), None)
     floor_band_scale = band_ulps * _EPS32 / floor_altitude if floor_altitude > 0 else np.inf
     for i in range(first, stop):
         p = prim[i]
@@ -174,11 +185,10 @@ def _screened(scene, lanes, origins, directions, shift, scale, extent, reorder, 
 
 
 def screened_nearest(
-    scene: int,
-    lanes: int,
-    threads: int,
+    bvh: BVH,
     origins: np.ndarray,
     directions: np.ndarray,
+    *,
     shift: np.ndarray,
     scale: float,
     extent: float,
@@ -190,10 +200,11 @@ def screened_nearest(
     band_ulps: float,
     graze: float,
     near_factor: float,
-) -> tuple[np.ndarray, np.ndarray, bool]:
+) -> tuple[np.ndarray, np.ndarray]:
     """Nearest hit of each ray and whether it is suspect (see the module docstring).
 
-    ``origins``, ``directions`` (n, 3) float64 world rays (directions need not be unit);
+    ``bvh``: a committed BVH of one triangle geometry, no instances; ``origins``,
+    ``directions`` (n, 3) float64 world rays (directions need not be unit);
     ``shift`` (3,) float64 and ``scale``: the local frame is ``(p - shift) * scale`` in float64,
     rounded to float32; ``extent``: the mesh's largest local coordinate; ``bounds``: (2, 3)
     float64 world box (the mesh's) to trace the rays in the order of where they enter it
@@ -205,27 +216,33 @@ def screened_nearest(
     degenerate one: always suspect), ``floor_altitude`` its smallest value (so 0 when any
     triangle is degenerate); ``graze``: hits at |cos| <= it are suspect.
 
-    Returns ``prim`` (n,) int32 (-1 for a miss, never suspect), ``suspect`` (n,) bool and
-    ``finite``: False when some ray had a non-finite coordinate (its answer is meaningless).
+    Returns ``prim`` (n,) int32 (-1 for a miss, never suspect) and ``suspect`` (n,) bool;
+    raises ValueError, naming the first bad row, when a ray is not finite in the BVH's frame.
 
     Reordering cannot change an answer: every ray is traced on its own (``lanes`` 1: one
     ``rtcIntersect1`` call, whose result is a function of that ray's fields and the committed,
     immutable BVH alone), and the frame change and screening of ray i read only row i. So with
     ``bounds`` or without, each ray goes through the same arithmetic on the same bits.
     """
+    scene = bvh.committed_scene()
     n = len(origins)
     prim = np.empty(n, np.int32)
     suspect = np.empty(n, bool)
     bad = np.zeros(1, bool)
     lower, upper = np.zeros((2, 3)) if bounds is None else np.asarray(bounds, np.float64)
-    if n:
-        numba.set_num_threads(threads_for(n, threads))
-        _screened(scene, lanes, np.ascontiguousarray(origins, np.float64),
-                  np.ascontiguousarray(directions, np.float64),
-                  np.ascontiguousarray(shift, np.float64), float(scale), float(extent),
-                  bounds is not None, lower, upper, box_cells(lower, upper),
-                  np.zeros(0) if near is None else np.ascontiguousarray(near, np.float64),
-                  float(near_ulps), np.ascontiguousarray(altitude, np.float64),
-                  float(floor_altitude), float(band_ulps), float(graze), float(near_factor), prim,
-                  suspect, bad)  # fmt: skip
-    return prim, suspect, not bad[0]
+    with parallel_region:
+        if n:
+            numba.set_num_threads(threads_for(n, bvh.threads))
+            _screened(scene, bvh.lanes, np.ascontiguousarray(origins, np.float64),
+                      np.ascontiguousarray(directions, np.float64),
+                      np.ascontiguousarray(shift, np.float64), float(scale), float(extent),
+                      bounds is not None, lower, upper, box_cells(lower, upper),
+                      np.zeros(0) if near is None else np.ascontiguousarray(near, np.float64),
+                      float(near_ulps), np.ascontiguousarray(altitude, np.float64),
+                      float(floor_altitude), float(band_ulps), float(graze), float(near_factor),
+                      prim, suspect, bad)  # fmt: skip
+    if bad[0]:
+        as_points(origins, "origins")  # raises, naming the first bad row
+        as_points(directions, "directions")
+        raise ValueError("rays: not finite in the BVH's frame (coordinates too large)")
+    return prim, suspect

@@ -1,5 +1,5 @@
 """Morton (Z-order) codes and the radix sort that orders them: the two pieces every spatial
-ordering in the Embree layer is made of (spheres in storage, rays in tracing order)."""
+ordering in embree_rt is made of (spheres in the BVH's storage, trimesh rays in tracing order)."""
 
 from __future__ import annotations
 

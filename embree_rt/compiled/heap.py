@@ -6,8 +6,7 @@ first touch, and the renderer's worker threads fault concurrently. Measured on a
 render of 1000 spheres with 2 workers: 160k minor faults and 0.5 s of system time out of
 2.4 s of CPU; with the settings below, 48k faults, 0.16 s, and the render 18% faster.
 
-This is native code, so it lives in this layer with Embree's bindings; it is a no-op where
-the C library is not glibc.
+A no-op where the C library is not glibc.
 """
 
 from __future__ import annotations

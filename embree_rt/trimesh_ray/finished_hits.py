@@ -18,8 +18,8 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.pointers import prefetch
-from embree_rt.embree.work_split import parallel_region, threads_for
+from embree_rt.compiled.pointers import prefetch
+from embree_rt.compiled.work_split import parallel_region, threads_for
 
 _EPS64 = np.finfo(np.float64).eps
 _AHEAD = 16

@@ -22,9 +22,9 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.embree.plane_distances import insert_by_distance, plane_distance
-from embree_rt.embree.pointers import prefetch
-from embree_rt.embree.work_split import parallel_region, threads_for
+from embree_rt.compiled.pointers import prefetch
+from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.trimesh_ray.plane_distances import insert_by_distance, plane_distance
 
 CHUNK = 512  # rays per parallel iteration
 _AHEAD = 8  # rays whose triangles' rows are fetched ahead (4: 4.7 ms, 8: 4.0, 16: 8-12)
