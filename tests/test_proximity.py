@@ -1,4 +1,4 @@
-"""embree_rt.trimesh_proximity.ProximityQuery against a float64 brute force over every triangle
+"""embree_rt.trimesh_ray.ProximityQuery against a float64 brute force over every triangle
 (trimesh's own vectorised closest point on triangles, ``trimesh.triangles.closest_point``, a
 separate implementation), against trimesh's ProximityQuery where its answers are defined, and
 on constructed ties."""
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from embree_rt.trimesh_proximity import ProximityQuery
+from embree_rt.trimesh_ray import ProximityQuery
 from embree_rt.trimesh_ray import RayMeshIntersector
 
 SCALES = (1e-4, 1.0, 1e8)

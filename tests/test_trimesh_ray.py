@@ -13,7 +13,7 @@ from trimesh.constants import tol
 from trimesh.ray import ray_pyembree, ray_triangle
 
 from embree_rt import trimesh_ray
-from embree_rt.trimesh_ray import RayMeshIntersector
+from embree_rt.trimesh_ray import ProximityQuery, RayMeshIntersector
 
 pytest.importorskip("rtree")  # ray_triangle's broad phase; in the project's test extras
 
@@ -334,12 +334,22 @@ def test_install_makes_new_meshes_use_it():
         trimesh_ray.install()
         mesh = trimesh.creation.box()
         assert isinstance(mesh.ray, RayMeshIntersector)
-        assert not isinstance(trimesh.Trimesh(mesh.vertices, mesh.faces, use_embree=False).ray,
-                              RayMeshIntersector)  # fmt: skip
+        assert isinstance(mesh.nearest, ProximityQuery)
+        plain = trimesh.Trimesh(mesh.vertices, mesh.faces, use_embree=False)
+        assert not isinstance(plain.ray, RayMeshIntersector)
+        assert not isinstance(plain.nearest, ProximityQuery)
         assert mesh.contains([[0, 0, 0], [2, 0, 0]]).tolist() == [True, False]
+        # the box's closest point to (2, 0.1, 0.2) is (0.5, 0.1, 0.2), 1.5 away (closed form)
+        closest, distance, _ = mesh.nearest.on_surface([[2.0, 0.1, 0.2]])
+        np.testing.assert_allclose(closest, [[0.5, 0.1, 0.2]], atol=1e-12)
+        np.testing.assert_allclose(distance, [1.5], atol=1e-12)
+        unpickled = pickle.loads(pickle.dumps(mesh)).nearest  # the Embree scene rebuilt
+        assert isinstance(unpickled, ProximityQuery)
+        np.testing.assert_array_equal(unpickled.on_surface([[2.0, 0.1, 0.2]])[0], closest)
     finally:
         trimesh_ray.uninstall()
     assert not isinstance(trimesh.creation.box().ray, RayMeshIntersector)
+    assert not isinstance(trimesh.creation.box().nearest, ProximityQuery)
 
 
 @pytest.mark.parametrize("scale", [1e-4, 1.0, 1e8])

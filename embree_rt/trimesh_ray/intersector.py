@@ -2,7 +2,7 @@
 
 The same methods, arguments, return values, dtypes and hit order as
 ``trimesh.ray.ray_pyembree.RayMeshIntersector``, traced on all cores, with multiple hits that
-are exact at any scale. ``install()`` makes every new ``trimesh.Trimesh`` use it.
+are exact at any scale. ``trimesh_ray.install()`` makes every new ``trimesh.Trimesh`` use it.
 
 How each hit is found exactly once: every ray is traced *once* with an Embree intersection
 filter that records every triangle Embree's watertight test accepts and rejects it, so the
@@ -40,8 +40,6 @@ the hit triangle's plane, as trimesh computes them.
 
 from __future__ import annotations
 
-import functools
-import inspect
 
 import numpy as np
 import trimesh
@@ -418,36 +416,3 @@ class RayMeshIntersector:
     def __copy__(self, *args) -> RayMeshIntersector:
         return RayMeshIntersector(geometry=self.mesh, scale_to_box=self._scale_to_box)
 
-
-# -- opting in for every new Trimesh --------------------------------------------------------------
-
-_original_init = None
-
-
-def install() -> None:
-    """Make every ``trimesh.Trimesh`` created from now on use this intersector (where trimesh
-    would have used its embree backend: ``use_embree=True``, its default). ``uninstall()``
-    undoes it."""
-    global _original_init
-    if _original_init is not None:
-        return
-    original = trimesh.Trimesh.__init__
-    signature = inspect.signature(original)
-
-    @functools.wraps(original)
-    def __init__(self, *args, **kwargs):  # noqa: N807
-        original(self, *args, **kwargs)
-        bound = signature.bind(self, *args, **kwargs)
-        if bound.arguments.get("use_embree", True):
-            self.ray = RayMeshIntersector(self)
-
-    _original_init = original
-    trimesh.Trimesh.__init__ = __init__
-
-
-def uninstall() -> None:
-    """Undo ``install()``: new meshes get trimesh's own ray backend again."""
-    global _original_init
-    if _original_init is not None:
-        trimesh.Trimesh.__init__ = _original_init
-        _original_init = None

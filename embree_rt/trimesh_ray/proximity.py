@@ -29,9 +29,9 @@ import numpy as np
 import trimesh
 from trimesh import caching
 
-from embree_rt.closest_triangles import closest_points, triangle_table
+from embree_rt.trimesh_ray.closest_triangles import closest_points, triangle_table
 from embree_rt.embree import BVH, point_query
-from embree_rt.trimesh_ray import RayMeshIntersector
+from embree_rt.trimesh_ray.intersector import RayMeshIntersector
 
 # trimesh's tol.merge (1e-8), relative to the mesh's size (its bounding box's diagonal)
 TIE_TOLERANCE = 1e-8
@@ -134,3 +134,14 @@ class ProximityQuery:
             inside = self._rays.contains_points(points[by_rays])
             signed[by_rays] = np.where(inside, 1.0, -1.0) * distance[by_rays]
         return signed
+
+    # -- pickling, as RayMeshIntersector: the Embree scene is rebuilt on first use ----------------
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state.pop("_cache", None)
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._cache = caching.Cache(id_function=self._mesh.__hash__)
