@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import carray, cfunc, njit
 
-from embree_rt.embree import BVH, point_query
 from embree_rt.compiled.pointers import doubles, floats, words64
+from embree_rt.embree import BVH, point_query
 
 _RECORD = 12  # words recorded per call
 _CALLS = 128

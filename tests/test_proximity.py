@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from embree_rt.trimesh_ray import ProximityQuery
-from embree_rt.trimesh_ray import RayMeshIntersector
+from embree_rt.trimesh_ray import ProximityQuery, RayMeshIntersector
 
 SCALES = (1e-4, 1.0, 1e8)
 

@@ -29,9 +29,9 @@ import numba
 import numpy as np
 from numba import carray, cfunc, njit, prange
 
-from embree_rt.embree import point_query
 from embree_rt.compiled.pointers import doubles, floats, words64
 from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.embree import point_query
 
 # The triangle table: a, b, c (shifted, float64) and the unit normal, one row a triangle.
 TABLE_COLUMNS = 12

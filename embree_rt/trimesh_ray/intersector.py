@@ -40,7 +40,6 @@ the hit triangle's plane, as trimesh computes them.
 
 from __future__ import annotations
 
-
 import numpy as np
 import trimesh
 from trimesh import caching, util

@@ -29,8 +29,8 @@ import numpy as np
 import trimesh
 from trimesh import caching
 
-from embree_rt.trimesh_ray.closest_triangles import closest_points, triangle_table
 from embree_rt.embree import BVH, point_query
+from embree_rt.trimesh_ray.closest_triangles import closest_points, triangle_table
 from embree_rt.trimesh_ray.intersector import RayMeshIntersector
 
 # trimesh's tol.merge (1e-8), relative to the mesh's size (its bounding box's diagonal)
