@@ -11,22 +11,25 @@ query from the last hit, so no offset to choose and no distance rule that could 
 a hit: a triangle is reported at most once per ray whatever the scale, and the watertight
 (``RTC_SCENE_FLAG_ROBUST``) test lets no ray slip between two triangles sharing an edge.
 
-Conventions, those of trimesh's pure-NumPy ``ray_triangle``:
+Conventions: which triangles a ray hits is ``ray_triangle``'s float64 test (trimesh's pure
+NumPy backend); how they are counted is trimesh's embree backend's contract, one hit per
+crossing of the surface:
 
-- A ray through an edge or a vertex hits every triangle there that ``ray_triangle``'s float64
-  test accepts (barycentrics within ``tol.zero`` of the triangle): ``intersects_id`` returns each
-  of them, as ``ray_triangle`` does. Embree's float32 test may accept one or both near an edge,
-  so every Embree hit within float32 reach of an edge (``local_scene``), or grazing its triangle,
-  is decided again in float64 against the triangles around it (those sharing a vertex position
-  with it) by ``ray_triangle``'s own formulas. Triangles meeting only at T-junctions (no
-  shared vertex position) are not looked up.
+- A ray through an edge or a vertex meets every triangle there that ``ray_triangle``'s float64
+  test accepts (barycentrics within ``tol.zero`` of the triangle). Embree's float32 test may
+  accept one or both near an edge, so every Embree hit within float32 reach of an edge
+  (``local_scene``), or grazing its triangle, is decided again in float64 against the triangles
+  around it (those sharing a vertex position with it) by ``ray_triangle``'s own formulas
+  (``decided_hits``). Triangles meeting only at T-junctions (no shared vertex position) are not
+  looked up.
+- Those triangles at one point are one crossing: ``intersects_id``, ``intersects_location`` and
+  ``intersects_first`` report it once, on the lowest triangle index there (``finished_hits``;
+  faces in the same place, coincident sheets, are each crossed). A ray that only touches the
+  surface at a silhouette edge or vertex also meets it at one point and reports it once. Where
+  ``ray_triangle`` merges points by rounding them to 1e-8 absolute (at unit scale, not at 1e8),
+  this holds at any scale.
 - A ray meeting a triangle at |cos| <= 1e-5 (in its plane, to float64 precision) does not hit
   it, as ``trimesh.intersections.planes_lines`` rules.
-- ``intersects_location`` (and ``intersects_id(..., return_locations=True)``) reports each
-  point once: hits of one ray at the same point on triangles sharing a vertex count once (the
-  lowest face index), as ``ray_triangle`` merges equal locations — but scale-free, where
-  ``ray_triangle`` rounds locations to 1e-8 absolute (so it merges edge hits at unit scale and
-  not at 1e8).
 - Where ``ray_triangle`` keeps hits up to 1e-6 (absolute) *behind* the origin, a ray here hits
   only what lies ahead of its origin by more than float32 resolution (``tnear``, see
   ``intersects_id``): a ray starting on a surface does not hit that surface again. Pass
@@ -175,13 +178,12 @@ class RayMeshIntersector:
             raise ValueError("tnear: must be finite and >= 0")
         return near, True
 
-    def _hits(self, origins, directions, max_hits, tnear, one_per_point=False, reorder=False,
-              with_locations=False):
+    def _hits(self, origins, directions, max_hits, tnear, reorder=False, with_locations=False):
         """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
         ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
         ``with_locations``, the points (k, 3) float64 (else None); each ray's hits by distance,
-        then triangle; with ``one_per_point``, the hits of a ray at one point (an edge, a
-        vertex) as one, the lowest-index triangle there.
+        then triangle, one hit per crossing of the surface (at an edge or a vertex, the
+        lowest-index triangle there: ``finished_hits``).
 
         With ``reorder`` (and a big mesh: ``scene.bounds``) the rays are traced, and every step
         but the last run, in a coherent order (``local_frame.ordered_local_rays``); each ray's
@@ -255,10 +257,10 @@ class RayMeshIntersector:
             hits.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
                                       inclusive, origins, directions))  # fmt: skip
         rays, tris, distance = hits.arrays()
-        return finished_hits(rays, tris, distance, traced_order, n, capacity,
-                             scene.fans()[0] if one_per_point else None,
-                             scene.extent / scene.scale, given_origins, given_directions,
-                             with_locations, scene.scratch, scene.bvh.threads)  # fmt: skip
+        return finished_hits(rays, tris, distance, traced_order, n, capacity, scene.fans()[0],
+                             scene.planes, scene.extent / scene.scale, _PARALLEL_COS,
+                             given_origins, given_directions, with_locations, scene.scratch,
+                             scene.bvh.threads)  # fmt: skip
 
     def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
         """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
@@ -295,7 +297,7 @@ class RayMeshIntersector:
         again = np.flatnonzero(suspect)
         if len(again):
             more = self._hits(origins[again], util.unitize(directions[again]), 1,
-                              None if near is None else near[again], True)  # fmt: skip
+                              None if near is None else near[again])  # fmt: skip
             first[again] = -1
             first[again[more[0]]] = more[1]
         return first
@@ -318,9 +320,9 @@ class RayMeshIntersector:
         default, as in trimesh 5's embree backend) or only the first; ``tnear`` (scalar or
         (n,), world units): report hits at distance >= tnear; by default hits beyond a few
         float32 ulps of the origin, so a ray starting on a surface does not hit it. Order: all
-        first hits by ray, then all second hits, ... (as trimesh's embree backend). With
-        ``return_locations`` a point where a ray meets several triangles (an edge, a vertex) is
-        reported once.
+        first hits by ray, then all second hits, ... (as trimesh's embree backend). One hit per
+        crossing of the surface: where a ray meets several triangles at one point (an edge, a
+        vertex) the lowest index of them stands for the point (module docstring).
         """
         if not multiple_hits:
             origins, given_directions = _ray_arrays(ray_origins, ray_directions)
@@ -334,8 +336,7 @@ class RayMeshIntersector:
                                        np.arange(len(rays)), tris)[0]  # fmt: skip
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, locations = self._hits(origins, directions, max_hits, tnear,
-                                           one_per_point=return_locations, reorder=True,
+        rays, tris, locations = self._hits(origins, directions, max_hits, tnear, reorder=True,
                                            with_locations=return_locations)  # fmt: skip
         if return_locations:
             return tris, rays, locations
@@ -344,7 +345,7 @@ class RayMeshIntersector:
     def intersects_location(self, ray_origins, ray_directions, multiple_hits: bool = True,
                             *, tnear=None):  # fmt: skip
         """Where rays hit: ``(locations (m, 3) float64, index_ray (m,) int64, index_tri (m,)
-        int64)``, each point once (see ``intersects_id``)."""
+        int64)``, one per crossing of the surface (see ``intersects_id``)."""
         index_tri, index_ray, locations = self.intersects_id(
             ray_origins, ray_directions, multiple_hits=multiple_hits, return_locations=True,
             tnear=tnear,
