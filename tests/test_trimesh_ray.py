@@ -301,6 +301,31 @@ def test_max_hits_keeps_the_nearest_hits_in_trimesh_order():
     assert tri.dtype == np.int64 and ray.dtype == np.int64 and locations.dtype == np.float64
 
 
+def test_max_hits_counts_crossings_through_crowded_vertices():
+    """A ray through the centre of a cylinder's caps meets 32 triangles at each, one crossing
+    each: max_hits = 2 must still find the far cap, however many hits the near one fills the
+    trace's room with (closed form: z = -2 and 2). The nearest max_hits crossings, at every
+    max_hits, and with the other rays of the batch unchanged."""
+    mesh = trimesh.creation.cylinder(radius=1.0, height=4.0, sections=32)
+    origins = np.array([[0.0, 0.0, -5.0], [0.3, 0.2, -5.0], [0.0, 0.0, 5.0], [0.0, 0.0, 0.0]])
+    directions = np.tile([0.0, 0.0, 1.0], (4, 1))
+    directions[2] = [0.0, 0.0, -1.0]
+    ours = RayMeshIntersector(mesh)
+    for max_hits in (1, 2, 3, 100):
+        tri, ray, locations = ours.intersects_id(origins, directions, max_hits=max_hits,
+                                                 return_locations=True)  # fmt: skip
+        expected = [min(max_hits, 2)] * 3 + [1]
+        assert np.bincount(ray, minlength=4).tolist() == expected
+        z = {r: locations[ray == r, 2].tolist() for r in range(4)}
+        np.testing.assert_allclose(z[0], [-2.0, 2.0][:max_hits], atol=1e-12)
+        np.testing.assert_allclose(z[1], [-2.0, 2.0][:max_hits], atol=1e-12)
+        np.testing.assert_allclose(z[2], [2.0, -2.0][:max_hits], atol=1e-12)
+        np.testing.assert_allclose(z[3], [2.0], atol=1e-12)
+        ranks = [list(ray[:k]).count(r) for k, r in enumerate(ray)]
+        assert ranks == sorted(ranks)  # depth-major, as trimesh orders hits
+        assert (np.abs(np.einsum("ij,ij->i", mesh.face_normals[tri], directions[ray])) > 0.99).all()
+
+
 def test_order_and_dtypes_match_trimeshs_embree_backend():
     """Where trimesh's own embree backend is right (unit scale, no edge on the rays), the very
     same arrays, in the same order and dtypes."""

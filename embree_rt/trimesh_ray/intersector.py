@@ -104,6 +104,26 @@ def _plane_distance(scene, origins, directions, rays, tris):
     return plane_distances(scene.planes, origins, directions, rays, tris)
 
 
+def _spliced(hits, rows, again):
+    """``hits``: a multi-hit answer ``(rays (m,) int64, tris (m,) int64, locations (m, 3)
+    float64 or None)`` in trimesh's order (every ray's first hit, rays ascending, then every
+    ray's second ...), with the hits of rays ``rows`` (k,) int64 replaced by ``again``, the
+    answer for those rays alone (its rays index ``rows``), in the same order."""
+    rays, tris, locations = hits
+    keep = ~np.isin(rays, rows)
+    rays = np.concatenate([rays[keep], rows[again[0]]])
+    tris = np.concatenate([tris[keep], again[1]])
+    # a hit's depth: how many hits of its ray come before it (each ray's hits are in order)
+    order = np.argsort(rays, kind="stable")
+    starts = np.searchsorted(rays[order], rays[order])
+    depth = np.empty(len(rays), np.int64)
+    depth[order] = np.arange(len(rays)) - starts
+    placed = np.lexsort((rays, depth))
+    if locations is not None:
+        locations = np.concatenate([locations[keep], again[2]])[placed]
+    return rays[placed], tris[placed], locations
+
+
 class _HitList:
     """The multi-hit query's hits, part after part, in arrays lent by the scene (grown as
     needed): (rays, tris) int64 and distance float64, so that no part is copied twice."""
@@ -178,7 +198,8 @@ class RayMeshIntersector:
             raise ValueError("tnear: must be finite and >= 0")
         return near, True
 
-    def _hits(self, origins, directions, max_hits, tnear, reorder=False, with_locations=False):
+    def _hits(self, origins, directions, max_hits, tnear, reorder=False, with_locations=False,
+              room=None):
         """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
         ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
         ``with_locations``, the points (k, 3) float64 (else None); each ray's hits by distance,
@@ -187,10 +208,15 @@ class RayMeshIntersector:
 
         With ``reorder`` (and a big mesh: ``scene.bounds``) the rays are traced, and every step
         but the last run, in a coherent order (``local_frame.ordered_local_rays``); each ray's
-        hits are computed from its own row alone, so they are the same in any order."""
+        hits are computed from its own row alone, so they are the same in any order.
+
+        ``room``: Embree hits recorded a ray (default ``max_hits`` + 4). Hits at one point
+        become one crossing, so a ray whose recorded hits overflowed it and gave fewer than
+        ``max_hits`` crossings (a ray through a vertex many triangles share) may have more:
+        such rays are traced again with four times the room."""
         scene = self._scene
         n = len(origins)
-        given_origins, given_directions = origins, directions
+        given_origins, given_directions, given_tnear = origins, directions, tnear
         traced_order = None
         if reorder and scene.bounds is not None:
             (traced_order, origins, directions, local_origins, local_directions, magnitude,
@@ -210,7 +236,8 @@ class RayMeshIntersector:
         capacity = max(1, int(max_hits))
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
         # pairs, so that the nearest `capacity` survive
-        room = capacity + 4
+        room = capacity + 4 if room is None else room
+        truncated = []  # positions of rays whose final trace had more hits than its room
         # Most rays hit a few triangles: trace with a little room first and again, with all of
         # it, only the rays that overflowed (so the hit arrays stay small).
         first_room = min(room, FIRST_ROOM)
@@ -243,6 +270,8 @@ class RayMeshIntersector:
             # buffers as traced (a second trace with more room records the same hits in the same
             # order); the others are traced again first.
             overflowed = result[6] if room > first_room else np.zeros(len(messy), bool)
+            if room <= first_room:
+                truncated.append(first + np.flatnonzero(messy & result[6]))
             complete_rows = np.flatnonzero(messy & ~overflowed)
             hits.append(self._decided(complete_rows, first + complete_rows, result, magnitude,
                                       near, inclusive, origins, directions))  # fmt: skip
@@ -256,11 +285,23 @@ class RayMeshIntersector:
                                         np.inf, room)  # fmt: skip
             hits.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
                                       inclusive, origins, directions))  # fmt: skip
+            truncated.append(which[result[6]])
         rays, tris, distance = hits.arrays()
-        return finished_hits(rays, tris, distance, traced_order, n, capacity, scene.fans()[0],
+        finished = finished_hits(rays, tris, distance, traced_order, n, capacity, scene.fans()[0],
                              scene.planes, scene.extent / scene.scale, _PARALLEL_COS,
                              given_origins, given_directions, with_locations, scene.scratch,
                              scene.bvh.threads)  # fmt: skip
+        truncated = np.concatenate(truncated) if truncated else np.zeros(0, np.int64)
+        if traced_order is not None:
+            truncated = traced_order[truncated]
+        short = truncated[np.bincount(finished[0], minlength=n)[truncated] < capacity]
+        if not len(short):
+            return finished
+        again = self._hits(given_origins[short], given_directions[short], capacity,
+                           given_tnear if given_tnear is None or not np.ndim(given_tnear)
+                           else np.broadcast_to(given_tnear, (n,))[short],
+                           with_locations=with_locations, room=4 * room)  # fmt: skip
+        return _spliced(finished, short, again)
 
     def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
         """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
