@@ -22,8 +22,9 @@ import time
 
 import numpy as np
 
+from embree_rt import Renderer
 from embree_rt.aovs import AOV_NAMES, render_aovs
-from embree_rt.integrator import Renderer
+from embree_rt.camera import camera_frame
 from embree_rt.scene import random_field
 
 
@@ -47,16 +48,18 @@ def main() -> None:
     scene = random_field(args.count, seed=0)
     image = dict(width=args.width, height=args.height, spp=args.spp, max_depth=args.max_depth,
                  seed=0)  # fmt: skip
-    size = dict(width=args.width, height=args.height, names=AOV_NAMES)
+    frame = camera_frame(scene.camera, args.width, args.height)
     with Renderer(scene, threads=args.threads) as renderer:
         # Compile and warm both paths on a small image, outside the timing.
         renderer.render(**{**image, "width": 64, "height": 36})
-        render_aovs(renderer, width=64, height=36, names=AOV_NAMES)
+        render_aovs(renderer, camera_frame(scene.camera, 64, 36), AOV_NAMES)
         beauty = {"wall": [], "cpu": []}
         aov_pass = {"wall": [], "cpu": []}
         for turn in range(args.turns):
-            steps = [(beauty, lambda: renderer.render(**image)),
-                     (aov_pass, lambda: render_aovs(renderer, **size))]  # fmt: skip
+            steps = [
+                (beauty, lambda: renderer.render(**image)),
+                (aov_pass, lambda: render_aovs(renderer, frame, AOV_NAMES)),
+            ]
             for times, step in steps if turn % 2 == 0 else steps[::-1]:
                 wall, cpu = timed(step)
                 times["wall"].append(wall)

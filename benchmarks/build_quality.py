@@ -37,13 +37,13 @@ def measure(count: int, kind: str, quality: str, compact: bool, width: int, heig
     """One setting, in this process (run it in a fresh one for a clean peak)."""
     import numpy as np
 
-    from embree_rt.camera import camera_frame, primary_rays
+    from embree_rt.camera import camera_frame, sample_rays
     from embree_rt.embree import BVH
     from embree_rt.scene import random_field
 
     scene = random_field(count)
     frame = camera_frame(scene.camera, width, height)
-    origins, directions, _ = primary_rays(frame, 1, 0, 0, width * height)
+    origins, directions, _ = sample_rays(frame, 1, 0, np.arange(width * height))
     before = _status_kib("VmRSS")
     Path("/proc/self/clear_refs").write_text("5")  # reset VmHWM to the current RSS
     started = time.perf_counter()

@@ -25,11 +25,12 @@ import time
 
 import distributed
 
+from embree_rt import Renderer
 from embree_rt import distributed as rd
 from embree_rt.batches import batch_ranges
 from embree_rt.camera import camera_frame
-from embree_rt.integrator import DEFAULT_BATCH_SIZE, Renderer
-from embree_rt.scene import random_field
+from embree_rt.integrator import DEFAULT_BATCH_SIZE
+from embree_rt.scene import RenderSettings, random_field
 from embree_rt.scene.random_field import plan_field
 
 
@@ -48,7 +49,7 @@ def main() -> None:
     parser.add_argument("--empty-tasks", type=int, default=500)
     args = parser.parse_args()
 
-    settings = rd.Settings(args.width, args.height, args.spp, max_depth=6, seed=0)
+    settings = RenderSettings(args.width, args.height, args.spp, max_depth=6, seed=0)
     image = {"width": args.width, "height": args.height, "spp": args.spp, "max_depth": 6, "seed": 0}
     scene = random_field(args.count)
     recipe = rd.FieldRecipe(plan_field(args.count))

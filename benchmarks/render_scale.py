@@ -23,7 +23,8 @@ import time
 
 import numpy as np
 
-from embree_rt.integrator import DEFAULT_BATCH_SIZE, Renderer
+from embree_rt import Renderer
+from embree_rt.integrator import DEFAULT_BATCH_SIZE
 from embree_rt.scene import random_field
 
 
@@ -103,19 +104,17 @@ def run(count: int, args: argparse.Namespace) -> dict:
     with Renderer(scene, threads=args.threads, batch_size=args.batch_size) as renderer:
         # Compile and warm the kernels on a tiny image so the timed render measures rendering.
         renderer.render(width=16, height=9, spp=1, max_depth=args.max_depth, seed=args.seed)
-        renderer.stats.rays = dict.fromkeys(renderer.stats.rays, 0)
-        renderer.render(**image)
+        stats = renderer.render(**image).stats
         peak_rss = peak_rss_mb()  # before the log below holds every ray in memory
-        rays_by_kind = dict(renderer.stats.rays)
-        render_s = [renderer.stats.render_s]
+        rays_by_kind = dict(stats.rays)
+        render_s = [stats.render_s]
         # Once more, logging every query (not timed).
         log = record_queries(renderer, image)
         # Timed renders, each followed at once by a replay of its rays: the machine's load
         # changes slowly, so each pair's ratio is a fair one even when the load does change.
         raw_s = []
         for _ in range(args.repeat):
-            renderer.render(**image)
-            render_s.append(renderer.stats.render_s)
+            render_s.append(renderer.render(**image).stats.render_s)
             raw_s.append(replay(renderer, log))
         efficiency = float(np.median(np.divide(raw_s, render_s[1:])))
         best_s = min(render_s)
@@ -128,7 +127,7 @@ def run(count: int, args: argparse.Namespace) -> dict:
             "max_depth": args.max_depth,
             "threads": renderer.workers,
             "batch_size": renderer.batch_size,
-            "build_s": round(renderer.stats.build_s, 4),
+            "build_s": round(stats.build_s, 4),
             "render_s": round(best_s, 3),
             "render_s_all": [round(x, 3) for x in render_s],
             "rays": rays_by_kind,

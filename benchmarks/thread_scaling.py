@@ -22,7 +22,7 @@ import statistics
 
 from render_scale import record_queries, replay  # run as a script: benchmarks/ is on sys.path
 
-from embree_rt.integrator import Renderer
+from embree_rt import Renderer
 from embree_rt.scene import random_field
 
 
@@ -47,10 +47,8 @@ def main() -> None:
         log = record_queries(one, image)
         render_1, render_n, replay_1, replay_n = [], [], [], []
         for _ in range(args.rounds):
-            one.render(**image)
-            render_1.append(one.stats.render_s)
-            many.render(**image)
-            render_n.append(many.stats.render_s)
+            render_1.append(one.render(**image).stats.render_s)
+            render_n.append(many.render(**image).stats.render_s)
             replay_1.append(replay(one, log, 1))
             replay_n.append(replay(one, log, args.threads))
     speedup = [a / b for a, b in zip(render_1, render_n, strict=True)]

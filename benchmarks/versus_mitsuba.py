@@ -91,9 +91,9 @@ import numpy as np
 from traversal import shadow_rays  # run as a script: benchmarks/ is on sys.path
 
 import embree_rt
+from embree_rt import Renderer
 from embree_rt.camera import camera_frame
 from embree_rt.embree import BVH
-from embree_rt.integrator import Renderer
 
 DEBIAN_LLVM = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
 MITSUBA_VARIANT = "llvm_ad_rgb"
@@ -553,7 +553,7 @@ def bench_count(count: int, args, mi, dr) -> dict:
                 else ""
             )
         )
-        ours_image = renderer.render(**image)
+        ours_image = renderer.render(**image).image
     render["one_call_s"] = round(seconds(lambda: embree_rt.render(scene, **image))[0], 4)
     row["render"] = render
     theirs_image = np.array(mitsuba_render()) if mi is not None else None

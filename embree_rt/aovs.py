@@ -32,12 +32,13 @@ import numpy as np
 
 from embree_rt import film
 from embree_rt.batches import batch_ranges, ordered_results
-from embree_rt.camera import camera_frame, pixel_center_rays
+from embree_rt.camera import pixel_center_rays
 from embree_rt.columns import scatter
 
 if TYPE_CHECKING:
+    from embree_rt.camera import CameraFrame
     from embree_rt.geometry import SceneGeometry, SurfaceHits
-    from embree_rt.integrator import Renderer
+    from embree_rt.integrator import Integrator
     from embree_rt.scene.model import Scene
 
 AOV_NAMES = ("depth", "normal", "albedo", "object_id", "material_id")
@@ -125,16 +126,16 @@ def empty_aovs(names: tuple[str, ...], pixels: int) -> dict[str, np.ndarray]:
 
 
 def render_aovs(
-    renderer: Renderer, *, width: int, height: int, names: tuple[str, ...]
+    integrator: Integrator, frame: CameraFrame, names: tuple[str, ...]
 ) -> dict[str, np.ndarray]:
-    """The AOVs ``names`` of ``renderer``'s scene at ``width`` x ``height``: name -> (height,
-    width) or (height, width, 3) array (see the module's docstring for each).
+    """The AOVs ``names`` of ``integrator``'s scene seen through the camera ``frame``: name ->
+    (height, width) or (height, width, 3) array (see the module's docstring for each).
 
-    One ray through each pixel centre, in the renderer's batches and on its workers; each batch
-    fills its own pixels, so the result does not depend on the batch size or thread count.
+    One ray through each pixel centre, in the integrator's batches and on its workers; each
+    batch fills its own pixels, so the result does not depend on the batch size or thread count.
     """
     names = check_aov_names(names)
-    frame = camera_frame(renderer.scene.camera, width, height)
+    width, height = frame.width, frame.height
     if not names:
         return {}
     flat = empty_aovs(names, width * height)
@@ -147,7 +148,7 @@ def render_aovs(
 
     def run(batch: tuple[int, int]) -> None:
         origins, directions, pixel = pixel_center_rays(frame, *batch)
-        rows, surfaces = renderer.geometry.intersect_compact(origins, directions, coherent=True)
+        rows, surfaces = integrator.geometry.intersect_compact(origins, directions, coherent=True)
         hit = pixel[rows]
         if "depth" in flat:
             # The rays start at the camera position with unit directions: t is the distance.
@@ -155,17 +156,17 @@ def render_aovs(
         # The integrator's own stages, not copies of them: the normal it shades with, turned
         # to the side the ray came from, and the colour it lights.
         if "normal" in flat:
-            normal, _, _ = renderer.facing_the_ray(surfaces.incoming, surfaces)
+            normal, _, _ = integrator.facing_the_ray(surfaces.incoming, surfaces)
             fill_vectors("normal", batch, hit, normal)
         if "albedo" in flat:
-            fill_vectors("albedo", batch, hit, renderer.surface_color(surfaces))
+            fill_vectors("albedo", batch, hit, integrator.surface_color(surfaces))
         if "material_id" in flat:
             flat["material_id"][hit] = surfaces.material
         if "object_id" in flat:
-            flat["object_id"][hit] = hit_object_ids(surfaces, renderer.geometry)
+            flat["object_id"][hit] = hit_object_ids(surfaces, integrator.geometry)
 
-    workers = renderer.workers
-    batches = batch_ranges(width * height, renderer.batch_size, 1, workers)
+    workers = integrator.workers
+    batches = batch_ranges(width * height, integrator.batch_size, 1, workers)
     # As the beauty runs its batches: side by side, waiting in slices so Ctrl-C gets through,
     # and on an error or Ctrl-C the batches not yet started are dropped.
     pool = ThreadPoolExecutor(max_workers=workers)

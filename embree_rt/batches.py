@@ -1,13 +1,24 @@
 """Camera samples in batches, run side by side on a thread pool and collected in order.
 
-Shared by the beauty render (``integrator.Renderer.render``) and the AOV pass (``aovs``).
+Shared by the beauty render (``integrator.Integrator.render_image``) and the AOV pass (``aovs``).
 """
 
 from __future__ import annotations
 
+import os
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor, TimeoutError
 from itertools import pairwise
+
+
+def worker_count(threads: int | None) -> int:
+    """The threads a render runs batches on: ``threads``, or every core when None. Raises
+    ValueError unless ``threads`` is None or a positive integer."""
+    if threads is None:
+        return os.cpu_count() or 1
+    if int(threads) != threads or threads < 1:
+        raise ValueError(f"threads: must be a positive integer, got {threads!r}")
+    return int(threads)
 
 
 def batch_ranges(total: int, batch_size: int, spp: int, workers: int) -> list[tuple[int, int]]:

@@ -12,8 +12,13 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+from embree_rt.batches import worker_count
 from embree_rt.errors import InputError
+
+if TYPE_CHECKING:
+    from embree_rt.scene.model import RenderSettings
 
 # The scene model's sphere arrays: (3,) float32 centre, float32 radius, int32 material.
 SCENE_BYTES_PER_SPHERE = 20
@@ -29,6 +34,12 @@ FIELD_RING_BYTES = 20 << 20
 # by 286 (``--instance MESH``, the same array: 308; both take the larger figure, so neither
 # is let through short of memory).
 GEOMETRY_BYTES_PER_SPHERE = {"user": 152, "point": 51, "mesh": 310}
+# Meshes in the BVH (estimates for `embree-rt info`): a triangle stored once (float32 vertex,
+# int32 index, Embree's nodes), an instance of its own, and an instance in an instance array
+# (48 bytes of transform and ~80 of Embree's, measured at 1e6).
+BYTES_PER_TRIANGLE = 12 + 12 + 64
+BYTES_PER_INSTANCE = 256
+BYTES_PER_ARRAYED_INSTANCE = 128
 # Per pixel: the film's float64 sums (24 bytes), the float32 image, the tone mapping's float32
 # temporaries and the encoder's bytes. 1920x1080 -> 7680x4320 at 1 spp grew by 75-87 bytes a
 # pixel for a PNG (66 for a .npy), when the film still made a transposed copy of the image (12
@@ -86,13 +97,24 @@ def available_memory() -> int | None:
 def field_bytes(count: int) -> int:
     """What generating a random field of ``count`` spheres on all cores (as ``random_field``
     does) needs: its arrays and a ring in the making on each core."""
-    return count * SCENE_BYTES_PER_SPHERE + (os.cpu_count() or 1) * FIELD_RING_BYTES
+    return count * SCENE_BYTES_PER_SPHERE + worker_count(None) * FIELD_RING_BYTES
 
 
 def geometry_bytes(count: int, kind: str) -> int:
     """What building the BVH of ``count`` spheres needs beyond the scene's own arrays, the
     spheres going in as ``kind`` ("user", "point" or "mesh": ``geometry.sphere_kind``)."""
     return count * GEOMETRY_BYTES_PER_SPHERE[kind]
+
+
+def bvh_bytes(
+    sphere_count: int, kind: str, triangles: int, instances: int, arrayed: int
+) -> int:
+    """An estimate of a BVH's memory: ``sphere_count`` spheres entered as ``kind``
+    (``geometry_bytes``), ``triangles`` distinct triangles, ``instances`` instances of their
+    own and ``arrayed`` instances in instance arrays (neither counting the spheres' own
+    instances when ``kind`` is "mesh": ``GEOMETRY_BYTES_PER_SPHERE`` holds those)."""
+    return (geometry_bytes(sphere_count, kind) + triangles * BYTES_PER_TRIANGLE
+            + instances * BYTES_PER_INSTANCE + arrayed * BYTES_PER_ARRAYED_INSTANCE)  # fmt: skip
 
 
 def image_bytes(width: int, height: int, spp: int, batch_size: int, workers: int) -> int:
@@ -103,9 +125,13 @@ def image_bytes(width: int, height: int, spp: int, batch_size: int, workers: int
     return pixels * FILM_BYTES_PER_PIXEL + in_flight * BYTES_PER_SAMPLE_IN_FLIGHT
 
 
-def bvh_needs(sphere_count: int, kind: str) -> dict[str, tuple[int, str]]:
-    """What building the BVH of ``sphere_count`` spheres entered as ``kind`` needs, for
-    ``require`` (a Dask worker's whole need: the film stays with the client)."""
+def bvh_needs(sphere_count: int, spheres: str) -> dict[str, tuple[int, str]]:
+    """What building the BVH of ``sphere_count`` spheres in mode ``spheres`` ("analytic",
+    "point", "mesh") needs, for ``require`` (a Dask worker's whole need: the film stays with
+    the client)."""
+    from embree_rt.geometry import sphere_kind
+
+    kind = sphere_kind(sphere_count, spheres)
     return {
         "spheres": (geometry_bytes(sphere_count, kind), f"the BVH of {sphere_count:,} spheres")
     }
@@ -113,22 +139,25 @@ def bvh_needs(sphere_count: int, kind: str) -> dict[str, tuple[int, str]]:
 
 def render_needs(
     sphere_count: int,
-    kind: str,
-    width: int,
-    height: int,
-    spp: int,
+    spheres: str,
+    settings: RenderSettings,
+    *,
     batch_size: int,
-    workers: int,
+    threads: int | None,
+    aovs: tuple[str, ...] = (),
 ) -> dict[str, tuple[int, str]]:
-    """What a render needs beyond the scene itself, for ``require``: the BVH of
-    ``sphere_count`` spheres entered as ``kind``, and the image with its batches."""
-    return {
-        **bvh_needs(sphere_count, kind),
-        "image": (
-            image_bytes(width, height, spp, batch_size, workers),
-            f"a {width}x{height} image at {spp} spp",
-        ),
-    }
+    """What a render of ``settings`` needs beyond the scene itself, for ``require``: the BVH of
+    ``sphere_count`` spheres in mode ``spheres``, and the image with its batches of
+    ``batch_size`` samples on ``threads`` (None: every core) and its ``aovs``' arrays."""
+    from embree_rt.aovs import aov_bytes
+
+    width, height, spp = settings.width, settings.height, settings.spp
+    image = image_bytes(width, height, spp, batch_size, worker_count(threads))
+    text = f"a {width}x{height} image at {spp} spp"
+    if aovs:
+        image += aov_bytes(width, height, aovs)
+        text += " with AOVs"
+    return {**bvh_needs(sphere_count, spheres), "image": (image, text)}
 
 
 def require(needs: Mapping[str, tuple[int, str]]) -> None:

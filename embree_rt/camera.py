@@ -1,4 +1,5 @@
-"""The pinhole camera: its frame, and jittered, stratified primary rays."""
+"""The pinhole camera: what a scene says of it (``Camera``) and the one rule it must follow
+(``camera_problem``), its frame, and jittered, stratified primary rays."""
 
 from __future__ import annotations
 
@@ -9,7 +10,77 @@ from dataclasses import dataclass
 import numpy as np
 
 from embree_rt.sampling import uniform_pair
-from embree_rt.scene.model import Camera, camera_problem
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass
+class Camera:
+    """A pinhole camera at ``position`` looking at ``look_at``; ``fov`` is vertical, in degrees."""
+
+    position: Vec3 = (0.0, 1.0, 5.0)
+    look_at: Vec3 = (0.0, 0.0, 0.0)
+    up: Vec3 = (0.0, 1.0, 0.0)
+    fov: float = 45.0
+
+
+# sin of the smallest angle allowed between a camera's ``up`` and its viewing direction: below
+# it the camera's roll is decided by rounding error.
+MIN_UP_SINE = 1e-6
+
+
+def camera_problem(camera: Camera) -> tuple[str, str] | None:
+    """What keeps ``camera`` from defining an image, as (field, problem), or None if nothing.
+
+    The one rule for a camera, followed by scene files and by ``camera.camera_frame``: ``fov``
+    a number of degrees strictly between 0 and 180; ``position``, ``look_at`` and ``up`` three
+    finite numbers each; ``look_at`` apart from ``position``; ``up`` not zero and at least
+    ``MIN_UP_SINE`` (sine of the angle) away from the viewing direction.
+    """
+    try:
+        fov = float(camera.fov)
+    except (TypeError, ValueError):
+        return "fov", f"expected a number of degrees, got {camera.fov!r}"
+    if not (math.isfinite(fov) and 0.0 < fov < 180.0):
+        return "fov", f"must be > 0 and < 180 degrees, got {fov:g}"
+    vectors = {}
+    for name in ("position", "look_at", "up"):
+        value = getattr(camera, name)
+        try:
+            vector = np.asarray(value, np.float64)
+        except (TypeError, ValueError):
+            vector = None
+        if vector is None or vector.shape != (3,) or not np.isfinite(vector).all():
+            return name, f"expected three finite numbers, got {value!r}"
+        vectors[name] = vector
+    found = view_problem(vectors["position"][None], vectors["look_at"][None], vectors["up"])
+    return None if found is None else found[1:]
+
+
+def view_problem(positions: np.ndarray, looks: np.ndarray, up) -> tuple[int, str, str] | None:
+    """The first of n cameras at (n, 3) float64 finite ``positions`` looking at (n, 3)
+    ``looks``, all with the finite (3,) ``up``, whose image ``camera_problem``'s rule refuses
+    (``look_at`` at ``position``, ``up`` zero or within ``MIN_UP_SINE`` of the view), as
+    (index, field, problem), or None: the rule over a whole camera path at once."""
+    up = np.asarray(up, np.float64)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        view = positions - looks
+        distance = np.linalg.norm(view, axis=1)
+        up_length = np.linalg.norm(up)
+        sine = np.linalg.norm(np.cross(up / up_length, view / distance[:, None]), axis=1)
+    refused = ~(distance > 0.0) | ~(up_length > 0.0) | ~(sine >= MIN_UP_SINE)
+    if not refused.any():
+        return None
+    i = int(np.flatnonzero(refused)[0])
+    if not distance[i] > 0.0:
+        return i, "look_at", f"must differ from camera.position, both are {looks[i].tolist()}"
+    if not up_length > 0.0:
+        return i, "up", "must not be the zero vector"
+    problem = (
+        f"{up.tolist()} is parallel to the viewing direction (from {positions[i].tolist()} to "
+        f"{looks[i].tolist()})"
+    )
+    return i, "up", problem
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,22 +182,6 @@ def _check_range(start: object, count: object, total: int, units: str, image: st
         )
 
 
-def primary_rays(
-    frame: CameraFrame, spp: int, seed: int, start: int, count: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Camera rays for the global sample indices ``i`` in ``[start, start + count)``.
-
-    Sample i belongs to pixel ``i // spp`` (row-major, row 0 at the top, column 0 at the left)
-    and is sample ``s = i % spp`` of it, placed in cell ``strata(spp)[2][s]`` of the pixel's
-    jitter grid and jittered inside it by ``sampling.uniform_pair(seed, i, 0)``, so any split
-    of the indices into batches yields the same rays. Returns origins (3, count) float32, unit
-    directions (3, count) float32 (one ray per column) and pixel (count,) int64.
-    """
-    size = f"{frame.width}x{frame.height}"
-    _check_range(start, count, frame.width * frame.height * spp, "samples", f"{size} at {spp} spp")
-    return sample_rays(frame, spp, seed, np.arange(start, start + count, dtype=np.int64))
-
-
 # Camera rays are traced in tiles of TILE_WIDTH x TILE_HEIGHT pixels: one 8-ray packet then
 # covers a 4x2 block instead of 8 pixels of one row, and on the 1e6-sphere field Embree traced
 # such packets 1.18x faster (1e5: the same speed).
@@ -178,9 +233,13 @@ def sample_rays(
     frame: CameraFrame, spp: int, seed: int, index: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Camera rays for the (n,) int64 global sample indices ``index`` (any order, each below
-    ``width * height * spp``), placed as ``primary_rays`` places them: sample i of a render is
-    the same ray whichever call makes it. Returns origins (3, n) float32, unit directions
-    (3, n) float32 and pixel (n,) int64."""
+    ``width * height * spp``).
+
+    Sample i belongs to pixel ``i // spp`` (row-major, row 0 at the top, column 0 at the left)
+    and is sample ``s = i % spp`` of it, placed in cell ``strata(spp)[2][s]`` of the pixel's
+    jitter grid and jittered inside it by ``sampling.uniform_pair(seed, i, 0)``: sample i of a
+    render is the same ray whichever call, batch or order makes it. Returns origins (3, n)
+    float32, unit directions (3, n) float32 and pixel (n,) int64."""
     nx, ny, cells = strata(spp)
     # Floor division and remainder by a scalar, not np.divmod: NumPy divides by a constant
     # through libdivide only in these two (13x faster here).
@@ -200,9 +259,9 @@ def pixel_center_rays(
     frame: CameraFrame, start: int, count: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One camera ray through the centre of each pixel ``start .. start + count - 1``
-    (row-major, as ``primary_rays`` numbers them), with no jitter: the rays of the AOVs.
+    (row-major, as ``sample_rays`` numbers them), with no jitter: the rays of the AOVs.
     Returns origins (3, count) float32, unit directions (3, count) float32 and pixel (count,)
-    int64, as ``primary_rays`` does."""
+    int64, as ``sample_rays`` does."""
     size = f"{frame.width}x{frame.height}"
     _check_range(start, count, frame.width * frame.height, "pixels", size)
     pixel = np.arange(start, start + count, dtype=np.int64)
@@ -215,7 +274,7 @@ def _rays_through(
     frame: CameraFrame, column: np.ndarray, row: np.ndarray, pixel: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rays from the eye through the image points at (n,) float64 ``column``, ``row`` (in
-    pixels, from the top left corner), for ``primary_rays`` and ``pixel_center_rays``."""
+    pixels, from the top left corner), for ``sample_rays`` and ``pixel_center_rays``."""
     # Screen coordinates, x = (2 column / width - 1) half_width and y = (1 - 2 row / height)
     # half_height, in float64: the jitter must survive being added to a column number in the
     # thousands.

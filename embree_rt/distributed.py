@@ -1,13 +1,13 @@
 """Rendering on a Dask cluster (``pip install 'embree-rt[distributed]'``), bit for bit as locally.
 
-The work is cut exactly as the local renderer cuts it: ``integrator.batch_ranges`` batches of
-whole pixels, each traced and shaded by ``Renderer.trace_batch`` into its own ``FilmBlock``. A
+The work is cut exactly as the local renderer cuts it: ``batches.batch_ranges`` batches of
+whole pixels, each traced and shaded by ``Integrator.trace_batch`` into its own ``FilmBlock``. A
 batch is a Dask task; the client adds the returned float64 block sums into a ``Film`` with
 ``Film.add_block``. Every pixel's sum is formed inside one block, by the same code on the same
 scene, and added once onto zero, so the image is bitwise the one ``embree_rt.render`` makes
 (given the same CPU: on another instruction set Embree may pick other kernels, see README).
 
-A worker builds a scene's ``Renderer`` once (its BVH holds Embree pointers and cannot travel):
+A worker builds a scene's ``Integrator`` once (its BVH holds Embree pointers and cannot travel):
 ``SceneRendererPlugin``, registered under a name made from a hash of the scene, so that several
 scenes share a cluster, and sent by the scheduler to workers that join later. How the scene
 reaches a worker (``SceneSource``): a scene file travels as its path (every worker must read it
@@ -28,7 +28,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import dask
@@ -36,12 +36,13 @@ import distributed
 import numpy as np
 
 from embree_rt import budget
+from embree_rt.api import RenderResult
 from embree_rt.batches import batch_ranges
-from embree_rt.camera import CameraFrame, camera_frame
+from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.errors import InputError
 from embree_rt.film import Film
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, RenderStats
-from embree_rt.scene.model import Camera, Scene
+from embree_rt.scene.model import RenderSettings, Scene
 from embree_rt.scene.random_field import FieldPlan
 
 # How long a render waits with no worker at all (lost, or not yet joined) before giving up.
@@ -153,7 +154,7 @@ def plugin_name(key: str) -> str:
 
 
 class SceneRendererPlugin(distributed.WorkerPlugin):
-    """Holds one scene's ``Renderer`` on a worker, built on the first batch that needs it (in a
+    """Holds one scene's ``Integrator`` on a worker, built on the first batch that needs it (in a
     task thread, not the worker's event loop) and closed when the plugin is removed.
 
     ``builds`` counts the builds on this worker (one, however many batches and frames)."""
@@ -164,23 +165,23 @@ class SceneRendererPlugin(distributed.WorkerPlugin):
 
     def setup(self, worker: distributed.Worker) -> None:
         self._lock = threading.Lock()
-        self.renderer = None
+        self.integrator = None
         self.builds = 0
         self.build_s = 0.0
 
     def teardown(self, worker: distributed.Worker) -> None:
-        if self.renderer is not None:
-            self.renderer.close()
-            self.renderer = None
+        if self.integrator is not None:
+            self.integrator.close()
+            self.integrator = None
 
-    def renderer_for(self, source: SceneSource | Scene):
-        """The renderer, built from ``source`` (a ``SceneSource``, or the scattered ``Scene``
+    def integrator_for(self, source: SceneSource | Scene):
+        """The integrator, built from ``source`` (a ``SceneSource``, or the scattered ``Scene``
         itself) the first time. A scene too big for this worker's memory is refused before it is
         generated or built (``budget``, as a local render is), not left to kill the worker."""
-        from embree_rt.integrator import Renderer
+        from embree_rt.integrator import Integrator
 
         with self._lock:
-            if self.renderer is None:
+            if self.integrator is None:
                 started = time.perf_counter()
                 try:
                     if isinstance(source, FieldRecipe):
@@ -190,17 +191,15 @@ class SceneRendererPlugin(distributed.WorkerPlugin):
                 except InputError as error:
                     raise WorkerSceneError(f"worker cannot load the scene: {error}") from None
                 # One thread: the worker runs as many batches side by side as it has threads.
-                self.renderer = Renderer(scene, spheres=self.spheres, threads=1)
+                self.integrator = Integrator(scene, spheres=self.spheres, threads=1)
                 self.builds += 1
                 self.build_s = time.perf_counter() - started
-            return self.renderer
+            return self.integrator
 
     def _require_memory(self, count: int, scene_bytes: Callable[[int], int] | None = None) -> None:
         """Raise ``MemoryBudgetError`` unless this machine can hold the BVH of ``count``
         spheres (and, with ``scene_bytes``, the scene's own arrays, not made yet)."""
-        from embree_rt.geometry import sphere_kind
-
-        needs = budget.bvh_needs(count, sphere_kind(count, self.spheres))
+        needs = budget.bvh_needs(count, self.spheres)
         if scene_bytes is not None:
             needs["field"] = (scene_bytes(count), f"a field of {count:,} spheres")
         budget.require(needs)
@@ -233,7 +232,7 @@ def render_batch(
     plugin = worker.plugins.get(plugin_name(key))
     if plugin is None:  # released (ClusterRenderer.release) while another render still ran
         raise ClusterError(f"worker {worker.address} holds no renderer for scene {key}")
-    work = plugin.renderer_for(source).trace_batch(frame, spp, seed, max_depth, start, count)
+    work = plugin.integrator_for(source).trace_batch(frame, spp, seed, max_depth, start, count)
     return BatchResult(work.block.first, work.block.count, work.block.sums, dict(work.rays))
 
 
@@ -241,38 +240,15 @@ def render_batch(
 
 
 @dataclass
-class Settings:
-    """Image size, samples, depth and seed of a render (a scene's ``render`` table, overridden)."""
-
-    width: int
-    height: int
-    spp: int
-    max_depth: int
-    seed: int
-
-    @staticmethod
-    def of(scene: Scene, **overrides: int | None) -> Settings:
-        values = {k: getattr(scene.render, k) for k in ("width", "height", "spp", "max_depth")}
-        values["seed"] = scene.render.seed
-        values.update({k: v for k, v in overrides.items() if v is not None})
-        return Settings(**values)
-
-
-@dataclass
 class ClusterProgress:
-    """What the client knows mid-render: samples done of ``total``, rays traced, seconds since
-    the start, and the workers present."""
+    """What the client knows mid-render: samples done of ``total``, frames done, the workers
+    present, and ``stats``, the rays traced and seconds spent since the start."""
 
     done: int = 0
     total: int = 0
-    rays: int = 0
-    elapsed_s: float = 0.0
     workers: int = 0
     frames_done: int = 0
-
-    @property
-    def rays_per_s(self) -> float:
-        return self.rays / self.elapsed_s if self.elapsed_s > 0 else 0.0
+    stats: RenderStats = field(default_factory=RenderStats)
 
 
 @dataclass
@@ -334,7 +310,7 @@ class ClusterRenderer:
         """Renderer builds per worker address (each worker that has taken a batch: 1)."""
         return self.client.run(_plugin_builds, name=plugin_name(self.key))
 
-    def render(self, settings: Settings, camera: Camera, progress=None) -> np.ndarray:
+    def render(self, settings: RenderSettings, camera: Camera, progress=None) -> np.ndarray:
         """One (height, width, 3) float32 linear image seen by ``camera``."""
         images = []
         self.render_frames(settings, [(0, camera)], lambda _, image: images.append(image), progress)
@@ -342,7 +318,7 @@ class ClusterRenderer:
 
     def render_frames(
         self,
-        settings: Settings,
+        settings: RenderSettings,
         cameras: Sequence[tuple[object, Camera]],
         on_frame: Callable[[object, np.ndarray], None],
         progress: Callable[[ClusterProgress], None] | None = None,
@@ -401,14 +377,14 @@ class ClusterRenderer:
                     self.bytes_returned += result.sums.nbytes
                     for kind, n in result.rays.items():
                         self.stats.rays[kind] += n
+                        state.stats.rays[kind] += n
                     state.done += result.count * settings.spp
-                    state.rays += sum(result.rays.values())
                     image.pending -= 1
                     if image.pending == 0:
                         on_frame(image.label, image.film.image(settings.spp))
                         state.frames_done += 1
                 top_up()
-                state.elapsed_s = self.stats.render_s = time.perf_counter() - began
+                state.stats.render_s = self.stats.render_s = time.perf_counter() - began
                 if progress is not None:
                     progress(state)
         finally:
@@ -478,27 +454,26 @@ def render(
     spheres: str = "analytic",
     batch_size: int = DEFAULT_BATCH_SIZE,
     quiet: bool = True,
-    stats: RenderStats | None = None,
-) -> np.ndarray:
+) -> RenderResult:
     """``embree_rt.render`` on ``client``'s cluster: the same (height, width, 3) float32 image,
-    bit for bit. ``scene`` is a ``Scene`` (scattered once to every worker) or the path of a scene
-    file every worker can read. Arguments left as None come from the scene's ``render`` table.
-    The workers' renderers are freed afterwards; for several images or frames of one scene use
-    a ``ClusterRenderer``, which builds once per worker for all of them.
+    bit for bit (no AOVs: they are rendered locally). ``scene`` is a ``Scene`` (scattered once
+    to every worker) or the path of a scene file every worker can read. Arguments left as None
+    come from the scene's ``render`` table. The workers' renderers are freed afterwards; for
+    several images or frames of one scene use a ``ClusterRenderer``, which builds once per
+    worker for all of them.
     """
     local = scene if isinstance(scene, Scene) else _local_view(scene)
-    settings = Settings.of(local, width=width, height=height, spp=spp, max_depth=max_depth,
-                           seed=seed)  # fmt: skip
+    settings = local.render.with_overrides(
+        width=width, height=height, spp=spp, max_depth=max_depth, seed=seed
+    )
     renderer = ClusterRenderer(scene, client, spheres=spheres, batch_size=batch_size)
     try:
         with progress_bar(settings.width * settings.height * settings.spp, quiet) as show:
             image = renderer.render(settings, local.camera if camera is None else camera, show)
     finally:
         renderer.release()  # one image: nothing to keep (a ClusterRenderer keeps its BVHs)
-    if stats is not None:
-        stats.rays = dict(renderer.stats.rays)
-        stats.render_s = renderer.stats.render_s
-    return image
+    stats = RenderStats(rays=dict(renderer.stats.rays), render_s=renderer.stats.render_s)
+    return RenderResult(image, {}, stats)
 
 
 def _local_view(source: SceneSource | str | os.PathLike) -> Scene:
@@ -525,7 +500,7 @@ def progress_bar(total: int, quiet: bool) -> Iterator[Callable[[ClusterProgress]
     def show(state: ClusterProgress) -> None:
         bar.update(state.done - bar.n)
         bar.set_postfix_str(
-            f"{state.rays_per_s / 1e6:.1f} Mrays/s, {state.workers} workers", refresh=False
+            f"{state.stats.rays_per_s / 1e6:.1f} Mrays/s, {state.workers} workers", refresh=False
         )
 
     try:

@@ -28,16 +28,6 @@ class Film:
         # One float64 accumulator per channel: float32 sums of millions of samples drift.
         self._sum = np.zeros((3, self.width * self.height), np.float64)
 
-    def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:
-        """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices (repeats allowed)."""
-        if len(pixel) == 0:
-            return
-        size = self.width * self.height
-        if pixel.min() < 0 or pixel.max() >= size:
-            raise ValueError(f"pixel: indices must lie in [0, {size}), got {pixel.min()}..")
-        for channel in range(3):
-            self._sum[channel] += np.bincount(pixel, weights=rgb[channel], minlength=size)
-
     def add_block(self, block: FilmBlock) -> None:
         """Add a finished block's sums into its pixels."""
         self._sum[:, block.first : block.first + block.count] += block.sums

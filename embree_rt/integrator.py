@@ -9,8 +9,6 @@ The seed article's recursion ``color = local·(1−r) + r·trace(reflected)`` (a
 
 from __future__ import annotations
 
-import os
-import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -18,15 +16,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from embree_rt import budget, shading
-from embree_rt.batches import batch_ranges, ordered_results
-from embree_rt.camera import CameraFrame, camera_frame, sample_rays, tiled_samples
+from embree_rt import shading
+from embree_rt.batches import batch_ranges, ordered_results, worker_count
+from embree_rt.camera import CameraFrame, sample_rays, tiled_samples
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.compiled import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
-from embree_rt.geometry import SceneGeometry, SurfaceHits, sphere_kind
-from embree_rt.materials import MaterialTable
-from embree_rt.scene.model import Camera, Scene
+from embree_rt.geometry import SceneGeometry, SurfaceHits
+from embree_rt.materials import MaterialTable, shading_shares
+from embree_rt.scene.model import Scene
 
 DEFAULT_BATCH_SIZE = 1 << 18
 # A child whose every channel weighs less than half an 8-bit step cannot change the picture.
@@ -100,8 +98,14 @@ def surface_offset(scale: np.ndarray) -> np.ndarray:
     return (np.float32(RELATIVE_OFFSET) * (np.float32(1.0) + scale)).astype(np.float32, copy=False)
 
 
-class Renderer:
-    """Renders one scene: builds its BVH once, then ``render()`` traces the image in batches."""
+class Integrator:
+    """The Whitted integrator of one scene: builds its BVH once, then traces and shades batches
+    of camera samples (``render_image``, ``trace_batch``, ``trace_pixels``). ``embree_rt.Renderer``
+    adds the public ``render`` to it; Dask workers and the browser preview use it as it is.
+
+    ``spheres``: how spheres enter the BVH (``geometry.SPHERE_MODES``); ``threads``: the worker
+    threads (None: every core, ``batches.worker_count``); ``batch_size``: camera samples a batch
+    traces at most."""
 
     def __init__(
         self,
@@ -115,28 +119,39 @@ class Renderer:
             raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
         self.scene = scene
         self.batch_size = int(batch_size)
-        if threads is not None and (int(threads) != threads or threads < 1):
-            raise ValueError(f"threads: must be a positive integer, got {threads!r}")
         # Parallel over batches: each worker traces and shades its own batch, calling Embree
         # through single-threaded kernels, so NumPy shading and traversal fill every core.
-        self.workers = int(threads) if threads is not None else (os.cpu_count() or 1)
-        self.stats = RenderStats()
+        self.workers = worker_count(threads)
         retain_freed_memory()
         start = time.perf_counter()
         self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
-        self.stats.build_s = time.perf_counter() - start
+        self.build_s = time.perf_counter() - start
         # Material ids are the scene's materials in order, then the floor's.
         self.materials = table = MaterialTable.from_materials(
             [*scene.materials.values(), *([scene.floor.material] if scene.floor else [])]
         )
         # Per material: the seed article's blend of local shading, reflection and transmission.
-        local = (1.0 - table.reflectivity) * (1.0 - table.transparency)
         self.material_color = np.ascontiguousarray(table.color.T)  # (3, m)
-        self.ambient_share = (table.ambient * local).astype(np.float32)
-        self.diffuse_share = (table.diffuse * local).astype(np.float32)
-        self.reflect_share = (table.reflectivity * (1.0 - table.transparency)).astype(np.float32)
+        self.ambient_share, self.diffuse_share, self.reflect_share = shading_shares(
+            table.ambient, table.diffuse, table.reflectivity, table.transparency
+        )
         # Which materials are metals; None when none is (nothing to tint).
         self.metallic = table.metallic if table.metallic.any() else None
+        self.specular = table.specular
+        self.transparency = table.transparency
+        # Unlit materials show their colour alone: all of it as "ambient", nothing else, and
+        # no shadow rays (``lit``: None when every material is lit).
+        self.lit = None
+        if table.unlit.any():
+            self.lit = ~table.unlit
+            self.ambient_share = np.where(table.unlit, 1.0, self.ambient_share).astype(np.float32)
+            for name in ("diffuse_share", "reflect_share", "specular", "transparency"):
+                setattr(self, name, np.where(table.unlit, 0.0, getattr(self, name)).astype(
+                    np.float32))  # fmt: skip
+        # (3, m) glow and Beer–Lambert absorption per unit length; None when no material has any.
+        self.emission = np.ascontiguousarray(table.emission.T) if table.emission.any() else None
+        absorbs = (table.absorption > 0).any()
+        self.absorption = np.ascontiguousarray(table.absorption.T) if absorbs else None
         lights = scene.lights
         self.light_positions = np.array([lt.position for lt in lights], np.float32).reshape(-1, 3)
         self.light_rgb = np.array(
@@ -148,30 +163,30 @@ class Renderer:
     def close(self) -> None:
         self.geometry.close()
 
-    def __enter__(self) -> Renderer:
+    def __enter__(self) -> Integrator:
         return self
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
 
-    def render(
+    def render_image(
         self,
+        frame: CameraFrame,
         *,
-        width: int,
-        height: int,
         spp: int,
         max_depth: int,
         seed: int,
-        progress: Callable[[int, int], None] | None = None,
-        camera: Camera | None = None,
-    ) -> np.ndarray:
-        """The (height, width, 3) float32 linear image. ``progress(done, total)`` counts samples;
-        ``camera`` (default the scene's) lets one BVH serve every frame of a camera path."""
+        progress: Callable[[int, int, RenderStats], None] | None = None,
+    ) -> tuple[np.ndarray, RenderStats]:
+        """The (height, width, 3) float32 linear image of the camera ``frame`` (its size is the
+        image's), and what tracing it took (``build_s`` is the BVH's, built once for every
+        image). ``progress(done, total, stats so far)`` counts samples."""
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
         if max_depth < 0:
             raise ValueError(f"max_depth: must be >= 0, got {max_depth}")
-        frame = camera_frame(self.scene.camera if camera is None else camera, width, height)
+        width, height = frame.width, frame.height
+        stats = RenderStats(build_s=self.build_s)
         film = Film(width, height)
         total = width * height * spp
         # Batches hold whole pixels and each batch sums into its own block, in ray order, so
@@ -195,15 +210,15 @@ class Renderer:
             for work in results:
                 film.add_block(work.block)
                 for kind, n in work.rays.items():
-                    self.stats.rays[kind] += n
+                    stats.rays[kind] += n
                 done += work.block.count * spp
-                self.stats.render_s = time.perf_counter() - began
+                stats.render_s = time.perf_counter() - began
                 if progress is not None:
-                    progress(done, total)
+                    progress(done, total, stats)
         finally:
             # On Ctrl-C or an error, drop the batches not yet started instead of finishing them.
             pool.shutdown(wait=True, cancel_futures=True)
-        return film.image(spp)
+        return film.image(spp), stats
 
     def trace_pixels(
         self, frame: CameraFrame, spp: int, seed: int, sample: int, first: int, count: int,
@@ -271,27 +286,90 @@ class Renderer:
         into ``work``; returns their reflection and refraction children."""
         d = rays.directions
         normal, face_normal, entering = self.facing_the_ray(d, surfaces)
+        material = surfaces.material
+        if self.absorption is not None:
+            self._absorb_inside(rays.weight, surfaces.t, material, entering)
         color = self.surface_color(surfaces)
         offset = surface_offset(surfaces.scale)
+        passing = self._see_through(rays, surfaces, face_normal, offset, work, spawn)
         outside = surfaces.position + face_normal * offset
-        material = surfaces.material
-        radiance = np.take(self.ambient_share, material) * color
-        self._add_direct_light(radiance, outside, normal, -d, color, material, work)
+        radiance = self._per_hit(self.ambient_share, surfaces, "ambient_share") * color
+        if surfaces.looks is not None and surfaces.looks.occlusion is not None:
+            radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
+        self._add_direct_light(radiance, outside, normal, -d, color, surfaces, work)
+        self._add_emission(radiance, surfaces)
         work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
             return NO_RAYS
-        reflect_share = np.take(self.reflect_share, material)
+        reflect_share = self._per_hit(self.reflect_share, surfaces, "reflect_share")
         children = self._refraction_children(
             rays, surfaces, normal, face_normal, entering, color, offset, reflect_share, work
         )
         reflected = self._reflection_children(
-            rays, outside, normal, color, reflect_share, material, work
+            rays, outside, normal, color, reflect_share, surfaces, work
         )
         children.insert(0, reflected)
+        children.append(passing)
         children = [batch for batch in children if len(batch)]
         return RayBatch.concatenate(children) if children else NO_RAYS
 
     # -- the stages of shading --------------------------------------------------------------
+
+    @staticmethod
+    def _per_hit(table: np.ndarray, surfaces: SurfaceHits, name: str) -> np.ndarray:
+        """(k,) values of a per-material ``table`` at the hits' materials, with the hits'
+        own where a mesh's textures vary it (``HitLooks.shading[name]``)."""
+        values = np.take(table, surfaces.material)
+        looks = surfaces.looks
+        if looks is not None and looks.shading is not None:
+            values[looks.rows[looks.shading_at]] = looks.shading[name]
+        return values
+
+    def _absorb_inside(self, weight, t, material, entering) -> None:
+        """Beer–Lambert: a ray that reaches a glass surface from inside (not ``entering``) has
+        crossed ``t`` (k,) of that glass; its ``weight`` (3, k) is multiplied in place by
+        ``exp(-absorption · t)`` of the material's (3, m) absorption per unit length."""
+        absorption = np.take(self.absorption, material, axis=1)
+        inside = np.flatnonzero(~entering & (column_max(absorption) > 0))
+        if len(inside) == 0:
+            return
+        with np.errstate(invalid="ignore"):  # inf absorption over t = 0 absorbs nothing
+            optical_depth = np.take(absorption, inside, axis=1) * t[inside]
+        optical_depth = np.nan_to_num(optical_depth, nan=0.0)
+        weight[:, inside] *= np.exp(-optical_depth)
+
+    def _add_emission(self, radiance, surfaces: SurfaceHits) -> None:
+        """Add to ``radiance`` (3, k) the light the surfaces give off themselves: their
+        material's ``emission``, or per hit a mesh's emissive texture's."""
+        if self.emission is None:
+            return
+        emission = np.take(self.emission, surfaces.material, axis=1)
+        looks = surfaces.looks
+        if looks is not None and looks.emission is not None:
+            scatter(emission, looks.rows, looks.emission)
+        radiance += emission
+
+    def _see_through(self, rays, surfaces, face_normal, offset, work, spawn) -> RayBatch:
+        """See-through (glTF BLEND) hits of coverage a: the surface keeps ``a`` of each ray's
+        weight (scaled in place, so all it shows and spawns is weighed by it), and ``1 − a``
+        goes straight on past it, as a ray started just beyond the surface: returned (no rays
+        when none pass, or ``spawn`` is False)."""
+        looks = surfaces.looks
+        if looks is None or looks.coverage is None:
+            return NO_RAYS
+        rows = looks.rows
+        weight = np.take(rays.weight, rows, axis=1)
+        rays.weight[:, rows] = weight * looks.coverage
+        if not spawn:
+            return NO_RAYS
+        weight *= np.float32(1.0) - looks.coverage
+        keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
+        through = rows[keep]
+        beyond = np.take(surfaces.position, through, axis=1)
+        beyond -= np.take(face_normal, through, axis=1) * offset[through]
+        work.rays["refraction"] += len(keep)
+        return RayBatch(beyond, np.take(rays.directions, through, axis=1), rays.pixel[through],
+                        np.take(weight, keep, axis=1))  # fmt: skip
 
     @staticmethod
     def facing_the_ray(d: np.ndarray, surfaces: SurfaceHits):
@@ -321,20 +399,15 @@ class Renderer:
         returns the refracted rays, started just inside the surface, tinted by the glass."""
         table = self.materials
         material = surfaces.material
-        transparency = np.take(table.transparency, material)
+        transparency = self._per_hit(self.transparency, surfaces, "transparency")
         glass = np.flatnonzero(transparency > 0)
         if len(glass) == 0:
             return []
         d_glass = np.take(rays.directions, glass, axis=1)
         normal_glass = np.take(normal, glass, axis=1)
-        ior = table.ior[material[glass]]
-        entering_glass = entering[glass]
-        n1 = np.where(entering_glass, np.float32(1.0), ior)
-        n2 = np.where(entering_glass, ior, np.float32(1.0))
-        refracted, total_internal = shading.refract(d_glass, normal_glass, n1 / n2)
-        cos_incident = np.clip(-shading.dot(d_glass, normal_glass), 0.0, 1.0)
-        fresnel = shading.fresnel_schlick(cos_incident, n1, n2)
-        fresnel[total_internal] = 1.0
+        refracted, _, fresnel = shading.dielectric_split(
+            d_glass, normal_glass, entering[glass], table.ior[material[glass]]
+        )
         reflect_share[glass] += transparency[glass] * fresnel
         # Glass tints what passes through it (the green marble), not what it reflects.
         weight = np.take(rays.weight, glass, axis=1)
@@ -355,16 +428,18 @@ class Renderer:
         ]
 
     def _reflection_children(
-        self, rays, outside, normal, color, reflect_share, material, work
+        self, rays, outside, normal, color, reflect_share, surfaces, work
     ) -> RayBatch:
         """Mirrors, metals and glass's Fresnel share reflect: the mirror rays whose weight can
         still show, started just outside the surface. Most hits reflect a little, so the
         weights are formed on every row and only the rows kept are gathered."""
         weight = rays.weight * reflect_share
-        if self.metallic is not None:
+        looks = surfaces.looks
+        if self.metallic is not None or (looks is not None and looks.shading is not None):
             # Metals tint what they reflect by their colour; the rest reflect untinted. (Metals
             # are few: three row passes over them beat a tint factor formed on every row.)
-            metals = np.flatnonzero(np.take(self.metallic, material))
+            metallic = self.metallic if self.metallic is not None else self.materials.metallic
+            metals = np.flatnonzero(self._per_hit(metallic, surfaces, "metallic"))
             for row in range(3):
                 weight[row, metals] *= color[row, metals]
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
@@ -382,7 +457,7 @@ class Renderer:
         )
 
     def _add_direct_light(
-        self, radiance, points, normal, to_viewer, color, material, work: BatchWork
+        self, radiance, points, normal, to_viewer, color, surfaces, work: BatchWork
     ) -> None:
         """Add to ``radiance`` (3, n) the Blinn-Phong light from every point light that the
         ``points`` (3, n) see."""
@@ -391,12 +466,16 @@ class Renderer:
             return
         # Shadow rays only where the light is in front of the surface: the segment from the
         # point to the light, which the Embree layer builds from the points' columns.
-        diffuse = np.take(self.diffuse_share, material)
-        specular = np.take(self.materials.specular, material)
-        shininess = np.take(self.materials.shininess, material)
+        material = surfaces.material
+        diffuse = self._per_hit(self.diffuse_share, surfaces, "diffuse_share")
+        specular = self._per_hit(self.specular, surfaces, "specular")
+        # Unlit surfaces take no light: no shadow rays for them.
+        takes_light = None if self.lit is None else np.take(self.lit, material)
+        shininess = self._per_hit(self.materials.shininess, surfaces, "shininess")
         for light, position in enumerate(self.light_positions):
             to_light = position[:, None] - points
-            facing = np.flatnonzero(shading.dot(to_light, normal) > 0)
+            facing = shading.dot(to_light, normal) > 0
+            facing = np.flatnonzero(facing if takes_light is None else facing & takes_light)
             visible = ~self.geometry.occluded_toward(points, facing, position)
             work.rays["shadow"] += len(facing)
             lit = facing[visible]
@@ -429,80 +508,3 @@ class Renderer:
                 ),
             )
 
-
-def render(
-    scene: Scene,
-    *,
-    width: int | None = None,
-    height: int | None = None,
-    spp: int | None = None,
-    max_depth: int | None = None,
-    seed: int | None = None,
-    threads: int | None = None,
-    spheres: str = "analytic",
-    batch_size: int = DEFAULT_BATCH_SIZE,
-    quiet: bool = True,
-    stats: RenderStats | None = None,
-    aovs: list[str] | tuple[str, ...] | None = None,
-) -> np.ndarray | tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Render ``scene`` to a (height, width, 3) float32 linear image.
-
-    Arguments left as None come from ``scene.render``. With ``quiet=False`` a progress bar runs
-    on stderr (when it is a terminal). Pass a ``RenderStats`` to receive ray counts and timings.
-    With ``aovs`` (names from ``embree_rt.aovs.AOV_NAMES``) it returns the image, bitwise the
-    same, and a dict of those AOVs (``embree_rt.aovs.render_aovs``).
-    """
-    if aovs is not None:
-        from embree_rt.aovs import aov_bytes, check_aov_names
-
-        aovs = check_aov_names(aovs)
-    settings = scene.render
-    width = settings.width if width is None else width
-    height = settings.height if height is None else height
-    spp = settings.spp if spp is None else spp
-    max_depth = settings.max_depth if max_depth is None else max_depth
-    seed = settings.seed if seed is None else seed
-    # Refuse what cannot fit before building or allocating anything (MemoryBudgetError).
-    count = len(scene.sphere_radii)
-    needs = budget.render_needs(
-        count, sphere_kind(count, spheres), width, height, spp, batch_size,
-        workers=threads or os.cpu_count() or 1,
-    )  # fmt: skip
-    if aovs:
-        size, text = needs["image"]
-        needs["image"] = (size + aov_bytes(width, height, aovs), f"{text} with AOVs")
-    budget.require(needs)
-    with Renderer(scene, spheres=spheres, threads=threads, batch_size=batch_size) as renderer:
-        bar = None
-        if not quiet and sys.stderr.isatty():
-            from tqdm import tqdm
-
-            bar = tqdm(total=width * height * spp, unit="sample", unit_scale=True, file=sys.stderr)
-
-        def progress(done: int, total: int) -> None:
-            if bar is not None:
-                bar.update(done - bar.n)
-                bar.set_postfix_str(f"{renderer.stats.rays_per_s / 1e6:.1f} Mrays/s", refresh=False)
-
-        try:
-            image = renderer.render(
-                width=width, height=height, spp=spp, max_depth=max_depth, seed=seed,
-                progress=progress,
-            )  # fmt: skip
-        finally:
-            if bar is not None:
-                bar.close()
-        if stats is not None:
-            stats.rays = dict(renderer.stats.rays)
-            stats.build_s = renderer.stats.build_s
-            stats.render_s = renderer.stats.render_s
-        if aovs is None:
-            return image
-        from embree_rt.aovs import render_aovs
-
-        began = time.perf_counter()
-        layers = render_aovs(renderer, width=width, height=height, names=aovs)
-        if stats is not None:
-            stats.rays["aov"] = width * height  # one pixel-centre ray per pixel
-            stats.render_s += time.perf_counter() - began
-    return image, layers

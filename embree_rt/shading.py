@@ -59,6 +59,26 @@ def refract(d: np.ndarray, n: np.ndarray, eta: float | np.ndarray) -> tuple[np.n
     return normalize(directions), total_internal
 
 
+def dielectric_split(
+    d: np.ndarray, n: np.ndarray, entering: np.ndarray, ior: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where light meets a dielectric of index ``ior`` (scalar or (k,)) from outside (index 1):
+    (3, k) unit directions ``d`` through (3, k) unit normals ``n`` turned towards the rays,
+    ``entering`` (k,) bool whether each ray goes into the dielectric (else leaves it).
+
+    Returns the (3, k) float32 refracted directions (the mirror ones on total internal
+    reflection, as ``refract``), the (k,) bool total internal reflection, and the (k,) float32
+    Fresnel reflectance (``fresnel_schlick``; exactly 1 on total internal reflection): the share
+    that reflects, the rest refracting."""
+    n1 = np.where(entering, np.float32(1.0), ior)
+    n2 = np.where(entering, ior, np.float32(1.0))
+    refracted, total_internal = refract(d, n, n1 / n2)
+    cos_incident = np.clip(-dot(d, n), 0.0, 1.0)
+    fresnel = fresnel_schlick(cos_incident, n1, n2)
+    fresnel[total_internal] = 1.0
+    return refracted, total_internal, fresnel
+
+
 def fresnel_schlick(
     cos_incident: np.ndarray, n1: float | np.ndarray, n2: float | np.ndarray
 ) -> np.ndarray:
@@ -169,6 +189,8 @@ def checker(points: np.ndarray, checker: Checker) -> np.ndarray:
     # float64 so the square a point falls in does not depend on float32 rounding of x / size.
     x = np.asarray(points[0], np.float64)
     z = np.asarray(points[2], np.float64)
-    odd = (np.floor(x / checker.size) + np.floor(z / checker.size)).astype(np.int64) & 1
+    # The parity taken in float64, not through int64: a far hit (a grazing ray meets the floor
+    # at any distance) over a small square passes 2**63 squares; beyond 2**53 all are even.
+    odd = np.fmod(np.floor(x / checker.size) + np.floor(z / checker.size), 2.0) != 0.0
     palette = np.array([checker.color_a, checker.color_b], np.float32).T  # (3, 2): even, odd
-    return np.take(palette, odd, axis=1)
+    return np.take(palette, odd.astype(np.intp), axis=1)

@@ -14,6 +14,7 @@ from trimesh.constants import tol
 from embree_rt.trimesh_ray import RayMeshIntersector, intersector, local_scene
 from embree_rt.trimesh_ray.decided_hits import decided_hits
 from embree_rt.trimesh_ray.finished_hits import finished_hits
+from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
 from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
 from embree_rt.trimesh_ray.ray_order import box_cells, segment_key
 from embree_rt.trimesh_ray.settled_hits import settled_hits
@@ -139,18 +140,16 @@ def test_settled_decided_and_finished_hits_are_the_same_on_one_thread_and_two():
     near = 16 * np.finfo(np.float32).eps * magnitude / scene.scale
     result = scene.bvh.all_hits(local_origins, local_directions,
                                 (near * scene.scale * 0.5).astype(np.float32), np.inf, 4)
-    answers = [settled_hits(result, True, magnitude, near, False, origins, directions,
-                            scene.planes, scene.min_altitude,
-                            scene.floor_altitude, 8 * np.finfo(np.float32).eps, 1e-3, 1e-5,
-                            threads) for threads in (1, 2)]  # fmt: skip
+    rays = world_rays(origins, directions, magnitude, near, False)
+    rules = tolerances(8 * np.finfo(np.float32).eps, 1e-3, 1e-5, tol.zero)
+    answers = [settled_hits(result, True, rays, scene.tables, rules, threads)
+               for threads in (1, 2)]  # fmt: skip
     assert answers[0][3].sum() > 100  # messy rays (left to the float64 pass) in the batch
     assert len(answers[0][0]) > len(origins)
     for x, y in zip(*answers, strict=True):
         np.testing.assert_array_equal(x, y)
     messy = np.flatnonzero(answers[0][3])
-    decided = [decided_hits(messy, messy, result, magnitude, near, False, origins, directions,
-                            scene.planes, scene.triangles, scene.min_altitude,
-                            8 * np.finfo(np.float32).eps, 1e-3, 1e-5, tol.zero, scene.fans(),
+    decided = [decided_hits(messy, messy, result, rays, scene.tables, rules, scene.fans(),
                             threads) for threads in (1, 2)]  # fmt: skip
     assert len(decided[0][0]) > len(messy)
     for x, y in zip(*decided, strict=True):

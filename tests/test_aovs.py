@@ -28,7 +28,6 @@ from embree_rt import cli
 from embree_rt.aovs import AOV_NAMES, FLOOR_ID, NOTHING_ID, id_colors, save_with_aovs
 from embree_rt.camera import camera_frame, pixel_center_rays
 from embree_rt.film import tonemap
-from embree_rt.integrator import Renderer
 from embree_rt.textures import srgb_to_linear
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -61,8 +60,9 @@ def sample_scene() -> rt.Scene:
 
 
 def render_with_aovs(scene: rt.Scene, **options) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    return rt.render(scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=1, aovs=AOV_NAMES,
-                     **options)  # fmt: skip
+    result = rt.render(scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=1, aovs=AOV_NAMES,
+                       **options)  # fmt: skip
+    return result.image, result.aovs
 
 
 class Reference:
@@ -340,7 +340,7 @@ def test_the_beauty_is_bitwise_the_render_without_aovs(scene, rendered) -> None:
     # The AOV pass runs after the beauty and changes no state the beauty reads: both images
     # come from the same instructions on the same machine, so they are equal on any ISA.
     beauty, _ = rendered
-    plain = rt.render(scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=1)
+    plain = rt.render(scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=1).image
     np.testing.assert_array_equal(beauty, plain)
     assert beauty.std() > 0.01
 
@@ -349,8 +349,8 @@ def test_aovs_do_not_depend_on_threads_or_batch_size(scene, rendered) -> None:
     # Each pixel is one ray through its centre; Embree answers the same ray the same way in
     # any packet, so the AOVs agree exactly (the ids) and to float32 rounding (the rest).
     _, layers = rendered
-    with Renderer(scene, threads=1, batch_size=97) as renderer:
-        small = aov_module.render_aovs(renderer, width=WIDTH, height=HEIGHT, names=AOV_NAMES)
+    with rt.Renderer(scene, threads=1, batch_size=97) as renderer:
+        small = renderer.render(width=WIDTH, height=HEIGHT, spp=1, max_depth=1, aovs=AOV_NAMES).aovs
     for name in ("object_id", "material_id"):
         np.testing.assert_array_equal(small[name], layers[name])
     for name in ("depth", "normal", "albedo"):
@@ -420,8 +420,8 @@ def test_a_scene_of_only_the_floor_and_sky() -> None:
     assert np.isfinite(flat(layers["depth"])[floor]).all()
     assert np.isinf(flat(layers["depth"])[~floor]).all()
     # No AOVs asked for: the image and an empty dict.
-    image, none = rt.render(scene, width=8, height=5, spp=1, aovs=[])
-    assert none == {} and image.shape == (5, 8, 3)
+    result = rt.render(scene, width=8, height=5, spp=1, aovs=[])
+    assert result.aovs == {} and result.image.shape == (5, 8, 3)
 
 
 def test_unknown_names_are_refused() -> None:

@@ -130,7 +130,7 @@ phase, count, output = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 retain_freed_memory()  # as the renderer runs: freed arrays stay in the heap
 tiny = Scene()
 tiny.add_sphere((0.0, 1.0, 0.0), 1.0)
-render(tiny, width=8, height=8, spp=1)  # the kernels compiled and loaded before measuring
+render(tiny, width=8, height=8, spp=1).image  # the kernels compiled and loaded before measuring
 scene = random_field(count) if phase in ("user", "point") else None
 before = status("VmRSS")
 Path("/proc/self/clear_refs").write_text("5")  # reset the peak (VmHWM) to VmRSS
@@ -139,7 +139,7 @@ if phase == "field":
 elif phase in ("user", "point"):
     SceneGeometry(scene, spheres="analytic" if phase == "user" else "point", threads=1).close()
 else:  # what the command does with an image: render it and write a PNG
-    save_image(render(tiny, width=1920, height=1080, spp=1, threads=2), output)
+    save_image(render(tiny, width=1920, height=1080, spp=1, threads=2).image, output)
 print(status("VmHWM") - before)
 """
 
@@ -166,3 +166,21 @@ def test_the_estimates_match_the_memory_really_used(phase: str, tmp_path: Path) 
         "image": image_bytes(1920, 1080, 1, DEFAULT_BATCH_SIZE, workers=2),
     }[phase]
     assert 0.5 <= grown / estimate <= 2.0, (grown, estimate)
+
+
+def test_info_estimates_the_bvh_from_the_budgets_figures(tmp_path: Path, capsys) -> None:
+    """``embree-rt info`` and the budget read one table of bytes per sphere: the estimate it
+    prints for a field of spheres is that table's figure for the kind they enter as."""
+    from embree_rt import cli
+    from embree_rt.budget import GEOMETRY_BYTES_PER_SPHERE
+
+    count = 20_000
+    scene_file = tmp_path / "field.toml"
+    scene_file.write_text(f"[random_field]\ncount = {count}\n", encoding="utf-8")
+    for spheres, kind in (("analytic", "user"), ("point", "point")):
+        assert cli.main(["info", str(scene_file), "--spheres", spheres]) == 0
+        out = capsys.readouterr().out
+        estimate = re.search(r"memory: +~([\d.]+) MiB \(estimate\)", out)
+        assert estimate is not None, out
+        expected = count * GEOMETRY_BYTES_PER_SPHERE[kind] / 2**20
+        assert float(estimate.group(1)) == pytest.approx(expected, abs=0.051)

@@ -1,9 +1,10 @@
 """The pinhole camera (embree_rt/camera.py): frame, jittered stratified primary rays.
 
-``primary_rays`` returns one ray per column: origins and directions (3, count) float32, pixel
-(count,) int64. Ray directions are checked by projecting them back onto the image plane with a
-basis built here from the Camera's fields (vertical field of view, square pixels, row 0 at the
-top), and by angles measured between rays, which need no basis at all.
+``sample_rays`` (here through ``camera_samples.primary_rays``) returns one ray per column:
+origins and directions (3, count) float32, pixel (count,) int64. Ray directions are checked by
+projecting them back onto the image plane with a basis built here from the Camera's fields
+(vertical field of view, square pixels, row 0 at the top), and by angles measured between rays,
+which need no basis at all.
 """
 
 from __future__ import annotations
@@ -13,9 +14,9 @@ import math
 
 import numpy as np
 import pytest
+from camera_samples import primary_rays
 
-from embree_rt.camera import camera_frame, primary_rays
-from embree_rt.scene.model import Camera
+from embree_rt.camera import Camera, camera_frame, pixel_center_rays, sample_rays
 
 # -- camera: an independent pinhole model ---------------------------------------------------------
 
@@ -246,15 +247,15 @@ def test_any_split_into_batches_gives_the_same_rays(spp: int) -> None:
     assert not np.array_equal(other[1], whole[1])
 
 
-def test_sample_ranges_outside_the_image_are_refused() -> None:
+def test_pixel_ranges_outside_the_image_are_refused() -> None:
     frame = camera_frame(ODD_CAMERA, 4, 3)
-    assert len(primary_rays(frame, 2, 0, 24, 0)[2]) == 0
+    assert len(pixel_center_rays(frame, 12, 0)[2]) == 0
     with pytest.raises(ValueError, match="run past"):
-        primary_rays(frame, 2, 0, 20, 5)
+        pixel_center_rays(frame, 10, 5)
     with pytest.raises(ValueError, match="start"):
-        primary_rays(frame, 2, 0, -1, 2)
+        pixel_center_rays(frame, -1, 2)
     with pytest.raises(ValueError, match="spp"):
-        primary_rays(frame, 0, 0, 0, 1)
+        sample_rays(frame, 0, 0, np.arange(1))
 
 
 # -- camera: degenerate and nearly degenerate cameras ---------------------------------------------

@@ -34,6 +34,7 @@ distributed = pytest.importorskip("distributed")  # the test extra installs it: 
 import embree_rt as rt  # noqa: E402
 from embree_rt import budget  # noqa: E402
 from embree_rt import distributed as rd  # noqa: E402
+from embree_rt.scene import RenderSettings  # noqa: E402
 from embree_rt.scene.animation import Animation, camera_at  # noqa: E402
 from embree_rt.scene.random_field import plan_field  # noqa: E402
 
@@ -68,7 +69,7 @@ def bounded(function, *args, **kwargs):
 def local_image(scene: rt.Scene, camera: rt.Camera | None = None, **settings) -> np.ndarray:
     if camera is not None:
         scene = replace(scene, camera=camera)
-    return rt.render(scene, **{**SMALL, **settings})
+    return rt.render(scene, **{**SMALL, **settings}).image
 
 
 @pytest.mark.parametrize(
@@ -80,11 +81,11 @@ def test_cluster_image_is_bitwise_the_local_image(cluster, name: str, as_path: b
     path = SCENES / f"{name}.toml"
     scene = rt.load_scene(path)
     source = path if as_path else scene  # a file travels as its path, a Scene is scattered
-    image = bounded(rd.render, source, client, batch_size=SMALL_BATCH, **SMALL)
+    image = bounded(rd.render, source, client, batch_size=SMALL_BATCH, **SMALL).image
     expected = local_image(scene)
     assert image.dtype == np.float32 and image.shape == expected.shape
     assert np.array_equal(image, expected)
-    # render() freed the workers' renderers of the scene. (A lambda: pickled by value, where a
+    # render().image freed the workers' renderers of the scene. (A lambda: pickled by value, where a
     # function of this module would be looked up, in vain, by name on the workers.)
     name = rd.plugin_name(rd.scene_key(rd.SceneFile(str(path)) if as_path else scene, "analytic"))
     held = client.run(lambda dask_worker, name=name: name in dask_worker.plugins)
@@ -97,9 +98,9 @@ def test_random_field_of_1e5_spheres_is_bitwise_the_local_image(cluster) -> None
     # The workers generate the field from its parameters; the client renders it locally.
     renderer = rd.ClusterRenderer(rd.FieldRecipe(plan), client, batch_size=4096)
     scene = rt.random_field(100_000, seed=3)
-    settings = rd.Settings(width=128, height=72, spp=1, max_depth=6, seed=0)
+    settings = RenderSettings(width=128, height=72, spp=1, max_depth=6, seed=0)
     image = bounded(renderer.render, settings, scene.camera)
-    expected = rt.render(scene, width=128, height=72, spp=1, max_depth=6, seed=0)
+    expected = rt.render(scene, width=128, height=72, spp=1, max_depth=6, seed=0).image
     assert np.array_equal(image, expected)
     assert renderer.stats.rays["primary"] == 128 * 72
 
@@ -111,7 +112,7 @@ def test_scene_is_scattered_once_and_built_once_per_worker(cluster) -> None:
     renderer = rd.ClusterRenderer(scene, client, batch_size=SMALL_BATCH)
     holders = client.who_has(renderer.source)[renderer.source.key]
     assert len(holders) == 2  # broadcast: on both workers before any task runs
-    settings = rd.Settings(max_depth=6, seed=11, **SMALL)
+    settings = RenderSettings(max_depth=6, seed=11, **SMALL)
     cameras = [(f, camera_at(scene.camera, Animation(3, orbit=30.0), f)) for f in range(3)]
     images = {}
     bounded(renderer.render_frames, settings, cameras, images.__setitem__)
@@ -130,7 +131,7 @@ def test_animation_frames_equal_frames_rendered_one_by_one_locally(cluster) -> N
     cameras = [(f, camera_at(scene.camera, animation, f)) for f in frames]
     renderer = rd.ClusterRenderer(SCENES / "showcase.toml", client, batch_size=SMALL_BATCH)
     images = {}
-    bounded(renderer.render_frames, rd.Settings(max_depth=6, seed=0, **SMALL), cameras,
+    bounded(renderer.render_frames, RenderSettings(max_depth=6, seed=0, **SMALL), cameras,
             images.__setitem__)  # fmt: skip
     assert sorted(images) == sorted(frames)
     for f, camera in cameras:
@@ -149,7 +150,7 @@ def test_a_worker_that_joins_late_takes_part(cluster) -> None:
     try:
         client.wait_for_workers(3, timeout=TIMEOUT_S)
         (late,) = set(client.nthreads()) - before
-        image = bounded(renderer.render, rd.Settings(max_depth=6, seed=5, **SMALL), scene.camera)
+        image = bounded(renderer.render, RenderSettings(max_depth=6, seed=5, **SMALL), scene.camera)
         assert renderer.builds()[late] == 1  # it got the plugin and the scene, and rendered
         assert np.array_equal(image, local_image(scene, seed=5))
     finally:
@@ -167,7 +168,7 @@ def test_a_worker_that_cannot_load_the_scene_is_bad_input(cluster, tmp_path: Pat
     scene_file.write_text(f'[[sphere_arrays]]\nfile = "{spheres.name}"\n', encoding="utf-8")
     renderer = rd.ClusterRenderer(scene_file, client)
     spheres.unlink()  # as on a worker whose file system lacks the data file
-    settings = rd.Settings(width=8, height=8, spp=1, max_depth=1, seed=0)
+    settings = RenderSettings(width=8, height=8, spp=1, max_depth=1, seed=0)
     with pytest.raises(rd.WorkerSceneError, match=r"sphere_arrays\[0\]\.file: .*no such file"):
         bounded(renderer.render, settings, rt.Camera())
 
@@ -182,7 +183,7 @@ def test_a_data_file_replaced_under_a_live_renderer_is_loaded_again(cluster, tmp
         f'[[sphere_arrays]]\nfile = "{spheres.name}"\n[camera]\nposition = [0, 1, -6]\n',
         encoding="utf-8",
     )
-    settings = rd.Settings(width=32, height=24, spp=1, max_depth=1, seed=0)
+    settings = RenderSettings(width=32, height=24, spp=1, max_depth=1, seed=0)
     np.savez(spheres, centers=[[-1.0, 1.0, 0.0]], radii=[1.0])
     first = rd.ClusterRenderer(scene_file, client, batch_size=32)  # a task a row
     try:
@@ -219,8 +220,8 @@ def test_a_scene_too_big_for_a_worker_is_refused_before_it_is_built(monkeypatch,
     if not as_recipe:
         monkeypatch.setattr(budget, "GEOMETRY_BYTES_PER_SPHERE", {"user": 1 << 20, "point": 0})
     with pytest.raises(rd.WorkerSceneError, match=r"spheres would need ~.* GB of memory"):
-        plugin.renderer_for(source)
-    assert plugin.renderer is None and made == []
+        plugin.integrator_for(source)
+    assert plugin.integrator is None and made == []
 
 
 def test_a_worker_killed_mid_render_leaves_the_image_unchanged(cluster) -> None:
@@ -239,7 +240,7 @@ def test_a_worker_killed_mid_render_leaves_the_image_unchanged(cluster) -> None:
             # the scene again. The batches it held run elsewhere.
             os.kill(pid, signal.SIGKILL)
 
-    settings = rd.Settings(max_depth=6, seed=0, **SMALL)
+    settings = RenderSettings(max_depth=6, seed=0, **SMALL)
     image = bounded(renderer.render, settings, scene.camera, kill_once)
     assert killed.is_set()
     assert np.array_equal(image, local_image(scene))
@@ -319,7 +320,7 @@ def test_command_on_dask_scheduler_and_worker_processes(tmp_path: Path) -> None:
         scene = rt.load_scene(scene_file)
         for f in (2, 3):
             camera = camera_at(scene.camera, scene.animation, f)
-            expected = rt.render(replace(scene, camera=camera), width=64, height=36, spp=2)
+            expected = rt.render(replace(scene, camera=camera), width=64, height=36, spp=2).image
             assert np.array_equal(np.load(tmp_path / f"f{f}.npy"), expected), f"frame {f}"
     finally:
         for process in reversed(started):

@@ -18,10 +18,10 @@ import math
 
 import numpy as np
 import pytest
+from camera_samples import primary_rays
 
-from embree_rt import Background, Camera, Floor, Material, PointLight, Scene, preset
-from embree_rt.camera import camera_frame, primary_rays
-from embree_rt.integrator import render
+from embree_rt import Background, Camera, Floor, Material, PointLight, Scene, preset, render
+from embree_rt.camera import camera_frame
 
 WIDTH, HEIGHT = 48, 32
 MAX_DEPTH = 6
@@ -205,7 +205,7 @@ def trace_image(tracer: ReferenceTracer, rays: tuple[np.ndarray, np.ndarray]) ->
 @pytest.fixture(scope="module")
 def images() -> tuple[np.ndarray, np.ndarray]:
     scene = reference_scene()
-    ours = render(scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=MAX_DEPTH, seed=5)
+    ours = render(scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=MAX_DEPTH, seed=5).image
     return ours, trace_image(ReferenceTracer(scene), primary(scene))
 
 

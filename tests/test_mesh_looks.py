@@ -20,9 +20,10 @@ import numpy as np
 import pytest
 import trimesh
 from bvh_reference import triangle_hits
+from camera_samples import primary_rays
 
 import embree_rt as rt
-from embree_rt.camera import camera_frame, primary_rays
+from embree_rt.camera import camera_frame
 from embree_rt.geometry import SceneGeometry
 from embree_rt.scene.meshes import load_mesh_parts, metallic_roughness_material
 from embree_rt.textures import sample_bilinear, texels_from_image
@@ -82,7 +83,7 @@ zenith = {[float(c) for c in sky]}
 
 
 def render_file(path: Path, spp: int = 4) -> np.ndarray:
-    return rt.render(rt.load_scene(path), width=SIZE, height=SIZE, spp=spp, max_depth=2)
+    return rt.render(rt.load_scene(path), width=SIZE, height=SIZE, spp=spp, max_depth=2).image
 
 
 def quadrant_pixels(image: np.ndarray) -> list[np.ndarray]:
@@ -177,7 +178,8 @@ def test_a_named_material_overrides_the_files_look(case: str, tmp_path: Path) ->
         api.floor = None
         api.lights.append(rt.PointLight(position=(0, 0, 1e4), intensity=INTENSITY))
         api.add_mesh(mesh, material)
-        assert_quadrants(rt.render(api, width=SIZE, height=SIZE, spp=1, max_depth=2), expected)
+        image = rt.render(api, width=SIZE, height=SIZE, spp=1, max_depth=2).image
+        assert_quadrants(image, expected)
 
 
 def test_a_smooth_metal_mirrors_the_sky_tinted_by_its_texture(tmp_path: Path) -> None:
@@ -346,7 +348,7 @@ def test_vertex_normals_that_cancel_to_rounding_residue_give_no_nan() -> None:
         placement = np.eye(4)
         placement[1, 3] = 1.0
         scene.add_mesh(ball, "glossy", transform=placement, smooth=smooth)
-        images.append(rt.render(scene, width=48, height=36, spp=2))
+        images.append(rt.render(scene, width=48, height=36, spp=2).image)
     assert np.isfinite(images[0]).all()
     np.testing.assert_allclose(images[0], images[1], atol=1e-4)
 

@@ -17,10 +17,10 @@ from embree_rt import (
     Scene,
     preset,
     random_field,
+    render,
 )
 from embree_rt.batches import batch_ranges
 from embree_rt.embree import BVH
-from embree_rt.integrator import render
 
 
 def pixel_of(camera: Camera, point, width: int, height: int) -> tuple[int, int]:
@@ -55,7 +55,7 @@ def test_shadowed_floor_is_darker_than_lit_floor() -> None:
     scene.add_material("red", Material(color=(1, 0, 0)))
     scene.add_sphere((0, 1.5, 0), 1.0, "red")
     width, height = 96, 72
-    image = render(scene, width=width, height=height, spp=4, max_depth=2, seed=1)
+    image = render(scene, width=width, height=height, spp=4, max_depth=2, seed=1).image
     # The light casts the ball's shadow around (1.06, 0, 0), away from the light.
     shadow = image[pixel_of(scene.camera, (1.1, 0.0, 0.8), width, height)]
     lit = image[pixel_of(scene.camera, (-1.1, 0.0, 0.8), width, height)]
@@ -70,7 +70,7 @@ def test_removing_the_light_blocker_removes_the_shadow() -> None:
         scene.lights.append(PointLight(position=(0, 10, 0)))
         if with_sphere:
             scene.add_sphere((0, 1.5, -3), 1.0, "matte")  # off to the back: casts no shadow here
-        image = render(scene, width=64, height=48, spp=2, max_depth=2, seed=3)
+        image = render(scene, width=64, height=48, spp=2, max_depth=2, seed=3).image
         return brightness(image, *pixel_of(scene.camera, (0, 0, 1.2), 64, 48))
 
     assert floor_at(True) == pytest.approx(floor_at(False), rel=1e-5)
@@ -87,7 +87,7 @@ def test_mirror_sphere_shows_the_color_of_what_it_faces() -> None:
         scene.lights.append(PointLight(position=(5, 5, 5)))
         scene.add_sphere((0, 1, 0), 1.0, material)
         scene.add_sphere((0, 1, 12), 4.0, "red")  # behind the camera: only a mirror shows it
-        image = render(scene, width=41, height=41, spp=1, max_depth=3, seed=0)
+        image = render(scene, width=41, height=41, spp=1, max_depth=3, seed=0).image
         return image[18:23, 18:23].reshape(-1, 3).mean(axis=0)
 
     mirror = centre_color("mirror")
@@ -111,7 +111,7 @@ def test_glass_sphere_flips_what_lies_behind_it() -> None:
     scene.add_material("clear", preset("glass", transparency=1.0, specular=0.0))
     scene.add_sphere((0, 0, 0), 1.0, "clear")
     width = height = 81
-    image = render(scene, width=width, height=height, spp=1, max_depth=6, seed=0)
+    image = render(scene, width=width, height=height, spp=1, max_depth=6, seed=0).image
     row, col = pixel_of(scene.camera, (0, 0, 0), width, height)
     left_inside = image[row, col - 5]
     right_inside = image[row, col + 5]
@@ -135,7 +135,7 @@ def _showcase_like_scene() -> Scene:
 
 
 def test_no_nan_or_negative_values_with_glass_grazing_and_total_internal_reflection() -> None:
-    image = render(_showcase_like_scene(), width=80, height=60, spp=4, max_depth=6, seed=7)
+    image = render(_showcase_like_scene(), width=80, height=60, spp=4, max_depth=6, seed=7).image
     assert np.isfinite(image).all()
     assert (image >= 0).all()
 
@@ -153,7 +153,7 @@ def test_weights_never_exceed_one_in_a_white_furnace() -> None:
     scene.add_material("perfect_mirror", Material(ambient=0, diffuse=0, reflectivity=1.0))
     scene.add_sphere((-1.1, 0, 0), 1.0, "lossless_glass")
     scene.add_sphere((1.1, 0, 0), 1.0, "perfect_mirror")
-    image = render(scene, width=64, height=48, spp=2, max_depth=8, seed=0)
+    image = render(scene, width=64, height=48, spp=2, max_depth=8, seed=0).image
     assert image.max() <= 1.0 + 1e-5
     assert image.min() > 0.5  # and little is lost: only deep paths are cut off
 
@@ -161,16 +161,16 @@ def test_weights_never_exceed_one_in_a_white_furnace() -> None:
 def test_same_seed_same_image_for_any_thread_count_and_batch_size() -> None:
     scene = _showcase_like_scene()
     settings = dict(width=48, height=36, spp=3, max_depth=6, seed=11)
-    reference = render(scene, threads=1, batch_size=1 << 18, **settings)
+    reference = render(scene, threads=1, batch_size=1 << 18, **settings).image
     # Bitwise, on any ISA (the bits themselves differ between machines, not between these
     # renders on one): a sample's rays are the same float32 values whatever batch carries
     # them (counter-based jitter); Embree traces each ray of a packet in its own SIMD lane, and
     # NumPy's float32 arithmetic rounds each element on its own (its vectorised exp and log run
     # the same code on every element, the tail of an array included); and each pixel sums its
     # contributions in ray order. Checked with Embree's SSE4.2, AVX and AVX2 kernels.
-    assert np.array_equal(reference, render(scene, threads=2, batch_size=1 << 18, **settings))
-    assert np.array_equal(reference, render(scene, threads=2, batch_size=999, **settings))
-    different_seed = render(scene, threads=2, **{**settings, "seed": 12})
+    assert np.array_equal(reference, render(scene, threads=2, batch_size=1 << 18, **settings).image)
+    assert np.array_equal(reference, render(scene, threads=2, batch_size=999, **settings).image)
+    different_seed = render(scene, threads=2, **{**settings, "seed": 12}).image
     assert not np.array_equal(reference, different_seed)
 
 
@@ -179,8 +179,8 @@ def test_analytic_and_tessellated_spheres_render_nearly_the_same_image() -> None
 
     scene = _showcase_like_scene()
     settings = dict(width=96, height=72, spp=4, max_depth=6, seed=5)
-    analytic = tonemap(render(scene, spheres="analytic", **settings)).astype(float)
-    mesh = tonemap(render(scene, spheres="mesh", **settings)).astype(float)
+    analytic = tonemap(render(scene, spheres="analytic", **settings).image).astype(float)
+    mesh = tonemap(render(scene, spheres="mesh", **settings).image).astype(float)
     assert np.abs(analytic - mesh).mean() / 255 < 0.01
 
 

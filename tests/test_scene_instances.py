@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from embree_rt import Scene, SceneError, load_scene, render
+from embree_rt import Scene, SceneError, load_scene, render, save_scene
 from embree_rt.geometry import SceneGeometry
 from embree_rt.scene import meshes as meshes_module
 from embree_rt.scene.instances import placement_matrices
@@ -121,7 +121,7 @@ def test_scene_save_writes_the_placements_back(tmp_path: Path):
     transforms[2, :3, 0] *= -1  # a mirrored copy
     scene = load_scene(write_instances_scene(tmp_path, {"transforms": transforms},
                                              'material = "red"\nsmooth = false'))  # fmt: skip
-    scene.save(tmp_path / "saved.toml")
+    save_scene(scene, tmp_path / "saved.toml")
     assert (tmp_path / "saved.instances0.npz").is_file()
     again = load_scene(tmp_path / "saved.toml")
     (before,), (after,) = scene.instances, again.instances
@@ -170,7 +170,7 @@ def test_a_bad_placements_file_is_one_line_before_any_mesh_loads(name, tmp_path,
     def no_mesh(*args, **kwargs):
         raise AssertionError("a mesh was loaded before the placements were checked")
 
-    monkeypatch.setattr(meshes_module, "load_mesh_parts", no_mesh)
+    monkeypatch.setattr(meshes_module, "load_model", no_mesh)
     with pytest.raises(SceneError) as error:
         load_scene(path)
     message = str(error.value)
@@ -209,10 +209,10 @@ def test_instances_render_as_the_same_meshes_placed_one_by_one(tmp_path: Path):
     one_by_one = load_scene(tmp_path / "meshes.toml")
     with SceneGeometry(instances) as geometry:
         assert geometry.bvh.geometry_count == 1 and geometry.instance_count == 16
-    image = render(instances)
-    reference = render(one_by_one)
+    image = render(instances).image
+    reference = render(one_by_one).image
     covered = np.abs(image - render(Scene(camera=instances.camera, lights=instances.lights,
-                                          render=instances.render))).max(axis=2) > 0.05
+                                          render=instances.render)).image).max(axis=2) > 0.05
     assert covered.mean() > 0.1  # the copies fill a good part of the picture
     # The two paths trace the same float32 transforms through Embree; they differ only in how
     # the world normal is rounded (cofactors in float64 against an inverse kept in float32) and
@@ -271,7 +271,7 @@ def test_random_instance_replaces_small_spheres_and_renders_as_meshes_placed_one
     names = one_by_one.material_names
     for matrix, material in zip(entry.transforms, entry.materials, strict=True):
         one_by_one.add_mesh(entry.mesh, names[material], matrix)
-    reference = render(one_by_one, width=64, height=40, spp=2, max_depth=3)
+    reference = render(one_by_one, width=64, height=40, spp=2, max_depth=3).image
     image = np.load(image_path)
     difference = np.abs(image - reference).max(axis=2)
     assert np.mean(difference > 1.0 / 512) < 0.002 and difference.mean() < 1e-4
@@ -318,8 +318,9 @@ def test_a_meshs_own_look_and_nodes_carry_over_to_its_instances(asset: str, tmp_
     nodes = len(one_by_one.meshes) // 9  # placements per copy: one per node
     assert len(entry.mesh.faces) == sum(len(m.mesh.faces) for m in one_by_one.meshes[:nodes])
     assert entry.mesh_colors
-    image, reference = render(instances), render(one_by_one)
-    empty = render(Scene(camera=instances.camera, lights=instances.lights, render=instances.render))
+    image, reference = render(instances).image, render(one_by_one).image
+    bare = Scene(camera=instances.camera, lights=instances.lights, render=instances.render)
+    empty = render(bare).image
     assert (np.abs(image - empty).max(axis=2) > 0.05).mean() > 0.05
     difference = np.abs(image - reference).max(axis=2)
     assert np.mean(difference > 1.0 / 512) < 0.002 and difference.mean() < 1e-4

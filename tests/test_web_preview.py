@@ -7,10 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from camera_samples import primary_rays
 
-from embree_rt.camera import camera_frame, primary_rays, sample_rays
+from embree_rt.camera import camera_frame, sample_rays
 from embree_rt.film import Film
-from embree_rt.integrator import Renderer
+from embree_rt.integrator import Integrator
 from embree_rt.scene import load_scene
 from embree_rt.scene.loader import read_document
 from embree_rt.web.preview import OvertakenError, PreviewSession
@@ -32,9 +33,9 @@ def test_sample_rays_are_the_primary_rays_of_those_samples():
 def test_passes_add_up_to_the_render():
     scene = load_scene(SCENES / "showcase.toml")
     width, height, spp = 40, 24, 4
-    with Renderer(scene, threads=1, batch_size=97 * spp) as renderer:
-        expected = renderer.render(width=width, height=height, spp=spp, max_depth=6, seed=2)
-        frame = camera_frame(scene.camera, width, height)
+    frame = camera_frame(scene.camera, width, height)
+    with Integrator(scene, threads=1, batch_size=97 * spp) as renderer:
+        expected, _ = renderer.render_image(frame, spp=spp, max_depth=6, seed=2)
         film = Film(width, height)
         for sample in range(spp):
             for first in range(0, width * height, 300):  # chunks unlike the render's batches

@@ -42,10 +42,18 @@ def prefetch(typingctx, address):
         word = ir.IntType(32)
         function_type = ir.FunctionType(ir.VoidType(), [byte_pointer, word, word, word])
         name = "llvm.prefetch.p0"
-        function = builder.module.globals.get(name) or ir.Function(builder.module,
-                                                                    function_type, name=name)
-        builder.call(function, [builder.inttoptr(args[0], byte_pointer), ir.Constant(word, 0),
-                                ir.Constant(word, 3), ir.Constant(word, 1)])  # fmt: skip
+        function = builder.module.globals.get(name) or ir.Function(
+            builder.module, function_type, name=name
+        )
+        builder.call(
+            function,
+            [
+                builder.inttoptr(args[0], byte_pointer),
+                ir.Constant(word, 0),
+                ir.Constant(word, 3),
+                ir.Constant(word, 1),
+            ],
+        )
         return context.get_dummy_value()
 
     return types.void(types.uintp), codegen

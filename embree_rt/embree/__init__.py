@@ -7,6 +7,11 @@ from embree_rt.embree.records import GROUPS, HitLabels, HitRecords
 from embree_rt.embree.spatial_order import spheres_in_spatial_order
 
 __all__ = [
-    "BVH", "GROUPS", "EmbreeError", "HitLabels", "HitRecords", "Hits",
+    "BVH",
+    "GROUPS",
+    "EmbreeError",
+    "HitLabels",
+    "HitRecords",
+    "Hits",
     "spheres_in_spatial_order",
 ]

@@ -24,6 +24,7 @@ from embree_rt.embree import (
     user_spheres,
     world_normals,
 )
+from embree_rt.embree.alpha_filter import TriangleFilter
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
     as_indices,
@@ -88,9 +89,11 @@ def native_lanes(device: device_module.Device) -> int:
     """The widest packet Embree runs natively on this CPU (16 with AVX-512, 8 with AVX2, else
     4). On this project's AVX2 machine 8-wide packets traced user-geometry spheres 1.2–1.8x
     faster than 4-wide ones, and 16-wide ones (emulated there) no faster than 8 (DESIGN.md)."""
-    for lanes, prop in ((16, library.DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED),
-                        (8, library.DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED),
-                        (4, library.DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED)):  # fmt: skip
+    for lanes, prop in (
+        (16, library.DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED),
+        (8, library.DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED),
+        (4, library.DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED),
+    ):
         if device.property(prop):
             return lanes
     return 1
@@ -149,8 +152,11 @@ class BVH:
         )
         self._build_quality = library.BUILD_QUALITY[build_quality]
         self._lib.rtcSetSceneBuildQuality(self._scene, self._build_quality)
-        flags = (library.SCENE_FLAG_COMPACT * compact | library.SCENE_FLAG_ROBUST * robust
-                 | library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS * filters)  # fmt: skip
+        flags = (
+            library.SCENE_FLAG_COMPACT * compact
+            | library.SCENE_FLAG_ROBUST * robust
+            | library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS * filters
+        )
         if flags:
             self._lib.rtcSetSceneFlags(self._scene, flags)
         self.filters = bool(filters)
@@ -163,6 +169,7 @@ class BVH:
         # The user-geometry spheres' user data (two addresses) and storage order, kept alive
         # here for as long as Embree may call the callbacks.
         self._sphere_user_data: list[tuple[np.ndarray, np.ndarray]] = []
+        self._hit_filters: list[TriangleFilter] = []
         # Inverse-transpose of each single instance's linear part, by geometry id: one
         # (g, 3, 3) table at commit (world_normals).
         self._normal_matrices: dict[int, np.ndarray] = {}
@@ -242,9 +249,13 @@ class BVH:
             pointer = self._new_buffer(
                 geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT4, 16, count
             )
-            packed = np.ctypeslib.as_array(
-                (ctypes.c_float * (4 * count)).from_address(pointer)
-            ).reshape(count, 4) if count else np.zeros((0, 4), np.float32)
+            packed = (
+                np.ctypeslib.as_array((ctypes.c_float * (4 * count)).from_address(pointer)).reshape(
+                    count, 4
+                )
+                if count
+                else np.zeros((0, 4), np.float32)
+            )
             reach = sphere_buffers.pack_spheres(
                 centers, radii, sphere_buffers.IN_GIVEN_ORDER, packed
             )
@@ -278,8 +289,11 @@ class BVH:
         self._sphere_buffers[geom_id] = (packed, slot)
         return geom_id
 
-    def add_triangles(self, vertices: np.ndarray, faces: np.ndarray) -> int:
-        """Add a triangle mesh: ``vertices`` (m, 3) float, ``faces`` (k, 3) int in [0, m)."""
+    def add_triangles(
+        self, vertices: np.ndarray, faces: np.ndarray, hit_filter: TriangleFilter | None = None
+    ) -> int:
+        """Add a triangle mesh: ``vertices`` (m, 3) float, ``faces`` (k, 3) int in [0, m);
+        ``hit_filter`` (``alpha_filter.triangle_filter``) cuts holes in it or hides its back."""
         vertices = as_points(vertices, "vertices")
         faces = as_triangle_indices(faces, "faces", len(vertices))
         self._live_scene()
@@ -300,6 +314,9 @@ class BVH:
         self.primitive_count += len(faces)
         if len(vertices):
             self.coordinate_bound = max(self.coordinate_bound, float(np.abs(vertices).max()))
+        if hit_filter is not None:
+            hit_filter.install(self._lib, geometry)
+            self._hit_filters.append(hit_filter)  # Embree reads its data while the BVH lives
         return self._attach(geometry, "adding triangles")
 
     def _check_instanceable(self, child: object, argument: str) -> None:
@@ -366,13 +383,16 @@ class BVH:
                 raise ValueError("child_index: required with several children")
             index = np.asarray(child_index)
             if index.shape != (count,) or (count and index.dtype.kind not in "iu"):
-                raise ValueError(f"child_index: expected shape ({count},) integers, got "
-                                 f"{index.shape} {index.dtype}")  # fmt: skip
+                raise ValueError(
+                    f"child_index: expected shape ({count},) integers, got "
+                    f"{index.shape} {index.dtype}"
+                )
             bad = (index < 0) | (index >= len(children))
             if bad.any():
                 row = int(np.flatnonzero(bad)[0])
-                raise ValueError(f"child_index: row {row} is {index[row]}, outside "
-                                 f"[0, {len(children)})")  # fmt: skip
+                raise ValueError(
+                    f"child_index: row {row} is {index[row]}, outside [0, {len(children)})"
+                )
             index = np.ascontiguousarray(index, np.uint32)
         self._live_scene()
         lib = self._lib
@@ -384,13 +404,25 @@ class BVH:
             scenes = np.array([child._live_scene() for child in children], np.uint64)
             lib.rtcSetGeometryInstancedScenes(geometry, scenes.ctypes.data, len(children))
             lib.rtcSetSharedGeometryBuffer(
-                geometry, library.BUFFER_TYPE_INDEX, 0, library.FORMAT_UINT, index.ctypes.data,
-                0, 4, count,
-            )  # fmt: skip
+                geometry,
+                library.BUFFER_TYPE_INDEX,
+                0,
+                library.FORMAT_UINT,
+                index.ctypes.data,
+                0,
+                4,
+                count,
+            )
         lib.rtcSetSharedGeometryBuffer(
-            geometry, library.BUFFER_TYPE_TRANSFORM, 0, library.FORMAT_FLOAT3X4_ROW_MAJOR,
-            packed.ctypes.data, 0, 48, count,
-        )  # fmt: skip
+            geometry,
+            library.BUFFER_TYPE_TRANSFORM,
+            0,
+            library.FORMAT_FLOAT3X4_ROW_MAJOR,
+            packed.ctypes.data,
+            0,
+            48,
+            count,
+        )
         self._device.check("setting up an instance array")
         geom_id = self._attach(geometry, "adding an instance array")
         bounds = np.array([child.coordinate_bound for child in children], np.float32)
@@ -415,8 +447,9 @@ class BVH:
         self._has_instances = bool(self._normal_matrices or self._arrays)
         self._normal_matrices = {}
         if self._arrays:
-            table = np.zeros((max(self.geometry_count, 1), instance_arrays.ARRAY_COLUMNS),
-                             np.uint64)  # fmt: skip
+            table = np.zeros(
+                (max(self.geometry_count, 1), instance_arrays.ARRAY_COLUMNS), np.uint64
+            )
             for geom_id, (packed, index, bounds) in self._arrays.items():
                 table[geom_id, instance_arrays.ARRAY_TRANSFORMS] = packed.ctypes.data
                 table[geom_id, instance_arrays.ARRAY_COUNT] = len(packed)
@@ -474,8 +507,10 @@ class BVH:
         hits.inst_prim_id = np.empty(n, np.int32) if copies else np.full(n, -1, np.int32)
         if n:
             arguments = (
-                self._query(coherent), kernels.Rays(origins, directions, tnear, tfar),
-                self._nearest(hits), hits.inst_prim_id if copies else None,
+                self._query(coherent),
+                kernels.Rays(origins, directions, tnear, tfar),
+                self._nearest(hits),
+                hits.inst_prim_id if copies else None,
             )
             self._run_query(kernels.intersect_serial, kernels.intersect, arguments)
         return hits
@@ -486,8 +521,9 @@ class BVH:
     @staticmethod
     def _nearest(hits: Hits) -> kernels.NearestHits:
         """The kernels' view of ``hits``' arrays."""
-        return kernels.NearestHits(hits.t, hits.normal, hits.u, hits.v, hits.prim_id,
-                                   hits.geom_id, hits.inst_id)  # fmt: skip
+        return kernels.NearestHits(
+            hits.t, hits.normal, hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id
+        )
 
     def intersect(
         self,
@@ -504,8 +540,13 @@ class BVH:
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         hits = self._raw_hits(origins, directions, tnear, tfar, coherent)
         if self._has_instances:
-            world_normals.hits_to_world(hits.inst_id, hits.inst_prim_id, hits.normal,
-                                        self._normal_matrix_table, self._array_table)  # fmt: skip
+            world_normals.hits_to_world(
+                hits.inst_id,
+                hits.inst_prim_id,
+                hits.normal,
+                self._normal_matrix_table,
+                self._array_table,
+            )
         return hits
 
     def intersect_records(
@@ -528,23 +569,41 @@ class BVH:
         sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
         has_plane = labels.plane_y is not None
         record_labels = records.RecordLabels(
-            has_plane, np.float32(labels.plane_y if has_plane else 0.0), int(labels.plane_label),
-            int(labels.sphere_geom_id) if len(spheres) else -1, spheres, sphere_slot,
-            np.asarray(sphere_label, np.int32), np.asarray(labels.geometry_label, np.int64),
+            has_plane,
+            np.float32(labels.plane_y if has_plane else 0.0),
+            int(labels.plane_label),
+            int(labels.sphere_geom_id) if len(spheres) else -1,
+            spheres,
+            sphere_slot,
+            np.asarray(sphere_label, np.int32),
+            np.asarray(labels.geometry_label, np.int64),
             np.asarray(labels.geometry_scale, np.float32),
         )
         fields = records.build_records(
-            origins, directions, near, far, self._nearest(hits), hits.inst_prim_id,
-            record_labels, self._normal_matrix_table, self._array_table,
+            origins,
+            directions,
+            near,
+            far,
+            self._nearest(hits),
+            hits.inst_prim_id,
+            record_labels,
+            self._normal_matrix_table,
+            self._array_table,
         )
         result = HitRecords(*fields)
         result.inst_prim_id = np.full(len(result.t), -1, np.int32)
         if self.array_count:
             other = result.group("other")
             result.inst_prim_id[other] = instance_arrays.finish_records(
-                result.rays, other.start, other.stop, hits.inst_id, hits.inst_prim_id,
-                result.label, result.scale, self._labelled_array_table(labels),
-            )  # fmt: skip
+                result.rays,
+                other.start,
+                other.stop,
+                hits.inst_id,
+                hits.inst_prim_id,
+                result.label,
+                result.scale,
+                self._labelled_array_table(labels),
+            )
         return result
 
     def _labelled_array_table(self, labels: HitLabels) -> np.ndarray:
@@ -573,10 +632,12 @@ class BVH:
         shading normals: ``world_normals.shading_normals`` (unit length on instance-array hits,
         unnormalised on single instances)."""
         return world_normals.shading_normals(
-            np.ascontiguousarray(inst_id, np.int32), np.ascontiguousarray(inst_prim_id, np.int32),
-            np.ascontiguousarray(normals, np.float32), self._normal_matrix_table,
+            np.ascontiguousarray(inst_id, np.int32),
+            np.ascontiguousarray(inst_prim_id, np.int32),
+            np.ascontiguousarray(normals, np.float32),
+            self._normal_matrix_table,
             self._array_table,
-        )  # fmt: skip
+        )
 
     def instance_children(self, inst_id: np.ndarray, inst_prim_id: np.ndarray) -> np.ndarray:
         """(k,) int32: for k hits, the position in its array's ``children`` of the child each
@@ -584,9 +645,10 @@ class BVH:
         if not self.array_count:
             return np.full(len(inst_id), -1, np.int32)
         return instance_arrays.child_of_hits(
-            np.ascontiguousarray(inst_id, np.int32), np.ascontiguousarray(inst_prim_id, np.int32),
+            np.ascontiguousarray(inst_id, np.int32),
+            np.ascontiguousarray(inst_prim_id, np.int32),
             self._array_table,
-        )  # fmt: skip
+        )
 
     def occluded(
         self,
@@ -601,8 +663,11 @@ class BVH:
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         blocked = np.zeros(len(origins), bool)
         if len(origins):
-            arguments = (self._query(coherent), kernels.Rays(origins, directions, tnear, tfar),
-                         blocked)
+            arguments = (
+                self._query(coherent),
+                kernels.Rays(origins, directions, tnear, tfar),
+                blocked,
+            )
             self._run_query(kernels.occluded_serial, kernels.occluded, arguments)
         return blocked
 
@@ -628,8 +693,9 @@ class BVH:
         blocked = np.zeros(len(rows), bool)
         if len(rows):
             has_plane = plane_y is not None
-            shadow = segments.Segments(points, rows, target, has_plane,
-                                       np.float32(plane_y if has_plane else 0.0))
+            shadow = segments.Segments(
+                points, rows, target, has_plane, np.float32(plane_y if has_plane else 0.0)
+            )
             arguments = (self._query(False), shadow, blocked)
             self._run_query(segments.occluded_toward_serial, segments.occluded_toward, arguments)
         return blocked
@@ -648,8 +714,16 @@ class BVH:
         origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
         self._require_filters()
         with parallel_region:
-            return multihit.all_hits(self._live_scene(), origins, directions, tnear, tfar,
-                                     int(capacity), self.threads, out)  # fmt: skip
+            return multihit.all_hits(
+                self._live_scene(),
+                origins,
+                directions,
+                tnear,
+                tfar,
+                int(capacity),
+                self.threads,
+                out,
+            )
 
     def crossing_parity(
         self, origins: np.ndarray, directions: np.ndarray, edge_band: np.ndarray, graze: float
@@ -661,8 +735,9 @@ class BVH:
         if np.shape(edge_band) != (self.primitive_count,):
             raise ValueError(f"edge_band: expected shape ({self.primitive_count},)")
         with parallel_region:
-            return multihit.crossing_parity(self._live_scene(), origins, directions, edge_band,
-                                            graze, self.threads)  # fmt: skip
+            return multihit.crossing_parity(
+                self._live_scene(), origins, directions, edge_band, graze, self.threads
+            )
 
     def committed_scene(self) -> int:
         """The committed Embree scene's handle (``RTCScene``), for a compiled pass that calls

@@ -34,11 +34,6 @@ ARRAY_LABELS = 4
 ARRAY_COLUMNS = 5
 
 
-_float_pointer = pointers.floats
-_uint_pointer = pointers.words32
-_int_pointer = pointers.ints
-
-
 @njit(inline="always")
 def is_array(table, g):
     """Whether top-level geometry ``g`` is an instance array in the BVH's array ``table``."""
@@ -48,7 +43,7 @@ def is_array(table, g):
 @njit(inline="always")
 def transforms_of(table, g):
     """The (n, 3, 4) float32 transforms of instance array ``g``, where the BVH keeps them."""
-    return carray(_float_pointer(table[g, ARRAY_TRANSFORMS]), (table[g, ARRAY_COUNT], 3, 4))
+    return carray(pointers.floats(table[g, ARRAY_TRANSFORMS]), (table[g, ARRAY_COUNT], 3, 4))
 
 
 @njit(nogil=True, cache=True)
@@ -64,7 +59,7 @@ def child_of_hits(inst, inst_prim, table):
         if table[g, ARRAY_CHILD_INDEX] == 0:
             out[j] = 0
         else:
-            index = carray(_uint_pointer(table[g, ARRAY_CHILD_INDEX]), table[g, ARRAY_COUNT])
+            index = carray(pointers.words32(table[g, ARRAY_CHILD_INDEX]), table[g, ARRAY_COUNT])
             out[j] = np.int32(index[inst_prim[j]])
     return out
 
@@ -94,21 +89,20 @@ def finish_records(rays, start, stop, inst, inst_prim, label, scale, table):
         out[j - start] = p
         m = transforms_of(table, g)
         if table[g, ARRAY_LABELS] != 0:
-            labels = carray(_int_pointer(table[g, ARRAY_LABELS]), table[g, ARRAY_COUNT])
+            labels = carray(pointers.ints(table[g, ARRAY_LABELS]), table[g, ARRAY_COUNT])
             label[j] = labels[p]
         child = 0
         if table[g, ARRAY_CHILD_INDEX] != 0:
-            index = carray(_uint_pointer(table[g, ARRAY_CHILD_INDEX]), table[g, ARRAY_COUNT])
+            index = carray(pointers.words32(table[g, ARRAY_CHILD_INDEX]), table[g, ARRAY_COUNT])
             child = index[p]
-        bound = np.float64(
-            carray(_float_pointer(table[g, ARRAY_CHILD_BOUND]), child + 1)[child]
-        )
+        bound = np.float64(carray(pointers.floats(table[g, ARRAY_CHILD_BOUND]), child + 1)[child])
         largest = 0.0
         for row in range(3):
             reach = abs(np.float64(m[p, row, 3])) + bound * (
-                abs(np.float64(m[p, row, 0])) + abs(np.float64(m[p, row, 1]))
+                abs(np.float64(m[p, row, 0]))
+                + abs(np.float64(m[p, row, 1]))
                 + abs(np.float64(m[p, row, 2]))
-            )  # fmt: skip
+            )
             largest = max(largest, reach)
         scale[j] = largest
     return out

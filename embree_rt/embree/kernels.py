@@ -96,6 +96,7 @@ class NearestHits(NamedTuple):
     geom: np.ndarray
     inst: np.ndarray
 
+
 # packet + alignment slack + valid mask, for the widest packet
 SCRATCH_WORDS = PACKET_FIELDS * MAX_LANES + PACKET_ALIGN // 4 + MAX_LANES
 CHUNK = 256  # rays per parallel iteration: small enough to balance, large enough to amortise
@@ -103,9 +104,15 @@ CHUNK = 256  # rays per parallel iteration: small enough to balance, large enoug
 _SIGNATURE_1 = types.void(types.uintp, types.uintp, types.uintp)
 _SIGNATURE_N = types.void(types.uintp, types.uintp, types.uintp, types.uintp)
 _NAMES = (
-    "rtcIntersect1", "rtcOccluded1", "rtcIntersect4", "rtcOccluded4", "rtcIntersect8",
-    "rtcOccluded8", "rtcIntersect16", "rtcOccluded16",
-)  # fmt: skip
+    "rtcIntersect1",
+    "rtcOccluded1",
+    "rtcIntersect4",
+    "rtcOccluded4",
+    "rtcIntersect8",
+    "rtcOccluded8",
+    "rtcIntersect16",
+    "rtcOccluded16",
+)
 
 
 def register_symbols() -> None:
@@ -256,8 +263,9 @@ def intersect(query, rays, hits, inst_prim):
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        intersect_chunk(query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), rays, hits,
-                        inst_prim)
+        intersect_chunk(
+            query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), rays, hits, inst_prim
+        )
 
 
 @njit(nogil=True, cache=True)

@@ -102,28 +102,24 @@ _SCRATCH_WORDS = 2 * (2 + _RAYHIT_WORDS64 + ARGS_WORDS + CONTEXT_WORDS)  # 4-byt
 CHUNK = 64  # rays per parallel iteration
 
 _FILTER_SIGNATURE = types.void(types.uintp)
-_words64 = pointers.words64
-_words32 = pointers.words32
-_floats = pointers.floats
-_ints = pointers.ints
 
 
 @cfunc(_FILTER_SIGNATURE, nopython=True, cache=True)
 def _record_and_reject(address):
     """Argument filter: record each candidate hit in the context's buffers, then reject it."""
-    args = carray(_words64(address), 6)
+    args = carray(pointers.words64(address), 6)
     n = np.int64(args[FILTER_N] & 0xFFFFFFFF)
-    valid = carray(_ints(args[FILTER_VALID]), n)
-    context = carray(_words64(args[FILTER_CONTEXT]), CONTEXT_WORDS)
-    ray = carray(_floats(args[FILTER_RAY]), 12 * n)
-    hit = carray(_floats(args[FILTER_HIT]), 9 * n)
-    hit_words = carray(_words32(args[FILTER_HIT]), 9 * n)
+    valid = carray(pointers.ints(args[FILTER_VALID]), n)
+    context = carray(pointers.words64(args[FILTER_CONTEXT]), CONTEXT_WORDS)
+    ray = carray(pointers.floats(args[FILTER_RAY]), 12 * n)
+    hit = carray(pointers.floats(args[FILTER_HIT]), 9 * n)
+    hit_words = carray(pointers.words32(args[FILTER_HIT]), 9 * n)
     capacity = np.int64(context[CONTEXT_CAPACITY])
-    t_buffer = carray(_floats(context[CONTEXT_T]), capacity)
-    prim_buffer = carray(_ints(context[CONTEXT_PRIM]), capacity)
-    u_buffer = carray(_floats(context[CONTEXT_U]), capacity)
-    v_buffer = carray(_floats(context[CONTEXT_V]), capacity)
-    cos_buffer = carray(_floats(context[CONTEXT_COS]), capacity)
+    t_buffer = carray(pointers.floats(context[CONTEXT_T]), capacity)
+    prim_buffer = carray(pointers.ints(context[CONTEXT_PRIM]), capacity)
+    u_buffer = carray(pointers.floats(context[CONTEXT_U]), capacity)
+    v_buffer = carray(pointers.floats(context[CONTEXT_V]), capacity)
+    cos_buffer = carray(pointers.floats(context[CONTEXT_COS]), capacity)
     for lane in range(n):
         if valid[lane] == 0:
             continue
@@ -201,8 +197,9 @@ def _prepare_scratch(words, filter_address):
 
 
 @njit(inline="always")
-def _trace_one(scene, words, rayhit, args, context, origin, direction, tnear, tfar, buffers,
-               capacity):  # fmt: skip
+def _trace_one(
+    scene, words, rayhit, args, context, origin, direction, tnear, tfar, buffers, capacity
+):
     """Trace one ray, recording its hits in the (capacity,) buffers at the addresses
     ``buffers`` (t, prim, u, v, cos); returns (count, more)."""
     floats = words.view(np.float32)
@@ -261,9 +258,19 @@ def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
         buffers[2] = u.ctypes.data + 4 * i * capacity
         buffers[3] = v.ctypes.data + 4 * i * capacity
         buffers[4] = cos.ctypes.data + 4 * i * capacity
-        found, dropped = _trace_one(scene, words, rayhit, args, context, origins[i],
-                                    directions[i], tnear[i], tfar[i], buffers,
-                                    capacity)  # fmt: skip
+        found, dropped = _trace_one(
+            scene,
+            words,
+            rayhit,
+            args,
+            context,
+            origins[i],
+            directions[i],
+            tnear[i],
+            tfar[i],
+            buffers,
+            capacity,
+        )
         _sort_hits(found, t[i], prim[i], u[i], v[i], cos[i])
         count[i] = found
         more[i] = dropped
@@ -275,8 +282,9 @@ def _all_hits(scene, filter_address, rays, hits):
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _all_hits_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                        rays, hits)
+        _all_hits_chunk(
+            scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), rays, hits
+        )
 
 
 @njit(nogil=True, cache=True)
@@ -294,8 +302,19 @@ def _parity_chunk(scene, filter_address, words, first, stop, origins, directions
     buffers[3] = v.ctypes.data
     buffers[4] = cos.ctypes.data
     for i in range(first, stop):
-        found, dropped = _trace_one(scene, words, rayhit, args, context, origins[i],
-                                    directions[i], 0.0, np.inf, buffers, capacity)  # fmt: skip
+        found, dropped = _trace_one(
+            scene,
+            words,
+            rayhit,
+            args,
+            context,
+            origins[i],
+            directions[i],
+            0.0,
+            np.inf,
+            buffers,
+            capacity,
+        )
         ok = not dropped
         for k in range(found):
             band = edge_band[prims[k]]
@@ -312,8 +331,17 @@ def _crossing_parity(scene, filter_address, origins, directions, screen, parity)
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _parity_chunk(scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                      origins, directions, screen, parity)
+        _parity_chunk(
+            scene,
+            filter_address,
+            scratch[c],
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            origins,
+            directions,
+            screen,
+            parity,
+        )
 
 
 class HitBuffers(NamedTuple):
@@ -333,9 +361,16 @@ class HitBuffers(NamedTuple):
 def new_hit_buffers(n: int, capacity: int) -> HitBuffers:
     """Empty ``HitBuffers`` for ``all_hits`` of n rays."""
     shape = (n, capacity)
-    return HitBuffers(np.empty(shape, np.float32), np.empty(shape, np.int32),
-                      np.empty(shape, np.float32), np.empty(shape, np.float32),
-                      np.empty(shape, np.float32), np.empty(n, np.int64), np.empty(n, bool))
+    return HitBuffers(
+        np.empty(shape, np.float32),
+        np.empty(shape, np.int32),
+        np.empty(shape, np.float32),
+        np.empty(shape, np.float32),
+        np.empty(shape, np.float32),
+        np.empty(n, np.int64),
+        np.empty(n, bool),
+    )
+
 
 def all_hits(
     scene: int,

@@ -119,8 +119,9 @@ class RecordLabels(NamedTuple):
 
 
 @njit(nogil=True, cache=True)
-def build_records(origins, directions, tnear, tfar, hits, inst_prim, labels, normal_matrices,
-                  arrays):  # fmt: skip
+def build_records(
+    origins, directions, tnear, tfar, hits, inst_prim, labels, normal_matrices, arrays
+):
     """The compiled pass behind ``BVH.intersect_records``: classify, count, then fill.
 
     Inputs per ray: ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32
@@ -129,8 +130,17 @@ def build_records(origins, directions, tnear, tfar, hits, inst_prim, labels, nor
     ``arrays``: the BVH's tables for world normals (``world_normals``).
     """
     t, ng, u, v, prim, geom, inst = hits
-    (has_plane, plane_y, plane_label, sphere_geom, spheres, sphere_slot, sphere_label,
-     geometry_label, geometry_scale) = labels  # fmt: skip
+    (
+        has_plane,
+        plane_y,
+        plane_label,
+        sphere_geom,
+        spheres,
+        sphere_slot,
+        sphere_label,
+        geometry_label,
+        geometry_scale,
+    ) = labels
     n = origins.shape[1]
     kind = np.empty(n, np.uint8)
     plane_t = np.empty(n, np.float32)
@@ -223,12 +233,25 @@ def build_records(origins, directions, tnear, tfar, hits, inst_prim, labels, nor
         position[0, j] = origins[0, i] + dx * ti
         position[1, j] = origins[1, i] + dy * ti
         position[2, j] = origins[2, i] + dz * ti
-        wx, wy, wz = unit_world_normal(normal_matrices, arrays, top, inst_prim[i], ng[i, 0],
-                                       ng[i, 1], ng[i, 2])  # fmt: skip
+        wx, wy, wz = unit_world_normal(
+            normal_matrices, arrays, top, inst_prim[i], ng[i, 0], ng[i, 1], ng[i, 2]
+        )
         normal[0, j] = wx
         normal[1, j] = wy
         normal[2, j] = wz
         label[j] = geometry_label[top]
         scale[j] = geometry_scale[top]
-    return (rays, counts[:3].copy(), out_t, position, normal, label, scale, incoming, out_prim,
-            out_inst, out_u, out_v)  # fmt: skip
+    return (
+        rays,
+        counts[:3].copy(),
+        out_t,
+        position,
+        normal,
+        label,
+        scale,
+        incoming,
+        out_prim,
+        out_inst,
+        out_u,
+        out_v,
+    )

@@ -66,8 +66,13 @@ def _segments_chunk(query, words, first_row, stop, segments, blocked):
                 directions[count, axis] = target[axis] - points[axis, r]
             crossing = np.float32(np.nan)
             if has_plane:
-                crossing = plane_crossing(origins[count, 1], directions[count, 1],
-                                          np.float32(0.0), np.float32(1.0), plane_y)  # fmt: skip
+                crossing = plane_crossing(
+                    origins[count, 1],
+                    directions[count, 1],
+                    np.float32(0.0),
+                    np.float32(1.0),
+                    plane_y,
+                )
             if not math.isnan(crossing):
                 blocked[k] = True
             else:

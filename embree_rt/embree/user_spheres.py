@@ -56,18 +56,12 @@ from embree_rt.embree.kernels import (
 _CALLBACK = types.void(types.uintp)
 
 
-_words64 = pointers.words64
-_words32 = pointers.words32
-_floats = pointers.floats
-_ints = pointers.ints
-
-
 @cfunc(_CALLBACK, nopython=True, cache=True)
 def _bounds(address):
-    args = carray(_words64(address), 3)
+    args = carray(pointers.words64(address), 3)
     prim = args[1] & 0xFFFFFFFF
-    sphere = carray(_floats(carray(_words64(args[0]), 2)[0] + 16 * prim), 4)
-    box = carray(_floats(args[2]), 8)
+    sphere = carray(pointers.floats(carray(pointers.words64(args[0]), 2)[0] + 16 * prim), 4)
+    box = carray(pointers.floats(args[2]), 8)
     r = sphere[3]
     box[0] = sphere[0] - r
     box[1] = sphere[1] - r
@@ -121,23 +115,32 @@ def _unpack(address):
     """The fields of an RTCIntersect/OccludedFunctionNArguments both callbacks read: the 64-bit
     words, the lane count N, the user data's two words, the stored sphere's slot, the valid
     mask (N,) and the sphere as float64."""
-    args = carray(_words64(address), 6)
+    args = carray(pointers.words64(address), 6)
     n = args[5] & 0xFFFFFFFF
     slot = args[2] & 0xFFFFFFFF
-    valid = carray(_ints(args[0]), n)
-    user = carray(_words64(args[1]), 2)
-    sphere = carray(_floats(user[0] + 16 * slot), 4)
-    return (args, n, user, slot, valid, np.float64(sphere[0]), np.float64(sphere[1]),
-            np.float64(sphere[2]), np.float64(sphere[3]))  # fmt: skip
+    valid = carray(pointers.ints(args[0]), n)
+    user = carray(pointers.words64(args[1]), 2)
+    sphere = carray(pointers.floats(user[0] + 16 * slot), 4)
+    return (
+        args,
+        n,
+        user,
+        slot,
+        valid,
+        np.float64(sphere[0]),
+        np.float64(sphere[1]),
+        np.float64(sphere[2]),
+        np.float64(sphere[3]),
+    )
 
 
 @cfunc(_CALLBACK, nopython=True, cache=True)
 def _intersect(address):
     args, n, user, slot, valid, cx, cy, cz, r = _unpack(address)
     geom_id = args[5] >> 32
-    context = carray(_words32(args[3]), 2)
-    floats = carray(_floats(args[4]), 21 * n)
-    words = carray(_words32(args[4]), 21 * n)
+    context = carray(pointers.words32(args[3]), 2)
+    floats = carray(pointers.floats(args[4]), 21 * n)
+    words = carray(pointers.words32(args[4]), 21 * n)
     for lane in range(n):
         if valid[lane] == 0:
             continue
@@ -155,7 +158,7 @@ def _intersect(address):
         floats[HIT_U * n + lane] = 0.0
         floats[HIT_V * n + lane] = 0.0
         # read only on a hit: most calls are misses, and this is one more cache line
-        words[HIT_PRIM_ID * n + lane] = carray(_ints(user[1] + 4 * slot), 1)[0]
+        words[HIT_PRIM_ID * n + lane] = carray(pointers.ints(user[1] + 4 * slot), 1)[0]
         words[HIT_GEOM_ID * n + lane] = geom_id
         words[HIT_INST_ID * n + lane] = context[0]
         words[HIT_INST_PRIM_ID * n + lane] = context[1]
@@ -164,7 +167,7 @@ def _intersect(address):
 @cfunc(_CALLBACK, nopython=True, cache=True)
 def _occluded(address):
     args, n, _, _, valid, cx, cy, cz, r = _unpack(address)
-    floats = carray(_floats(args[4]), 12 * n)
+    floats = carray(pointers.floats(args[4]), 12 * n)
     for lane in range(n):
         if valid[lane] == 0:
             continue

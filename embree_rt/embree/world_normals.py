@@ -60,8 +60,9 @@ def world_normal(normal_matrices, arrays, top, copy, gx, gy, gz):
     (read only there). ``normal_matrices`` (g, 3, 3) float32 and ``arrays`` (the array table)
     as the module docstring says. The one copy of this rule."""
     if is_array(arrays, top):
-        return _cofactor_normal(transforms_of(arrays, top), copy, np.float64(gx),
-                                np.float64(gy), np.float64(gz))  # fmt: skip
+        return _cofactor_normal(
+            transforms_of(arrays, top), copy, np.float64(gx), np.float64(gy), np.float64(gz)
+        )
     m = normal_matrices[top]
     wx = m[0, 0] * gx + m[0, 1] * gy + m[0, 2] * gz
     wy = m[1, 0] * gx + m[1, 1] * gy + m[1, 2] * gz
@@ -90,8 +91,9 @@ def hits_to_world(inst, inst_prim, normal, normal_matrices, arrays):
             inst_prim[i] = -1
         if top < 0:
             continue
-        wx, wy, wz = world_normal(normal_matrices, arrays, top, inst_prim[i], normal[i, 0],
-                                  normal[i, 1], normal[i, 2])  # fmt: skip
+        wx, wy, wz = world_normal(
+            normal_matrices, arrays, top, inst_prim[i], normal[i, 0], normal[i, 1], normal[i, 2]
+        )
         normal[i, 0] = wx
         normal[i, 1] = wy
         normal[i, 2] = wz

@@ -12,6 +12,7 @@ from embree_rt.scene.model import (
     Scene,
 )
 from embree_rt.scene.random_field import random_field
+from embree_rt.scene.writer import save_scene
 
 __all__ = [
     "Background",
@@ -24,4 +25,5 @@ __all__ = [
     "SceneError",
     "load_scene",
     "random_field",
+    "save_scene",
 ]

@@ -4,16 +4,18 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from embree_rt.scene.animation import Animation, Keyframe, frame_cameras
+import numpy as np
+
+from embree_rt.camera import Camera, camera_problem, view_problem
+from embree_rt.scene.animation import MAX_FRAMES, Animation, Keyframe, keyframe_paths
 from embree_rt.scene.fields import Table
-from embree_rt.scene.model import Camera, camera_problem
 
 
 def read_animation(table: Table, camera: Camera) -> Animation:
     """The ``[animation]`` table, checked: every frame's camera must define an image (the rule
-    of ``model.camera_problem``). Raises ``SceneError`` naming the key."""
+    of ``camera.camera_problem``). Raises ``SceneError`` naming the key."""
     table.require("frames")
-    frames = table.integer("frames", low=1)
+    frames = table.integer("frames", low=1, high=MAX_FRAMES)
     keyframe_tables = table.tables("keyframes")
     if table.has("orbit") == bool(keyframe_tables):
         raise table.error("orbit", "give either orbit (degrees) or a list of keyframes")
@@ -47,9 +49,17 @@ def read_animation(table: Table, camera: Camera) -> Animation:
         previous = key
     table.finish()
     animation = Animation(frames, keyframes=keys)
-    # The spline may pass through a camera no keyframe has (look_at meeting position).
-    for number, between in enumerate(frame_cameras(camera, animation)):
-        if (problem := camera_problem(between)) is not None:
-            name, text = problem
-            raise table.error("keyframes", f"frame {number}'s interpolated camera: {name} {text}")
+    # The spline may pass through a camera no keyframe has (look_at meeting position); frames
+    # outside the keyframes hold the first or the last, checked above.
+    first = keys[0].frame
+    positions, looks, fovs = keyframe_paths(keys, np.arange(first, keys[-1].frame + 1))
+    found = view_problem(positions, looks, camera.up)
+    bad_fov = np.flatnonzero(~((fovs > 0.0) & (fovs < 180.0)))  # PCHIP keeps to the keys' range
+    if len(bad_fov) and (found is None or bad_fov[0] < found[0]):
+        found = int(bad_fov[0]), "fov", f"must be > 0 and < 180 degrees, got {fovs[bad_fov[0]]:g}"
+    if found is not None:
+        index, name, text = found
+        raise table.error(
+            "keyframes", f"frame {first + index}'s interpolated camera: {name} {text}"
+        )
     return animation

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from embree_rt.scene.errors import SceneError, unknown_key_message
+from embree_rt.scene.limits import COORDINATE_LIMIT, INTEGER_LIMIT, RADIANCE_LIMIT
 
 _ABSENT = object()
 
@@ -74,14 +75,20 @@ class Table:
             return default
         return check_number(self, name, value, low, high, low_open, high_open)
 
-    def integer(self, name: str, default: int | None = None, *, low: int | None = None) -> int:
+    def integer(
+        self, name: str, default: int | None = None, *, low: int | None = None,
+        high: int = INTEGER_LIMIT,
+    ) -> int:  # fmt: skip
+        """An integer in [low, high] (``high`` by default what int64 holds)."""
         value = self._value(name, required=False)
         if value is _ABSENT:
             return default
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, f"expected an integer, got {_show(value)}")
         if low is not None and value < low:
-            raise self.error(name, f"must be >= {low}, got {value}")
+            raise self.error(name, f"must be >= {low}, got {_show(value)}")
+        if value > high:
+            raise self.error(name, f"must be <= {high}, got {_show(value)}")
         return value
 
     def boolean(self, name: str, default: bool) -> bool:
@@ -100,8 +107,16 @@ class Table:
             raise self.error(name, f"expected a non-empty string, got {_show(value)}")
         return value
 
-    def vector(self, name: str, default=None, *, required: bool = False, non_negative=False):
-        """Three finite numbers as a tuple of floats."""
+    def file_name(self, name: str) -> str:
+        """A required file name: a non-empty string the operating system can take (no NUL)."""
+        value = self.string(name, required=True)
+        if "\0" in value:
+            raise self.error(name, f"a file name cannot hold a NUL character, got {_show(value)}")
+        return value
+
+    def vector(self, name: str, default=None, *, required: bool = False, non_negative=False,
+               high: float | None = None):  # fmt: skip
+        """Three finite numbers as a tuple of floats, each at most ``high`` if given."""
         value = self._value(name, required)
         if value is _ABSENT:
             return default
@@ -111,11 +126,12 @@ class Table:
         for item in value:
             if isinstance(item, bool) or not isinstance(item, int | float):
                 raise self.error(name, f"expected numbers, got {_show(item)}")
-            if not math.isfinite(item):
-                raise self.error(name, f"must be finite, got {item}")
+            item = _finite_float(self, name, item)
             if non_negative and item < 0:
                 raise self.error(name, f"must not be negative, got {item}")
-            numbers.append(float(item))
+            if high is not None and item > high:
+                raise self.error(name, f"must be <= {high:g} a component, got {item:g}")
+            numbers.append(item)
         return tuple(numbers)
 
     def pair(
@@ -133,7 +149,8 @@ class Table:
         return low_value, high_value
 
     def color(self, name: str, default=None):
-        return self.vector(name, default, non_negative=True)
+        """Three numbers from 0 to ``RADIANCE_LIMIT``."""
+        return self.vector(name, default, non_negative=True, high=RADIANCE_LIMIT)
 
     def table(self, name: str) -> Table | None:
         """The sub-table at ``name``, or None when absent."""
@@ -158,14 +175,24 @@ class Table:
 def check_number(table, name, value, low, high, low_open, high_open) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise table.error(name, f"expected a number, got {_show(value)}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise table.error(name, f"must be finite, got {value}")
+    value = _finite_float(table, name, value)
     if low is not None and (value <= low if low_open else value < low):
         raise table.error(name, f"must be {'>' if low_open else '>='} {low:g}, got {value:g}")
     if high is not None and (value >= high if high_open else value > high):
         raise table.error(name, f"must be {'<' if high_open else '<='} {high:g}, got {value:g}")
     return value
+
+
+def _finite_float(table: Table, name: str, value: int | float) -> float:
+    """``value`` as a float within ``COORDINATE_LIMIT`` (every number of a scene file is: see
+    ``scene.limits``); an int beyond float range is an error, not OverflowError."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise table.error(name, f"must be finite, got {value}")
+    if not -COORDINATE_LIMIT <= value <= COORDINATE_LIMIT:  # exact for an int of any size
+        raise table.error(
+            name, f"must lie within ±{COORDINATE_LIMIT:g} (float32's reach), got {_show(value)}"
+        )
+    return float(value)
 
 
 def _kind(value: object) -> str:

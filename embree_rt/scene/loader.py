@@ -11,24 +11,33 @@ from __future__ import annotations
 import json
 import math
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from embree_rt import budget
+from embree_rt.camera import Camera, camera_problem
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
-from embree_rt.scene.archives import read_archive
+from embree_rt.scene.archives import Headers, array_headers, read_archive, unpacked_bytes
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
+from embree_rt.scene.limits import (
+    MIN_LENGTH,
+    RADIANCE_LIMIT,
+    SEED_LIMIT,
+    placed_mesh_problem,
+    spheres_problem,
+)
 from embree_rt.scene.model import (
     Background,
-    Camera,
     Floor,
     PointLight,
     RenderSettings,
     Scene,
-    camera_problem,
+    render_problem,
 )
 from embree_rt.scene.random_field import (
     FieldParameterError,
@@ -37,7 +46,7 @@ from embree_rt.scene.random_field import (
     field_scene,
     plan_field,
 )
-from embree_rt.transforms import affine_problem
+from embree_rt.transforms import affine_array_problem, affine_problem
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -59,18 +68,45 @@ def read_document(path: Path) -> dict:
     except (OSError, UnicodeDecodeError) as error:
         raise SceneError(path, "(file)", f"cannot read: {error}") from None
     try:
-        if suffix == ".toml":
-            return tomllib.loads(text)  # its messages say "(at line L, column C)"
-        document = json.loads(text)
+        # tomllib's messages say "(at line L, column C)"
+        document = tomllib.loads(text) if suffix == ".toml" else json.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise SceneError(path, "(syntax)", f"malformed TOML: {error}") from None
     except json.JSONDecodeError as error:
         raise SceneError(
             path, "(syntax)", f"malformed JSON at line {error.lineno}: {error.msg}"
         ) from None
+    except RecursionError:  # the parsers recurse once a level
+        raise SceneError(path, "(syntax)", "tables or lists nested too deeply") from None
+    except ValueError as error:  # Python's limit on the digits of an int literal, above all
+        limit = sys.get_int_max_str_digits()
+        problem = f"an integer of more than {limit} digits" if "digits" in str(error) else error
+        raise SceneError(path, "(syntax)", f"malformed {suffix[1:].upper()}: {problem}") from None
     if not isinstance(document, dict):
         raise SceneError(path, "(top level)", "expected a JSON object")
+    if (key := _too_deep(document, MAX_NESTING)) is not None:
+        raise SceneError(path, key, f"nested more than {MAX_NESTING} levels deep")
     return document
+
+
+# No key of the schema is more than 5 levels down (instances[0].transform[3][2]); the limit keeps
+# every later step (reading, repr in messages, NumPy) clear of Python's recursion limit.
+MAX_NESTING = 16
+
+
+def _too_deep(document: dict, limit: int) -> str | None:
+    """The key of the first value of ``document`` nested more than ``limit`` tables or lists
+    deep, or None; iterative, so any depth the parser returned is measured safely."""
+    stack: list[tuple[str, object, int]] = [("", document, 0)]
+    while stack:
+        key, value, depth = stack.pop()
+        if depth > limit:
+            return key or "(top level)"
+        if isinstance(value, dict):
+            stack.extend((f"{key}.{k}" if key else str(k), v, depth + 1) for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend((f"{key}[{i}]", v, depth + 1) for i, v in enumerate(value))
+    return None
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -80,6 +116,37 @@ def load_scene(path: str | Path) -> Scene:
     """
     path = Path(path)
     return SceneReader(path, read_document(path)).build()
+
+
+def _check_unpacking(
+    path: Path, fail: Callable[[str], Exception], cost: Callable[[Headers], tuple[int, str]]
+) -> None:
+    """Raise ``fail("problem")`` when the arrays of the ``.npz`` at ``path`` would ``cost``
+    (bytes, what for) more than the memory available, known from the headers alone: a zip bomb
+    is refused before anything is unpacked. A file that cannot be read is left for
+    ``read_archive`` to report."""
+    try:
+        headers = array_headers(path)
+    except Exception:  # missing, a directory, a corrupt zip or .npy header: read_archive says
+        return
+    if headers is None:
+        return
+    needed, what = cost(headers)
+    available = budget.available_memory()
+    if available is not None and needed > available:
+        raise fail(
+            f"{what} would need ~{budget.format_bytes(needed)} of memory, this machine has "
+            f"{budget.format_bytes(available)} available"
+        )
+
+
+def _sphere_array_cost(headers: Headers) -> tuple[int, str]:
+    """What a sphere array needs in memory by its headers: its arrays unpacked, and each sphere
+    in the scene and in the BVH in its least costly form (what any render of it needs at least)."""
+    shape = headers.get("centers", ((0,), None))[0]
+    count = shape[0] if shape else 1
+    per_sphere = budget.SCENE_BYTES_PER_SPHERE + min(budget.GEOMETRY_BYTES_PER_SPHERE.values())
+    return unpacked_bytes(headers) + count * per_sphere, f"{count:,} spheres"
 
 
 @dataclass
@@ -161,21 +228,25 @@ class SceneReader:
         # Step 2: the files the scene names, each checked before anything is generated.
         arrays = [self._read_sphere_array(entry) for entry in self.sphere_arrays]
         placements = [self._read_placements(entry) for entry in self.instances]
-        parts: dict[Path, list] = {}
-        for entry in self.instances:
-            if entry.path not in parts:
-                from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
+        models: dict[Path, object] = {}  # one load per file: its placements share the meshes
+        for entry in [*self.instances, *self.meshes]:
+            if entry.path not in models:
+                from embree_rt.scene.meshes import load_model  # trimesh: ~1 s to import
 
-                parts[entry.path] = load_mesh_parts(entry.path, self.path, entry.key)
-            for _, node_transform in parts[entry.path]:
+                models[entry.path] = load_model(entry.path, self.path, entry.key)
+        for entry in self.instances:
+            for _, node_transform in models[entry.path].every_placement():
                 if (problem := affine_problem(node_transform)) is not None:
                     raise SceneError(self.path, entry.key, f"{entry.path}: a node {problem}")
+        for entry, (transforms, _) in zip(self.instances, placements, strict=True):
+            for mesh, node_transform in models[entry.path].every_placement():
+                if problem := placed_mesh_problem(mesh.vertices, transforms @ node_transform):
+                    row, text = problem
+                    raise SceneError(self.path, entry.placements_key,
+                                     f"{entry.placements_path}: row {row} {text}")  # fmt: skip
         for entry in self.meshes:
-            if entry.path not in parts:  # one load per file: its placements share the Trimesh
-                from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
-
-                parts[entry.path] = load_mesh_parts(entry.path, self.path, entry.key)
-            for _, node_transform in parts[entry.path]:
+            model = models[entry.path]
+            for _, node_transform in model.parts:
                 if np.array_equal(node_transform, np.eye(4)):
                     continue  # the placement alone, checked when it was read
                 if (problem := affine_problem(node_transform)) is not None:
@@ -184,6 +255,20 @@ class SceneReader:
                     raise SceneError(
                         self.path, entry.placement_key, f"with the file's node transforms {problem}"
                     )
+            for mesh, node_transform in model.parts:
+                placed = (entry.placement @ node_transform)[None]
+                if (problem := placed_mesh_problem(mesh.vertices, placed)) is not None:
+                    raise SceneError(self.path, entry.key, f"{entry.path}: {problem[1]}")
+            for mesh, transforms in model.instanced:
+                if (problem := affine_array_problem(entry.placement @ transforms)) is not None:
+                    raise SceneError(
+                        self.path,
+                        entry.placement_key,
+                        f"with the file's EXT_mesh_gpu_instancing copy {problem[0]}: {problem[1]}",
+                    )
+                if problem := placed_mesh_problem(mesh.vertices, entry.placement @ transforms):
+                    raise SceneError(self.path, entry.key, f"{entry.path}: instancing copy "
+                                     f"{problem[0]} {problem[1]}")  # fmt: skip
         # Step 3: build.
         if self.field is not None:
             add_field_spheres(scene, self.field)
@@ -193,16 +278,20 @@ class SceneReader:
         for centers, radii, materials in arrays:
             scene.add_spheres(centers, radii, materials)
         for entry in self.meshes:
-            for mesh, node_transform in parts[entry.path]:
+            model = models[entry.path]
+            for mesh, node_transform in model.parts:
                 # The node's own transform first, then the user's placement of the whole file.
                 scene.add_mesh(mesh, entry.material, entry.placement @ node_transform, entry.smooth)
+            for mesh, transforms in model.instanced:
+                scene.add_instances(mesh, entry.placement @ transforms, entry.material,
+                                    entry.smooth)  # fmt: skip
         if self.instances:
             from embree_rt.scene.instances import mesh_from_parts
 
             baked: dict[Path, object] = {}  # one mesh per file: entries sharing it share a child
             for entry, (transforms, materials) in zip(self.instances, placements, strict=True):
                 if entry.path not in baked:
-                    baked[entry.path] = mesh_from_parts(parts[entry.path])
+                    baked[entry.path] = mesh_from_parts(models[entry.path].every_placement())
                 scene.add_instances(baked[entry.path], transforms,
                                     entry.material if materials is None else materials,
                                     entry.smooth)  # fmt: skip
@@ -215,9 +304,9 @@ class SceneReader:
             return None
         table.require("count")
         count = table.integer("count", low=1)
-        seed = table.integer("seed", 0, low=0)
+        seed = table.integer("seed", 0, low=0, high=SEED_LIMIT)
         extent = table.number("extent", None, low=0, low_open=True)
-        radius = table.pair("radius", low=0, low_open=True) if table.has("radius") else None
+        radius = table.pair("radius", low=MIN_LENGTH) if table.has("radius") else None
         mix = None
         if (mix_table := table.table("mix")) is not None:
             for name in mix_table.data:
@@ -237,9 +326,11 @@ class SceneReader:
             height=table.integer("height", current.height, low=1),
             spp=table.integer("spp", current.spp, low=1),
             max_depth=table.integer("max_depth", current.max_depth, low=0),
-            seed=table.integer("seed", current.seed, low=0),
+            seed=table.integer("seed", current.seed, low=0, high=SEED_LIMIT),
         )
         table.finish()
+        if (problem := render_problem(settings)) is not None:
+            raise table.error(*problem)
         return settings
 
     def _camera(self, table: Table, current: Camera) -> Camera:
@@ -259,7 +350,7 @@ class SceneReader:
         light = PointLight(
             position=table.vector("position", required=True),
             color=table.color("color", (1.0, 1.0, 1.0)),
-            intensity=table.number("intensity", 1.0, low=0),
+            intensity=table.number("intensity", 1.0, low=0, high=RADIANCE_LIMIT),
         )
         table.finish()
         return light
@@ -285,6 +376,18 @@ class SceneReader:
             fields["ior"] = table.number("ior", low=1)
         if table.has("metallic"):
             fields["metallic"] = table.boolean("metallic", False)
+        if table.has("emission"):
+            fields["emission"] = table.color("emission")
+        if table.has("attenuation_color"):
+            fields["attenuation_color"] = table.color("attenuation_color")
+            if max(fields["attenuation_color"]) > 1.0:
+                raise table.error("attenuation_color", "each must lie in [0, 1], got "
+                                  f"{list(fields['attenuation_color'])}")  # fmt: skip
+        if table.has("attenuation_distance"):
+            fields["attenuation_distance"] = table.number("attenuation_distance", low=0,
+                                                          low_open=True)  # fmt: skip
+        if table.has("unlit"):
+            fields["unlit"] = table.boolean("unlit", False)
         return Material(**{**base.__dict__, **fields})
 
     def _material(self, table: Table) -> Material:
@@ -305,7 +408,7 @@ class SceneReader:
             checker=Checker(
                 color_a=table.color("color_a", default.checker.color_a),
                 color_b=table.color("color_b", default.checker.color_b),
-                size=table.number("size", default.checker.size, low=0, low_open=True),
+                size=table.number("size", default.checker.size, low=MIN_LENGTH),
             ),
             material=self._material_fields(table, self._preset(table, default.material)),
         )
@@ -320,13 +423,13 @@ class SceneReader:
 
     def _sphere(self, table: Table) -> tuple[tuple[float, float, float], float, str]:
         center = table.vector("center", required=True)
-        radius = table.number("radius", required=True, low=0, low_open=True)
+        radius = table.number("radius", required=True, low=MIN_LENGTH)
         material = self._material_name(table)
         table.finish()
         return center, radius, material
 
     def _file(self, table: Table) -> Path:
-        return (self.base / table.string("file", required=True)).resolve()
+        return (self.base / table.file_name("file")).resolve()
 
     def _sphere_array(self, table: Table) -> _SphereArrayEntry:
         entry = _SphereArrayEntry(table.key("file"), self._file(table), self._material_name(table))
@@ -348,9 +451,9 @@ class SceneReader:
     def _instances(self, table: Table) -> _InstancesEntry:
         entry = _InstancesEntry(
             key=table.key("mesh"),
-            path=(self.base / table.string("mesh", required=True)).resolve(),
+            path=(self.base / table.file_name("mesh")).resolve(),
             placements_key=table.key("transforms"),
-            placements_path=(self.base / table.string("transforms", required=True)).resolve(),
+            placements_path=(self.base / table.file_name("transforms")).resolve(),
             material=self._material_name(table, None),
             smooth=table.boolean("smooth", True),
         )
@@ -395,6 +498,7 @@ class SceneReader:
         def fail(problem: str) -> SceneError:
             return SceneError(self.path, entry.key, f"{path}: {problem}")
 
+        _check_unpacking(path, fail, _sphere_array_cost)
         arrays = read_archive(path, fail)
         for required in ("centers", "radii"):
             if required not in arrays:
@@ -405,13 +509,8 @@ class SceneReader:
         n = len(centers)
         if radii.shape != (n,) or radii.dtype.kind not in "fiu":
             raise fail(f"radii must be ({n},) numbers, got {radii.shape} {radii.dtype}")
-        if not np.isfinite(centers).all():
-            row = int(np.flatnonzero(~np.isfinite(centers).all(axis=1))[0])
-            raise fail(f"centers row {row} is not finite")
-        bad = ~(np.isfinite(radii) & (radii > 0))
-        if bad.any():
-            row = int(np.flatnonzero(bad)[0])
-            raise fail(f"radii row {row} must be a finite number > 0, got {radii[row]}")
+        if (problem := spheres_problem(centers, radii)) is not None:
+            raise fail(problem)
         materials = arrays.get("materials")
         if materials is None:
             return centers, radii, entry.material
@@ -442,4 +541,5 @@ class SceneReader:
         def fail(problem: str) -> SceneError:
             return SceneError(self.path, entry.placements_key, f"{path}: {problem}")
 
+        _check_unpacking(path, fail, lambda headers: (unpacked_bytes(headers), "its arrays"))
         return read_placements(path, fail, self._materials_problem)

@@ -4,7 +4,9 @@ An OBJ names its material library on its first ``mtllib`` line, and that library
 textures on its ``map_Kd`` lines; a glTF (``.gltf``, or the JSON chunk of a ``.glb``) names
 external buffers and images by ``uri``. embree_rt loads meshes through trimesh, so these follow
 trimesh's own rules: names are taken as written (the rest of the line, stripped), relative to
-the mesh's directory, and tried as given, without a leading slash, then as a bare file name.
+the mesh's directory, and tried as given, URI-decoded, with Windows separators as ``/``, without a
+leading slash, then as a bare file name (``candidate_paths``, the one list the loader's resolver
+also tries).
 The other formats embree_rt reads are self-contained.
 
 The cluster's scene key stamps these files (``embree_rt.distributed``): a texture repainted
@@ -18,6 +20,7 @@ import mmap
 import os
 import struct
 from pathlib import Path
+from urllib.parse import unquote
 
 _GLB_MAGIC = b"glTF"
 _GLB_JSON_CHUNK = 0x4E4F534A
@@ -34,7 +37,7 @@ def companion_files(mesh: Path) -> list[Path]:
             found = _obj_companions(mesh)
         elif suffix in (".gltf", ".glb"):
             tree = json.loads(mesh.read_bytes()) if suffix == ".gltf" else _glb_json(mesh)
-            found = [path for uri in _gltf_uris(tree) for path in _candidates(mesh.parent, uri)]
+            found = [path for uri in _gltf_uris(tree) for path in candidate_paths(mesh.parent, uri)]
         else:
             return []
     except (OSError, ValueError, UnicodeDecodeError):
@@ -43,20 +46,20 @@ def companion_files(mesh: Path) -> list[Path]:
 
 
 def _obj_companions(mesh: Path) -> list[Path]:
-    name = _first_line_after(mesh, b"mtllib")
+    name = first_line_after(mesh, b"mtllib")
     if name is None:
         return []
-    found = _candidates(mesh.parent, name)
+    found = candidate_paths(mesh.parent, name)
     for library in [path for path in found if path.is_file()]:
         for line in library.read_text(encoding="utf-8", errors="replace").splitlines():
             words = line.strip().split()
             if len(words) > 1 and words[0].lower() == "map_kd":
                 at = line.lower().index("map_kd") + len("map_kd")
-                found += _candidates(mesh.parent, line[at:].strip())
+                found += candidate_paths(mesh.parent, line[at:].strip())
     return found
 
 
-def _first_line_after(path: Path, keyword: bytes) -> str | None:
+def first_line_after(path: Path, keyword: bytes) -> str | None:
     """The rest of the line after the first ``keyword`` in the file, stripped, or None. The
     file is searched in place (an OBJ can be gigabytes), not read into memory."""
     with open(path, "rb") as file:
@@ -96,9 +99,13 @@ def _gltf_uris(tree: object) -> list[str]:
     return uris
 
 
-def _candidates(root: Path, name: str) -> list[Path]:
-    """Every path trimesh's file resolver may read ``name`` from, relative to ``root``: as
-    written, without a leading slash, and as a bare file name (trimesh 4's releases differ in
-    which they try and whether a path may leave ``root``, so all are stamped)."""
-    names = (name.strip(), name.strip().lstrip("/"), os.path.split(name.strip())[-1])
+def candidate_paths(root: Path, name: str) -> list[Path]:
+    """Every path a file named ``name`` inside a mesh file in ``root`` is looked for at, in
+    order, each once: as written; URI-decoded (glTF names are URIs: ``my%20tex.png``); with
+    Windows separators read as ``/`` (3ds Max writes ``map_Kd .\\Tex.jpg``); without a leading
+    slash; and as a bare file name, as Blender and assimp do."""
+    written = name.strip()
+    decoded = unquote(written)
+    forward = decoded.replace("\\", "/")
+    names = (written, decoded, forward, forward.lstrip("/"), forward.rsplit("/", 1)[-1])
     return list(dict.fromkeys((root / candidate).resolve() for candidate in names if candidate))

@@ -4,15 +4,26 @@ and its per-point colours (base-colour texture, vertex or face colours)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import io
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
-from embree_rt.materials import RGB, Material
-from embree_rt.scene.errors import SceneError
-from embree_rt.textures import texels_from_image
+from embree_rt.materials import Material
+from embree_rt.scene.errors import MeshFileError, SceneError, warn_input
+from embree_rt.scene.gltf import MESH_INDEX_TAG, FileCamera, FileLight, PreparedGltf, prepare_gltf
+from embree_rt.scene.gltf_materials import (
+    LOOKS_KEY,
+    GltfLooks,
+    attach_gltf_looks,
+    metallic_roughness_material,
+)
+from embree_rt.scene.mesh_companions import candidate_paths
+from embree_rt.scene.obj import check_obj_files
+from embree_rt.scene.ply import with_strips
+from embree_rt.textures import DEFAULT_SAMPLER, Sampler, texels_from_image
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
@@ -36,33 +47,121 @@ def mesh_parts(
     return [(mesh, transform) for mesh, transform in parts if len(mesh.faces)]
 
 
-def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
-    """The meshes in ``path`` with their (4, 4) float64 node transforms (identity for a plain
-    mesh; a multi-node glTF keeps one part per node). Errors name the scene ``file`` and ``key``."""
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise SceneError(
-            file, key, f"{path}: unsupported mesh format; use one of {', '.join(MESH_SUFFIXES)}"
-        )
+@dataclass
+class LoadedModel:
+    """A mesh file as embree_rt reads it.
+
+    ``parts``: (mesh, (4, 4) float64 node transform) per placed mesh (``mesh_parts``);
+    ``instanced``: (mesh, (n, 4, 4) float64 transforms) per triangle primitive of each glTF node
+    placed by ``EXT_mesh_gpu_instancing``; ``camera`` and ``lights``: a glTF's first camera and
+    its ``KHR_lights_punctual`` lights, as the file places them (``embree_rt.scene.gltf``).
+    """
+
+    parts: list[tuple[trimesh.Trimesh, np.ndarray]]
+    instanced: list[tuple[trimesh.Trimesh, np.ndarray]] = field(default_factory=list)
+    camera: FileCamera | None = None
+    lights: list[FileLight] = field(default_factory=list)
+
+    def meshes(self) -> list[trimesh.Trimesh]:
+        """Every distinct mesh of the file, placed or instanced, in order."""
+        found = [mesh for mesh, _ in self.parts] + [mesh for mesh, _ in self.instanced]
+        return list({id(mesh): mesh for mesh in found}.values())
+
+    def every_placement(self) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
+        """``parts``, then each instanced copy as a part of its own (mesh, (4, 4) float64)."""
+        copies = [(mesh, matrix) for mesh, transforms in self.instanced for matrix in transforms]
+        return self.parts + copies
+
+
+class _NamesAsWritten(trimesh.resolvers.FilePathResolver):
+    """trimesh's resolver for the files a mesh file names, looking where
+    ``mesh_companions.candidate_paths`` says (Windows separators, URI escapes, bare names), as
+    Blender and assimp do; a name may lead outside the mesh's directory (``../textures``)."""
+
+    def get(self, name: str) -> bytes:
+        for path in candidate_paths(Path(self.parent), name):
+            if path.is_file():
+                return path.read_bytes()
+        raise FileNotFoundError(name)
+
+
+def read_model(path: Path) -> LoadedModel:
+    """The meshes of the file at ``path`` (see ``LoadedModel``), checked: finite vertices,
+    faces that index existing vertices, at least one triangle. Raises ``MeshFileError``;
+    what it renders differently or leaves out is an ``InputWarning`` line."""
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise MeshFileError("(file)", f"unsupported mesh format; use one of "
+                            f"{', '.join(MESH_SUFFIXES)}")  # fmt: skip
     if not path.is_file():
-        raise SceneError(file, key, f"{path}: no such file")
+        raise MeshFileError("(file)", "no such file")
+    prepared = prepare_gltf(path) if suffix in (".glb", ".gltf") else PreparedGltf()
+    if suffix == ".obj":
+        check_obj_files(path)
+    resolver = _NamesAsWritten(str(path), allow_anywhere=True)
     try:
-        loaded = trimesh.load(str(path), process=False)
+        if prepared.data is not None:
+            loaded = trimesh.load(io.BytesIO(prepared.data), file_type=suffix[1:],
+                                  resolver=resolver, process=False)  # fmt: skip
+        else:
+            loaded = trimesh.load(str(path), resolver=resolver, process=False)
     except Exception as error:  # trimesh raises many kinds for a file it cannot parse
-        raise SceneError(file, key, f"{path}: cannot read mesh: {error}") from None
+        raise MeshFileError("(file)", f"cannot read mesh: {error}") from None
+    if suffix == ".ply":
+        loaded = with_strips(loaded)
+    if suffix in (".glb", ".gltf"):
+        read_gltf_looks(path, loaded)
     parts = mesh_parts(loaded) if isinstance(loaded, trimesh.Trimesh | trimesh.Scene) else []
-    if not parts:
-        raise SceneError(file, key, f"{path}: the mesh has no triangles")
-    for mesh, _ in parts:
+    instanced = []
+    for mesh_index, transforms, _ in prepared.instanced:
+        for geometry in loaded.geometry.values():
+            if (isinstance(geometry, trimesh.Trimesh) and len(geometry.faces)
+                    and geometry.metadata.get(MESH_INDEX_TAG) == mesh_index):  # fmt: skip
+                instanced.append((geometry, transforms))
+    model = LoadedModel(parts, instanced, prepared.camera, prepared.lights)
+    if not model.meshes():
+        raise MeshFileError("(file)", "the mesh has no triangles")
+    for mesh in model.meshes():
         if not np.isfinite(mesh.vertices).all():
-            raise SceneError(file, key, f"{path}: vertices contain NaN or inf")
+            raise MeshFileError("(file)", "vertices contain NaN or inf")
         # trimesh loads a face naming a missing vertex without complaint (PLY); catch it here,
-        # where the message can name the scene file and key, not later in the BVH build.
+        # where the message can name the file, not later in the BVH build.
         faces = np.asarray(mesh.faces)
         if faces.min() < 0 or faces.max() >= len(mesh.vertices):
-            raise SceneError(
-                file, key, f"{path}: a face indexes a vertex outside [0, {len(mesh.vertices)})"
-            )
-    return parts
+            raise MeshFileError("(file)", f"a face indexes a vertex outside "
+                                f"[0, {len(mesh.vertices)})")  # fmt: skip
+    return model
+
+
+def load_model(path: Path, file: object = None, key: str | None = None) -> LoadedModel:
+    """``read_model(path)`` with its problems raised as ``SceneError``: naming the scene
+    ``file`` and its ``key`` that named the mesh, or, without them, the mesh file itself."""
+    try:
+        return read_model(path)
+    except MeshFileError as error:
+        if file is None:
+            raise SceneError(path, error.key, error.problem) from None
+        where = "" if error.key == "(file)" else f"{error.key}: "
+        raise SceneError(file, key, f"{path}: {where}{error.problem}") from None
+
+
+def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
+    """The meshes in ``path`` with their (4, 4) float64 node transforms (identity for a plain
+    mesh; a multi-node glTF keeps one part per node), instanced glTF nodes baked as one part
+    per copy. Errors name the scene ``file`` and ``key``."""
+    return load_model(path, file, key).every_placement()
+
+
+def read_gltf_looks(path: Path, loaded: trimesh.Trimesh | trimesh.Scene) -> None:
+    """Attach to each of ``loaded``'s meshes what the glTF file ``path`` says of its material
+    beyond what trimesh keeps (``gltf_materials.attach_gltf_looks``); a file whose materials
+    cannot be read that way keeps trimesh's reading, with a one-line warning."""
+    meshes = list(loaded.geometry.values()) if isinstance(loaded, trimesh.Scene) else [loaded]
+    try:
+        attach_gltf_looks(path, meshes)
+    except (OSError, ValueError, KeyError, IndexError, TypeError) as error:
+        warn_input(f"{path}: glTF materials read as trimesh reads them only "
+                   f"({type(error).__name__}: {error})")  # fmt: skip
 
 
 # -- what a mesh looks like ----------------------------------------------------------------------
@@ -70,11 +169,6 @@ def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Tr
 # trimesh fills an MTL material's missing ``Kd`` with this grey; beside a ``map_Kd`` texture it
 # is read as no ``Kd`` at all (factor 1), or every such texture would render at 40% brightness.
 _TRIMESH_DEFAULT_RGBA = (102, 102, 102, 255)
-# glTF's metallic-roughness model → Blinn-Phong: highlight exponent range, and the mirror
-# reflectance at normal incidence of a dielectric (plastics, paint: about 4%) and of a metal.
-SHININESS_RANGE = (1.0, 4096.0)
-DIELECTRIC_REFLECTIVITY = 0.04
-METAL_REFLECTIVITY = 0.9
 
 
 @dataclass(frozen=True)
@@ -83,9 +177,11 @@ class MeshSurface:
 
     A point's base colour is ``factor`` × the texture at its interpolated UV × its interpolated
     vertex colour (or its face's colour), each factor present or not: ``factor`` (3,) float32;
-    ``texels`` (h, w, 4) float32, linear RGB and padding (``embree_rt.textures``), with ``uv``
+    ``texels`` (h, w, 4) float32, linear RGB and alpha (``embree_rt.textures``), with ``uv``
     (2, v) float32 per vertex; ``vertex_colors`` (3, v) float32; ``face_colors`` (3, f) float32.
-    Per-vertex arrays hold one vertex per column, so that gathers at the hits come out (3, n).
+    The texture is read as ``sampler`` says; ``looks`` is what a glTF file says besides
+    (emissive texture, alpha, ...: ``gltf_materials.GltfLooks``). Per-vertex arrays hold one
+    vertex per column, so that gathers at the hits come out (3, n).
     """
 
     factor: np.ndarray
@@ -93,6 +189,8 @@ class MeshSurface:
     uv: np.ndarray | None = None
     vertex_colors: np.ndarray | None = None
     face_colors: np.ndarray | None = None
+    sampler: Sampler = DEFAULT_SAMPLER
+    looks: GltfLooks | None = None
 
 
 def _rgb(rgba: object) -> np.ndarray:
@@ -108,6 +206,28 @@ def _colors_in_unit_range(colors: np.ndarray) -> np.ndarray:
         colors = colors / float(np.iinfo(colors.dtype).max)
     colors = np.nan_to_num(np.asarray(colors, np.float64)[:, :3], nan=0.0, posinf=1.0)
     return np.clip(colors, 0.0, 1.0)
+
+
+def is_placeholder_material(material: object) -> bool:
+    """Whether ``material`` is the stand-in trimesh gives an OBJ with texture coordinates but
+    no material (a 2x2 grey image read from no file, ``trimesh.visual.material.color_image()``):
+    no material at all, not a texture. A texture read from an MTL records its file name."""
+    if not isinstance(material, trimesh.visual.material.SimpleMaterial):
+        return False
+    image = getattr(material, "image", None)
+    if image is None or "file_path" in getattr(image, "info", {}) or image.size != (2, 2):
+        return False
+    placeholder = np.asarray(trimesh.visual.material.color_image())
+    return np.array_equal(np.asarray(image.convert("RGBA")), placeholder)
+
+
+def _file_material(visual: object) -> object | None:
+    """The material a mesh's file gives it: a TextureVisuals' material, None for none or for
+    trimesh's placeholder."""
+    if not isinstance(visual, trimesh.visual.TextureVisuals):
+        return None
+    material = visual.material
+    return None if material is None or is_placeholder_material(material) else material
 
 
 def _texture_image(material: object):
@@ -131,39 +251,6 @@ def _base_color_factor(material: object) -> np.ndarray:
     return _rgb(diffuse)
 
 
-def metallic_roughness_material(color: RGB, metallic: float, roughness: float) -> Material:
-    """A Blinn-Phong ``Material`` that looks like glTF's metallic-roughness surface.
-
-    With smoothness ``s = 1 − roughness`` and ``m = metallic`` (both clipped to [0, 1]):
-
-    - ``shininess = 2 / α² − 2`` with ``α = roughness²``, the Blinn-Phong exponent whose lobe
-      matches a Beckmann/GGX lobe of width α (Walter et al. 2007), clipped to [1, 4096];
-    - ``specular = s · (0.5 + 0.4 m)``: no highlight on a fully rough surface, 0.5 (the glossy
-      preset) on a smooth dielectric, 0.9 (the metal preset) on a smooth metal;
-    - ``reflectivity = s² · (0.04 (1 − m) + 0.9 m)``: a smooth dielectric mirrors about 4% of
-      the scene, a smooth metal 90% (the mirror preset); roughness blurs a real reflection
-      away, which a sharp mirror bounce can only fade;
-    - ``diffuse = 0.85 · (1 − m · s)``: dielectrics keep the matte preset's diffuse, a smooth
-      metal has none (its colour is in what it reflects), a rough metal scatters like a matte
-      surface of its colour;
-    - ``metallic`` is ``m >= 0.5`` (metals tint their reflections and highlights' bounce).
-    """
-    m = float(np.clip(metallic, 0.0, 1.0))
-    roughness = float(np.clip(roughness, 0.0, 1.0))
-    s = 1.0 - roughness
-    alpha = roughness * roughness
-    low, high = SHININESS_RANGE
-    shininess = high if alpha == 0.0 else float(np.clip(2.0 / alpha**2 - 2.0, low, high))
-    return Material(
-        color=color,
-        diffuse=0.85 * (1.0 - m * s),
-        specular=s * (0.5 + 0.4 * m),
-        shininess=shininess,
-        reflectivity=s * s * (DIELECTRIC_REFLECTIVITY * (1.0 - m) + METAL_REFLECTIVITY * m),
-        metallic=m >= 0.5,
-    )
-
-
 def mesh_material(mesh: trimesh.Trimesh) -> Material | None:
     """The material a mesh's own file gives it, or None when it gives none (the caller's
     default applies).
@@ -176,9 +263,10 @@ def mesh_material(mesh: trimesh.Trimesh) -> Material | None:
     with ``Ns 0``). Colours are linear: glTF defines its factors and vertex colours so, and
     8-bit vertex colours of other formats are read the same way.
     """
+    if (looks := mesh.metadata.get(LOOKS_KEY)) is not None:
+        return looks.material
     visual = mesh.visual
-    if isinstance(visual, trimesh.visual.TextureVisuals) and visual.material is not None:
-        material = visual.material
+    if (material := _file_material(visual)) is not None:
         color = tuple(float(c) for c in _base_color_factor(material))
         if isinstance(material, trimesh.visual.material.PBRMaterial):
             metallic = 1.0 if material.metallicFactor is None else material.metallicFactor
@@ -204,9 +292,9 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
     factor = np.ones(3)
     texels = uv = vertex_colors = face_colors = None
     if isinstance(visual, trimesh.visual.TextureVisuals):
-        if visual.material is not None:
-            factor = _base_color_factor(visual.material)
-            image = _texture_image(visual.material)
+        if (material := _file_material(visual)) is not None:
+            factor = _base_color_factor(material)
+            image = _texture_image(material)
             coordinates = visual.uv
             if (
                 image is not None
@@ -229,14 +317,26 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
         factor, vertex_colors = factor * vertex_colors[0], None
     if face_colors is not None and np.ptp(face_colors, axis=0).max() == 0:
         factor, face_colors = factor * face_colors[0], None
-    if texels is None and vertex_colors is None and face_colors is None:
+    sampler = DEFAULT_SAMPLER
+    looks = mesh.metadata.get(LOOKS_KEY)
+    if looks is not None:  # the glTF file's own reading of its base colour
+        factor = looks.base_color_factor[:3].astype(np.float64)
+        texels = uv = None
+        if (base := looks.base_color) is not None:
+            texels, uv, sampler = base.texels, base.uv, base.sampler
+        if not looks.per_point:
+            looks = None
+    if texels is None and vertex_colors is None and face_colors is None and looks is None:
         return None
+
     return MeshSurface(
         factor=factor.astype(np.float32),
         texels=texels,
         uv=uv,
         vertex_colors=_columns(vertex_colors),
         face_colors=_columns(face_colors),
+        sampler=sampler,
+        looks=looks,
     )
 
 

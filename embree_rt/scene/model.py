@@ -3,77 +3,20 @@
 from __future__ import annotations
 
 import hashlib
-import math
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
-from embree_rt.scene.writer import save_scene
+from embree_rt.scene.limits import INTEGER_LIMIT, placed_mesh_problem, spheres_problem
 from embree_rt.transforms import as_affine
 
 if TYPE_CHECKING:  # trimesh (and SciPy behind it) loads in ~1 s: only scenes with meshes pay
     import trimesh
-
-Vec3 = tuple[float, float, float]
-
-
-@dataclass
-class Camera:
-    """A pinhole camera at ``position`` looking at ``look_at``; ``fov`` is vertical, in degrees."""
-
-    position: Vec3 = (0.0, 1.0, 5.0)
-    look_at: Vec3 = (0.0, 0.0, 0.0)
-    up: Vec3 = (0.0, 1.0, 0.0)
-    fov: float = 45.0
-
-
-# sin of the smallest angle allowed between a camera's ``up`` and its viewing direction: below
-# it the camera's roll is decided by rounding error.
-MIN_UP_SINE = 1e-6
-
-
-def camera_problem(camera: Camera) -> tuple[str, str] | None:
-    """What keeps ``camera`` from defining an image, as (field, problem), or None if nothing.
-
-    The one rule for a camera, followed by scene files and by ``camera.camera_frame``: ``fov``
-    a number of degrees strictly between 0 and 180; ``position``, ``look_at`` and ``up`` three
-    finite numbers each; ``look_at`` apart from ``position``; ``up`` not zero and at least
-    ``MIN_UP_SINE`` (sine of the angle) away from the viewing direction.
-    """
-    try:
-        fov = float(camera.fov)
-    except (TypeError, ValueError):
-        return "fov", f"expected a number of degrees, got {camera.fov!r}"
-    if not (math.isfinite(fov) and 0.0 < fov < 180.0):
-        return "fov", f"must be > 0 and < 180 degrees, got {fov:g}"
-    vectors = {}
-    for name in ("position", "look_at", "up"):
-        value = getattr(camera, name)
-        try:
-            vector = np.asarray(value, np.float64)
-        except (TypeError, ValueError):
-            vector = None
-        if vector is None or vector.shape != (3,) or not np.isfinite(vector).all():
-            return name, f"expected three finite numbers, got {value!r}"
-        vectors[name] = vector
-    view = vectors["position"] - vectors["look_at"]
-    distance = np.linalg.norm(view)
-    if not distance > 0.0:
-        return "look_at", f"must differ from camera.position, both are {list(camera.look_at)}"
-    up_length = np.linalg.norm(vectors["up"])
-    if not up_length > 0.0:
-        return "up", "must not be the zero vector"
-    sine = np.linalg.norm(np.cross(vectors["up"] / up_length, view / distance))
-    if not sine >= MIN_UP_SINE:
-        return "up", (
-            f"{list(camera.up)} is parallel to the viewing direction (from "
-            f"{list(camera.position)} to {list(camera.look_at)})"
-        )
-    return None
 
 
 @dataclass
@@ -106,11 +49,31 @@ class Background:
 
 @dataclass
 class RenderSettings:
+    """Image size, samples per pixel, bounces and seed of a render (a scene's ``render`` table)."""
+
     width: int = 640
     height: int = 360
     spp: int = 8
     max_depth: int = 6
     seed: int = 0
+
+    def with_overrides(self, **values: int | None) -> RenderSettings:
+        """These settings with each field named in ``values`` (width, height, spp, max_depth,
+        seed) replaced, unless its value is None: the one rule by which flags and keyword
+        arguments override a scene's ``render`` table. An unknown name raises TypeError."""
+        return replace(self, **{name: value for name, value in values.items() if value is not None})
+
+
+def render_problem(settings: RenderSettings) -> tuple[str, str] | None:
+    """What keeps ``settings`` from numbering its samples, as (field, problem), or None: the
+    samples of an image (width × height × spp) are numbered in int64."""
+    samples = settings.width * settings.height * settings.spp
+    if samples > INTEGER_LIMIT:
+        return "spp", (
+            f"a {settings.width}x{settings.height} image at {settings.spp} spp is {samples:.3g} "
+            f"samples, more than the {INTEGER_LIMIT:.3g} int64 can number"
+        )
+    return None
 
 
 @dataclass
@@ -153,6 +116,70 @@ class Scene:
     instances: list[MeshInstances] = field(default_factory=list)
     # A camera path (``scene.animation``): None for a still image.
     animation: Animation | None = None
+    # What the scene's maker found and chose, one line each (a mesh file rendered on its own:
+    # whose camera and lights, where the floor is), for ``embree-rt info``.
+    notes: list[str] = field(default_factory=list)
+
+    @classmethod
+    def from_file(cls, path, floor: bool = True) -> Scene:
+        """A mesh file (OBJ, PLY, STL, OFF, glTF/GLB) rendered on its own, as it places its
+        meshes: from its own camera and under its own lights when it has them, else from a
+        camera framed on its bounds under a default rig, with a floor under it unless
+        ``floor`` is False (``embree_rt.scene.model_file``). Raises ``SceneError`` naming the
+        file and the key in it."""
+        from pathlib import Path
+
+        from embree_rt.scene.meshes import load_model
+        from embree_rt.scene.model_file import stage_model
+
+        path = Path(path)
+        model = load_model(path)
+        scene = cls()
+        for mesh, transform in model.parts:
+            scene.add_mesh(mesh, transform=transform)
+        for mesh, transforms in model.instanced:
+            scene.add_instances(mesh, transforms)
+        scene._stage(stage_model(path, model), floor)
+        return scene
+
+    @classmethod
+    def from_trimesh(cls, loaded: trimesh.Trimesh | trimesh.Scene, floor: bool = True) -> Scene:
+        """A trimesh.Trimesh or trimesh.Scene rendered on its own (as ``add_mesh`` places it):
+        from the trimesh.Scene's camera when it has one, else framed on its bounds; a default
+        light rig; a floor under it unless ``floor`` is False. Raises as ``add_mesh``."""
+        from embree_rt.scene.model_file import stage_trimesh
+
+        scene = cls()
+        scene.add_mesh(loaded)
+        scene._stage(stage_trimesh(loaded), floor)
+        return scene
+
+    def _stage(self, staging, floor: bool) -> None:
+        """Camera, lights and floor from a ``model_file.Staging``: its first view the camera
+        rule accepts (``camera_problem``), a render as wide as the file camera's aspect."""
+        from embree_rt.scene.errors import warn_input
+
+        for view in staging.views:
+            camera = Camera(position=view.position, look_at=view.look_at, up=view.up,
+                            fov=view.fov)  # fmt: skip
+            if (problem := camera_problem(camera)) is None:
+                break
+            warn_input(f"{view.note}: cannot be used ({problem[0]}: {problem[1]}); the next "
+                       "choice is taken")  # fmt: skip
+        self.camera = camera
+        self.notes.append(view.note)
+        if view is not staging.views[-1] and staging.aspect_ratio:  # the file's own camera
+            self.render.height = max(1, round(self.render.width / staging.aspect_ratio))
+        self.lights = [PointLight(position=light.position, color=light.color,
+                                  intensity=light.intensity) for light in staging.lights]
+        self.notes += staging.notes
+        if floor:
+            height, size = staging.floor
+            self.floor = Floor(height=height, checker=Checker(size=size))
+            self.notes.append(f"floor: under the model, y = {height:.6g}")
+        else:
+            self.floor = None
+            self.notes.append("floor: none")
 
     @property
     def material_names(self) -> list[str]:
@@ -195,11 +222,19 @@ class Scene:
 
         ``copy=False`` hands the arrays over: when the scene holds no spheres yet and they are
         already (n, 3) float32, (n,) float32 and (n,) int32, it keeps them as they are (no copy
-        of a hundred million spheres); do not modify them afterwards."""
-        centers = np.asarray(centers, np.float32).reshape(-1, 3)
-        radii = np.asarray(radii, np.float32).reshape(-1)
+        of a hundred million spheres); do not modify them afterwards. Centres and radii must lie
+        within ``scene.limits``' bounds (ValueError naming the first bad row)."""
+        centers, radii = np.asarray(centers), np.asarray(radii)
+        if centers.dtype.kind not in "fiu" or radii.dtype.kind not in "fiu":
+            centers, radii = np.asarray(centers, np.float64), np.asarray(radii, np.float64)
+        centers, radii = centers.reshape(-1, 3), radii.reshape(-1)
         if len(radii) != len(centers):
             raise ValueError(f"radii: {len(radii)} values for {len(centers)} centers")
+        # Checked before the cast: a float64 1e39 or 1e-320 would become inf or 0 in float32.
+        if (problem := spheres_problem(centers, radii)) is not None:
+            raise ValueError(problem)
+        centers = centers.astype(np.float32, copy=False)
+        radii = radii.astype(np.float32, copy=False)
         ids = self.material_ids(materials, len(centers), "centers")
         if not copy and len(self.sphere_radii) == 0:
             self.sphere_centers, self.sphere_radii, self.sphere_materials = centers, radii, ids
@@ -260,6 +295,8 @@ class Scene:
         if len(transforms) == 0:
             raise ValueError("transforms: expected at least one placement, got none")
         child = single_mesh(mesh)
+        if (problem := placed_mesh_problem(child.vertices, transforms)) is not None:
+            raise ValueError(f"transforms: row {problem[0]}: {problem[1]}")
         if materials is None:
             ids = self.material_ids(self._mesh_material(child), len(transforms), "transforms")
         else:
@@ -310,6 +347,9 @@ class Scene:
         if isinstance(mesh, trimesh.Scene):  # a node's transform may spoil the placement
             for matrix in placements:
                 as_affine(matrix, "transform")
+        for (part, _), matrix in zip(parts, placements, strict=True):
+            if (problem := placed_mesh_problem(part.vertices, matrix[None])) is not None:
+                raise ValueError(f"transform: {problem[1]}")
         added = [
             MeshObject(
                 mesh=part,
@@ -322,10 +362,6 @@ class Scene:
         ]
         self.meshes.extend(added)
         return added
-
-    def save(self, path) -> None:
-        """Write this scene to a ``.toml`` or ``.json`` file (bulk data beside it)."""
-        save_scene(self, path)
 
     def _mesh_material(self, mesh: trimesh.Trimesh) -> str:
         """The name of the material the mesh's own file gives it (added to ``materials`` under a

@@ -20,7 +20,6 @@ memory).
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -28,8 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from embree_rt import budget
+from embree_rt.batches import worker_count
+from embree_rt.camera import Camera
 from embree_rt.materials import PRESETS, preset
-from embree_rt.scene.model import Camera, PointLight, RenderSettings, Scene
+from embree_rt.scene.model import PointLight, RenderSettings, Scene
 
 HERO_RADIUS = 1.0
 HEROES = (  # (x, z) on the floor, material name; the glass one comes first
@@ -217,7 +218,7 @@ def add_field_spheres(scene: Scene, plan: FieldPlan, *, threads: int | None = No
             draws.fill(ring.first, x, z, rank, centers[rows], radii[rows], materials[rows])
 
         rings = layout.rings(plan.small, RING_CELLS)
-        with ThreadPoolExecutor(max_workers=threads or os.cpu_count() or 1) as pool:
+        with ThreadPoolExecutor(max_workers=worker_count(threads)) as pool:
             for _ in pool.map(make, rings):  # re-raises a ring's error
                 pass
     scene.add_spheres(centers, radii, materials, copy=False)

@@ -11,15 +11,12 @@ import json
 import re
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.materials import PRESETS
+from embree_rt.materials import PRESETS, Material
 from embree_rt.scene.animation import animation_document
-
-if TYPE_CHECKING:  # the model imports the writer (Scene.save); the writer needs only the type
-    from embree_rt.scene.model import Scene
+from embree_rt.scene.model import Scene
 
 
 def scene_document(scene: Scene, path: Path) -> dict:
@@ -111,12 +108,22 @@ def scene_document(scene: Scene, path: Path) -> dict:
 
 def _material_dict(material) -> dict:
     fields = asdict(material)
-    fields["color"] = list(fields["color"])
+    # Keys a material leaves at their defaults (no glow, no absorption, lit) are not written.
+    for name, default in asdict(Material()).items():
+        if name in _OPTIONAL_MATERIAL_KEYS and fields[name] == default:
+            del fields[name]
+    for name, value in fields.items():
+        if isinstance(value, tuple):
+            fields[name] = list(value)
     return {"preset": "matte", **fields}
 
 
+_OPTIONAL_MATERIAL_KEYS = ("emission", "attenuation_color", "attenuation_distance", "unlit")
+
+
 def save_scene(scene: Scene, path: str | Path) -> None:
-    """Write ``scene`` to ``path`` (``.toml`` or ``.json``)."""
+    """Write ``scene`` to ``path`` (``.toml`` or ``.json``), bulk data in files beside it:
+    ``load_scene(path)`` gives the scene back."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".toml", ".json"):

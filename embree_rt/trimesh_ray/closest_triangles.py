@@ -117,8 +117,7 @@ def closest_on_triangle(px, py, pz, t):
     if va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
         span = (d4 - d3) + (d5 - d6)
         w = (d4 - d3) / span if span > 0.0 else 0.0
-        return (t[3] + w * (t[6] - t[3]), t[4] + w * (t[7] - t[4]), t[5] + w * (t[8] - t[5]),
-                False)  # fmt: skip
+        return (t[3] + w * (t[6] - t[3]), t[4] + w * (t[7] - t[4]), t[5] + w * (t[8] - t[5]), False)
     total = va + vb + vc
     if total > 0.0:
         v = vb / total
@@ -232,9 +231,26 @@ def _cosine(entries, e, table, px, py, pz):
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _closest_chunk(scene, callback, first, stop, points, shift, scale, extent, tolerance,
-                   table, capacity, scratch, user, closest, distance, triangle, interior,
-                   overflow):  # fmt: skip
+def _closest_chunk(
+    scene,
+    callback,
+    first,
+    stop,
+    points,
+    shift,
+    scale,
+    extent,
+    tolerance,
+    table,
+    capacity,
+    scratch,
+    user,
+    closest,
+    distance,
+    triangle,
+    interior,
+    overflow,
+):
     b = point_query.init_scratch(scratch)
     words = user.view(np.uint64)
     entries = user[_HEADER:]
@@ -261,8 +277,7 @@ def _closest_chunk(scene, callback, first, stop, points, shift, scale, extent, t
         user[_CAPACITY] = capacity
         user[_OVERFLOW] = 0.0
         words[_TABLE] = table.ctypes.data
-        point_query.point_query(scene, scratch, b, qx, qy, qz, np.inf, callback,
-                                user.ctypes.data)  # fmt: skip
+        point_query.point_query(scene, scratch, b, qx, qy, qz, np.inf, callback, user.ctypes.data)
         overflow[i] = user[_OVERFLOW] != 0.0
         e = _chosen(user, entries, table)
         if e < 0:  # cannot be: every triangle is within an infinite radius
@@ -278,26 +293,88 @@ def _closest_chunk(scene, callback, first, stop, points, shift, scale, extent, t
 
 
 @njit(parallel=True, nogil=True, cache=True, error_model="numpy")
-def _closest(scene, callback, points, shift, scale, extent, tolerance, table, capacity, closest,
-             distance, triangle, interior, overflow):  # fmt: skip
+def _closest(
+    scene,
+    callback,
+    points,
+    shift,
+    scale,
+    extent,
+    tolerance,
+    table,
+    capacity,
+    closest,
+    distance,
+    triangle,
+    interior,
+    overflow,
+):
     n = points.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, point_query.SCRATCH_WORDS), np.uint32)
     user = np.empty((n_chunks, _HEADER + _ENTRY * capacity), np.float64)
     for c in prange(n_chunks):
-        _closest_chunk(scene, callback, c * CHUNK, min(n, (c + 1) * CHUNK), points, shift, scale,
-                       extent, tolerance, table, capacity, scratch[c], user[c], closest,
-                       distance, triangle, interior, overflow)  # fmt: skip
+        _closest_chunk(
+            scene,
+            callback,
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            points,
+            shift,
+            scale,
+            extent,
+            tolerance,
+            table,
+            capacity,
+            scratch[c],
+            user[c],
+            closest,
+            distance,
+            triangle,
+            interior,
+            overflow,
+        )
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _closest_serial(scene, callback, points, shift, scale, extent, tolerance, table, capacity,
-                    closest, distance, triangle, interior, overflow):  # fmt: skip
+def _closest_serial(
+    scene,
+    callback,
+    points,
+    shift,
+    scale,
+    extent,
+    tolerance,
+    table,
+    capacity,
+    closest,
+    distance,
+    triangle,
+    interior,
+    overflow,
+):
     scratch = np.empty(point_query.SCRATCH_WORDS, np.uint32)
     user = np.empty(_HEADER + _ENTRY * capacity, np.float64)
-    _closest_chunk(scene, callback, 0, points.shape[0], points, shift, scale, extent, tolerance,
-                   table, capacity, scratch, user, closest, distance, triangle, interior,
-                   overflow)  # fmt: skip
+    _closest_chunk(
+        scene,
+        callback,
+        0,
+        points.shape[0],
+        points,
+        shift,
+        scale,
+        extent,
+        tolerance,
+        table,
+        capacity,
+        scratch,
+        user,
+        closest,
+        distance,
+        triangle,
+        interior,
+        overflow,
+    )
 
 
 @functools.cache
@@ -350,10 +427,25 @@ def closest_points(
     capacity = FIRST_CAPACITY
     while len(rows):
         subset = points if len(rows) == n else points[rows]
-        parts = (np.zeros((len(rows), 3)), np.zeros(len(rows)), np.full(len(rows), -1, np.int64),
-                 np.zeros(len(rows), bool), np.zeros(len(rows), bool))  # fmt: skip
-        arguments = (scene, _visit.address, subset, shift, float(scale), float(extent),
-                     float(tolerance), table, capacity, *parts)  # fmt: skip
+        parts = (
+            np.zeros((len(rows), 3)),
+            np.zeros(len(rows)),
+            np.full(len(rows), -1, np.int64),
+            np.zeros(len(rows), bool),
+            np.zeros(len(rows), bool),
+        )
+        arguments = (
+            scene,
+            _visit.address,
+            subset,
+            shift,
+            float(scale),
+            float(extent),
+            float(tolerance),
+            table,
+            capacity,
+            *parts,
+        )
         used = threads_for(len(rows), threads)
         if used == 1:
             _closest_serial(*arguments)

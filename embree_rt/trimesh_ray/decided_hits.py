@@ -24,6 +24,8 @@ from numba import njit, prange
 
 from embree_rt.compiled.pointers import prefetch
 from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.embree.multihit import HitBuffers
+from embree_rt.trimesh_ray.hit_inputs import MeshTables, Tolerances, WorldRays
 from embree_rt.trimesh_ray.plane_distances import insert_by_distance, plane_distance
 
 CHUNK = 16  # rays per parallel iteration
@@ -59,16 +61,21 @@ def _barycentric_hit(triangles, f, px, py, pz, zero):
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _bounds_chunk(first, stop, rows, positions, prim, u, v, cos, count, magnitude, altitude,
-                  band_scale, graze, canonical, fan_starts, totals):  # fmt: skip
+def _bounds_chunk(first, stop, rows, positions, hits, rays, mesh, tolerances, fans, totals):
+    _t, prim, u, v, cos, count, _more = hits
+    magnitude = rays.magnitude
+    altitude = mesh.altitude
+    band_scale, graze, _parallel_cos, _zero = tolerances
+    canonical, fan_starts, _fan_faces = fans
     for a in range(first, stop):  # candidates of each ray, at most
         r, q = rows[a], positions[a]
         total = 0
         for j in range(count[r]):
             p = prim[r, j]
             total += 1
-            if _is_suspect(u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p],
-                           graze):  # fmt: skip
+            if _is_suspect(
+                u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p], graze
+            ):
                 for c in range(3):
                     corner = canonical[p, c]
                     total += fan_starts[corner + 1] - fan_starts[corner]
@@ -76,18 +83,25 @@ def _bounds_chunk(first, stop, rows, positions, prim, u, v, cos, count, magnitud
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _decide_chunk(first, stop, bound, rows, positions, prim, u, v, cos, count, magnitude, near,
-                  inclusive, origins, directions, planes, triangles, altitude, band_scale, graze,
-                  parallel_cos, zero, canonical, fan_starts, fan_faces, candidates, tested,
-                  out_tris, out_distance, kept):  # fmt: skip
-    # rays first .. stop; ray a's candidates and hits in bound[a] .. bound[a + 1], kept[a] hits
+def _decide_chunk(
+    first, stop, bound, rows, positions, hits, rays, mesh, tolerances, fans, work, kept
+):
+    # rays first .. stop; ray a's candidates and hits in bound[a] .. bound[a + 1] of `work`
+    # (candidates, tested, tris, distance), kept[a] hits
+    _t, prim, u, v, cos, count, _more = hits
+    origins, directions, magnitude, near, inclusive = rays
+    planes, triangles, altitude, _floor_altitude = mesh
+    band_scale, graze, parallel_cos, zero = tolerances
+    canonical, fan_starts, fan_faces = fans
+    candidates, tested, out_tris, out_distance = work
     for a in range(first, stop):
         r, q = rows[a], positions[a]
         stop_a = bound[a]
         for j in range(count[r]):
             p = prim[r, j]
-            if _is_suspect(u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p],
-                           graze):  # fmt: skip
+            if _is_suspect(
+                u[r, j], v[r, j], cos[r, j], band_scale * magnitude[q], altitude[p], graze
+            ):
                 for c in range(3):
                     corner = canonical[p, c]
                     for s in range(fan_starts[corner], fan_starts[corner + 1]):
@@ -111,8 +125,9 @@ def _decide_chunk(first, stop, bound, rows, positions, prim, u, v, cos, count, m
         for i in range(bound[a] + 1, stop_a):
             f, flag = candidates[i], tested[i]
             j = i - 1
-            while j >= bound[a] and (candidates[j] > f or (candidates[j] == f and tested[j]
-                                                           and not flag)):  # fmt: skip
+            while j >= bound[a] and (
+                candidates[j] > f or (candidates[j] == f and tested[j] and not flag)
+            ):
                 candidates[j + 1], tested[j + 1] = candidates[j], tested[j]
                 j -= 1
             candidates[j + 1], tested[j + 1] = f, flag
@@ -125,9 +140,13 @@ def _decide_chunk(first, stop, bound, rows, positions, prim, u, v, cos, count, m
             if not along > parallel_cos:
                 continue
             if tested[i] and not _barycentric_hit(
-                    triangles, f, origins[q, 0] + directions[q, 0] * distance,
-                    origins[q, 1] + directions[q, 1] * distance,
-                    origins[q, 2] + directions[q, 2] * distance, zero):  # fmt: skip
+                triangles,
+                f,
+                origins[q, 0] + directions[q, 0] * distance,
+                origins[q, 1] + directions[q, 1] * distance,
+                origins[q, 2] + directions[q, 2] * distance,
+                zero,
+            ):
                 continue
             if not (distance >= near[q] if inclusive else distance > near[q]):
                 continue
@@ -137,8 +156,9 @@ def _decide_chunk(first, stop, bound, rows, positions, prim, u, v, cos, count, m
 
 
 @njit(nogil=True, cache=True)
-def _gather_chunk(first, stop, bound, places, positions, tris, distance, kept, out_rays,
-                  out_tris, out_distance):  # fmt: skip
+def _gather_chunk(first, stop, bound, places, positions, work, kept, out):
+    _candidates, _tested, tris, distance = work
+    out_rays, out_tris, out_distance = out
     for a in range(first, stop):
         for i in range(kept[a]):
             out_rays[places[a] + i] = positions[a]
@@ -147,92 +167,97 @@ def _gather_chunk(first, stop, bound, places, positions, tris, distance, kept, o
 
 
 @njit(parallel=True, nogil=True, cache=True, error_model="numpy")
-def _decide(rows, positions, prim, u, v, cos, count, magnitude, near, inclusive, origins,
-            directions, planes, triangles, altitude, band_scale, graze, parallel_cos, zero,
-            canonical, fan_starts, fan_faces):  # fmt: skip
+def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
     # in parallel over chunks of rays, each in its own ranges (a prefix sum of bounds, then of
     # kept hits): the same output on any number of threads
     m = rows.shape[0]
     n_chunks = (m + CHUNK - 1) // CHUNK
     totals = np.empty(m, np.int64)
     for c in prange(n_chunks):
-        _bounds_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), rows, positions, prim, u, v, cos,
-                      count, magnitude, altitude, band_scale, graze, canonical, fan_starts,
-                      totals)  # fmt: skip
+        _bounds_chunk(
+            c * CHUNK,
+            min(m, (c + 1) * CHUNK),
+            rows,
+            positions,
+            hits,
+            rays,
+            mesh,
+            tolerances,
+            fans,
+            totals,
+        )
     bound = np.zeros(m + 1, np.int64)
     for a in range(m):
         bound[a + 1] = bound[a] + totals[a]
-    candidates = np.empty(bound[m], np.int64)
-    tested = np.empty(bound[m], np.bool_)  # decided in float64 (else Embree's hit stands)
-    tris = np.empty(bound[m], np.int64)
-    distance = np.empty(bound[m], np.float64)
+    # candidates, tested (decided in float64, else Embree's hit stands), tris, distance
+    work = (
+        np.empty(bound[m], np.int64),
+        np.empty(bound[m], np.bool_),
+        np.empty(bound[m], np.int64),
+        np.empty(bound[m], np.float64),
+    )
     kept = np.empty(m, np.int64)
     for c in prange(n_chunks):
-        _decide_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, rows, positions, prim, u, v,
-                      cos, count, magnitude, near, inclusive, origins, directions, planes,
-                      triangles, altitude, band_scale, graze, parallel_cos, zero, canonical,
-                      fan_starts, fan_faces, candidates, tested, tris, distance,
-                      kept)  # fmt: skip
+        _decide_chunk(
+            c * CHUNK,
+            min(m, (c + 1) * CHUNK),
+            bound,
+            rows,
+            positions,
+            hits,
+            rays,
+            mesh,
+            tolerances,
+            fans,
+            work,
+            kept,
+        )
     places = np.zeros(m + 1, np.int64)
     for a in range(m):
         places[a + 1] = places[a] + kept[a]
-    out_rays = np.empty(places[m], np.int64)
-    out_tris = np.empty(places[m], np.int64)
-    out_distance = np.empty(places[m], np.float64)
+    out = (
+        np.empty(places[m], np.int64),
+        np.empty(places[m], np.int64),
+        np.empty(places[m], np.float64),
+    )
     for c in prange(n_chunks):
-        _gather_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, places, positions, tris,
-                      distance, kept, out_rays, out_tris, out_distance)  # fmt: skip
-    return out_rays, out_tris, out_distance
+        _gather_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, places, positions, work, kept, out)
+    return out
 
 
 def decided_hits(
     rows: np.ndarray,
     positions: np.ndarray,
-    result: tuple[np.ndarray, ...],
-    magnitude: np.ndarray,
-    near: np.ndarray,
-    inclusive: bool,
-    origins: np.ndarray,
-    directions: np.ndarray,
-    planes: np.ndarray,
-    triangles: np.ndarray,
-    altitude: np.ndarray,
-    band_scale: float,
-    graze: float,
-    parallel_cos: float,
-    zero: float,
+    hits: HitBuffers,
+    rays: WorldRays,
+    mesh: MeshTables,
+    tolerances: Tolerances,
     fans: tuple[np.ndarray, np.ndarray, np.ndarray],
     threads: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Final hits of the rays in rows ``rows`` (m,) int64 of ``multihit.all_hits``' buffers
-    ``result``, decided as the module docstring says.
+    ``hits``, decided as the module docstring says.
 
-    ``positions`` (m,) int64: each ray's index into the per-ray arrays ``magnitude``, ``near``
-    (float64, as ``settled_hits``' arguments, ``inclusive`` too), ``origins``, ``directions``
-    (n, 3) float64 world rays (unit directions); ``planes`` (triangles, 6) (as
-    ``plane_distances.plane_distances`` takes them) and ``triangles`` (triangles, 3, 3)
-    float64; ``altitude`` (triangles,) float64 smallest local altitudes; ``band_scale``: edge
-    band per unit of magnitude / altitude; ``graze``: suspect |cos|; ``parallel_cos``: |cos|
-    at or below which a ray misses a triangle's plane; ``zero``: ray_triangle's barycentric
-    tolerance; ``fans``: (canonical faces (triangles, 3), starts, faces) CSR of the faces
-    around each vertex position; ``threads``: how many to run on (the answer is the same for
-    any).
+    ``positions`` (m,) int64: each ray's index into ``rays`` (``hit_inputs.world_rays``);
+    ``mesh``: the mesh's tables; ``tolerances``: ``band_scale`` and ``graze`` (which hits are
+    suspect), ``parallel_cos`` (|cos| at or below which a ray misses a triangle's plane) and
+    ``zero`` (ray_triangle's barycentric tolerance); ``fans``: (canonical faces (triangles,
+    3), starts, faces) CSR of the faces around each vertex position; ``threads``: how many to
+    run on (the answer is the same for any).
 
     Returns ``rays`` (k,) int64 (positions, in the order of ``positions``), ``tris`` (k,) int64
     and ``distance`` (k,) float64, sorted by (distance, triangle) within each ray.
     """
     if not len(rows):
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-    _t, prim, u, v, cos, count, _more = result[:7]
-    canonical, fan_starts, fan_faces = fans
-    arguments = (np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(positions, np.int64),
-                   prim, u, v, cos, count, np.ascontiguousarray(magnitude, np.float64),
-                   np.ascontiguousarray(near, np.float64), bool(inclusive),
-                   np.ascontiguousarray(origins, np.float64),
-                   np.ascontiguousarray(directions, np.float64),
-                   np.ascontiguousarray(planes, np.float64),
-                   triangles, altitude, float(band_scale), np.float32(graze), float(parallel_cos),
-                   float(zero), canonical, fan_starts, fan_faces)  # fmt: skip
     with parallel_region:
         numba.set_num_threads(threads_for(len(rows) * 16, threads))
-        return _decide(*arguments)
+        return _decide(
+            np.ascontiguousarray(rows, np.int64),
+            np.ascontiguousarray(positions, np.int64),
+            HitBuffers(*hits[:7]),
+            rays,
+            mesh,
+            tolerances,
+            tuple(fans),
+        )

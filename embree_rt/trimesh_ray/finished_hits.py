@@ -43,15 +43,17 @@ def _shared_positions(canonical, a, b):
     # how many of triangle a's corner positions are among b's (3: the same triangle's place)
     shared = 0
     for i in range(3):
-        if canonical[a, i] == canonical[b, 0] or canonical[a, i] == canonical[b, 1] or (
-                canonical[a, i] == canonical[b, 2]):  # fmt: skip
+        if (
+            canonical[a, i] == canonical[b, 0]
+            or canonical[a, i] == canonical[b, 1]
+            or (canonical[a, i] == canonical[b, 2])
+        ):
             shared += 1
     return shared
 
 
 @njit(inline="always")
-def _same_point(planes, directions, ray, tri_a, distance_a, tri_b, distance_b, size,
-                parallel_cos):
+def _same_point(planes, directions, ray, tri_a, distance_a, tri_b, distance_b, size, parallel_cos):
     # Two hits of a ray are at one point if their float64 plane distances agree to within the
     # rounding of the planes' formula (a few ulps of the coordinates, over the |cos| of the
     # ray with each plane) and the width of ray_triangle's tol.zero band at an edge: 1e4 ulps
@@ -62,8 +64,11 @@ def _same_point(planes, directions, ray, tri_a, distance_a, tri_b, distance_b, s
         return False
     smaller = 1.0
     for tri in (tri_a, tri_b):
-        along = abs(planes[tri, 3] * directions[ray, 0] + planes[tri, 4] * directions[ray, 1]
-                    + planes[tri, 5] * directions[ray, 2])  # fmt: skip
+        along = abs(
+            planes[tri, 3] * directions[ray, 0]
+            + planes[tri, 4] * directions[ray, 1]
+            + planes[tri, 5] * directions[ray, 2]
+        )
         smaller = min(smaller, max(along, parallel_cos))
     return gap <= scale / smaller
 
@@ -106,8 +111,9 @@ def _one_hit_per_crossing(tris, distance, canonical, crossing_tris, crossing_dis
     for i in range(1, groups):  # by (distance, triangle), as every ray's hits
         f, d = crossing_tris[i], crossing_distance[i]
         j = i - 1
-        while j >= 0 and (crossing_distance[j] > d or (crossing_distance[j] == d
-                                                        and crossing_tris[j] > f)):  # fmt: skip
+        while j >= 0 and (
+            crossing_distance[j] > d or (crossing_distance[j] == d and crossing_tris[j] > f)
+        ):
             crossing_tris[j + 1], crossing_distance[j + 1] = crossing_tris[j], crossing_distance[j]
             j -= 1
         crossing_tris[j + 1], crossing_distance[j + 1] = f, d
@@ -115,20 +121,30 @@ def _one_hit_per_crossing(tris, distance, canonical, crossing_tris, crossing_dis
 
 
 @njit(nogil=True, cache=True)
-def _merge_chunk(first_ray, stop_ray, starts, capacity, canonical, planes, directions, size,
-                 parallel_cos, grouped_tris, grouped_distance, kept):  # fmt: skip
+def _merge_chunk(first_ray, stop_ray, starts, capacity, merge, directions, grouped, kept):
     # each ray's hits at one point made one hit per crossing (``_one_hit_per_crossing``, in
-    # the run's place), then cut to `capacity`, in place; `kept` hits per ray
+    # the run's place), then cut to `capacity`, in place; `kept` hits per ray. merge:
+    # (canonical, planes, size, parallel_cos); grouped: (tris, distance) of the hits grouped by
+    # ray
+    canonical, planes, size, parallel_cos = merge
+    grouped_tris, grouped_distance = grouped
     for r in range(first_ray, stop_ray):
         first, stop = starts[r], starts[r + 1]
         out = first
         k = first
         while k < stop and out - first < capacity:
             j = k + 1
-            while j < stop and _same_point(planes, directions, r, grouped_tris[j - 1],
-                                           grouped_distance[j - 1], grouped_tris[j],
-                                           grouped_distance[j], size,
-                                           parallel_cos):  # fmt: skip
+            while j < stop and _same_point(
+                planes,
+                directions,
+                r,
+                grouped_tris[j - 1],
+                grouped_distance[j - 1],
+                grouped_tris[j],
+                grouped_distance[j],
+                size,
+                parallel_cos,
+            ):
                 j += 1
             if j - k == 1:
                 grouped_tris[out] = grouped_tris[k]
@@ -137,9 +153,13 @@ def _merge_chunk(first_ray, stop_ray, starts, capacity, canonical, planes, direc
             else:  # rare: a ray through an edge, a vertex or coincident faces
                 crossing_tris = np.empty(j - k, np.int64)
                 crossing_distance = np.empty(j - k, np.float64)
-                crossings = _one_hit_per_crossing(grouped_tris[k:j].copy(),
-                                                  grouped_distance[k:j].copy(), canonical,
-                                                  crossing_tris, crossing_distance)  # fmt: skip
+                crossings = _one_hit_per_crossing(
+                    grouped_tris[k:j].copy(),
+                    grouped_distance[k:j].copy(),
+                    canonical,
+                    crossing_tris,
+                    crossing_distance,
+                )
                 for i in range(min(crossings, capacity - (out - first))):
                     grouped_tris[out] = crossing_tris[i]
                     grouped_distance[out] = crossing_distance[i]
@@ -149,9 +169,12 @@ def _merge_chunk(first_ray, stop_ray, starts, capacity, canonical, planes, direc
 
 
 @njit(nogil=True, cache=True)
-def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped_tris, grouped_distance,
-                 origins, directions, out_rays, out_tris, locations):  # fmt: skip
-    # rays first_ray .. stop_ray; slots[d]: where this chunk's next hit of depth d goes
+def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped, points, out):
+    # rays first_ray .. stop_ray; slots[d]: where this chunk's next hit of depth d goes.
+    # points: (origins, directions, with_locations); out: (rays, tris, locations)
+    grouped_tris, grouped_distance = grouped
+    origins, directions, _with_locations = points
+    out_rays, out_tris, locations = out
     with_locations = locations.shape[0] > 0
     for r in range(first_ray, stop_ray):
         first = starts[r]
@@ -162,14 +185,20 @@ def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped_tris, grouped
             out_tris[slot] = grouped_tris[first + d]
             if with_locations:
                 for axis in range(3):  # NumPy's origins[r] + directions[r] * distance, unfused
-                    locations[slot, axis] = (origins[r, axis]
-                                             + directions[r, axis] * grouped_distance[first + d])
+                    locations[slot, axis] = (
+                        origins[r, axis] + directions[r, axis] * grouped_distance[first + d]
+                    )
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _finish(rays, tris, distance, order, ray_count, capacity, canonical, planes, size,
-            parallel_cos, origins, directions, with_locations, starts, cursor, kept, grouped_tris,
-            grouped_distance):  # fmt: skip
+def _finish(parts, order, ray_count, capacity, merge, points, scratch):
+    # parts: (rays, tris, distance); merge: (canonical, planes, size, parallel_cos); points:
+    # (origins, directions, with_locations); scratch: (starts, cursor, kept, grouped_tris,
+    # grouped_distance)
+    rays, tris, distance = parts
+    with_locations = points[2]
+    starts, cursor, kept, grouped_tris, grouped_distance = scratch
+    grouped = (grouped_tris, grouped_distance)
     reordered = order.shape[0] > 0
     # 1. counting sort by ray; in traced order, the counters of each hit's ray are scattered:
     # fetched _AHEAD hits early, so that their loads overlap
@@ -194,9 +223,16 @@ def _finish(rays, tris, distance, order, ray_count, capacity, canonical, planes,
     # 2. in parallel over chunks of rays: one hit per crossing and cut, in each ray's range
     n_chunks = (ray_count + CHUNK - 1) // CHUNK
     for c in prange(n_chunks):
-        _merge_chunk(c * CHUNK, min(ray_count, (c + 1) * CHUNK), starts, capacity, canonical,
-                     planes, directions, size, parallel_cos, grouped_tris, grouped_distance,
-                     kept)  # fmt: skip
+        _merge_chunk(
+            c * CHUNK,
+            min(ray_count, (c + 1) * CHUNK),
+            starts,
+            capacity,
+            merge,
+            points[1],
+            grouped,
+            kept,
+        )
     # 3. depth-major: rays with more than d hits, ascending, for each depth d; each chunk's
     # hits of depth d follow the earlier chunks' (a prefix sum over chunks, depth by depth), so
     # the placement is the serial one on any number of threads
@@ -217,11 +253,12 @@ def _finish(rays, tris, distance, order, ray_count, capacity, canonical, planes,
     out_rays = np.empty(total, np.int64)
     out_tris = np.empty(total, np.int64)
     locations = np.empty((total if with_locations else 0, 3), np.float64)
+    out = (out_rays, out_tris, locations)
     for c in prange(n_chunks):
-        _place_chunk(c * CHUNK, min(ray_count, (c + 1) * CHUNK), slots[c], starts, kept,
-                     grouped_tris, grouped_distance, origins, directions, out_rays, out_tris,
-                     locations)  # fmt: skip
-    return out_rays, out_tris, locations
+        _place_chunk(
+            c * CHUNK, min(ray_count, (c + 1) * CHUNK), slots[c], starts, kept, grouped, points, out
+        )
+    return out
 
 
 def finished_hits(
@@ -260,21 +297,38 @@ def finished_hits(
     the same for any).
     """
     if scratch is None:
+
         def scratch(name, size, dtype):
             return np.empty(size, dtype)
+
     k = len(rays)
-    arguments = (
-        np.ascontiguousarray(rays, np.int64), np.ascontiguousarray(tris, np.int64),
+    parts = (
+        np.ascontiguousarray(rays, np.int64),
+        np.ascontiguousarray(tris, np.int64),
         np.ascontiguousarray(distance, np.float64),
-        np.zeros(0, np.int64) if order is None else np.ascontiguousarray(order, np.int64),
-        int(ray_count), max(1, int(capacity)), np.ascontiguousarray(canonical, np.int64),
-        np.ascontiguousarray(planes, np.float64), float(size), float(parallel_cos),
-        np.ascontiguousarray(origins, np.float64), np.ascontiguousarray(directions, np.float64),
-        bool(with_locations), scratch("starts", ray_count + 1, np.int64),
-        scratch("cursor", ray_count, np.int64), scratch("kept", ray_count, np.int64),
-        scratch("grouped_tris", k, np.int64), scratch("grouped_distance", k, np.float64),
-    )  # fmt: skip
+    )
+    merge = (
+        np.ascontiguousarray(canonical, np.int64),
+        np.ascontiguousarray(planes, np.float64),
+        float(size),
+        float(parallel_cos),
+    )
+    points = (
+        np.ascontiguousarray(origins, np.float64),
+        np.ascontiguousarray(directions, np.float64),
+        bool(with_locations),
+    )
+    work = (
+        scratch("starts", ray_count + 1, np.int64),
+        scratch("cursor", ray_count, np.int64),
+        scratch("kept", ray_count, np.int64),
+        scratch("grouped_tris", k, np.int64),
+        scratch("grouped_distance", k, np.float64),
+    )
+    order = np.zeros(0, np.int64) if order is None else np.ascontiguousarray(order, np.int64)
     with parallel_region:
         numba.set_num_threads(threads_for(int(ray_count), threads))
-        out_rays, out_tris, locations = _finish(*arguments)
+        out_rays, out_tris, locations = _finish(
+            parts, order, int(ray_count), max(1, int(capacity)), merge, points, work
+        )
     return out_rays, out_tris, locations if with_locations else None

@@ -51,6 +51,7 @@ from trimesh.constants import tol
 from embree_rt.embree.validation import as_points
 from embree_rt.trimesh_ray.decided_hits import decided_hits
 from embree_rt.trimesh_ray.finished_hits import finished_hits
+from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
 from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
 from embree_rt.trimesh_ray.local_scene import BAND_ULPS, EDGE_BAND_SCALE, EPS32, LocalScene
 from embree_rt.trimesh_ray.plane_distances import plane_distances
@@ -59,11 +60,13 @@ from embree_rt.trimesh_ray.settled_hits import settled_hits
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
 # near an edge or along a face to trust their parity.
-_CONTAINS_DIRECTIONS = np.array([
-    [0.4395064455, 0.617598629942, 0.652231566745],
-    [-0.5773502691896258, 0.7071067811865476, -0.4082482904638631],
-    [0.8017837257372732, -0.2672612419124244, -0.5345224838248488],
-])  # fmt: skip
+_CONTAINS_DIRECTIONS = np.array(
+    [
+        [0.4395064455, 0.617598629942, 0.652231566745],
+        [-0.5773502691896258, 0.7071067811865476, -0.4082482904638631],
+        [0.8017837257372732, -0.2672612419124244, -0.5345224838248488],
+    ]
+)
 # trimesh.intersections.planes_lines: a ray and a plane with |cos| at most this do not meet.
 _PARALLEL_COS = 1e-5
 # Hits at a smaller |cos| (float32) are decided again in float64: near _PARALLEL_COS, Embree's
@@ -134,18 +137,19 @@ class _HitList:
         self._count = 0
 
     def _lent(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return tuple(self._scene.scratch(f"hits_{k}", size, dtype)
-                     for k, dtype in enumerate((np.int64, np.int64, np.float64)))  # fmt: skip
+        return tuple(
+            self._scene.scratch(f"hits_{k}", size, dtype)
+            for k, dtype in enumerate((np.int64, np.int64, np.float64))
+        )
 
     def room(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Views of the next ``size`` places, to write a part into (then ``filled``)."""
         if self._count + size > len(self._arrays[0]):
-            grown = tuple(np.empty(2 * (self._count + size), array.dtype)
-                          for array in self._arrays)  # fmt: skip
+            grown = tuple(np.empty(2 * (self._count + size), array.dtype) for array in self._arrays)
             for old, new in zip(self._arrays, grown, strict=True):
-                new[:self._count] = old[:self._count]
+                new[: self._count] = old[: self._count]
             self._arrays = grown
-        return tuple(array[self._count:self._count + size] for array in self._arrays)
+        return tuple(array[self._count : self._count + size] for array in self._arrays)
 
     def filled(self, size: int) -> None:
         """The next ``size`` places now hold a part."""
@@ -159,7 +163,7 @@ class _HitList:
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rays, tris, distance) of every part so far."""
-        return tuple(array[:self._count] for array in self._arrays)
+        return tuple(array[: self._count] for array in self._arrays)
 
 
 class RayMeshIntersector:
@@ -198,8 +202,9 @@ class RayMeshIntersector:
             raise ValueError("tnear: must be finite and >= 0")
         return near, True
 
-    def _hits(self, origins, directions, max_hits, tnear, reorder=False, with_locations=False,
-              room=None):
+    def _hits(
+        self, origins, directions, max_hits, tnear, reorder=False, with_locations=False, room=None
+    ):
         """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
         ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
         ``with_locations``, the points (k, 3) float64 (else None); each ray's hits by distance,
@@ -219,19 +224,35 @@ class RayMeshIntersector:
         given_origins, given_directions, given_tnear = origins, directions, tnear
         traced_order = None
         if reorder and scene.bounds is not None:
-            (traced_order, origins, directions, local_origins, local_directions, magnitude,
-             finite) = ordered_local_rays(origins, directions, scene.origin, scene.scale,
-                                          scene.extent, scene.bounds, scene.bvh.threads)
+            (
+                traced_order,
+                origins,
+                directions,
+                local_origins,
+                local_directions,
+                magnitude,
+                finite,
+            ) = ordered_local_rays(
+                origins,
+                directions,
+                scene.origin,
+                scene.scale,
+                scene.extent,
+                scene.bounds,
+                scene.bvh.threads,
+            )
             if not finite:  # named by its row as given
-                given = local_rays(given_origins, given_directions, scene.origin, scene.scale,
-                                   scene.extent)  # fmt: skip
+                given = local_rays(
+                    given_origins, given_directions, scene.origin, scene.scale, scene.extent
+                )
                 as_points(given[0], "origins")
                 as_points(given[1], "directions")
             if tnear is not None and np.ndim(tnear):
                 tnear = np.broadcast_to(np.asarray(tnear, np.float64), (n,))[traced_order]
         else:
             local_origins, local_directions, magnitude = local_rays(
-                origins, directions, scene.origin, scene.scale, scene.extent)
+                origins, directions, scene.origin, scene.scale, scene.extent
+            )
         near, inclusive = self._resolve_tnear(scene, magnitude, tnear)
         capacity = max(1, int(max_hits))
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
@@ -244,27 +265,40 @@ class RayMeshIntersector:
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
         buffers = scene.hit_buffers(first_room)
         hits, pending_parts = _HitList(scene, 2 * n), []
-        band_scale = EDGE_BAND_SCALE
+        rules = tolerances(EDGE_BAND_SCALE, _GRAZE_COS, _PARALLEL_COS, tol.zero)
+        world = world_rays(origins, directions, magnitude, near, inclusive)
         for first in range(0, n, block):
             rows = slice(first, min(n, first + block))
             # Embree from the local frame's tnear (inclusive, a little short of ours): which
             # hits count as at the origin is decided below in float64.
             block_near = (near[rows] * scene.scale * 0.5).astype(np.float32)
-            result = scene.bvh.all_hits(local_origins[rows], local_directions[rows], block_near,
-                                        np.inf, first_room, out=buffers)  # fmt: skip
+            result = scene.bvh.all_hits(
+                local_origins[rows],
+                local_directions[rows],
+                block_near,
+                np.inf,
+                first_room,
+                out=buffers,
+            )
             scene.keep_hit_buffers(first_room, result)
             buffers = result
             # rays clear of edges and grazing settled in one compiled pass; the others go to the
             # float64 path below, those that overflowed `first_room` traced again first
             recorded = int(result[5].sum())
             rays, tris, distance, messy = settled_hits(
-                result, room > first_room, magnitude[rows], near[rows], inclusive, origins[rows],
-                directions[rows], scene.planes, scene.min_altitude,
-                scene.floor_altitude, band_scale, _GRAZE_COS, _PARALLEL_COS, scene.bvh.threads,
-                tuple(scene.scratch(f"settle_{k}", recorded, dtype) for k, dtype in
-                      enumerate((np.int64, np.int64, np.float64))),
-                hits.room(recorded), first,
-            )  # fmt: skip
+                result,
+                room > first_room,
+                world_rays(origins[rows], directions[rows], magnitude[rows], near[rows], inclusive),
+                scene.tables,
+                rules,
+                scene.bvh.threads,
+                tuple(
+                    scene.scratch(f"settle_{k}", recorded, dtype)
+                    for k, dtype in enumerate((np.int64, np.int64, np.float64))
+                ),
+                hits.room(recorded),
+                first,
+            )
             hits.filled(len(rays))
             # Messy rays whose hits all fit are complete: decided in float64 now, from the
             # buffers as traced (a second trace with more room records the same hits in the same
@@ -273,46 +307,63 @@ class RayMeshIntersector:
             if room <= first_room:
                 truncated.append(first + np.flatnonzero(messy & result[6]))
             complete_rows = np.flatnonzero(messy & ~overflowed)
-            hits.append(self._decided(complete_rows, first + complete_rows, result, magnitude,
-                                      near, inclusive, origins, directions))  # fmt: skip
+            hits.append(self._decided(complete_rows, first + complete_rows, result, world, rules))
             pending_parts.append(first + np.flatnonzero(messy & overflowed))
         pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
         block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
         for first in range(0, len(pending), block):
-            which = pending[first:first + block]
+            which = pending[first : first + block]
             block_near = (near[which] * scene.scale * 0.5).astype(np.float32)
-            result = scene.bvh.all_hits(local_origins[which], local_directions[which], block_near,
-                                        np.inf, room)  # fmt: skip
-            hits.append(self._decided(np.arange(len(which)), which, result, magnitude, near,
-                                      inclusive, origins, directions))  # fmt: skip
+            result = scene.bvh.all_hits(
+                local_origins[which], local_directions[which], block_near, np.inf, room
+            )
+            hits.append(self._decided(np.arange(len(which)), which, result, world, rules))
             truncated.append(which[result[6]])
         rays, tris, distance = hits.arrays()
-        finished = finished_hits(rays, tris, distance, traced_order, n, capacity, scene.fans()[0],
-                             scene.planes, scene.extent / scene.scale, _PARALLEL_COS,
-                             given_origins, given_directions, with_locations, scene.scratch,
-                             scene.bvh.threads)  # fmt: skip
+        finished = finished_hits(
+            rays,
+            tris,
+            distance,
+            traced_order,
+            n,
+            capacity,
+            scene.fans()[0],
+            scene.planes,
+            scene.extent / scene.scale,
+            _PARALLEL_COS,
+            given_origins,
+            given_directions,
+            with_locations,
+            scene.scratch,
+            scene.bvh.threads,
+        )
         truncated = np.concatenate(truncated) if truncated else np.zeros(0, np.int64)
         if traced_order is not None:
             truncated = traced_order[truncated]
         short = truncated[np.bincount(finished[0], minlength=n)[truncated] < capacity]
         if not len(short):
             return finished
-        again = self._hits(given_origins[short], given_directions[short], capacity,
-                           given_tnear if given_tnear is None or not np.ndim(given_tnear)
-                           else np.broadcast_to(given_tnear, (n,))[short],
-                           with_locations=with_locations, room=4 * room)  # fmt: skip
+        if given_tnear is not None and np.ndim(given_tnear):
+            given_tnear = np.broadcast_to(given_tnear, (n,))[short]
+        again = self._hits(
+            given_origins[short],
+            given_directions[short],
+            capacity,
+            given_tnear,
+            with_locations=with_locations,
+            room=4 * room,
+        )
         return _spliced(finished, short, again)
 
-    def _decided(self, rows, positions, result, magnitude, near, inclusive, origins, directions):
+    def _decided(self, rows, positions, result, world, rules):
         """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
         decides them, against all the triangles around them (``decided_hits``)."""
         scene = self._scene
         if not len(rows):
             return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-        return decided_hits(rows, positions, result, magnitude, near, inclusive, origins,
-                            directions, scene.planes, scene.triangles,
-                            scene.min_altitude, EDGE_BAND_SCALE, _GRAZE_COS, _PARALLEL_COS,
-                            tol.zero, scene.fans(), scene.bvh.threads)  # fmt: skip
+        return decided_hits(
+            rows, positions, result, world, scene.tables, rules, scene.fans(), scene.bvh.threads
+        )
 
     def _first_hits(self, origins, directions, tnear) -> np.ndarray:
         """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
@@ -329,16 +380,30 @@ class RayMeshIntersector:
             if not np.isfinite(near).all() or (near < 0).any():
                 raise ValueError("tnear: must be finite and >= 0")
         prim, suspect = screened_nearest(
-            scene.bvh, origins, directions, shift=scene.origin, scale=scene.scale,
-            extent=scene.extent, bounds=scene.bounds, near=near, near_ulps=_TNEAR_ULPS,
-            altitude=scene.min_altitude, floor_altitude=scene.floor_altitude, band_ulps=BAND_ULPS,
-            graze=_GRAZE_COS, near_factor=4.0,
-        )  # fmt: skip
+            scene.bvh,
+            origins,
+            directions,
+            shift=scene.origin,
+            scale=scene.scale,
+            extent=scene.extent,
+            bounds=scene.bounds,
+            near=near,
+            near_ulps=_TNEAR_ULPS,
+            altitude=scene.min_altitude,
+            floor_altitude=scene.floor_altitude,
+            band_ulps=BAND_ULPS,
+            graze=_GRAZE_COS,
+            near_factor=4.0,
+        )
         first = prim.astype(np.int64)
         again = np.flatnonzero(suspect)
         if len(again):
-            more = self._hits(origins[again], util.unitize(directions[again]), 1,
-                              None if near is None else near[again])  # fmt: skip
+            more = self._hits(
+                origins[again],
+                util.unitize(directions[again]),
+                1,
+                None if near is None else near[again],
+            )
             first[again] = -1
             first[again[more[0]]] = more[1]
         return first
@@ -373,24 +438,30 @@ class RayMeshIntersector:
             if not return_locations:
                 return tris, rays
             directions = util.unitize(given_directions[rays])
-            distance = _plane_distance(self._scene, origins[rays], directions,
-                                       np.arange(len(rays)), tris)[0]  # fmt: skip
+            distance = _plane_distance(
+                self._scene, origins[rays], directions, np.arange(len(rays)), tris
+            )[0]
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, locations = self._hits(origins, directions, max_hits, tnear, reorder=True,
-                                           with_locations=return_locations)  # fmt: skip
+        rays, tris, locations = self._hits(
+            origins, directions, max_hits, tnear, reorder=True, with_locations=return_locations
+        )
         if return_locations:
             return tris, rays, locations
         return tris, rays
 
-    def intersects_location(self, ray_origins, ray_directions, multiple_hits: bool = True,
-                            *, tnear=None):  # fmt: skip
+    def intersects_location(
+        self, ray_origins, ray_directions, multiple_hits: bool = True, *, tnear=None
+    ):
         """Where rays hit: ``(locations (m, 3) float64, index_ray (m,) int64, index_tri (m,)
         int64)``, one per crossing of the surface (see ``intersects_id``)."""
         index_tri, index_ray, locations = self.intersects_id(
-            ray_origins, ray_directions, multiple_hits=multiple_hits, return_locations=True,
+            ray_origins,
+            ray_directions,
+            multiple_hits=multiple_hits,
+            return_locations=True,
             tnear=tnear,
-        )  # fmt: skip
+        )
         return locations, index_ray, index_tri
 
     def intersects_first(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
@@ -428,8 +499,7 @@ class RayMeshIntersector:
         pending = np.arange(len(candidates))
         for k, direction in enumerate(_CONTAINS_DIRECTIONS):
             directions = np.tile(direction.astype(np.float32), (len(pending), 1))
-            odd, clear = scene.bvh.crossing_parity(local[pending], directions, band,
-                                                   _GRAZE_COS)  # fmt: skip
+            odd, clear = scene.bvh.crossing_parity(local[pending], directions, band, _GRAZE_COS)
             last = k == len(_CONTAINS_DIRECTIONS) - 1
             votes[pending] += odd
             settled = clear | last
@@ -456,4 +526,3 @@ class RayMeshIntersector:
 
     def __copy__(self, *args) -> RayMeshIntersector:
         return RayMeshIntersector(geometry=self.mesh, scale_to_box=self._scale_to_box)
-

@@ -14,6 +14,7 @@ still in cache for the next. Each output row is the same arithmetic on the same 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -22,7 +23,7 @@ from numba import njit, prange
 from embree_rt.compiled.morton import radix_order
 from embree_rt.compiled.pointers import prefetch
 from embree_rt.compiled.work_split import parallel_region, threads_for
-from embree_rt.trimesh_ray.ray_order import box_cells, segment_key
+from embree_rt.trimesh_ray.ray_order import box, segment_key
 
 CHUNK = 1024  # rays per parallel iteration of the ordering passes
 _AHEAD = 16
@@ -51,11 +52,26 @@ def local_points(points: np.ndarray, shift: np.ndarray, scale: float) -> np.ndar
     return out
 
 
+class Frame(NamedTuple):
+    """The BVH's local frame: a point p is at ``(p - shift) * scale`` there (``shift`` (3,)
+    float64), and ``extent`` is the mesh's largest local coordinate."""
+
+    shift: np.ndarray
+    scale: float
+    extent: float
+
+
+def frame(shift: np.ndarray, scale: float, extent: float) -> Frame:
+    """A ``Frame`` with the kernels' types."""
+    return Frame(np.ascontiguousarray(shift, np.float64), float(scale), float(extent))
+
+
 @njit(inline="always")
-def _to_local(origins, directions, i, shift, scale, extent, local_origins, local_directions,
-              magnitude, j):  # fmt: skip
-    """Row i of the float64 rays into row j of the local arrays. Returns whether the local row
-    is finite."""
+def _to_local(origins, directions, i, frame, local, j):
+    """Row i of the float64 rays into row j of the ``local`` arrays (origins, directions (n, 3)
+    float32, magnitude (n,) float64). Returns whether the local row is finite."""
+    shift, scale, extent = frame
+    local_origins, local_directions, magnitude = local
     largest = extent
     finite = True
     for k in range(3):
@@ -69,11 +85,9 @@ def _to_local(origins, directions, i, shift, scale, extent, local_origins, local
 
 
 @njit(nogil=True, cache=True)
-def _local_rays(origins, directions, shift, scale, extent, local_origins, local_directions,
-                magnitude):  # fmt: skip
+def _local_rays(origins, directions, frame, local):
     for i in range(origins.shape[0]):
-        _to_local(origins, directions, i, shift, scale, extent, local_origins, local_directions,
-                  magnitude, i)  # fmt: skip
+        _to_local(origins, directions, i, frame, local, i)
 
 
 def local_rays(
@@ -87,15 +101,18 @@ def local_rays(
     local_directions = np.empty((n, 3), np.float32)
     magnitude = np.empty(n, np.float64)
     if n:
-        _local_rays(np.ascontiguousarray(origins, np.float64),
-                    np.ascontiguousarray(directions, np.float64),
-                    np.ascontiguousarray(shift, np.float64), float(scale), float(extent),
-                    local_origins, local_directions, magnitude)  # fmt: skip
+        _local_rays(
+            np.ascontiguousarray(origins, np.float64),
+            np.ascontiguousarray(directions, np.float64),
+            frame(shift, scale, extent),
+            (local_origins, local_directions, magnitude),
+        )
     return local_origins, local_directions, magnitude
 
 
 @njit(nogil=True, cache=True)
-def _key_chunk(first, stop, origins, directions, lower, upper, cells_per_unit, keys):
+def _key_chunk(first, stop, origins, directions, box, keys):
+    lower, upper, cells_per_unit = box
     for i in range(first, stop):
         keys[i] = segment_key(origins[i], directions[i], lower, upper, cells_per_unit)
 
@@ -107,11 +124,12 @@ def _inverse_chunk(first, stop, order, position):
 
 
 @njit(nogil=True, cache=True)
-def _scatter_chunk(first, stop, position, origins, directions, shift, scale, extent,
-                   ordered_origins, ordered_directions, local_origins, local_directions,
-                   magnitude, bad):  # fmt: skip
+def _scatter_chunk(first, stop, position, origins, directions, frame, out, bad):
     # rows read in the given order and written to their places: scattered stores, which do not
-    # stall the loop as scattered loads (a gather by `order`) do
+    # stall the loop as scattered loads (a gather by `order`) do. out: (ordered origins,
+    # ordered directions, local origins, local directions, magnitude)
+    ordered_origins, ordered_directions, local_origins, local_directions, magnitude = out
+    local = (local_origins, local_directions, magnitude)
     for i in range(first, stop):
         if i + _AHEAD < stop:  # the rows written _AHEAD rays on, fetched now: overlapping
             ahead = position[i + _AHEAD]
@@ -124,29 +142,25 @@ def _scatter_chunk(first, stop, position, origins, directions, shift, scale, ext
         for k in range(3):
             ordered_origins[j, k] = origins[i, k]
             ordered_directions[j, k] = directions[i, k]
-        if not _to_local(origins, directions, i, shift, scale, extent, local_origins,
-                         local_directions, magnitude, j):  # fmt: skip
+        if not _to_local(origins, directions, i, frame, local, j):
             bad[0] = True  # the caller names the row
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _ordered_local_rays(origins, directions, shift, scale, extent, lower, upper, cells_per_unit,
-                        ordered_origins, ordered_directions, local_origins, local_directions,
-                        magnitude, bad):  # fmt: skip
+def _ordered_local_rays(origins, directions, frame, box, out, bad):
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     keys = np.empty(n, np.uint32)
     for c in prange(n_chunks):
-        _key_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), origins, directions, lower, upper,
-                   cells_per_unit, keys)  # fmt: skip
+        _key_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), origins, directions, box, keys)
     order = radix_order(keys)
     position = np.empty(n, np.int64)
     for c in prange(n_chunks):
         _inverse_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, position)
     for c in prange(n_chunks):
-        _scatter_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), position, origins, directions, shift,
-                       scale, extent, ordered_origins, ordered_directions, local_origins,
-                       local_directions, magnitude, bad)  # fmt: skip
+        _scatter_chunk(
+            c * CHUNK, min(n, (c + 1) * CHUNK), position, origins, directions, frame, out, bad
+        )
     return order
 
 
@@ -168,18 +182,24 @@ def ordered_local_rays(
     ``local_rays`` of the rays as given names the first bad one).
     """
     n = len(origins)
-    lower, upper = np.asarray(bounds, np.float64)
-    out = (np.empty((n, 3), np.float64), np.empty((n, 3), np.float64),
-           np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
-           np.empty(n, np.float64))  # fmt: skip
+    out = (
+        np.empty((n, 3), np.float64),
+        np.empty((n, 3), np.float64),
+        np.empty((n, 3), np.float32),
+        np.empty((n, 3), np.float32),
+        np.empty(n, np.float64),
+    )
     if not n:
         return (np.zeros(0, np.int64), *out, True)
     bad = np.zeros(1, np.bool_)
-    arguments = (np.ascontiguousarray(origins, np.float64),
-                 np.ascontiguousarray(directions, np.float64),
-                 np.ascontiguousarray(shift, np.float64), float(scale), float(extent), lower,
-                 upper, box_cells(lower, upper), *out, bad)  # fmt: skip
     with parallel_region:
         numba.set_num_threads(threads_for(n, threads))
-        order = _ordered_local_rays(*arguments)
+        order = _ordered_local_rays(
+            np.ascontiguousarray(origins, np.float64),
+            np.ascontiguousarray(directions, np.float64),
+            frame(shift, scale, extent),
+            box(bounds),
+            out,
+            bad,
+        )
     return (order, *out, not bad[0])

@@ -10,6 +10,7 @@ import numpy as np
 import trimesh
 
 from embree_rt.embree import BVH
+from embree_rt.trimesh_ray.hit_inputs import MeshTables
 from embree_rt.trimesh_ray.local_frame import local_points
 
 EPS32 = float(np.finfo(np.float32).eps)
@@ -38,8 +39,11 @@ class LocalScene:
         # Rays are traced in the order of where they enter the mesh's box (ray_order) on meshes
         # whose BVH outgrows the caches: 1.4-1.6x the rate on 1e5 and 1.3e6 triangles; on a
         # small mesh (2,304 triangles) the sort cost more than the order saved.
-        self.bounds = (np.array([vertices.min(axis=0), vertices.max(axis=0)])
-                       if len(faces) >= REORDER_FACES else None)  # fmt: skip
+        self.bounds = (
+            np.array([vertices.min(axis=0), vertices.max(axis=0)])
+            if len(faces) >= REORDER_FACES
+            else None
+        )
         # single rays: trimesh's queries are rarely coherent, and packets of incoherent rays
         # traced 10-15% slower here
         self.bvh = BVH(lanes=1, robust=True, filters=True)
@@ -55,10 +59,17 @@ class LocalScene:
         self.min_altitude = min_altitudes(self.triangles, np.asarray(mesh.area_faces)) * scale
         # 0 when any triangle is degenerate: then every hit's own altitude is looked up
         self.floor_altitude = float(self.min_altitude.min()) if self.face_count else 0.0
+        # the same tables as the compiled float64 passes take them
+        self.tables = MeshTables(
+            np.ascontiguousarray(self.planes, np.float64),
+            self.triangles,
+            self.min_altitude,
+            self.floor_altitude,
+        )
         # contains_points' rays reach twice the mesh's extent
-        self.contains_band = _edge_band(self, np.arange(self.face_count),
-                                        np.full(self.face_count, 2 * self.extent)
-                                        ).astype(np.float32)  # fmt: skip
+        self.contains_band = _edge_band(
+            self, np.arange(self.face_count), np.full(self.face_count, 2 * self.extent)
+        ).astype(np.float32)
         self._fans: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         # all_hits' buffers and working space (megabytes), kept from query to query, one set a
         # thread: fresh arrays of that size come from the kernel a page fault a 4 KiB page at a

@@ -17,11 +17,16 @@ from numba import njit
 def plane_distance(planes, origins, directions, r, f):
     """(distance, |cos|) float64 of ray ``r`` to triangle ``f``'s plane (see ``plane_distances``);
     the one copy of this arithmetic, which ``settled_hits`` also runs."""
-    toward = ((planes[f, 0] - origins[r, 0]) * planes[f, 3]
-              + (planes[f, 1] - origins[r, 1]) * planes[f, 4]
-              + (planes[f, 2] - origins[r, 2]) * planes[f, 5])  # fmt: skip
-    along = (directions[r, 0] * planes[f, 3] + directions[r, 1] * planes[f, 4]
-             + directions[r, 2] * planes[f, 5])  # fmt: skip
+    toward = (
+        (planes[f, 0] - origins[r, 0]) * planes[f, 3]
+        + (planes[f, 1] - origins[r, 1]) * planes[f, 4]
+        + (planes[f, 2] - origins[r, 2]) * planes[f, 5]
+    )
+    along = (
+        directions[r, 0] * planes[f, 3]
+        + directions[r, 1] * planes[f, 4]
+        + directions[r, 2] * planes[f, 5]
+    )
     return toward / along, abs(along)  # ±inf or nan along the plane, as NumPy gives
 
 
@@ -31,8 +36,10 @@ def insert_by_distance(out_distance, out_tris, start, stop, distance, triangle):
     sorted by distance then triangle (a ray's few hits: insertion is the cheapest sort; float64
     may order what float32 tied). The run grows to ``stop + 1``."""
     m = stop
-    while m > start and (out_distance[m - 1] > distance
-                         or (out_distance[m - 1] == distance and out_tris[m - 1] > triangle)):
+    while m > start and (
+        out_distance[m - 1] > distance
+        or (out_distance[m - 1] == distance and out_tris[m - 1] > triangle)
+    ):
         out_distance[m] = out_distance[m - 1]
         out_tris[m] = out_tris[m - 1]
         m -= 1
@@ -43,8 +50,7 @@ def insert_by_distance(out_distance, out_tris, start, stop, distance, triangle):
 @njit(nogil=True, cache=True, error_model="numpy")
 def _plane_distances(planes, origins, directions, rays, tris, distance, cos):
     for k in range(rays.shape[0]):
-        distance[k], cos[k] = plane_distance(planes, origins, directions,
-                                             rays[k], tris[k])  # fmt: skip
+        distance[k], cos[k] = plane_distance(planes, origins, directions, rays[k], tris[k])
 
 
 def plane_distances(
@@ -66,9 +72,13 @@ def plane_distances(
     distance = np.empty(count, np.float64)
     cos = np.empty(count, np.float64)
     if count:
-        _plane_distances(np.ascontiguousarray(planes, np.float64),
-                         np.ascontiguousarray(origins, np.float64),
-                         np.ascontiguousarray(directions, np.float64),
-                         np.ascontiguousarray(rays, np.int64), np.ascontiguousarray(tris, np.int64),
-                         distance, cos)  # fmt: skip
+        _plane_distances(
+            np.ascontiguousarray(planes, np.float64),
+            np.ascontiguousarray(origins, np.float64),
+            np.ascontiguousarray(directions, np.float64),
+            np.ascontiguousarray(rays, np.int64),
+            np.ascontiguousarray(tris, np.int64),
+            distance,
+            cos,
+        )
     return distance, cos

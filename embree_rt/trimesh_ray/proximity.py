@@ -91,9 +91,15 @@ class ProximityQuery:
     def _closest(self, points: np.ndarray):
         scene = self._scene
         answers = closest_points(
-            scene.bvh.scene_address(), scene.table, points, scene.shift, scene.scale,
-            scene.extent, scene.tolerance, numba.config.NUMBA_NUM_THREADS,
-        )  # fmt: skip
+            scene.bvh.scene_address(),
+            scene.table,
+            points,
+            scene.shift,
+            scene.scale,
+            scene.extent,
+            scene.tolerance,
+            numba.config.NUMBA_NUM_THREADS,
+        )
         missing = np.flatnonzero(answers[2] < 0)
         if len(missing):
             row = int(missing[0])

@@ -26,6 +26,7 @@ immutable BVH, whose result depends on that ray alone (see the callers).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -92,3 +93,18 @@ def box_cells(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     size = np.asarray(upper, np.float64) - np.asarray(lower, np.float64)
     with np.errstate(divide="ignore"):
         return np.where(size > 0, CELLS / np.where(size > 0, size, 1.0), 0.0)
+
+
+class Box(NamedTuple):
+    """The box rays are keyed in: ``lower``, ``upper`` (3,) float64 corners and
+    ``cells_per_unit`` (3,) float64 (``box_cells``)."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    cells_per_unit: np.ndarray
+
+
+def box(bounds: np.ndarray) -> Box:
+    """The ``Box`` of ``bounds`` (2, 3) float (lower and upper corners)."""
+    lower, upper = np.asarray(bounds, np.float64)
+    return Box(lower, upper, box_cells(lower, upper))

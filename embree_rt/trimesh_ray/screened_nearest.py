@@ -24,6 +24,7 @@ on big meshes) is then never touched, which is where the pass spent most of its 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -41,21 +42,46 @@ from embree_rt.embree.kernels import (
     intersect_chunk,
 )
 from embree_rt.embree.validation import as_points
-from embree_rt.trimesh_ray.local_frame import local_coordinate
-from embree_rt.trimesh_ray.ray_order import box_cells, entry_key
+from embree_rt.trimesh_ray.local_frame import frame, local_coordinate
+from embree_rt.trimesh_ray.ray_order import box, entry_key
 
 _EPS32 = np.float64(np.finfo(np.float32).eps)
 # trimesh.util.unitize leaves vectors no longer than this as they are
 _UNIT_THRESHOLD = 1e-12
 
 
+class Near(NamedTuple):
+    """Where each ray's hits start to count: ``world`` (n,) float64 world distances, or empty
+    for ``ulps`` float32 ulps of each ray's magnitude; Embree looks from half of it, and a hit
+    within ``factor`` times it is suspect."""
+
+    world: np.ndarray
+    ulps: float
+    factor: float
+
+
+class Screen(NamedTuple):
+    """What makes a hit suspect: ``altitude`` (primitives,) float64 smallest local altitude of
+    each triangle (0: degenerate, always suspect) and ``floor_altitude`` its smallest value; a
+    barycentric distance from an edge within ``band_ulps`` float32 ulps of the magnitude over
+    the altitude; |cos| <= ``graze``."""
+
+    altitude: np.ndarray
+    floor_altitude: float
+    band_ulps: float
+    graze: float
+
+
 @njit(nogil=True, cache=True)
-def _frame_chunk(first, stop, origins, directions, shift, scale, extent, near_world, near_ulps,
-                 near_factor, lower, upper, cells_per_unit, rays, limits, keys,
-                 bad):  # fmt: skip
+def _frame_chunk(first, stop, origins, directions, frame, near_rule, box, staged, bad):
     # the local frame (local_frame.local_coordinate) and trimesh.util.unitize's unit direction:
-    # rays[i] = local origin, unit direction (float32), limits[i] = Embree's tnear, the
-    # screening's origin limit; and with keys, ray i's tracing-order key
+    # staged = (rays, limits, keys): rays[i] = local origin, unit direction (float32),
+    # limits[i] = Embree's tnear, the screening's origin limit; and with keys, ray i's
+    # tracing-order key
+    shift, scale, extent = frame
+    near_world, near_ulps, near_factor = near_rule
+    lower, upper, cells_per_unit = box
+    rays, limits, keys = staged
     given = near_world.shape[0] > 0
     for i in range(first, stop):
         magnitude = extent
@@ -98,16 +124,16 @@ def _gather_chunk(first, stop, order, rays, limits, ordered_rays, ordered_limits
 
 
 @njit(nogil=True, cache=True)
-def _trace_chunk(scene, lanes, words, first, stop, origins, directions, limits, extent,
-                 altitude, floor_altitude, band_ulps, graze, tnear, tfar, t, normal, u, v, prim,
-                 geom, inst, suspect):  # fmt: skip
-    # local rays first .. stop: origins, directions (n, 3) float32, limits (n, 2) float64
+def _trace_chunk(query, words, first, stop, rays, limits, extent, screen, hits, suspect):
+    # local rays first .. stop of `rays` (kernels.Rays; tnear and tfar written here from
+    # limits (n, 2) float64), their nearest hits into `hits` (kernels.NearestHits)
+    origins, directions, tnear, tfar = rays
+    altitude, floor_altitude, band_ulps, graze = screen
+    t, normal, u, v, prim, _geom, _inst = hits
     for i in range(first, stop):
         tnear[i] = np.float32(limits[i, 0])
         tfar[i] = np.inf
-    intersect_chunk(Query(scene, 0, lanes), words, first, stop,
-                    Rays(origins, directions, tnear, tfar),
-                    NearestHits(t, normal, u, v, prim, geom, inst), None)
+    intersect_chunk(query, words, first, stop, rays, hits, None)
     floor_band_scale = band_ulps * _EPS32 / floor_altitude if floor_altitude > 0 else np.inf
     for i in range(first, stop):
         p = prim[i]
@@ -140,48 +166,83 @@ def _scatter_chunk(first, stop, order, ordered_prim, ordered_suspect, prim, susp
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _screened(scene, lanes, origins, directions, shift, scale, extent, reorder, lower, upper,
-              cells_per_unit, near_world, near_ulps, altitude, floor_altitude, band_ulps, graze,
-              near_factor, prim, suspect, bad):  # fmt: skip
+def _screened(
+    query, origins, directions, frame, reorder, box, near_rule, screen, prim, suspect, bad
+):
     n = origins.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     rays = np.empty((n, 6), np.float32)
     limits = np.empty((n, 2), np.float64)
     keys = np.empty(n if reorder else 0, np.uint32)
+    staged = (rays, limits, keys)
     for c in prange(n_chunks):
-        _frame_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), origins, directions, shift, scale,
-                     extent, near_world, near_ulps, near_factor, lower, upper, cells_per_unit,
-                     rays, limits, keys, bad)  # fmt: skip
+        _frame_chunk(
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            origins,
+            directions,
+            frame,
+            near_rule,
+            box,
+            staged,
+            bad,
+        )
     if reorder:
         order = radix_order(keys)
         ordered_rays = np.empty((n, 6), np.float32)
         ordered_limits = np.empty((n, 2), np.float64)
         for c in prange(n_chunks):
-            _gather_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, rays, limits, ordered_rays,
-                          ordered_limits)  # fmt: skip
+            _gather_chunk(
+                c * CHUNK,
+                min(n, (c + 1) * CHUNK),
+                order,
+                rays,
+                limits,
+                ordered_rays,
+                ordered_limits,
+            )
     else:
         order = np.arange(0)
         ordered_rays, ordered_limits = rays, limits
-    tnear = np.empty(n, np.float32)
-    tfar = np.empty(n, np.float32)
-    t = np.empty(n, np.float32)
-    normal = np.empty((n, 3), np.float32)
-    u = np.empty(n, np.float32)
-    v = np.empty(n, np.float32)
+    local = Rays(
+        ordered_rays[:, :3], ordered_rays[:, 3:], np.empty(n, np.float32), np.empty(n, np.float32)
+    )
     ordered_prim = np.empty(n, np.int32) if reorder else prim
     ordered_suspect = np.empty(n, np.bool_) if reorder else suspect
-    geom = np.empty(n, np.int32)
-    inst = np.empty(n, np.int32)
+    hits = NearestHits(
+        np.empty(n, np.float32),
+        np.empty((n, 3), np.float32),
+        np.empty(n, np.float32),
+        np.empty(n, np.float32),
+        ordered_prim,
+        np.empty(n, np.int32),
+        np.empty(n, np.int32),
+    )
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _trace_chunk(scene, lanes, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK),
-                     ordered_rays[:, :3], ordered_rays[:, 3:], ordered_limits, extent, altitude,
-                     floor_altitude, band_ulps, graze, tnear, tfar, t, normal, u, v,
-                     ordered_prim, geom, inst, ordered_suspect)  # fmt: skip
+        _trace_chunk(
+            query,
+            scratch[c],
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            local,
+            ordered_limits,
+            frame.extent,
+            screen,
+            hits,
+            ordered_suspect,
+        )
     if reorder:
         for c in prange(n_chunks):
-            _scatter_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, ordered_prim,
-                           ordered_suspect, prim, suspect)  # fmt: skip
+            _scatter_chunk(
+                c * CHUNK,
+                min(n, (c + 1) * CHUNK),
+                order,
+                ordered_prim,
+                ordered_suspect,
+                prim,
+                suspect,
+            )
 
 
 def screened_nearest(
@@ -229,18 +290,33 @@ def screened_nearest(
     prim = np.empty(n, np.int32)
     suspect = np.empty(n, bool)
     bad = np.zeros(1, bool)
-    lower, upper = np.zeros((2, 3)) if bounds is None else np.asarray(bounds, np.float64)
+    near_rule = Near(
+        np.zeros(0) if near is None else np.ascontiguousarray(near, np.float64),
+        float(near_ulps),
+        float(near_factor),
+    )
+    screen = Screen(
+        np.ascontiguousarray(altitude, np.float64),
+        float(floor_altitude),
+        float(band_ulps),
+        float(graze),
+    )
     with parallel_region:
         if n:
             numba.set_num_threads(threads_for(n, bvh.threads))
-            _screened(scene, bvh.lanes, np.ascontiguousarray(origins, np.float64),
-                      np.ascontiguousarray(directions, np.float64),
-                      np.ascontiguousarray(shift, np.float64), float(scale), float(extent),
-                      bounds is not None, lower, upper, box_cells(lower, upper),
-                      np.zeros(0) if near is None else np.ascontiguousarray(near, np.float64),
-                      float(near_ulps), np.ascontiguousarray(altitude, np.float64),
-                      float(floor_altitude), float(band_ulps), float(graze), float(near_factor),
-                      prim, suspect, bad)  # fmt: skip
+            _screened(
+                Query(scene, 0, bvh.lanes),
+                np.ascontiguousarray(origins, np.float64),
+                np.ascontiguousarray(directions, np.float64),
+                frame(shift, scale, extent),
+                bounds is not None,
+                box(np.zeros((2, 3)) if bounds is None else bounds),
+                near_rule,
+                screen,
+                prim,
+                suspect,
+                bad,
+            )
     if bad[0]:
         as_points(origins, "origins")  # raises, naming the first bad row
         as_points(directions, "directions")

@@ -24,6 +24,8 @@ from numba import njit, prange
 
 from embree_rt.compiled.pointers import prefetch
 from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.embree.multihit import HitBuffers
+from embree_rt.trimesh_ray.hit_inputs import MeshTables, Tolerances, WorldRays
 from embree_rt.trimesh_ray.plane_distances import insert_by_distance, plane_distance
 
 CHUNK = 512  # rays per parallel iteration
@@ -31,11 +33,14 @@ _AHEAD = 8  # rays whose triangles' rows are fetched ahead (4: 4.7 ms, 8: 4.0, 1
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _settle_chunk(first, stop, k, t, prim, u, v, cos, count, more, retrace_more, magnitude,
-                  near, inclusive, origins, directions, planes, altitude,
-                  floor_altitude, band_scale, graze, parallel_cos, messy, out_rays, out_tris,
-                  out_distance):  # fmt: skip
-    # rays first .. stop, their kept hits written from index k on; returns the index past them
+def _settle_chunk(first, stop, k, hits, retrace_more, rays, mesh, tolerances, messy, out):
+    # rays first .. stop, their kept hits written from index k of `out` (rays, tris, distance)
+    # on; returns the index past them
+    _t, prim, u, v, cos, count, more = hits
+    origins, directions, magnitude, near, inclusive = rays
+    planes, _triangles, altitude, floor_altitude = mesh
+    band_scale, graze, parallel_cos, _zero = tolerances
+    out_rays, out_tris, out_distance = out
     one = np.float32(1.0)
     floor_scale = band_scale / floor_altitude if floor_altitude > 0 else np.inf
     rows = planes.ctypes.data
@@ -79,8 +84,9 @@ def _settle_chunk(first, stop, k, t, prim, u, v, cos, count, more, retrace_more,
 
 
 @njit(nogil=True, cache=True)
-def _copy_chunk(source, stop, target, rays, tris, distance, ray_offset, out_rays, out_tris,
-                out_distance):  # fmt: skip
+def _copy_chunk(source, stop, target, kept, ray_offset, out):
+    rays, tris, distance = kept
+    out_rays, out_tris, out_distance = out
     for k in range(source, stop):
         out_rays[target] = rays[k] + ray_offset
         out_tris[target] = tris[k]
@@ -89,10 +95,8 @@ def _copy_chunk(source, stop, target, rays, tris, distance, ray_offset, out_rays
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, inclusive, origins,
-            directions, planes, altitude, floor_altitude, band_scale, graze, parallel_cos,
-            messy, rays, tris, distance, ray_offset, out_rays, out_tris,
-            out_distance):  # fmt: skip
+def _settle(hits, retrace_more, rays, mesh, tolerances, messy, scratch, ray_offset, out):
+    count = hits.count
     n = count.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     starts = np.zeros(n_chunks + 1, np.int64)  # each chunk's scratch range: hits found
@@ -102,34 +106,32 @@ def _settle(t, prim, u, v, cos, count, more, retrace_more, magnitude, near, incl
         starts[c + 1] += starts[c]
     ends = np.empty(n_chunks, np.int64)
     for c in prange(n_chunks):
-        ends[c] = _settle_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), starts[c], t, prim, u, v,
-                                cos, count, more, retrace_more, magnitude, near, inclusive,
-                                origins, directions, planes, altitude, floor_altitude,
-                                band_scale, graze, parallel_cos, messy, rays, tris,
-                                distance)  # fmt: skip
+        ends[c] = _settle_chunk(
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            starts[c],
+            hits,
+            retrace_more,
+            rays,
+            mesh,
+            tolerances,
+            messy,
+            scratch,
+        )
     places = np.zeros(n_chunks + 1, np.int64)  # each chunk's place in the output
     for c in range(n_chunks):
         places[c + 1] = places[c] + ends[c] - starts[c]
     for c in prange(n_chunks):
-        _copy_chunk(starts[c], ends[c], places[c], rays, tris, distance, ray_offset, out_rays,
-                    out_tris, out_distance)  # fmt: skip
+        _copy_chunk(starts[c], ends[c], places[c], scratch, ray_offset, out)
     return places[n_chunks]
 
 
 def settled_hits(
-    result: tuple[np.ndarray, ...],
+    hits: HitBuffers,
     retrace_more: bool,
-    magnitude: np.ndarray,
-    near: np.ndarray,
-    inclusive: bool,
-    origins: np.ndarray,
-    directions: np.ndarray,
-    planes: np.ndarray,
-    altitude: np.ndarray,
-    floor_altitude: float,
-    band_scale: float,
-    graze: float,
-    parallel_cos: float,
+    rays: WorldRays,
+    mesh: MeshTables,
+    tolerances: Tolerances,
     threads: int = 1,
     scratch: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
@@ -137,39 +139,37 @@ def settled_hits(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Final hits of the clear rays of one ``all_hits`` block, and which rays are messy.
 
-    ``result``: ``all_hits``' (t, prim, u, v, cos, count, more) for n rays; ``retrace_more``:
-    rays with ``more`` set are messy (the caller traces them again with more room);
-    ``magnitude`` (n,) float64 largest local coordinate of each ray, ``near`` (n,) float64 world
-    distance hits must lie beyond (``inclusive``: at or beyond); ``origins``, ``directions``
-    (n, 3) float64 world rays (unit directions); ``planes`` (triangles, 6) float64 (each
-    triangle's first vertex and unit normal, as ``plane_distances.plane_distances`` takes
-    them); ``altitude`` (triangles,) float64 smallest local altitude (0: degenerate, always
-    messy), ``floor_altitude`` its minimum; ``band_scale``: edge band per unit of magnitude /
-    altitude; ``graze``, ``parallel_cos``: the messy and the dropping |cos|.
+    ``hits``: ``all_hits``' ``HitBuffers`` for n rays; ``retrace_more``: rays with ``more`` set
+    are messy (the caller traces them again with more room); ``rays``: the n rays
+    (``hit_inputs.world_rays``); ``mesh``: the mesh's tables (a triangle of altitude 0 is
+    degenerate: always messy); ``tolerances``: ``band_scale``, ``graze`` (the messy |cos|) and
+    ``parallel_cos`` (the dropping |cos|) are read. ``scratch``, ``out``: (int64, int64,
+    float64) arrays of at least as many items as ``hits`` holds, or None for new ones.
 
     Returns ``rays`` (k,) int64 (``ray_offset`` + 0 .. n - 1, ascending), ``tris`` (k,)
     int64, ``distance`` (k,) float64 sorted by (distance, triangle) within each ray, and
     ``messy`` (n,) bool.
     """
-    _t, prim, u, v, cos, count, more = result
-    n = len(count)
+    n = len(hits.count)
     messy = np.zeros(n, bool)
     if not n:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), messy
-    arguments = (_t, prim, u, v, cos, count, more, bool(retrace_more),
-                 np.ascontiguousarray(magnitude, np.float64),
-                 np.ascontiguousarray(near, np.float64), bool(inclusive),
-                 np.ascontiguousarray(origins, np.float64),
-                 np.ascontiguousarray(directions, np.float64),
-                 np.ascontiguousarray(planes, np.float64), altitude,
-                 float(floor_altitude), float(band_scale), np.float32(graze), float(parallel_cos),
-                 messy)  # fmt: skip
-    total = int(count.sum())
+    total = int(hits.count.sum())
     if scratch is None:
         scratch = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
     if out is None:
         out = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
     with parallel_region:
         numba.set_num_threads(threads_for(n, threads))
-        kept = _settle(*arguments, *scratch, int(ray_offset), *out)
+        kept = _settle(
+            hits,
+            bool(retrace_more),
+            rays,
+            mesh,
+            tolerances,
+            messy,
+            tuple(scratch),
+            int(ray_offset),
+            tuple(out),
+        )
     return out[0][:kept], out[1][:kept], out[2][:kept], messy

@@ -59,7 +59,10 @@ def create_app(new_session: Callable[[], PreviewSession], *, loopback: bool = Tr
     (the server listens on a loopback address only) restricts the Host header to loopback
     names, which keeps other sites' pages out through DNS rebinding."""
     static, pages = load_assets()
-    sessions: set[PreviewSession] = set()
+    # Preview sessions open or being made. Counted (and the slot taken) before the first await
+    # that makes one: a check that awaited before counting let 20 sockets opened at once all
+    # through the limit.
+    open_sessions = 0
 
     async def page(request: Request) -> Response:
         return _answer(pages.get(request.url.path))
@@ -75,27 +78,27 @@ def create_app(new_session: Callable[[], PreviewSession], *, loopback: bool = Tr
         if not await _accept(socket):
             return
         while (text := await _receive(socket)) is not _CLOSED:
-            try:
-                reply = await _trace_reply(messages.parse(text))
-            except MessageError as error:
-                reply = {"type": "error", "message": str(error)}
+            reply = await _answer_or_error(_trace_reply, text)
             if not await _send(socket, reply):
                 return
 
     async def preview_socket(socket: WebSocket) -> None:
+        nonlocal open_sessions
         if not await _accept(socket):
             return
-        if len(sessions) >= MAX_SESSIONS:
+        if open_sessions >= MAX_SESSIONS:
             await _send(socket, {"type": "error", "message": "too many preview sessions open"})
             await socket.close()
             return
-        session = await asyncio.to_thread(new_session)
-        sessions.add(session)
+        open_sessions += 1
         try:
-            await PreviewConnection(socket, session).run()
+            session = await asyncio.to_thread(new_session)
+            try:
+                await PreviewConnection(socket, session).run()
+            finally:
+                await asyncio.to_thread(session.close)
         finally:
-            sessions.discard(session)
-            await asyncio.to_thread(session.close)
+            open_sessions -= 1
 
     routes = [
         Route("/", page),
@@ -150,6 +153,19 @@ async def _send(socket: WebSocket, reply: dict | bytes) -> bool:
     return True
 
 
+async def _answer_or_error(handle, text) -> dict | None:
+    """``await handle(message)`` for the message in ``text``; a message this server will not act
+    on is answered with its one-line error, and so is one that meets a bug of ours (said so, the
+    traceback on the server's console), so that no message can drop the connection."""
+    try:
+        return await handle(messages.parse(text))
+    except MessageError as error:
+        return {"type": "error", "message": str(error)}
+    except Exception:
+        traceback.print_exc(file=sys.stderr)
+        return {"type": "error", "message": "the server failed on this message (see the server)"}
+
+
 async def _trace_reply(message: dict) -> dict:
     """The answer to a 2D demo message: the traced polylines of its layout."""
     if message["type"] != "trace":
@@ -192,10 +208,7 @@ class PreviewConnection:
         try:
             await self.send(self._scene_message())
             while (text := await _receive(self.socket)) is not _CLOSED:
-                try:
-                    reply = await self._handle(messages.parse(text))
-                except MessageError as error:
-                    reply = {"type": "error", "message": str(error)}
+                reply = await _answer_or_error(self._handle, text)
                 if reply is not None and not await self.send(reply):
                     break
         finally:

@@ -8,7 +8,7 @@ No field ever names a file: a client edits its scene in memory only.
 from __future__ import annotations
 
 import json
-import math
+import sys
 
 import numpy as np
 
@@ -43,6 +43,9 @@ def parse(text: str | bytes | None) -> dict:
         message = json.loads(text)
     except (json.JSONDecodeError, RecursionError) as error:
         raise MessageError(f"malformed JSON: {error}") from None
+    except ValueError:  # an int literal beyond Python's limit on digits
+        limit = sys.get_int_max_str_digits()
+        raise MessageError(f"malformed JSON: an integer of more than {limit} digits") from None
     if not isinstance(message, dict) or not isinstance(message.get("type"), str):
         raise MessageError('expected a JSON object with a string "type"')
     return message
@@ -53,10 +56,10 @@ def number(message: dict, key: str, low: float, high: float) -> float:
     value = message.get(key)
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise MessageError(f"{key}: expected a number, got {_short(value)}")
-    value = float(value)
-    if not (math.isfinite(value) and low <= value <= high):
-        raise MessageError(f"{key}: must lie in [{low:g}, {high:g}], got {value:g}")
-    return value
+    # Compared before float(): an int of 400 digits is beyond float range (OverflowError).
+    if not (low <= value <= high):  # NaN fails it too
+        raise MessageError(f"{key}: must lie in [{low:g}, {high:g}], got {_short(value)}")
+    return float(value)
 
 
 def integer(message: dict, key: str, low: int, high: int) -> int:
@@ -65,7 +68,7 @@ def integer(message: dict, key: str, low: int, high: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise MessageError(f"{key}: expected an integer, got {_short(value)}")
     if not low <= value <= high:
-        raise MessageError(f"{key}: must lie in [{low}, {high}], got {value}")
+        raise MessageError(f"{key}: must lie in [{low}, {high}], got {_short(value)}")
     return value
 
 

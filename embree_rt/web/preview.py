@@ -1,7 +1,7 @@
 """One browser tab's live preview: its own copy of the scene, traced one sample per pixel a pass.
 
 Pass k traces sample k of every pixel, the very rays ``embree-rt render`` traces for it
-(``Renderer.trace_pixels``), and the preview shows the mean of the passes so far: after ``spp``
+(``Integrator.trace_pixels``), and the preview shows the mean of the passes so far: after ``spp``
 passes it is the render's image at the preview's size. Any edit bumps ``generation``; a pass
 that sees it change stops between chunks of pixels.
 """
@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import copy
 import io
-import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
@@ -18,11 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from embree_rt.camera import camera_frame, sample_rays
+from embree_rt.api import Renderer
+from embree_rt.batches import worker_count
+from embree_rt.camera import camera_frame, camera_problem, sample_rays
 from embree_rt.film import Film, FilmBlock, tonemap
-from embree_rt.integrator import Renderer
+from embree_rt.integrator import Integrator
 from embree_rt.scene.loader import read_document
-from embree_rt.scene.model import Scene, camera_problem
+from embree_rt.scene.model import Scene
 from embree_rt.scene.writer import inline_short_arrays
 
 # Pixels a chunk of a pass traces: small enough that an edit stops a pass within ~0.1 s.
@@ -66,8 +67,8 @@ class PreviewSession:
         self.generation = 0
         self.render_generation = 0
         self._lock = threading.Lock()
-        self._renderer: Renderer | None = None
-        self._pool = ThreadPoolExecutor(max_workers=os.cpu_count() or 1)
+        self._renderer: Integrator | None = None
+        self._pool = ThreadPoolExecutor(max_workers=worker_count(None))
 
     def close(self) -> None:
         self.generation += 1
@@ -120,10 +121,10 @@ class PreviewSession:
 
     # -- rendering ----------------------------------------------------------------------------
 
-    def _current_renderer(self) -> Renderer:
-        """The renderer of the scene as it is now (call with the lock held)."""
+    def _current_renderer(self) -> Integrator:
+        """The integrator of the scene as it is now (call with the lock held)."""
         if self._renderer is None:
-            self._renderer = Renderer(self.scene, threads=1)
+            self._renderer = Integrator(self.scene, threads=1)
         return self._renderer
 
     def render_pass(self, sample: int, generation: int, film: Film) -> Film:
@@ -161,7 +162,6 @@ class PreviewSession:
         """The scene at its own size and samples, as ``embree-rt render`` makes it (the same
         ``Renderer.render``); ``progress(done, total)`` after each batch. Raises OvertakenError when
         ``render_generation`` moves on."""
-        settings = self.scene.render
 
         def report(done: int, total: int) -> None:
             if generation != self.render_generation:
@@ -170,10 +170,7 @@ class PreviewSession:
 
         # A shallow copy: edits rebind the scene's fields, never change them in place.
         with Renderer(replace(self.scene)) as renderer:
-            return renderer.render(
-                width=settings.width, height=settings.height, spp=settings.spp,
-                max_depth=settings.max_depth, seed=settings.seed, progress=report,
-            )  # fmt: skip
+            return renderer.render(progress=report).image
 
     # -- the edited scene as a file -------------------------------------------------------------
 

@@ -156,12 +156,7 @@ def _trace(bvh: BVH, layout: Layout) -> dict[str, np.ndarray]:
                            np.hypot(center[:, 0], center[:, 1]) + center[:, 2])  # fmt: skip
         offset = surface_offset(scale.astype(np.float32))
         glass = material == GLASS
-        n1 = np.where(entering, np.float32(1.0), ior)
-        n2 = np.where(entering, ior, np.float32(1.0))
-        refracted, total_internal = shading.refract(d, normal, n1 / n2)
-        cos_incident = np.clip(-shading.dot(d, normal), 0.0, 1.0)
-        fresnel = shading.fresnel_schlick(cos_incident, n1, n2)
-        fresnel[total_internal] = 1.0
+        refracted, total_internal, fresnel = shading.dielectric_split(d, normal, entering, ior)
         w = weight[rows]
         reflect_weight = np.where(glass, w * (glass_reflect + transparency * fresnel),
                                   w * mirror_reflect)  # fmt: skip

@@ -10,7 +10,6 @@ one ``Renderer`` (one BVH) renders them one after another, on a cluster they sha
 from __future__ import annotations
 
 import argparse
-import os
 import string
 import sys
 import time
@@ -70,7 +69,9 @@ def frame_range(text: str | None, count: int) -> range:
     return range(start, stop)
 
 
-def render_command(scene: Scene, args: argparse.Namespace, made: tuple[str, float], source) -> None:
+def render_frames_command(
+    scene: Scene, args: argparse.Namespace, made: tuple[str, float], source
+) -> None:
     """``embree-rt render|random`` for an animated scene or on a cluster (``--cluster``,
     ``--scheduler``): render the frames and write each to its file. ``source`` is what workers
     make the scene from: the scene file's path, or the random field's ``FieldPlan``; ``made``
@@ -134,27 +135,18 @@ def render_command(scene: Scene, args: argparse.Namespace, made: tuple[str, floa
 def _render_locally(scene, args, settings, cameras, write: Callable) -> tuple[int, float, str]:
     """Render the frames one after another on one ``Renderer``: the rays traced, the seconds
     spent rendering (the rest was building the BVH), and where."""
-    from embree_rt import budget
-    from embree_rt.geometry import sphere_kind
-    from embree_rt.integrator import DEFAULT_BATCH_SIZE, Renderer
+    from embree_rt.api import Renderer, require_memory
 
-    count = len(scene.sphere_radii)
-    budget.require(
-        budget.render_needs(
-            count, sphere_kind(count, args.spheres), settings.width, settings.height,
-            settings.spp, DEFAULT_BATCH_SIZE, workers=args.threads or os.cpu_count() or 1,
-        )
-    )  # fmt: skip
+    require_memory(scene, settings, spheres=args.spheres, threads=args.threads)
     render_s = 0.0
+    rays = 0
     with Renderer(scene, spheres=args.spheres, threads=args.threads) as renderer:
         for frame, camera in cameras:
-            image = renderer.render(
-                width=settings.width, height=settings.height, spp=settings.spp,
-                max_depth=settings.max_depth, seed=settings.seed, camera=camera,
-            )  # fmt: skip
-            render_s += renderer.stats.render_s
-            write(frame, image)
-        return renderer.stats.total_rays, render_s, "locally"
+            result = renderer.render(camera=camera)
+            render_s += result.stats.render_s
+            rays += result.stats.total_rays
+            write(frame, result.image)
+    return rays, render_s, "locally"
 
 
 def _render_on_cluster(
@@ -178,7 +170,7 @@ def _render_on_cluster(
         renderer = distributed.ClusterRenderer(source, client, spheres=args.spheres)
         total = settings.width * settings.height * settings.spp * len(cameras)
         with distributed.progress_bar(total, args.quiet) as show:
-            renderer.render_frames(distributed.Settings.of(scene), cameras, write, progress=show)
+            renderer.render_frames(settings, cameras, write, progress=show)
         workers = len(client.nthreads())
     where = f"on {workers} Dask worker{'s' if workers != 1 else ''}"
     return renderer.stats.total_rays, renderer.stats.render_s, where

@@ -1,0 +1,203 @@
+"""The Python face of the renderer: ``render`` one image, or a ``Renderer`` for many views of one
+BVH, each returning a ``RenderResult`` (the linear image, its AOVs, what it took).
+
+Above the integrator (``integrator.Integrator``, which traces and shades batches) and the AOV
+pass (``aovs.render_aovs``): this module resolves the settings against the scene's ``render``
+table, refuses what cannot fit in memory before anything is built, shows the progress bar, and
+gathers what a render made into one value.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from embree_rt import budget, film
+from embree_rt.aovs import check_aov_names, render_aovs, save_with_aovs
+from embree_rt.camera import Camera, camera_frame
+from embree_rt.integrator import DEFAULT_BATCH_SIZE, Integrator, RenderStats
+from embree_rt.scene.model import RenderSettings, Scene
+
+
+@dataclass
+class RenderResult:
+    """What one render made.
+
+    ``image`` (height, width, 3) float32 is the linear HDR radiance (the mean of the samples,
+    not tone-mapped: ``to_srgb8`` gives the 8-bit picture a PNG holds); ``aovs`` maps each AOV
+    asked for to its (height, width) or (height, width, 3) array (``embree_rt.aovs``), empty
+    when none were; ``stats`` counts the rays by kind (``"aov"``: the AOV pass's) and the
+    seconds spent building the BVH and rendering (the AOV pass included).
+    """
+
+    image: np.ndarray
+    aovs: dict[str, np.ndarray] = field(default_factory=dict)
+    stats: RenderStats = field(default_factory=RenderStats)
+
+    def to_srgb8(self) -> np.ndarray:
+        """(height, width, 3) uint8: the image tone-mapped as a PNG is written
+        (``film.tonemap``: Reinhard, gamma 2.2)."""
+        return film.tonemap(self.image)
+
+    def save(self, path: str | os.PathLike) -> list[Path]:
+        """Write the image to ``path`` by its extension (``.png``, ``.npy``, ``.npz``, ``.exr``),
+        with the AOVs in the same file (``.npz``, ``.exr``) or beside it; all or nothing, an
+        existing file left as it was on failure. Returns the files written beside ``path``."""
+        if not self.aovs:
+            film.save_image(self.image, path)
+            return []
+        return save_with_aovs(self.image, self.aovs, path)
+
+
+class Renderer(Integrator):
+    """Renders many views of one scene on one BVH, built once when it is made: the way to
+    render the frames of a camera path, or an image and then its AOVs at another size.
+
+    ``Renderer(scene, *, spheres="analytic", threads=None, batch_size=DEFAULT_BATCH_SIZE)``:
+    ``spheres`` is how spheres enter the BVH, "analytic" (compiled user geometry, exact),
+    "point" (Embree's own point spheres) or "mesh" (instanced icospheres); ``threads`` the
+    worker threads (None: every core); ``batch_size`` the camera samples a batch traces. The
+    image is bitwise the same for any ``threads`` and ``batch_size``. Close it (or use it as a
+    context manager) to free the BVH.
+
+    An ``Integrator`` (which holds the BVH and traces the batches) with the one method a user
+    needs, ``render``.
+    """
+
+    def render(
+        self,
+        *,
+        camera: Camera | None = None,
+        width: int | None = None,
+        height: int | None = None,
+        spp: int | None = None,
+        max_depth: int | None = None,
+        seed: int | None = None,
+        aovs: Sequence[str] = (),
+        quiet: bool = True,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> RenderResult:
+        """The scene seen by ``camera`` (default the scene's own). Settings left as None come
+        from the scene's ``render`` table (``RenderSettings.with_overrides``); ``aovs`` names
+        AOVs (``embree_rt.aovs.AOV_NAMES``) to render after the image, which they leave bitwise
+        unchanged. With ``quiet=False`` a progress bar runs on stderr (when it is a terminal);
+        ``progress(done, total)`` counts camera samples."""
+        names = check_aov_names(aovs)
+        settings = self.scene.render.with_overrides(
+            width=width, height=height, spp=spp, max_depth=max_depth, seed=seed
+        )
+        frame = camera_frame(
+            self.scene.camera if camera is None else camera, settings.width, settings.height
+        )
+        with progress_bar(settings, quiet, progress) as show:
+            image, stats = self.render_image(
+                frame,
+                spp=settings.spp,
+                max_depth=settings.max_depth,
+                seed=settings.seed,
+                progress=show,
+            )
+        if not names:
+            return RenderResult(image, {}, stats)
+        began = time.perf_counter()
+        layers = render_aovs(self, frame, names)
+        stats.rays["aov"] = settings.width * settings.height  # one pixel-centre ray per pixel
+        stats.render_s += time.perf_counter() - began
+        return RenderResult(image, layers, stats)
+
+
+def render(
+    scene: Scene,
+    *,
+    camera: Camera | None = None,
+    width: int | None = None,
+    height: int | None = None,
+    spp: int | None = None,
+    max_depth: int | None = None,
+    seed: int | None = None,
+    aovs: Sequence[str] = (),
+    threads: int | None = None,
+    spheres: str = "analytic",
+    batch_size: int = DEFAULT_BATCH_SIZE,
+    quiet: bool = True,
+) -> RenderResult:
+    """Render ``scene`` once: build its BVH, render (``Renderer.render``), free the BVH.
+
+    Arguments as ``Renderer`` and ``Renderer.render`` take them. What cannot fit in this
+    machine's memory (the BVH, the image, its AOVs) raises ``budget.MemoryBudgetError`` before
+    anything is built."""
+    names = check_aov_names(aovs)
+    settings = scene.render.with_overrides(
+        width=width, height=height, spp=spp, max_depth=max_depth, seed=seed
+    )
+    require_memory(
+        scene, settings, spheres=spheres, threads=threads, batch_size=batch_size, aovs=names
+    )
+    with Renderer(scene, spheres=spheres, threads=threads, batch_size=batch_size) as renderer:
+        return renderer.render(
+            camera=camera,
+            width=settings.width,
+            height=settings.height,
+            spp=settings.spp,
+            max_depth=settings.max_depth,
+            seed=settings.seed,
+            aovs=names,
+            quiet=quiet,
+        )
+
+
+def require_memory(
+    scene: Scene,
+    settings: RenderSettings,
+    *,
+    spheres: str = "analytic",
+    threads: int | None = None,
+    batch_size: int = DEFAULT_BATCH_SIZE,
+    aovs: tuple[str, ...] = (),
+) -> None:
+    """Raise ``budget.MemoryBudgetError`` unless this machine can hold ``scene``'s BVH and a
+    render of ``settings`` (``budget.render_needs``): call it before building a ``Renderer``."""
+    budget.require(
+        budget.render_needs(
+            len(scene.sphere_radii),
+            spheres,
+            settings,
+            batch_size=batch_size,
+            threads=threads,
+            aovs=aovs,
+        )
+    )
+
+
+@contextmanager
+def progress_bar(
+    settings: RenderSettings, quiet: bool, progress: Callable[[int, int], None] | None
+) -> Iterator[Callable[[int, int, RenderStats], None]]:
+    """The integrator's progress callback: a tqdm bar on stderr (unless ``quiet``, and only on
+    a terminal) counting samples and showing rays/s, and the caller's ``progress(done, total)``."""
+    bar = None
+    if not quiet and sys.stderr.isatty():
+        from tqdm import tqdm
+
+        total = settings.width * settings.height * settings.spp
+        bar = tqdm(total=total, unit="sample", unit_scale=True, file=sys.stderr)
+
+    def show(done: int, total: int, stats: RenderStats) -> None:
+        if bar is not None:
+            bar.update(done - bar.n)
+            bar.set_postfix_str(f"{stats.rays_per_s / 1e6:.1f} Mrays/s", refresh=False)
+        if progress is not None:
+            progress(done, total)
+
+    try:
+        yield show
+    finally:
+        if bar is not None:
+            bar.close()

@@ -1,0 +1,55 @@
+"""The ``embree-rt`` command: render a scene file, render a random field, describe a scene,
+serve the browser demo. ``main`` runs it; each command lives in a module of its own
+(``render``, ``animate`` for animations and clusters, ``info``, ``serve``)."""
+
+from __future__ import annotations
+
+import sys
+import traceback
+
+from embree_rt.cli.errors import BUG_REPORT, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED
+from embree_rt.cli.info import command_info
+from embree_rt.cli.parser import SPHERE_CHOICES, build_parser
+from embree_rt.cli.render import command_random, command_render
+from embree_rt.cli.serve import command_serve
+from embree_rt.errors import InputError
+
+__all__ = [
+    "BUG_REPORT",
+    "EXIT_BAD_INPUT",
+    "EXIT_BUG",
+    "EXIT_INTERRUPTED",
+    "SPHERE_CHOICES",
+    "build_parser",
+    "main",
+]
+
+COMMANDS = {
+    "render": command_render,
+    "random": command_random,
+    "info": command_info,
+    "serve": command_serve,
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command ``argv`` (default: the process's arguments); returns the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:
+        return int(exit_.code or 0)
+    try:
+        COMMANDS[args.command](args)
+    except KeyboardInterrupt:
+        print("embree-rt: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except InputError as error:  # scene files, flags, the user's files: one line
+        print(f"embree-rt: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except Exception:  # anything else is ours to fix: say so, with what a report needs
+        traceback.print_exc()
+        print(BUG_REPORT, file=sys.stderr)
+        return EXIT_BUG
+    return 0
+

@@ -1,0 +1,56 @@
+"""The command's checks of what the user gave it: output paths before any work, the Embree
+library, writes of the user's files, and the input to blame when memory cannot hold a render."""
+
+from __future__ import annotations
+
+import argparse
+
+from embree_rt.cli.errors import UsageError
+
+
+def check_output(path: str, aovs: tuple[str, ...] | None = None) -> None:
+    """The image path's checks (``film.check_output_path``), and those of the AOV files beside
+    it, as bad input: every ValueError it raises is about the path, its RuntimeError about
+    OpenEXR missing for ``.exr``."""
+    from embree_rt.film import check_output_path
+
+    try:
+        check_output_path(path)
+        if aovs:
+            from embree_rt.aovs import aov_paths
+
+            for side in aov_paths(path, aovs).values():
+                check_output_path(side)
+    except (ValueError, RuntimeError) as error:
+        raise UsageError(str(error)) from None
+
+
+def check_library() -> None:
+    """Load Embree before any work: a library that is missing, or that ``EMBREE_RT_LIBRARY``
+    names wrongly, is the installation's problem, not a bug (later Embree errors are bugs)."""
+    from embree_rt.embree import EmbreeError
+    from embree_rt.embree.library import load_library
+
+    try:
+        load_library()
+    except EmbreeError as error:
+        raise UsageError(str(error)) from None
+
+
+def writing(path: str, write) -> None:
+    """Run ``write()``, which writes the user's file ``path``: an OSError there (no space, no
+    permission) is the user's to fix."""
+    try:
+        write()
+    except OSError as error:
+        raise UsageError(f"{path}: cannot write: {error.strerror or error}") from None
+
+
+def memory_key(error, args: argparse.Namespace) -> str:
+    """The input to blame for a ``MemoryBudgetError``: the flags or the scene file's keys."""
+    scene_file = getattr(args, "scene", None)
+    if error.largest == "image":
+        if scene_file is None or args.width is not None or args.height is not None:
+            return "--width, --height"
+        return f"{scene_file}: render.width, render.height"
+    return "--count" if scene_file is None else f"{scene_file}: spheres"

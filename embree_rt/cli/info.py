@@ -1,0 +1,111 @@
+"""``embree-rt info``: what a scene holds, its bounds, the BVH's build time and memory, and the
+ids its AOVs give objects and materials."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from embree_rt.cli.checks import check_library
+
+
+def command_info(args: argparse.Namespace) -> None:
+    from embree_rt import budget
+    from embree_rt.aovs import id_listing
+    from embree_rt.geometry import SceneGeometry, sphere_kind
+    from embree_rt.scene import load_scene
+
+    scene = load_scene(args.scene)
+    check_library()
+    resident_before = resident_bytes()
+    started = time.perf_counter()
+    with SceneGeometry(scene, spheres=args.spheres) as geometry:
+        build_s = time.perf_counter() - started
+        resident_growth = resident_bytes() - resident_before
+        floor_material = geometry.floor_material
+        triangles = geometry.triangle_count
+        instances = geometry.instance_count
+        in_arrays = geometry.bvh.instance_count
+        arrays = geometry.bvh.array_count
+    objects = [*scene.meshes, *scene.instances]
+    distinct = {id(o.mesh): o.mesh for o in objects}.values()
+    unique_triangles = sum(len(mesh.faces) for mesh in distinct)
+    placements = len(scene.meshes) + sum(len(entry) for entry in scene.instances)
+    spheres = len(scene.sphere_radii)
+    bounds = scene_bounds(scene)
+    # Embree's own footprint is not exposed: estimated by the budget's figures, the spheres'
+    # own instances (--spheres mesh) counted among the spheres.
+    kind = sphere_kind(spheres, args.spheres)
+    sphere_instances = spheres if kind == "mesh" else 0
+    estimate = budget.bvh_bytes(
+        spheres,
+        kind,
+        unique_triangles,
+        instances=instances - in_arrays,
+        arrayed=in_arrays - sphere_instances,
+    )
+    print(f"scene:      {args.scene}")
+    print(f"spheres:    {spheres:,}")
+    print(f"meshes:     {placements:,} placements of {len(distinct):,} distinct meshes")
+    print(f"triangles:  {unique_triangles:,} stored, {triangles:,} placed")
+    print(f"instances:  {instances:,}")
+    print(f"arrays:     {arrays:,} instance arrays holding {in_arrays:,} instances")
+    print(f"lights:     {len(scene.lights)}")
+    print(f"materials:  {len(scene.materials)}")
+    floor = f"y = {scene.floor.height:g}" if scene.floor else "none"
+    print(f"floor:      {floor}")
+    if bounds is None:
+        print("bounds:     empty")
+    else:
+        low, high = bounds
+        print(f"bounds:     {np.round(low, 3).tolist()} .. {np.round(high, 3).tolist()}")
+    print(f"BVH build:  {build_s:.3f} s")
+    print(
+        f"memory:     ~{estimate / 2**20:.1f} MiB (estimate), "
+        f"{resident_growth / 2**20:.1f} MiB measured (resident set growth while building)"
+    )
+    for line in id_listing(scene, floor_material):
+        print(line)
+
+
+def resident_bytes() -> int:
+    """This process's resident set in bytes (Linux), or 0 where /proc is missing."""
+    import resource
+
+    try:
+        with open("/proc/self/statm") as statm:
+            return int(statm.read().split()[1]) * resource.getpagesize()
+    except OSError:
+        return 0
+
+
+def scene_bounds(scene) -> tuple[np.ndarray, np.ndarray] | None:
+    """(3,) float64 low and high corners of everything in ``scene`` but the floor, or None
+    when it is empty."""
+    lows, highs = [], []
+    if len(scene.sphere_radii):
+        radius = scene.sphere_radii[:, None]
+        lows.append((scene.sphere_centers - radius).min(axis=0))
+        highs.append((scene.sphere_centers + radius).max(axis=0))
+    for placement in scene.meshes:
+        corners = placement.mesh.bounds
+        box = np.array(
+            [[x, y, z, 1.0] for x in corners[:, 0] for y in corners[:, 1] for z in corners[:, 2]]
+        )
+        world = box @ placement.transform.T
+        lows.append(world[:, :3].min(axis=0))
+        highs.append(world[:, :3].max(axis=0))
+    for entry in scene.instances:
+        corners = entry.mesh.bounds
+        box = np.array(
+            [[x, y, z] for x in corners[:, 0] for y in corners[:, 1] for z in corners[:, 2]]
+        )
+        world = np.einsum("nij,kj->nki", entry.transforms[:, :3, :3], box)
+        world += entry.transforms[:, None, :3, 3]
+        lows.append(world.min(axis=(0, 1)))
+        highs.append(world.max(axis=(0, 1)))
+    if not lows:
+        return None
+    return np.min(lows, axis=0), np.max(highs, axis=0)

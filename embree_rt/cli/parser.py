@@ -1,0 +1,114 @@
+"""The command line: the ``embree-rt`` parser, its commands and flags."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from embree_rt.cli.errors import EXIT_BAD_INPUT
+
+# geometry.SPHERE_MODES, spelled out so that --help does not load Embree and numba.
+SPHERE_CHOICES = ("analytic", "point", "mesh")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line on stderr and exit code 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        message = message.removeprefix("argument ")
+        print(f"embree-rt: error: {message}", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
+def int_at_least(low: int):
+    """An argparse type: an integer >= ``low``."""
+
+    # argparse prefixes the message with the flag ("argument --width: ..."), so it is not repeated.
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        return value
+
+    return parse
+
+
+def aov_list(text: str) -> tuple[str, ...]:
+    """An argparse type: comma-separated AOV names (``aovs.parse_aov_list``)."""
+    from embree_rt.aovs import parse_aov_list
+
+    try:
+        return parse_aov_list(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_render_flags(parser: argparse.ArgumentParser) -> None:
+    positive, non_negative = int_at_least(1), int_at_least(0)
+    parser.add_argument(
+        "-o", "--output", required=True, help="image to write: .png, .npy, .npz or .exr"
+    )
+    parser.add_argument(
+        "--aov",
+        type=aov_list,
+        metavar="NAMES",
+        help="also write AOVs, any of depth,normal,albedo,object_id,material_id: in the .npz or "
+        ".exr, or one file each beside a .png or .npy",
+    )
+    parser.add_argument("--width", type=positive)
+    parser.add_argument("--height", type=positive)
+    parser.add_argument("--spp", type=positive, help="samples per pixel")
+    parser.add_argument("--max-depth", type=non_negative)
+    parser.add_argument("--seed", type=non_negative)
+    parser.add_argument("--threads", type=positive, help="default: all cores")
+    parser.add_argument(
+        "--spheres",
+        choices=SPHERE_CHOICES,
+        default="analytic",
+        help="analytic spheres (compiled user geometry), Embree's own point spheres, or "
+        "tessellated icospheres",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    cluster = parser.add_mutually_exclusive_group()  # embree_rt/distributed.py
+    cluster.add_argument("--cluster", metavar="local:N", help="render on N local Dask workers")
+    cluster.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="render on a Dask cluster")
+    parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
+    parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = Parser(
+        prog="embree-rt",
+        description="Whitted-style ray tracing of scenes with very many objects, on Embree.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True)
+    render = commands.add_parser("render", help="render a scene file (TOML or JSON)")
+    render.add_argument("scene", help="scene file")
+    add_render_flags(render)
+    random = commands.add_parser("random", help="render a random sphere field of N spheres")
+    random.add_argument("--count", type=int_at_least(1), required=True)
+    random.add_argument("--save-scene", help="also write the generated scene to this file")
+    random.add_argument(
+        "--instance",
+        metavar="MESHFILE",
+        help="replace every small sphere by this mesh (fitted into the sphere, resting on the "
+        "floor, turned at random about y), all through one Embree instance array",
+    )
+    add_render_flags(random)
+    info = commands.add_parser("info", help="describe a scene: objects, bounds, build time")
+    info.add_argument("scene", help="scene file")
+    info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic")
+    serve = commands.add_parser("serve", help="the 2D ray demo and a live preview in a browser")
+    serve.add_argument("scene", nargs="?", help="scene file (default: the showcase)")
+    serve.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    serve.add_argument("--port", type=int_at_least(0), default=8000, help="0: any free port")
+    return parser
+
+
+def render_overrides(args: argparse.Namespace) -> dict[str, int | None]:
+    """The render settings the flags override (None: the scene's), for
+    ``RenderSettings.with_overrides``."""
+    return {name: getattr(args, name) for name in ("width", "height", "spp", "max_depth", "seed")}

@@ -1,0 +1,152 @@
+"""``embree-rt render`` and ``embree-rt random``: make the scene, render it, write the image
+(and its AOVs), and say what it took. Animations and clusters go on to ``cli.animate``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from embree_rt.cli.checks import check_library, check_output, memory_key, writing
+from embree_rt.cli.errors import UsageError
+from embree_rt.cli.parser import render_overrides
+
+
+def command_render(args: argparse.Namespace) -> None:
+    from embree_rt.scene import load_scene
+
+    check_output(args.output, args.aov)
+    started = time.perf_counter()
+    scene = load_scene(args.scene)
+    render_and_save(scene, args, ("load", time.perf_counter() - started), Path(args.scene))
+
+
+def command_random(args: argparse.Namespace) -> None:
+    from embree_rt.scene.random_field import (
+        FieldParameterError,
+        add_field_spheres,
+        field_scene,
+        plan_field,
+    )
+    from embree_rt.scene.writer import save_scene
+
+    check_output(args.output, args.aov)
+    if args.save_scene is not None:
+        target = Path(args.save_scene)
+        if target.suffix.lower() not in (".toml", ".json"):
+            raise UsageError(f"--save-scene: {target}: expected a .toml or .json file name")
+        if not target.parent.is_dir():
+            raise UsageError(f"--save-scene: {target}: directory {target.parent} does not exist")
+    started = time.perf_counter()
+    try:
+        plan = plan_field(args.count, seed=0 if args.seed is None else args.seed)
+    except FieldParameterError as error:  # the flags' values, refused by the field itself
+        raise UsageError(f"--{error.name}: {error.problem}") from None
+    scene = field_scene(plan)
+    scene.render = scene.render.with_overrides(**render_overrides(args))
+    mesh = None if args.instance is None else instance_mesh(args.instance)
+    require_memory_for_field(plan.count, scene.render, args)
+    # A cluster's workers generate a plain field themselves, from its plan; a field of
+    # instances, or one to be saved, is made here.
+    on_workers = bool(args.cluster or args.scheduler) and args.save_scene is None and mesh is None
+    if not on_workers:
+        add_field_spheres(scene, plan)
+    if mesh is not None:
+        from embree_rt.scene.instances import spheres_to_instances
+
+        spheres_to_instances(scene, mesh, keep=plan.heroes, seed=plan.seed)
+    generate_s = time.perf_counter() - started
+    if args.save_scene is not None:
+        writing(args.save_scene, lambda: save_scene(scene, args.save_scene))
+    render_and_save(scene, args, ("generate", generate_s), None if mesh is not None else plan)
+
+
+def render_and_save(
+    scene, args: argparse.Namespace, made: tuple[str, float], source: object = None
+) -> None:
+    """Render ``scene`` with the flags' overrides and save it; ``made`` is how the scene was
+    made and the seconds it took ("generate" or "load"), for the summary line; ``source`` the
+    scene file or field plan a cluster's workers make the scene from."""
+    from embree_rt.api import render
+    from embree_rt.budget import MemoryBudgetError
+
+    scene.render = scene.render.with_overrides(**render_overrides(args))
+    check_library()
+    framed = args.frames or "{frame" in args.output  # an animation's pattern, or a mistake
+    if scene.animation is not None or args.cluster or args.scheduler or framed:
+        from embree_rt.cli.animate import render_frames_command
+
+        try:
+            render_frames_command(scene, args, made, source)
+        except MemoryBudgetError as error:
+            raise UsageError(f"{memory_key(error, args)}: {error}") from None
+        return
+    settings = scene.render
+    started = time.perf_counter()
+    try:
+        result = render(
+            scene,
+            threads=args.threads,
+            spheres=args.spheres,
+            quiet=args.quiet,
+            aovs=args.aov or (),
+        )
+    except MemoryBudgetError as error:
+        raise UsageError(f"{memory_key(error, args)}: {error}") from None
+    check_output(args.output, args.aov)  # again: the directory may have gone meanwhile
+    written: list[Path] = []
+    writing(args.output, lambda: written.extend(result.save(args.output)))
+    for side in written:  # the AOV files beside the image, for scripts to pick up
+        print(side)
+    stats = result.stats
+    elapsed = made[1] + time.perf_counter() - started
+    if not args.quiet:
+        print(
+            f"embree-rt: {settings.width}x{settings.height} at {settings.spp} spp in "
+            f"{elapsed:.2f} s ({made[0]} {made[1]:.2f} s, BVH {stats.build_s:.2f} s, render "
+            f"{stats.render_s:.2f} s): {stats.total_rays:,} rays, "
+            f"{stats.rays_per_s / 1e6:.1f} Mrays/s -> {args.output}",
+            file=sys.stderr,
+        )
+
+
+def require_memory_for_field(count: int, settings, args: argparse.Namespace) -> None:
+    """Refuse, before a sphere is made, a field whose render cannot fit: the field's arrays,
+    its BVH and the image (``render`` checks the last two again once the field exists)."""
+    from embree_rt import budget
+    from embree_rt.integrator import DEFAULT_BATCH_SIZE
+
+    # --instance: the small spheres become an instance array, as --spheres mesh makes them
+    spheres = "mesh" if getattr(args, "instance", None) else args.spheres
+    needs = budget.render_needs(
+        count, spheres, settings, batch_size=DEFAULT_BATCH_SIZE, threads=args.threads
+    )
+    bvh_bytes, _ = needs["spheres"]
+    needs["spheres"] = (budget.field_bytes(count) + bvh_bytes, f"{count:,} spheres")
+    try:
+        budget.require(needs)
+    except budget.MemoryBudgetError as error:
+        raise UsageError(f"{memory_key(error, args)}: {error}") from None
+
+
+def instance_mesh(path: str):
+    """The mesh file of ``--instance`` as one Trimesh (a multi-node file baked into one)."""
+    from embree_rt.scene import SceneError
+    from embree_rt.scene.instances import mesh_from_parts
+    from embree_rt.scene.meshes import load_mesh_parts
+    from embree_rt.transforms import affine_problem
+
+    try:
+        parts = load_mesh_parts(Path(path), "--instance", "mesh")
+    except SceneError as error:
+        raise UsageError(f"--instance: {error.problem}") from None
+    for _, node_transform in parts:
+        if (problem := affine_problem(node_transform)) is not None:
+            raise UsageError(f"--instance: {path}: a node {problem}")
+    mesh = mesh_from_parts(parts)
+    if not np.ptp(np.asarray(mesh.vertices), axis=0).max() > 0:
+        raise UsageError(f"--instance: {path}: all its vertices are one point")
+    return mesh

@@ -1,0 +1,20 @@
+"""``embree-rt serve``: the 2D ray demo and the live preview in a browser."""
+
+from __future__ import annotations
+
+import argparse
+
+from embree_rt.cli.checks import check_library
+from embree_rt.cli.errors import UsageError
+
+
+def command_serve(args: argparse.Namespace) -> None:
+    import importlib.util
+
+    needed = ("starlette", "uvicorn", "websockets")
+    if any(importlib.util.find_spec(name) is None for name in needed):
+        raise UsageError("serve needs the web extra: pip install 'embree-rt[web]'")
+    check_library()
+    from embree_rt.web.serve import serve
+
+    serve(args.scene, args.host, args.port)

@@ -1,0 +1,85 @@
+"""The Python face (embree_rt/api.py): ``render`` and ``Renderer`` return one ``RenderResult``,
+a ``Renderer`` serves many views of one BVH with their AOVs, and settings override the scene's
+``render`` table by one rule."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import embree_rt as rt
+from embree_rt.aovs import AOV_NAMES
+from embree_rt.film import tonemap
+
+SIZE = {"width": 40, "height": 24, "spp": 2, "max_depth": 3, "seed": 4}
+
+
+def small_scene() -> rt.Scene:
+    scene = rt.Scene(camera=rt.Camera(position=(0.0, 1.5, 6.0), look_at=(0.0, 0.8, 0.0)))
+    scene.lights.append(rt.PointLight(position=(3.0, 6.0, 4.0)))
+    scene.add_sphere((0.0, 1.0, 0.0), 1.0, "glass")
+    scene.add_sphere((-1.8, 0.5, 0.6), 0.5, "mirror")
+    scene.add_sphere((1.7, 0.6, -0.4), 0.6, "matte")
+    return scene
+
+
+def test_one_renderer_renders_every_view_as_render_does() -> None:
+    # Each view is rendered from the same rays by the same code on the same BVH (a BVH built
+    # from the same scene is the same, and the views share nothing else), so the images and
+    # AOVs are bitwise those of a fresh render on any ISA.
+    scene = small_scene()
+    views = [scene.camera, replace(scene.camera, position=(4.0, 2.0, 4.0), fov=35.0)]
+    with rt.Renderer(scene, threads=2) as renderer:
+        results = [renderer.render(camera=view, aovs=AOV_NAMES, **SIZE) for view in views]
+    for view, result in zip(views, results, strict=True):
+        alone = rt.render(replace(scene, camera=view), aovs=AOV_NAMES, threads=1, **SIZE)
+        np.testing.assert_array_equal(result.image, alone.image)
+        assert result.aovs.keys() == alone.aovs.keys() == set(AOV_NAMES)
+        for name in AOV_NAMES:
+            np.testing.assert_array_equal(result.aovs[name], alone.aovs[name])
+        assert result.image.shape == (24, 40, 3) and result.image.dtype == np.float32
+        assert result.stats.rays["primary"] == 40 * 24 * 2
+        assert result.stats.rays["aov"] == 40 * 24
+        assert result.stats.render_s > 0
+    assert not np.array_equal(results[0].image, results[1].image)
+    assert results[0].stats.build_s == results[1].stats.build_s  # one BVH for both
+
+
+def test_settings_left_out_come_from_the_scene() -> None:
+    scene = small_scene()
+    scene.render = rt.RenderSettings(**SIZE)
+    overridden = scene.render.with_overrides(width=20, seed=None)
+    assert overridden == rt.RenderSettings(**{**SIZE, "width": 20})
+    assert scene.render.width == 40  # the scene's own table is left as it was
+    result = rt.render(scene, width=20)
+    assert result.image.shape == (24, 20, 3) and result.aovs == {}
+    np.testing.assert_array_equal(result.image, rt.render(scene, **{**SIZE, "width": 20}).image)
+
+
+def test_a_result_tone_maps_and_saves_itself(tmp_path: Path) -> None:
+    scene = small_scene()
+    result = rt.render(scene, aovs=["depth", "object_id"], **SIZE)
+    np.testing.assert_array_equal(result.to_srgb8(), tonemap(result.image))
+    assert result.to_srgb8().dtype == np.uint8
+    assert result.save(tmp_path / "both.npz") == []
+    with np.load(tmp_path / "both.npz") as saved:
+        assert sorted(saved.files) == ["beauty", "depth", "object_id"]
+        np.testing.assert_array_equal(saved["beauty"], result.image)
+        np.testing.assert_array_equal(saved["object_id"], result.aovs["object_id"])
+    beside = result.save(tmp_path / "image.npy")
+    assert sorted(path.name for path in beside) == ["image.depth.npy", "image.object_id.npy"]
+    plain = rt.render(scene, **SIZE)
+    assert plain.save(tmp_path / "plain.png") == []
+    assert sorted(path.name for path in tmp_path.iterdir() if path.name.startswith("plain")) == [
+        "plain.png"
+    ]
+
+
+def test_bad_aov_names_are_refused_before_anything_is_built() -> None:
+    with pytest.raises(ValueError, match="bogus"):
+        rt.render(small_scene(), aovs=["depth", "bogus"], **SIZE)
+    with rt.Renderer(small_scene(), threads=1) as renderer, pytest.raises(TypeError):
+        renderer.render(aovs="depth", **SIZE)

@@ -1,0 +1,431 @@
+"""Hostile and extreme scene input: whatever a file holds, loading ends in a ``SceneError`` of one
+line naming the file and the key, or in a scene that renders without NaN; never another exception.
+
+The cases are the ones a hostile user tried: parser limits (nesting, the digits of an integer),
+numbers float64 holds and float32 does not, names with NUL or newline characters, a zip bomb.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from embree_rt import Scene, load_scene, render
+from embree_rt.scene import SceneError
+
+SPHERE = "[[spheres]]\ncenter = [0, 1, 0]\nradius = 1\n"
+DIGITS_400 = "1" + "0" * 400
+
+
+def _load_error(path: Path, text: str) -> SceneError:
+    path.write_text(text)
+    with pytest.raises(SceneError) as caught:
+        load_scene(path)
+    message = str(caught.value)
+    assert "\n" not in message and "\r" not in message and message.isprintable()
+    return caught.value
+
+
+# case: (file name, text, key, words the problem must contain)
+PARSER_LIMITS = {
+    "600 nested toml arrays": ("s.toml", "a = " + "[" * 600 + "]" * 600, "(syntax)", "nested"),
+    "600 nested toml tables": (
+        "s.toml",
+        "a = " + "{b = " * 600 + "1" + "}" * 600,
+        "(syntax)",
+        "nested",
+    ),
+    "100000 nested json lists": (
+        "s.json",
+        '{"a": ' + "[" * 100_000 + "]" * 100_000 + "}",
+        "(syntax)",
+        "nested",
+    ),
+    "20 nested json tables": (
+        "s.json",
+        '{"render": ' + '{"a": ' * 20 + "1" + "}" * 21,
+        "render" + ".a" * 16,
+        "levels deep",
+    ),
+    "4400-digit toml integer": (
+        "s.toml",
+        "[render]\nwidth = " + "1" * 4400,
+        "(syntax)",
+        "more than 4300 digits",
+    ),
+    "4400-digit json integer": (
+        "s.json",
+        '{"render": {"width": ' + "1" * 4400 + "}}",
+        "(syntax)",
+        "4300 digits",
+    ),
+    "400-digit radius": (
+        "s.toml",
+        SPHERE.replace("radius = 1", f"radius = {DIGITS_400}"),
+        "spheres[0].radius",
+        "within ±1e+10",
+    ),
+    "400-digit centre": (
+        "s.toml",
+        SPHERE.replace("[0, 1, 0]", f"[{DIGITS_400}, 1, 0]"),
+        "spheres[0].center",
+        "within ±1e+10",
+    ),
+    "400-digit negative fov": (
+        "s.json",
+        json.dumps({"camera": {"fov": -(10**400)}}),
+        "camera.fov",
+        "within",
+    ),
+    "NUL in a mesh file name": (
+        "s.toml",
+        '[[meshes]]\nfile = "a\\u0000b.obj"',
+        "meshes[0].file",
+        "NUL",
+    ),
+    "NUL in a sphere array name": (
+        "s.toml",
+        '[[sphere_arrays]]\nfile = "a\\u0000.npz"',
+        "sphere_arrays[0].file",
+        "NUL",
+    ),
+    "NUL in a placements name": (
+        "s.toml",
+        '[[instances]]\nmesh = "m.obj"\ntransforms = "\\u0000"',
+        "instances[0].transforms",
+        "NUL",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(PARSER_LIMITS))
+def test_parser_limits_are_one_line_scene_errors(tmp_path: Path, case: str) -> None:
+    name, text, key, words = PARSER_LIMITS[case]
+    error = _load_error(tmp_path / name, text)
+    assert (error.file, error.key) == (str(tmp_path / name), key)
+    assert words in error.problem
+
+
+def test_a_newline_in_a_key_or_a_file_name_stays_on_one_line(tmp_path: Path) -> None:
+    error = _load_error(tmp_path / "s.toml", '[render]\n"wid\\nth" = 3\n')
+    assert error.key == "render.wid\nth"
+    assert "'render.wid\\nth'" in str(error)  # quoted by repr: where the key ends is plain
+    error = _load_error(tmp_path / "s.toml", '[[meshes]]\nfile = "a\\nb.obj"\n')
+    assert "a\\nb.obj" in str(error) and "no such file" in str(error)
+    folder = tmp_path / "new\nline"
+    folder.mkdir()
+    error = _load_error(folder / "s.toml", "[render]\nwidth = 0\n")
+    assert str(error).startswith(repr(str(folder / "s.toml")) + ": render.width: ")
+
+
+def _run(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "embree_rt", *args], capture_output=True,
+                          text=True, timeout=300, cwd=cwd)  # fmt: skip
+
+
+def test_the_command_says_one_line_and_exits_2_for_a_parser_limit(tmp_path: Path) -> None:
+    (tmp_path / "deep.toml").write_text("a = " + "[" * 600 + "]" * 600)
+    result = _run("render", "deep.toml", "-o", "out.png", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count("\n") == 1 and "deep.toml: (syntax):" in result.stderr
+    assert not (tmp_path / "out.png").exists()
+
+
+# -- numbers float64 holds and float32 does not ----------------------------------------------------
+
+LIGHT = "[[lights]]\nposition = [0, 5, 0]\n"
+# case: (scene text, support file to write (name, kind, value), key, words)
+BEYOND_FLOAT32 = {
+    "centre 1e39": (
+        SPHERE.replace("[0, 1, 0]", "[1e39, 1, 0]"),
+        None,
+        "spheres[0].center",
+        "within ±1e+10",
+    ),
+    "light at 1e39": (
+        "[[lights]]\nposition = [0, 1e39, 0]\n",
+        None,
+        "lights[0].position",
+        "within",
+    ),
+    "light intensity 1e39": (LIGHT + "intensity = 1e39\n", None, "lights[0].intensity", "within"),
+    "light intensity 2e6": (LIGHT + "intensity = 2e6\n", None, "lights[0].intensity", "<= 1e+06"),
+    "light colour 1e39": (LIGHT + "color = [1, 1e39, 1]\n", None, "lights[0].color", "within"),
+    "light colour 1e7": (LIGHT + "color = [1, 1e7, 1]\n", None, "lights[0].color", "<= 1e+06"),
+    "material colour 1e39": (
+        "[materials.hot]\ncolor = [1e39, 0, 0]\n",
+        None,
+        "materials.hot.color",
+        "within",
+    ),
+    "material colour 2e6": (
+        "[materials.hot]\ncolor = [0, 2e6, 0]\n",
+        None,
+        "materials.hot.color",
+        "<= 1e+06",
+    ),
+    "sky 1e39": ("[background]\nzenith = [1e39, 0, 0]\n", None, "background.zenith", "within"),
+    "ior 1e39": ("[materials.hot]\nior = 1e39\n", None, "materials.hot.ior", "within"),
+    "radius 1e-320": (
+        SPHERE.replace("radius = 1", "radius = 1e-320"),
+        None,
+        "spheres[0].radius",
+        ">= 1e-18",
+    ),
+    "floor square 1e-300": ("[floor]\nsize = 1e-300\n", None, "floor.size", ">= 1e-18"),
+    "npz centre 1e308": (
+        '[[sphere_arrays]]\nfile = "a.npz"\n',
+        ("a.npz", "centers", 1e308),
+        "sphere_arrays[0].file",
+        "centers row 1 must be finite and within",
+    ),
+    "npz radius 1e-320": (
+        '[[sphere_arrays]]\nfile = "a.npz"\n',
+        ("a.npz", "radii", 1e-320),
+        "sphere_arrays[0].file",
+        "radii row 1",
+    ),
+    "obj vertex 1e39": (
+        '[[meshes]]\nfile = "far.obj"\n',
+        ("far.obj", "vertex", 1e39),
+        "meshes[0].file",
+        "beyond the ±1e+10",
+    ),
+    "mesh scaled past the limit": (
+        '[[meshes]]\nfile = "far.obj"\nscale = 1e9\n',
+        ("far.obj", "vertex", 100.0),
+        "meshes[0].file",
+        "beyond",
+    ),
+    "instances placed at 1e12": (
+        '[[instances]]\nmesh = "far.obj"\ntransforms = "p.npz"\n',
+        ("p.npz", "positions", 1e12),
+        "instances[0].transforms",
+        "row 1 places the mesh",
+    ),
+}
+
+
+def _write_support(folder: Path, name: str, kind: str, value: float) -> None:
+    if kind in ("centers", "radii"):
+        arrays = {"centers": np.zeros((3, 3)), "radii": np.ones(3)}
+        arrays[kind][1] = value
+        np.savez(folder / name, **arrays)
+    elif kind == "vertex":
+        (folder / name).write_text(f"v 0 0 0\nv {value!r} 0 0\nv 0 1 0\nf 1 2 3\n")
+    else:
+        (folder / "far.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+        np.savez(folder / name, positions=np.array([[0.0, 0, 0], [value, 0, 0]]))
+
+
+@pytest.mark.parametrize("case", sorted(BEYOND_FLOAT32))
+def test_numbers_beyond_float32_are_refused_where_they_enter(tmp_path: Path, case: str) -> None:
+    text, support, key, words = BEYOND_FLOAT32[case]
+    if support is not None:
+        _write_support(tmp_path, *support)
+    error = _load_error(tmp_path / "s.toml", text)
+    assert error.key == key
+    assert words in error.problem
+
+
+def test_the_python_api_holds_spheres_and_meshes_to_the_same_limits() -> None:
+    import trimesh
+
+    scene = Scene()
+    with pytest.raises(ValueError, match=r"centers row 0 must be finite and within"):
+        scene.add_sphere((1e39, 0.0, 0.0), 1.0)
+    with pytest.raises(ValueError, match=r"radii row 1"):
+        scene.add_spheres(np.zeros((2, 3)), np.array([1.0, 1e-320]), "matte")
+    assert len(scene.sphere_radii) == 0
+    triangle = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    with pytest.raises(ValueError, match=r"transform: places the mesh 2e\+11"):
+        scene.add_mesh(triangle, transform=np.diag([2e11, 2e11, 2e11, 1.0]))
+    placements = np.stack([np.eye(4)] * 3)
+    placements[2, 0, 3] = -3e10
+    with pytest.raises(ValueError, match=r"transforms: row 2: places the mesh 3e\+10"):
+        scene.add_instances(triangle, placements)
+    assert scene.meshes == [] and scene.instances == []
+
+
+def test_a_scene_at_every_limit_renders_without_nan_or_inf(tmp_path: Path) -> None:
+    """Colours and intensities at 1e6, lights and spheres at 1e10, a 1e-18 radius and floor
+    square, an ior and shininess of 1e10, eight bounces: finite pixels, and bright ones."""
+    (tmp_path / "limits.toml").write_text(LIMITS_SCENE)
+    image = render(load_scene(tmp_path / "limits.toml")).image
+    assert np.isfinite(image).all()
+    assert image.max() > 1e12  # the 1e6 colours did reach the image
+
+
+LIMITS_SCENE = """
+[render]
+width = 24
+height = 16
+spp = 2
+max_depth = 8
+[camera]
+position = [0, 2, 8]
+look_at = [0, 1, 0]
+[background]
+horizon = [1e6, 1e6, 1e6]
+zenith = [1e6, 0, 1e6]
+[materials.hot]
+color = [1e6, 1e6, 1e6]
+shininess = 1e10
+ior = 1e10
+transparency = 0.5
+reflectivity = 0.5
+specular = 1
+diffuse = 1
+[floor]
+color_a = [1e6, 1e6, 1e6]
+size = 1e-18
+[[lights]]
+position = [0, 1e10, 0]
+intensity = 1e6
+color = [1e6, 1e6, 1e6]
+[[lights]]
+position = [1e10, -1e10, 1e10]
+intensity = 1e6
+color = [1e6, 1e6, 1e6]
+[[spheres]]
+center = [0, 1, 0]
+radius = 1
+material = "hot"
+[[spheres]]
+center = [1e10, 1e10, -1e10]
+radius = 1e10
+material = "hot"
+[[spheres]]
+center = [1, 1, 1]
+radius = 1e-18
+material = "mirror"
+"""
+
+
+# -- a zip bomb --------------------------------------------------------------------------------
+
+
+def test_a_sphere_array_too_large_for_memory_is_refused_from_its_headers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The issue's bomb (3.7 MB of zip declaring 610 M spheres) scaled to a machine with 40 MB
+    available: 400,000 spheres of zeros, 190 kB of zip, 12.8 MB of arrays, and 28.4 MB more for
+    the scene and the BVH (71 bytes a sphere at least): 41.2 MB. The headers alone refuse it:
+    nothing near the arrays' size is allocated. 50,000 spheres then load under that budget."""
+    import tracemalloc
+
+    from embree_rt import budget
+
+    count = 400_000
+    np.savez_compressed(tmp_path / "bomb.npz", centers=np.zeros((count, 3)), radii=np.ones(count))
+    assert (tmp_path / "bomb.npz").stat().st_size < 300_000
+    monkeypatch.setattr(budget, "available_memory", lambda: 40_000_000)
+    path = tmp_path / "s.toml"
+    path.write_text('[[sphere_arrays]]\nfile = "bomb.npz"\n')
+    tracemalloc.start()
+    try:
+        with pytest.raises(SceneError) as caught:
+            load_scene(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert caught.value.key == "sphere_arrays[0].file"
+    assert "400,000 spheres would need ~0.0412 GB of memory" in caught.value.problem
+    assert peak < 2_000_000  # the arrays alone are 12.8 MB
+    count = 50_000
+    np.savez_compressed(tmp_path / "bomb.npz", centers=np.zeros((count, 3)), radii=np.ones(count))
+    assert len(load_scene(path).sphere_radii) == count
+
+
+def test_any_archive_unpacking_beyond_memory_is_refused_from_its_headers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Instance placements too: 200,000 (4, 4) float64 matrices are 25.6 MB unpacked."""
+    from embree_rt import budget
+
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    np.savez_compressed(tmp_path / "p.npz", transforms=np.zeros((200_000, 4, 4)))
+    monkeypatch.setattr(budget, "available_memory", lambda: 20_000_000)
+    path = tmp_path / "s.toml"
+    path.write_text('[[instances]]\nmesh = "m.obj"\ntransforms = "p.npz"\n')
+    error = _load_error(path, path.read_text())
+    assert error.key == "instances[0].transforms"
+    assert "its arrays would need ~0.0256 GB of memory" in error.problem
+
+
+# -- integers beyond int64 ---------------------------------------------------------------------
+
+BIG_INTEGERS = {
+    "spp 1e29 (a float)": ("[render]\nspp = 1e29\n", "render.spp", "expected an integer"),
+    "spp 10**29": (f"[render]\nspp = {10**29}\n", "render.spp", f"<= {2**63 - 1}"),
+    "width 2**63": (f"[render]\nwidth = {2**63}\n", "render.width", "<= 9223372036854775807"),
+    "2**64 samples": (
+        f"[render]\nwidth = {2**32}\nheight = {2**16}\nspp = {2**16}\n",
+        "render.spp",
+        "1.84e+19 samples, more than",
+    ),
+    "seed 2**64": (f"[render]\nseed = {2**64}\n", "render.seed", f"<= {2**64 - 1}"),
+    "field seed 2**64": (
+        f"[random_field]\ncount = 5\nseed = {2**64}\n",
+        "random_field.seed",
+        "<= 18446744073709551615",
+    ),
+    "field count 10**30": (f"[random_field]\ncount = {10**30}\n", "random_field.count", "<="),
+    "frames 10**30": (f"[animation]\nframes = {10**30}\norbit = 360\n", "animation.frames", "<="),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BIG_INTEGERS))
+def test_integers_beyond_int64_are_refused(tmp_path: Path, case: str) -> None:
+    text, key, words = BIG_INTEGERS[case]
+    error = _load_error(tmp_path / "s.toml", text)
+    assert error.key == key
+    assert words in error.problem
+
+
+def test_the_command_refuses_spp_beyond_int64_in_a_file_in_one_line(tmp_path: Path) -> None:
+    (tmp_path / "s.toml").write_text(f"[render]\nwidth = 16\nheight = 16\nspp = {10**29}\n")
+    result = _run("render", "s.toml", "-o", "out.png", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count("\n") == 1 and "s.toml: render.spp: must be <=" in result.stderr
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_a_long_camera_path_is_checked_whole_and_bounded(tmp_path: Path) -> None:
+    """Every frame's camera is checked (as arrays: a million frames in about a second, where a
+    camera object a frame took minutes, and 10**12 frames never ended); past a million frames
+    the path is refused."""
+    keys = "keyframes = [{frame = 0, position = [0, 1, 5]}, {frame = 999999, position = [5, 1, 0]}]"
+    path = tmp_path / "s.toml"
+    path.write_text(f"[animation]\nframes = 1000000\n{keys}\n")
+    assert load_scene(path).animation.frames == 1_000_000
+    # Through look_at = [0, 0, 0] half way: the one frame where position meets it is found.
+    keys = (
+        "keyframes = [{frame = 0, position = [0, 0, -5]}, {frame = 999998, position = [0, 0, 5]}]"
+    )
+    error = _load_error(path, f"[animation]\nframes = 1000000\n{keys}\n")
+    assert error.key == "animation.keyframes"
+    assert error.problem.startswith("frame 499999's interpolated camera: look_at must differ")
+    error = _load_error(path, "[animation]\nframes = 1000001\norbit = 360\n")
+    assert error.key == "animation.frames" and "<= 1000000" in error.problem
+
+
+def test_no_warning_is_printed_before_the_one_line_error(tmp_path: Path) -> None:
+    """A keyframe at 1e308 once printed NumPy's RuntimeWarnings (overflow in the spline) before
+    its error; an OBJ vertex at 1e39 those of the float32 cast. Now: the one line alone."""
+    (tmp_path / "far.obj").write_text("v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "mesh.toml").write_text('[[meshes]]\nfile = "far.obj"\n')
+    (tmp_path / "keys.toml").write_text(
+        "[animation]\nframes = 10\nkeyframes = [{frame = 0, position = [0, 1, 5]}, "
+        "{frame = 9, position = [1e308, 1, 0]}]\n"
+    )
+    for name, key in (("mesh.toml", "meshes[0].file"), ("keys.toml", "keyframes[1].position")):
+        result = _run("render", name, "-o", "out.png", cwd=tmp_path)
+        assert result.returncode == 2
+        assert result.stderr.startswith("embree-rt: error: ") and result.stderr.count("\n") == 1
+        assert key in result.stderr
