@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import sys
 import traceback
+import warnings
+from contextlib import contextmanager
 
 from embree_rt.cli.errors import BUG_REPORT, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED
 from embree_rt.cli.info import command_info
@@ -40,7 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exit_:
         return int(exit_.code or 0)
     try:
-        COMMANDS[args.command](args)
+        with one_line_warnings():
+            COMMANDS[args.command](args)
     except KeyboardInterrupt:
         print("embree-rt: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -53,3 +56,22 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BUG
     return 0
 
+
+
+@contextmanager
+def one_line_warnings():
+    """Print each ``InputWarning`` (what a file asks for that is rendered differently or left
+    out) as one line, ``embree-rt: warning: MESSAGE``; other warnings as Python prints them."""
+    from embree_rt.scene.errors import InputWarning
+
+    with warnings.catch_warnings():
+        shown = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, InputWarning):
+                print(f"embree-rt: warning: {message}", file=sys.stderr)
+            else:
+                shown(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield

@@ -14,10 +14,10 @@ from embree_rt.cli.checks import check_library
 def command_info(args: argparse.Namespace) -> None:
     from embree_rt import budget
     from embree_rt.aovs import id_listing
+    from embree_rt.cli.scene_input import read_scene
     from embree_rt.geometry import SceneGeometry, sphere_kind
-    from embree_rt.scene import load_scene
 
-    scene = load_scene(args.scene)
+    scene, _ = read_scene(args)
     check_library()
     resident_before = resident_bytes()
     started = time.perf_counter()
@@ -47,6 +47,8 @@ def command_info(args: argparse.Namespace) -> None:
         arrayed=in_arrays - sphere_instances,
     )
     print(f"scene:      {args.scene}")
+    for note in scene.notes:  # what was chosen for a mesh file rendered on its own
+        print(f"note:       {note}")
     print(f"spheres:    {spheres:,}")
     print(f"meshes:     {placements:,} placements of {len(distinct):,} distinct meshes")
     print(f"triangles:  {unique_triangles:,} stored, {triangles:,} placed")

@@ -9,6 +9,11 @@ from embree_rt.cli.errors import EXIT_BAD_INPUT
 
 # geometry.SPHERE_MODES, spelled out so that --help does not load Embree and numba.
 SPHERE_CHOICES = ("analytic", "point", "mesh")
+SCENE_HELP = (
+    "scene or mesh file: a .toml or .json scene, or a mesh (.obj, .ply, .stl, .off, .glb, "
+    ".gltf) shown on its own, from its own camera and lights or framed and lit by default"
+)
+NO_FLOOR_HELP = "leave out the floor (a mesh file's, or the scene file's)"
 
 
 class Parser(argparse.ArgumentParser):
@@ -85,8 +90,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Whitted-style ray tracing of scenes with very many objects, on Embree.",
     )
     commands = parser.add_subparsers(dest="command", required=True)
-    render = commands.add_parser("render", help="render a scene file (TOML or JSON)")
-    render.add_argument("scene", help="scene file")
+    render = commands.add_parser("render", help="render a scene file or a mesh file")
+    render.add_argument("scene", help=SCENE_HELP)
+    render.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
     add_render_flags(render)
     random = commands.add_parser("random", help="render a random sphere field of N spheres")
     random.add_argument("--count", type=int_at_least(1), required=True)
@@ -99,7 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_render_flags(random)
     info = commands.add_parser("info", help="describe a scene: objects, bounds, build time")
-    info.add_argument("scene", help="scene file")
+    info.add_argument("scene", help=SCENE_HELP)
+    info.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
     info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic")
     serve = commands.add_parser("serve", help="the 2D ray demo and a live preview in a browser")
     serve.add_argument("scene", nargs="?", help="scene file (default: the showcase)")

@@ -16,12 +16,12 @@ from embree_rt.cli.parser import render_overrides
 
 
 def command_render(args: argparse.Namespace) -> None:
-    from embree_rt.scene import load_scene
+    from embree_rt.cli.scene_input import read_scene
 
     check_output(args.output, args.aov)
     started = time.perf_counter()
-    scene = load_scene(args.scene)
-    render_and_save(scene, args, ("load", time.perf_counter() - started), Path(args.scene))
+    scene, source = read_scene(args)
+    render_and_save(scene, args, ("load", time.perf_counter() - started), source)
 
 
 def command_random(args: argparse.Namespace) -> None:
