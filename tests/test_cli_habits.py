@@ -9,8 +9,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 import trimesh
 from PIL import Image
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 
 ROOT = Path(__file__).resolve().parent.parent
 TINY = ["--width", "16", "--height", "9", "--spp", "1"]
@@ -79,3 +85,83 @@ def test_a_file_neither_scene_nor_mesh_is_one_line(tmp_path: Path) -> None:
     result = run_cli("render", str(tmp_path / "scene.yaml"), "-o", str(tmp_path / "o.png"))
     assert result.returncode == 2 and len(result.stderr.splitlines()) == 1, result.stderr
     assert ".toml" in result.stderr and ".glb" in result.stderr and "scene.yaml" in result.stderr
+
+
+# -- 1. --set ---------------------------------------------------------------------------------
+
+
+def one_line_error(result: subprocess.CompletedProcess) -> str:
+    assert result.returncode == 2, result.stderr
+    assert "Traceback" not in result.stderr and result.stdout == ""
+    (line,) = result.stderr.splitlines()
+    assert line.startswith("embree-rt: error: ")
+    return line.removeprefix("embree-rt: error: ")
+
+
+def test_set_changes_any_key_as_the_file_would(tmp_path: Path) -> None:
+    """Each --set gives bitwise the image of the scene file with the same value written in it
+    (the same document reaches the same loader and renderer)."""
+    base = (ROOT / "scenes" / "three_spheres.toml").read_text()
+    scene = tmp_path / "scene.toml"
+    scene.write_text(base)
+    edited = tmp_path / "edited.toml"
+    document = tomllib.loads(base)
+    document["camera"]["fov"] = 35
+    document["lights"][0]["intensity"] = 2
+    document.setdefault("materials", {}).setdefault("gold", {})["shininess"] = 200
+    document["render"]["max_depth"] = 1
+    edited.write_text(tomli_w.dumps(document))
+    flags = ["-D", "camera.fov=35", "--set", "lights[0].intensity=2",
+             "-D", "materials.gold.shininess=200", "-D", "render.max_depth=3",
+             "--max-depth", "1"]  # fmt: skip  (the last of render.max_depth wins)
+    assert run_cli("render", str(scene), "-o", str(tmp_path / "a.npy"), *TINY, *flags,
+                   "--quiet").returncode == 0  # fmt: skip
+    assert run_cli("render", str(edited), "-o", str(tmp_path / "b.npy"), *TINY,
+                   "--quiet").returncode == 0  # fmt: skip
+    assert run_cli("render", str(scene), "-o", str(tmp_path / "c.npy"), *TINY,
+                   "--quiet").returncode == 0  # fmt: skip
+    changed, written, plain = (np.load(tmp_path / f"{n}.npy") for n in "abc")
+    np.testing.assert_array_equal(changed, written)
+    assert not np.array_equal(changed, plain)
+
+
+def test_set_refuses_what_the_loader_refuses_with_its_message(tmp_path: Path) -> None:
+    scene = tmp_path / "scene.toml"
+    scene.write_text((ROOT / "scenes" / "three_spheres.toml").read_text())
+    output = tmp_path / "o.png"
+    cases = {
+        "camera.fov=0": ("camera.fov", "[camera]\nfov = 0\n"),
+        "camera.fvo=30": ("camera.fvo", "[camera]\nfvo = 30\n"),
+        "render.spp=many": ("render.spp", '[render]\nspp = "many"\n'),
+    }
+    for assignment, (key, text) in cases.items():
+        line = one_line_error(run_cli("render", str(scene), "-o", str(output), "-D", assignment))
+        (tmp_path / "bad.toml").write_text(text)
+        in_file = one_line_error(run_cli("render", str(tmp_path / "bad.toml"), "-o", str(output)))
+        # the loader's own words, said of the flag instead of the file
+        assert line == f"--set {assignment}: " + in_file.split(": ", 1)[1]
+        assert line.startswith(f"--set {assignment}: {key}: ")
+    fvo = one_line_error(run_cli("render", str(scene), "-o", str(output), "-D", "camera.fvo=30"))
+    assert "did you mean 'fov'?" in fvo
+    width = one_line_error(run_cli("render", str(scene), "-o", str(output), "--width", "-1"))
+    assert width == "--width -1: render.width: must be >= 1, got -1"
+    past = one_line_error(run_cli("render", str(scene), "-o", str(output), "-D", "lights[9].x=1"))
+    assert past.startswith("--set lights[9].x=1: lights[9]: no such entry: lights has ")
+    assert not output.exists()
+
+
+def test_set_reaches_a_mesh_files_scene_and_a_random_field(tmp_path: Path) -> None:
+    mesh = tmp_path / "ball.stl"
+    trimesh.creation.icosphere(subdivisions=1).export(mesh)
+    for command in (["render", str(mesh)], ["random", "--count", "50"]):
+        runs = {}
+        unlit = ["-D", "lights[0].intensity=0", "-D", "lights[1].intensity=0"]
+        for name, flags in {"plain": [], "lit": unlit}.items():
+            out = tmp_path / f"{name}.npy"
+            result = run_cli(*command, "-o", str(out), *TINY, *flags, "--quiet")
+            assert result.returncode == 0, result.stderr
+            runs[name] = np.load(out)
+        assert runs["lit"].mean() < runs["plain"].mean()  # unlit: sky and reflections only
+    line = one_line_error(run_cli("render", str(mesh), "-o", str(tmp_path / "x.png"),
+                                  "-D", "spheres[0].radius=2"))  # fmt: skip
+    assert line.startswith("--set spheres[0].radius=2: spheres: not settable on ")

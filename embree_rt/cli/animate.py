@@ -74,7 +74,8 @@ def render_frames_command(
 ) -> None:
     """``embree-rt render|random`` for an animated scene or on a cluster (``--cluster``,
     ``--scheduler``): render the frames and write each to its file. ``source`` is what workers
-    make the scene from: the scene file's path, or the random field's ``FieldPlan``; ``made``
+    make the scene from: the scene file's path, the random field's ``FieldPlan``, or the
+    ``Scene`` itself (scattered to them); ``made``
     as in the command's summary line."""
     from embree_rt.film import check_output_path, save_image
 
@@ -165,7 +166,7 @@ def _render_on_cluster(
     with _quiet_dask(), distributed.connect(args.cluster, args.scheduler) as client:
         if isinstance(source, Path):  # every worker loads the file itself
             source = distributed.SceneFile(str(source.resolve()))
-        else:  # every worker generates the field itself
+        elif not isinstance(source, Scene):  # a FieldPlan: every worker generates the field
             source = distributed.FieldRecipe(source)
         renderer = distributed.ClusterRenderer(source, client, spheres=args.spheres)
         total = settings.width * settings.height * settings.spp * len(cameras)

@@ -50,7 +50,11 @@ def memory_key(error, args: argparse.Namespace) -> str:
     """The input to blame for a ``MemoryBudgetError``: the flags or the scene file's keys."""
     scene_file = getattr(args, "scene", None)
     if error.largest == "image":
-        if scene_file is None or args.width is not None or args.height is not None:
+        size = ("render.width", "render.height")
+        flags = [setting.origin for setting in args.settings if setting.key in size]
+        if flags:
+            return ", ".join(flags)
+        if scene_file is None:
             return "--width, --height"
         return f"{scene_file}: render.width, render.height"
     return "--count" if scene_file is None else f"{scene_file}: spheres"

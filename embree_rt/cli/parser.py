@@ -13,6 +13,7 @@ SCENE_HELP = (
     "scene or mesh file: a .toml or .json scene, or a mesh (.obj, .ply, .stl, .off, .glb, "
     ".gltf) shown on its own, from its own camera and lights or framed and lit by default"
 )
+SCENE_DEFAULT = "; default: the scene's"
 NO_FLOOR_HELP = "leave out the floor (a mesh file's, or the scene file's)"
 
 
@@ -51,8 +52,56 @@ def aov_list(text: str) -> tuple[str, ...]:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
+class SetKey(argparse.Action):
+    """Appends a ``settings.Setting`` to ``args.settings``, in the order the flags come:
+    ``--set KEY=VALUE``, or a flag that stands for one key (``key``): ``--width 32`` is
+    ``--set render.width=32``. Values are checked when the scene is read, by the loader."""
+
+    def __init__(self, option_strings, dest, key: str | None = None, **kwargs) -> None:
+        self.key = key
+        super().__init__(option_strings, "settings", default=(), **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        from embree_rt.scene.settings import Setting, parse_assignment, parse_value
+
+        if self.key is None:
+            try:
+                setting = parse_assignment(values)
+            except ValueError as error:
+                raise argparse.ArgumentError(self, str(error)) from None
+        else:
+            words = values if isinstance(values, list) else [values]
+            value = [parse_value(word) for word in words] if self.nargs else parse_value(values)
+            setting = Setting(self.key, value, " ".join([option_string, *words]))
+        namespace.settings = (*namespace.settings, setting)
+
+
+def add_setting_flags(parser: argparse.ArgumentParser) -> None:
+    """``--set`` and the flags that stand for one scene key each."""
+    parser.add_argument(
+        "-D", "--set", action=SetKey, metavar="KEY=VALUE",
+        help="set any scene key, named as in the scene file: camera.fov=35, "
+        "lights[0].intensity=2, materials.gold.shininess=200, render.max_depth=3 (the value is "
+        "read as TOML, else as a string; repeatable, the last wins)",
+    )  # fmt: skip
+    shortcuts = {
+        "--width": ("render.width", "image width in pixels (render.width)"),
+        "--height": ("render.height", "image height in pixels (render.height)"),
+        "--spp": ("render.spp", "samples per pixel (render.spp)"),
+        "--max-depth": ("render.max_depth", "bounces of reflection and refraction "
+                        "(render.max_depth)"),
+        "--seed": ("render.seed", "the sampler's seed (render.seed); random: the field's too"),
+        "--fov": ("camera.fov", "vertical field of view in degrees (camera.fov)"),
+    }  # fmt: skip
+    for flag, (key, text) in shortcuts.items():
+        parser.add_argument(flag, action=SetKey, key=key, metavar="N", help=text + SCENE_DEFAULT)
+    for flag, key in (("--camera-position", "camera.position"), ("--look-at", "camera.look_at")):
+        parser.add_argument(flag, action=SetKey, key=key, nargs=3, metavar=("X", "Y", "Z"),
+                            help=f"the camera's {key.split('.')[1]} ({key})" + SCENE_DEFAULT)
+
+
 def add_render_flags(parser: argparse.ArgumentParser) -> None:
-    positive, non_negative = int_at_least(1), int_at_least(0)
+    positive = int_at_least(1)
     parser.add_argument(
         "-o", "--output", required=True, help="image to write: .png, .npy, .npz or .exr"
     )
@@ -63,11 +112,7 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         help="also write AOVs, any of depth,normal,albedo,object_id,material_id: in the .npz or "
         ".exr, or one file each beside a .png or .npy",
     )
-    parser.add_argument("--width", type=positive)
-    parser.add_argument("--height", type=positive)
-    parser.add_argument("--spp", type=positive, help="samples per pixel")
-    parser.add_argument("--max-depth", type=non_negative)
-    parser.add_argument("--seed", type=non_negative)
+    add_setting_flags(parser)
     parser.add_argument("--threads", type=positive, help="default: all cores")
     parser.add_argument(
         "--spheres",
@@ -108,14 +153,9 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("scene", help=SCENE_HELP)
     info.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
     info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic")
+    add_setting_flags(info)
     serve = commands.add_parser("serve", help="the 2D ray demo and a live preview in a browser")
     serve.add_argument("scene", nargs="?", help="scene file (default: the showcase)")
     serve.add_argument("--host", default="127.0.0.1", help="address to listen on")
     serve.add_argument("--port", type=int_at_least(0), default=8000, help="0: any free port")
     return parser
-
-
-def render_overrides(args: argparse.Namespace) -> dict[str, int | None]:
-    """The render settings the flags override (None: the scene's), for
-    ``RenderSettings.with_overrides``."""
-    return {name: getattr(args, name) for name in ("width", "height", "spp", "max_depth", "seed")}

@@ -28,17 +28,25 @@ def is_mesh_file(path: str | Path) -> bool:
 
 
 def read_scene(args: argparse.Namespace) -> tuple[Scene, Path | Scene]:
-    """The scene ``args.scene`` names, with ``--no-floor``, and the source a cluster's workers
-    make it from: the scene file's path when they can load it as it is (they load a path with
-    ``load_scene``), else the ``Scene`` itself (scattered to them)."""
-    from embree_rt.scene import load_scene
+    """The scene ``args.scene`` names, with ``--no-floor`` and the settings (``--set`` and the
+    flags standing for a key), and the source a cluster's workers make it from: the scene
+    file's path when they can load it as it is (they load a path with ``load_scene``; the
+    render settings travel with the frames), else the ``Scene`` itself (scattered to them)."""
+    from embree_rt.scene.settings import Setting, apply_to_scene, load_scene_with
 
+    settings = list(args.settings)
     path = Path(args.scene)
     if is_mesh_file(path):
         scene = Scene.from_file(path, floor=not args.no_floor)
+        apply_to_scene(scene, settings, str(path))
         return scene, scene
-    scene = load_scene(path)
     if args.no_floor:
-        scene.floor = None
-        return scene, scene
-    return scene, path
+        settings.append(Setting("floor", False, "--no-floor"))
+    scene = load_scene_with(path, settings)
+    return scene, (path if only_render_settings(settings) else scene)
+
+
+def only_render_settings(settings) -> bool:
+    """Whether ``settings`` change the render settings alone (which travel with the frames to
+    a cluster's workers), so workers can make the scene themselves."""
+    return all(setting.key.startswith("render.") for setting in settings)
