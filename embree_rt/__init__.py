@@ -16,6 +16,7 @@ from embree_rt.scene.loader import load_scene
 from embree_rt.scene.model import Background, Floor, MeshObject, PointLight, RenderSettings, Scene
 from embree_rt.scene.random_field import random_field
 from embree_rt.scene.writer import save_scene
+from embree_rt.version import __version__
 
 __all__ = [
     "AOV_NAMES",
@@ -33,6 +34,7 @@ __all__ = [
     "Renderer",
     "Scene",
     "SceneError",
+    "__version__",
     "load_scene",
     "preset",
     "random_field",

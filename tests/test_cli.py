@@ -234,7 +234,7 @@ def test_bad_input_leaves_an_existing_image_alone(name: str, bad_runs) -> None:
 
 
 def test_usage_errors_are_one_line_too(tmp_path: Path) -> None:
-    assert_one_line_error(run_cli(), ["required"])
+    assert_one_line_error(run_cli("render"), ["required", "scene", "--output"])
     assert_one_line_error(
         run_cli("random", "--count", "0", "-o", str(tmp_path / "x.png")), ["--count"]
     )

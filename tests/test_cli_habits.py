@@ -165,3 +165,58 @@ def test_set_reaches_a_mesh_files_scene_and_a_random_field(tmp_path: Path) -> No
     line = one_line_error(run_cli("render", str(mesh), "-o", str(tmp_path / "x.png"),
                                   "-D", "spheres[0].radius=2"))  # fmt: skip
     assert line.startswith("--set spheres[0].radius=2: spheres: not settable on ")
+
+
+# -- 2. version, usage, help ------------------------------------------------------------------
+
+
+def test_version_is_the_projects() -> None:
+    import embree_rt
+
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    assert embree_rt.__version__ == declared
+    result = run_cli("--version")
+    assert result.returncode == 0 and result.stdout == f"embree-rt {declared}\n", result.stderr
+
+
+def test_bare_command_prints_usage_and_a_mistyped_flag_gets_a_suggestion() -> None:
+    bare = run_cli()
+    assert bare.returncode == 2 and bare.stdout == ""
+    assert bare.stderr.startswith("usage: embree-rt")
+    for command in ("render", "random", "info", "serve"):
+        assert command in bare.stderr
+    typo = run_cli("render", "scene.toml", "-o", "x.png", "--widht", "3")
+    assert typo.returncode == 2
+    assert typo.stderr.endswith("(did you mean '--width'?)\n")
+    assert len(typo.stderr.splitlines()) == 1
+    command = run_cli("rendr", "scene.toml")
+    assert command.stderr.endswith("(did you mean 'render'?)\n")
+
+
+def subcommands() -> dict:
+    import argparse
+
+    from embree_rt.cli import build_parser
+
+    parser = build_parser()
+    (commands,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return commands.choices
+
+
+def test_help_explains_every_flag_and_offers_only_what_applies() -> None:
+    for name, parser in subcommands().items():
+        for action in parser._actions:
+            assert action.help, f"{name} {action.option_strings or action.dest}: no help text"
+    render_help = " ".join(run_cli("render", "--help").stdout.split())  # lines unwrapped
+    assert "(default: analytic)" in render_help  # --spheres
+    assert "--frames" in render_help and "--overwrite" in render_help
+    random_help = " ".join(run_cli("random", "--help").stdout.split())
+    assert "--frames" not in random_help and "--overwrite" not in random_help
+    assert "--count N" in random_help and "spheres in the field" in random_help
+
+
+def test_threads_takes_the_spellings_of_pbrt_and_mitsuba() -> None:
+    render = subcommands()["render"]
+    for spelling in ("--threads", "--nthreads", "-t"):
+        args = render.parse_args(["s.toml", "-o", "x.png", spelling, "3"])
+        assert args.threads == 3

@@ -37,6 +37,9 @@ COMMANDS = {
 def main(argv: list[str] | None = None) -> int:
     """Run the command ``argv`` (default: the process's arguments); returns the exit code."""
     parser = build_parser()
+    if not (sys.argv[1:] if argv is None else argv):  # bare `embree-rt`: what it can do
+        print(parser.format_help(), end="", file=sys.stderr)
+        return EXIT_BAD_INPUT
     try:
         args = parser.parse_args(argv)
     except SystemExit as exit_:

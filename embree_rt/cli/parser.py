@@ -17,13 +17,58 @@ SCENE_DEFAULT = "; default: the scene's"
 NO_FLOOR_HELP = "leave out the floor (a mesh file's, or the scene file's)"
 
 
+class HelpFormatter(argparse.HelpFormatter):
+    """Help that ends each flag's text with its default, where it has one worth saying."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        quiet = (None, False, argparse.SUPPRESS)
+        if "%(default)" in text or any(action.default is value for value in quiet):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line on stderr and exit code 2."""
+    """argparse, but a usage error is one line on stderr and exit code 2, and a mistyped flag
+    or command gets a "did you mean"."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+        self.argv: list[str] = []
+
+    def parse_known_args(self, args=None, namespace=None):
+        self.argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         message = message.removeprefix("argument ")
-        print(f"embree-rt: error: {message}", file=sys.stderr)
+        print(f"embree-rt: error: {message}{self.suggestion(message)}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT)
+
+    def suggestion(self, message: str) -> str:
+        """" (did you mean ...?)" for the first unrecognized flag close to one the command
+        takes, or an invalid command close to one; "" otherwise."""
+        import difflib
+        import re
+
+        commands = next((action.choices for action in self._actions
+                         if isinstance(action, argparse._SubParsersAction)), {})  # fmt: skip
+        if message.startswith("command: invalid choice:"):
+            known = list(commands)
+            words = re.findall(r"invalid choice: '([^']*)'", message)
+        elif message.startswith("unrecognized arguments:"):
+            command = next((commands[word] for word in self.argv if word in commands), self)
+            known = [flag for action in command._actions for flag in action.option_strings]
+            words = [word.split("=")[0] for word in message.split(":", 1)[1].split()
+                     if word.startswith("-")]  # fmt: skip
+        else:
+            return ""
+        for word in words:
+            close = difflib.get_close_matches(word, known, n=1, cutoff=0.6)
+            if close:
+                return f" (did you mean {close[0]!r}?)"
+        return ""
 
 
 def int_at_least(low: int):
@@ -59,7 +104,7 @@ class SetKey(argparse.Action):
 
     def __init__(self, option_strings, dest, key: str | None = None, **kwargs) -> None:
         self.key = key
-        super().__init__(option_strings, "settings", default=(), **kwargs)
+        super().__init__(option_strings, "settings", default=argparse.SUPPRESS, **kwargs)
 
     def __call__(self, parser, namespace, values, option_string=None) -> None:
         from embree_rt.scene.settings import Setting, parse_assignment, parse_value
@@ -78,6 +123,7 @@ class SetKey(argparse.Action):
 
 def add_setting_flags(parser: argparse.ArgumentParser) -> None:
     """``--set`` and the flags that stand for one scene key each."""
+    parser.set_defaults(settings=())  # (before the flags: theirs is SUPPRESS, not shown)
     parser.add_argument(
         "-D", "--set", action=SetKey, metavar="KEY=VALUE",
         help="set any scene key, named as in the scene file: camera.fov=35, "
@@ -113,7 +159,8 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         ".exr, or one file each beside a .png or .npy",
     )
     add_setting_flags(parser)
-    parser.add_argument("--threads", type=positive, help="default: all cores")
+    parser.add_argument("-t", "--threads", "--nthreads", type=positive, metavar="N",
+                        help="worker threads (default: all cores)")  # fmt: skip
     parser.add_argument(
         "--spheres",
         choices=SPHERE_CHOICES,
@@ -125,6 +172,10 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
     cluster = parser.add_mutually_exclusive_group()  # embree_rt/distributed.py
     cluster.add_argument("--cluster", metavar="local:N", help="render on N local Dask workers")
     cluster.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="render on a Dask cluster")
+
+
+def add_animation_flags(parser: argparse.ArgumentParser) -> None:
+    """The flags of a scene file's [animation] (not of a random field, which has none)."""
     parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
     parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
 
@@ -134,13 +185,18 @@ def build_parser() -> argparse.ArgumentParser:
         prog="embree-rt",
         description="Whitted-style ray tracing of scenes with very many objects, on Embree.",
     )
+    from embree_rt.version import __version__
+
+    parser.add_argument("--version", action="version", version=f"embree-rt {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
     render = commands.add_parser("render", help="render a scene file or a mesh file")
     render.add_argument("scene", help=SCENE_HELP)
     render.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
     add_render_flags(render)
+    add_animation_flags(render)
     random = commands.add_parser("random", help="render a random sphere field of N spheres")
-    random.add_argument("--count", type=int_at_least(1), required=True)
+    random.add_argument("--count", type=int_at_least(1), required=True, metavar="N",
+                        help="spheres in the field")  # fmt: skip
     random.add_argument("--save-scene", help="also write the generated scene to this file")
     random.add_argument(
         "--instance",
@@ -149,10 +205,12 @@ def build_parser() -> argparse.ArgumentParser:
         "floor, turned at random about y), all through one Embree instance array",
     )
     add_render_flags(random)
+    random.set_defaults(frames=None, overwrite=False)
     info = commands.add_parser("info", help="describe a scene: objects, bounds, build time")
     info.add_argument("scene", help=SCENE_HELP)
     info.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
-    info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic")
+    info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic",
+                      help="how spheres enter the BVH, as render's --spheres")  # fmt: skip
     add_setting_flags(info)
     serve = commands.add_parser("serve", help="the 2D ray demo and a live preview in a browser")
     serve.add_argument("scene", nargs="?", help="scene file (default: the showcase)")
