@@ -196,7 +196,10 @@ def aov_paths(path: str | os.PathLike, names: tuple[str, ...]) -> dict[str, Path
 
 
 def save_with_aovs(
-    image: np.ndarray, aovs: dict[str, np.ndarray], path: str | os.PathLike
+    image: np.ndarray,
+    aovs: dict[str, np.ndarray],
+    path: str | os.PathLike,
+    encoding: film.Encoding = film.DEFAULT_ENCODING,
 ) -> list[Path]:
     """Write the (h, w, 3) float32 linear beauty ``image`` and its ``aovs`` (``render_aovs``)
     to ``path`` by its extension, all or nothing (``film.write_atomically``); returns the files
@@ -205,10 +208,11 @@ def save_with_aovs(
     ``.npz``: ``beauty`` and one array per AOV under its name. ``.exr``: the beauty as R, G, B
     and the AOVs as the layers of ``EXR_CHANNELS``, float32, the ids as UINT channels holding
     the int32 values' bits (read them back with ``.view(np.int32)``: -1 is 0xFFFFFFFF).
-    ``.png``: the beauty as ``save_image`` writes it and each AOV beside it, visualised
-    (``visualize``); ``.npy``: the beauty and each AOV's array beside it.
+    ``.png`` and the other display formats: the beauty as ``save_image`` writes it (with
+    ``encoding``) and each AOV beside it in the same format, visualised (``visualize``, 8
+    bits); ``.npy``: the beauty and each AOV's array beside it.
     """
-    film.check_output_path(path)
+    film.check_output_path(path, encoding)
     image = film.check_image_shape(image, path)
     target = Path(path)
     suffix = target.suffix.lower()
@@ -220,23 +224,21 @@ def save_with_aovs(
                                                                  handle))]  # fmt: skip
     else:
         writer = film.WRITERS[suffix]
-        files = [(target, lambda handle: writer(image, handle))]
+        files = [(target, lambda handle: writer(image, handle, encoding))]
         for name, side in aov_paths(target, tuple(aovs)).items():
-            files.append((side, _side_writer(suffix, name, aovs[name])))
+            files.append((side, _side_writer(suffix, name, aovs[name], encoding)))
     film.write_atomically(files)
     return [side for side, _ in files[1:]]
 
 
-def _side_writer(suffix: str, name: str, values: np.ndarray):
+def _side_writer(suffix: str, name: str, values: np.ndarray, encoding: film.Encoding):
     """A writer(handle) of the AOV ``name``'s ``values`` as a file of its own."""
 
     def write(handle: BinaryIO) -> None:
         if suffix == ".npy":
             np.save(handle, values)
         else:
-            from PIL import Image
-
-            Image.fromarray(visualize(name, values)).save(handle, format="PNG")
+            film.write_pixels(visualize(name, values), handle, suffix, encoding.quality)
 
     return write
 

@@ -46,14 +46,16 @@ class RenderResult:
         (``film.tonemap``: Reinhard, gamma 2.2)."""
         return film.tonemap(self.image)
 
-    def save(self, path: str | os.PathLike) -> list[Path]:
-        """Write the image to ``path`` by its extension (``.png``, ``.npy``, ``.npz``, ``.exr``),
-        with the AOVs in the same file (``.npz``, ``.exr``) or beside it; all or nothing, an
-        existing file left as it was on failure. Returns the files written beside ``path``."""
+    def save(self, path: str | os.PathLike, encoding: film.Encoding = film.DEFAULT_ENCODING
+             ) -> list[Path]:  # fmt: skip
+        """Write the image to ``path`` by its extension (``film.IMAGE_SUFFIXES``; ``encoding``:
+        8 or 16 bits, quality), with the AOVs in the same file (``.npz``, ``.exr``) or beside
+        it; all or nothing, an existing file left as it was on failure. Returns the files
+        written beside ``path``."""
         if not self.aovs:
-            film.save_image(self.image, path)
+            film.save_image(self.image, path, encoding)
             return []
-        return save_with_aovs(self.image, self.aovs, path)
+        return save_with_aovs(self.image, self.aovs, path, encoding)
 
 
 class Renderer(Integrator):

@@ -1,17 +1,55 @@
-"""The film: linear accumulation, Reinhard tone mapping, gamma, and atomic image files."""
+"""The film: linear accumulation, Reinhard tone mapping, gamma, and atomic image files.
+
+Display images (.png, .jpg/.jpeg, .tif/.tiff, .webp) hold the tone-mapped picture, 8 bits a
+channel through Pillow, or 16 (``Encoding.bit_depth``; .png and .tif/.tiff) for grading: Pillow
+holds no 16-bit RGB image (its 16-bit modes are single-channel), so 16-bit PNG goes through
+pypng and 16-bit TIFF through tifffile, both small pure-Python writers. Data images (.npy, .npz,
+.exr) hold the linear float32 radiance."""
 
 from __future__ import annotations
 
 import os
 import secrets
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, NamedTuple
 
 import numpy as np
 
 GAMMA = 2.2
-IMAGE_SUFFIXES = (".png", ".npy", ".npz", ".exr")
+# Display formats: Pillow's name for each extension.
+PILLOW_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF",
+                  ".tiff": "TIFF", ".webp": "WEBP"}  # fmt: skip
+IMAGE_SUFFIXES = (*PILLOW_FORMATS, ".npy", ".npz", ".exr")
+SIXTEEN_BIT_SUFFIXES = (".png", ".tif", ".tiff")
+QUALITY_SUFFIXES = (".jpg", ".jpeg", ".webp")
+DEFAULT_QUALITY = 90
+
+
+class Encoding(NamedTuple):
+    """How a display image stores its pixels: ``bit_depth`` 8, or 16 for .png and .tif/.tiff;
+    ``quality`` 1 to 100 for the lossy .jpg/.jpeg and .webp (None: ``DEFAULT_QUALITY``)."""
+
+    bit_depth: int = 8
+    quality: int | None = None
+
+
+DEFAULT_ENCODING = Encoding()
+
+
+def encoding_problem(suffix: str, encoding: Encoding) -> str | None:
+    """What keeps ``encoding`` from applying to a file with the extension ``suffix``, or None."""
+    if encoding.bit_depth not in (8, 16):
+        return f"bit depth must be 8 or 16, got {encoding.bit_depth}"
+    if encoding.bit_depth == 16 and suffix not in SIXTEEN_BIT_SUFFIXES:
+        return f"16-bit images are written as {', '.join(SIXTEEN_BIT_SUFFIXES)}, not {suffix}"
+    if encoding.quality is not None:
+        if suffix not in QUALITY_SUFFIXES:
+            return f"quality applies to the lossy {', '.join(QUALITY_SUFFIXES)}, not {suffix}"
+        if not 1 <= encoding.quality <= 100:
+            return f"quality must be 1 to 100, got {encoding.quality}"
+    return None
 
 
 class Film:
@@ -88,10 +126,16 @@ class FilmBlock:
 
 
 def tonemap(image: np.ndarray) -> np.ndarray:
-    """(h, w, 3) linear radiance → (h, w, 3) uint8 display values.
+    """(h, w, 3) linear radiance → (h, w, 3) uint8 display values (``display_values``
+    quantized to 8 bits). NaN is a bug upstream and raises ValueError."""
+    return quantize(display_values(image), 8)
+
+
+def display_values(image: np.ndarray) -> np.ndarray:
+    """(h, w, 3) linear radiance → (h, w, 3) float32 display values in [0, 1].
 
     Per channel: negatives clamp to 0, Reinhard ``c / (1 + c)`` (+inf maps to 1), gamma
-    ``1/2.2``, then ``round(255 ·)``. NaN is a bug upstream and raises ValueError.
+    ``1/2.2``. NaN is a bug upstream and raises ValueError.
     """
     image = np.asarray(image, np.float32)
     if np.isnan(image).any():
@@ -99,15 +143,23 @@ def tonemap(image: np.ndarray) -> np.ndarray:
     linear = np.maximum(image, np.float32(0.0))
     with np.errstate(invalid="ignore"):
         mapped = np.where(np.isinf(linear), np.float32(1.0), linear / (np.float32(1.0) + linear))
-    display = mapped ** np.float32(1.0 / GAMMA)
-    return np.clip(np.rint(display * np.float32(255.0)), 0, 255).astype(np.uint8)
+    return mapped ** np.float32(1.0 / GAMMA)
 
 
-def check_output_path(path: str | os.PathLike) -> None:
-    """Check, before any rendering, that an image can be written to ``path``.
+def quantize(display: np.ndarray, bits: int) -> np.ndarray:
+    """Float display values in [0, 1] → uint8 (``bits`` 8) or uint16 (16): ``round((2^bits -
+    1) ·)``, clipped."""
+    top = float(2**bits - 1)
+    dtype = np.uint8 if bits == 8 else np.uint16
+    return np.clip(np.rint(display * np.float32(top)), 0, top).astype(dtype)
 
-    Raises ValueError naming the path for an unknown extension, a missing or unwritable
-    directory, or a directory in the way; RuntimeError for ``.exr`` without the OpenEXR package.
+
+def check_output_path(path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCODING) -> None:
+    """Check, before any rendering, that an image can be written to ``path`` as ``encoding``.
+
+    Raises ValueError naming the path for an unknown extension, an encoding it cannot take, a
+    missing or unwritable directory, or a directory in the way; RuntimeError for ``.exr``
+    without the OpenEXR package.
     """
     target = Path(path)
     suffix = target.suffix.lower()
@@ -116,6 +168,8 @@ def check_output_path(path: str | os.PathLike) -> None:
             f"{target}: unknown image extension {target.suffix or '(none)'!r}; "
             f"use one of {', '.join(IMAGE_SUFFIXES)}"
         )
+    if (problem := encoding_problem(suffix, encoding)) is not None:
+        raise ValueError(f"{target}: {problem}")
     directory = target.parent
     if not directory.is_dir():
         raise ValueError(f"{target}: directory {directory} does not exist")
@@ -138,21 +192,45 @@ def _exr_module():
     return OpenEXR
 
 
-def _write_png(image: np.ndarray, handle: BinaryIO) -> None:
+def write_pixels(pixels: np.ndarray, handle: BinaryIO, suffix: str, quality: int | None = None
+                 ) -> None:  # fmt: skip
+    """Write (h, w, 3) uint8 or uint16 display ``pixels`` as the display format of ``suffix``
+    (``PILLOW_FORMATS``) to ``handle``: uint8 through Pillow (``quality`` for JPEG and WebP),
+    uint16 as 16-bit RGB PNG (pypng) or TIFF (tifffile)."""
+    height, width, _ = pixels.shape
+    if pixels.dtype == np.uint16:
+        if suffix == ".png":
+            import png
+
+            writer = png.Writer(width, height, greyscale=False, bitdepth=16)
+            writer.write(handle, pixels.reshape(height, width * 3))
+        else:
+            import tifffile
+
+            tifffile.imwrite(handle, pixels, photometric="rgb")
+        return
     from PIL import Image
 
-    Image.fromarray(tonemap(image)).save(handle, format="PNG")
+    name = PILLOW_FORMATS[suffix]
+    options = {"quality": quality or DEFAULT_QUALITY} if suffix in QUALITY_SUFFIXES else {}
+    Image.fromarray(pixels).save(handle, format=name, **options)
 
 
-def _write_npy(image: np.ndarray, handle: BinaryIO) -> None:
+def _write_display(suffix: str, image: np.ndarray, handle: BinaryIO,
+                   encoding: Encoding = DEFAULT_ENCODING) -> None:  # fmt: skip
+    pixels = quantize(display_values(image), encoding.bit_depth)
+    write_pixels(pixels, handle, suffix, encoding.quality)
+
+
+def _write_npy(image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING) -> None:
     np.save(handle, np.asarray(image, np.float32))
 
 
-def _write_npz(image: np.ndarray, handle: BinaryIO) -> None:
+def _write_npz(image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING) -> None:
     np.savez(handle, beauty=np.asarray(image, np.float32))
 
 
-def _write_exr(image: np.ndarray, handle: BinaryIO) -> None:
+def _write_exr(image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING) -> None:
     write_exr_channels({"RGB": np.ascontiguousarray(image, np.float32)}, handle)
 
 
@@ -166,9 +244,10 @@ def write_exr_channels(channels: dict[str, np.ndarray], handle: BinaryIO) -> Non
         exr.write(os.fspath(handle.name))
 
 
-# Writers by extension: writer(image, binary file handle opened on the temp file's path).
-WRITERS: dict[str, Callable[[np.ndarray, BinaryIO], None]] = {
-    ".png": _write_png,
+# Writers by extension: writer(image, binary file handle opened on the temp file's path,
+# Encoding).
+WRITERS: dict[str, Callable[..., None]] = {
+    **{suffix: partial(_write_display, suffix) for suffix in PILLOW_FORMATS},
     ".npy": _write_npy,
     ".npz": _write_npz,
     ".exr": _write_exr,
@@ -183,19 +262,21 @@ def check_image_shape(image: np.ndarray, path: str | os.PathLike) -> np.ndarray:
     return image
 
 
-def save_image(image: np.ndarray, path: str | os.PathLike) -> None:
+def save_image(image: np.ndarray, path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCODING
+               ) -> None:  # fmt: skip
     """Write the (h, w, 3) float32 linear ``image`` to ``path`` by its extension
-    (case-insensitive): ``.png`` tone-mapped 8-bit, ``.npy``, ``.npz`` (as ``beauty``) and
-    ``.exr`` linear float32.
+    (case-insensitive): ``.png``, ``.jpg``/``.jpeg``, ``.tif``/``.tiff``, ``.webp`` tone-mapped
+    (``encoding``: 8 or 16 bits, quality), ``.npy``, ``.npz`` (as ``beauty``) and ``.exr``
+    linear float32.
 
     Atomic (``write_atomically``): on any failure, Ctrl-C included, an existing file at
     ``path`` is left as it was and no partial file is left.
     """
-    check_output_path(path)
+    check_output_path(path, encoding)
     image = check_image_shape(image, path)
     target = Path(path)
     writer = WRITERS[target.suffix.lower()]
-    write_atomically([(target, lambda handle: writer(image, handle))])
+    write_atomically([(target, lambda handle: writer(image, handle, encoding))])
 
 
 def write_atomically(files: list[tuple[Path, Callable[[BinaryIO], None]]]) -> None:

@@ -220,3 +220,27 @@ def test_threads_takes_the_spellings_of_pbrt_and_mitsuba() -> None:
     for spelling in ("--threads", "--nthreads", "-t"):
         args = render.parse_args(["s.toml", "-o", "x.png", spelling, "3"])
         assert args.threads == 3
+
+
+# -- 3. image formats -------------------------------------------------------------------------
+
+
+def test_render_writes_jpeg_and_16_bit_tiff_and_refuses_what_a_format_cannot_take(
+    tmp_path: Path,
+) -> None:
+    scene = str(ROOT / "scenes" / "three_spheres.toml")
+    jpeg, tiff = tmp_path / "a.jpg", tmp_path / "a.tif"
+    assert run_cli("render", scene, "-o", str(jpeg), *TINY, "--quality", "80",
+                   "--quiet", "--aov", "depth").returncode == 0  # fmt: skip
+    with Image.open(jpeg) as image, Image.open(tmp_path / "a.depth.jpg") as depth:
+        assert (image.format, image.mode, image.size) == ("JPEG", "RGB", (16, 9))
+        assert (depth.format, depth.size) == ("JPEG", (16, 9))  # beside it, in its format
+    assert run_cli("render", scene, "-o", str(tiff), *TINY, "--bit-depth", "16",
+                   "--quiet").returncode == 0  # fmt: skip
+    import tifffile
+
+    assert tifffile.imread(tiff).dtype == np.uint16
+    line = one_line_error(run_cli("render", scene, "-o", str(tmp_path / "b.webp"),
+                                  "--bit-depth", "16"))  # fmt: skip
+    assert "b.webp" in line and "16-bit" in line
+    assert not (tmp_path / "b.webp").exists()

@@ -77,6 +77,7 @@ def render_frames_command(
     make the scene from: the scene file's path, the random field's ``FieldPlan``, or the
     ``Scene`` itself (scattered to them); ``made``
     as in the command's summary line."""
+    from embree_rt.cli.checks import output_encoding
     from embree_rt.film import check_output_path, save_image
 
     animation = scene.animation
@@ -91,9 +92,10 @@ def render_frames_command(
         )
     frames = frame_range(args.frames, animation.frames) if animation is not None else None
     paths = output_paths(args.output, frames)
+    encoding = output_encoding(args)
     for path in paths.values():
         try:
-            check_output_path(path)
+            check_output_path(path, encoding)
         except (ValueError, RuntimeError) as error:
             raise InputError(str(error)) from None
     redo = args.overwrite or frames is None
@@ -105,7 +107,7 @@ def render_frames_command(
     def write(frame: int | None, image: np.ndarray) -> None:
         path = paths[frame]
         try:
-            save_image(image, path)
+            save_image(image, path, encoding)
         except OSError as error:
             raise InputError(f"{path}: cannot write: {error.strerror or error}") from None
 

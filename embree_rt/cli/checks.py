@@ -8,14 +8,21 @@ import argparse
 from embree_rt.cli.errors import UsageError
 
 
-def check_output(path: str, aovs: tuple[str, ...] | None = None) -> None:
-    """The image path's checks (``film.check_output_path``), and those of the AOV files beside
-    it, as bad input: every ValueError it raises is about the path, its RuntimeError about
-    OpenEXR missing for ``.exr``."""
-    from embree_rt.film import check_output_path
+def output_encoding(args: argparse.Namespace):
+    """The ``film.Encoding`` of ``--bit-depth`` and ``--quality``."""
+    from embree_rt.film import Encoding
+
+    return Encoding(bit_depth=args.bit_depth, quality=args.quality)
+
+
+def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) -> None:
+    """The image path's checks (``film.check_output_path``, with the ``film.Encoding``), and
+    those of the AOV files beside it, as bad input: every ValueError it raises is about the
+    path, its RuntimeError about OpenEXR missing for ``.exr``."""
+    from embree_rt.film import Encoding, check_output_path
 
     try:
-        check_output_path(path)
+        check_output_path(path, encoding or Encoding())
         if aovs:
             from embree_rt.aovs import aov_paths
 

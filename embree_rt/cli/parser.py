@@ -149,8 +149,14 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
 def add_render_flags(parser: argparse.ArgumentParser) -> None:
     positive = int_at_least(1)
     parser.add_argument(
-        "-o", "--output", required=True, help="image to write: .png, .npy, .npz or .exr"
-    )
+        "-o", "--output", required=True, metavar="IMAGE",
+        help="image to write: .png, .jpg, .tif, .webp (tone-mapped), .npy, .npz or .exr "
+        "(linear float32)",
+    )  # fmt: skip
+    parser.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
+                        help="bits per channel of a .png or .tif")  # fmt: skip
+    parser.add_argument("--quality", type=int_at_least(1), metavar="Q",
+                        help="1 to 100, of a .jpg or .webp (default: 90)")  # fmt: skip
     parser.add_argument(
         "--aov",
         type=aov_list,

@@ -10,14 +10,20 @@ from pathlib import Path
 
 import numpy as np
 
-from embree_rt.cli.checks import check_library, check_output, memory_key, writing
+from embree_rt.cli.checks import (
+    check_library,
+    check_output,
+    memory_key,
+    output_encoding,
+    writing,
+)
 from embree_rt.cli.errors import UsageError
 
 
 def command_render(args: argparse.Namespace) -> None:
     from embree_rt.cli.scene_input import read_scene
 
-    check_output(args.output, args.aov)
+    check_output(args.output, args.aov, output_encoding(args))
     started = time.perf_counter()
     scene, source = read_scene(args)
     render_and_save(scene, args, ("load", time.perf_counter() - started), source)
@@ -32,7 +38,7 @@ def command_random(args: argparse.Namespace) -> None:
     )
     from embree_rt.scene.writer import save_scene
 
-    check_output(args.output, args.aov)
+    check_output(args.output, args.aov, output_encoding(args))
     if args.save_scene is not None:
         target = Path(args.save_scene)
         if target.suffix.lower() not in (".toml", ".json"):
@@ -104,9 +110,10 @@ def render_and_save(
         )
     except MemoryBudgetError as error:
         raise UsageError(f"{memory_key(error, args)}: {error}") from None
-    check_output(args.output, args.aov)  # again: the directory may have gone meanwhile
+    encoding = output_encoding(args)
+    check_output(args.output, args.aov, encoding)  # again: the directory may have gone meanwhile
     written: list[Path] = []
-    writing(args.output, lambda: written.extend(result.save(args.output)))
+    writing(args.output, lambda: written.extend(result.save(args.output, encoding)))
     for side in written:  # the AOV files beside the image, for scripts to pick up
         print(side)
     stats = result.stats
