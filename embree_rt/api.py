@@ -31,7 +31,8 @@ class RenderResult:
     """What one render made.
 
     ``image`` (height, width, 3) float32 is the linear HDR radiance (the mean of the samples,
-    not tone-mapped: ``to_srgb8`` gives the 8-bit picture a PNG holds); ``aovs`` maps each AOV
+    not tone-mapped: ``to_srgb8`` gives the 8-bit picture a PNG holds, by ``look``, the
+    scene's ``render`` exposure, tone map and transfer curve); ``aovs`` maps each AOV
     asked for to its (height, width) or (height, width, 3) array (``embree_rt.aovs``), empty
     when none were; ``stats`` counts the rays by kind (``"aov"``: the AOV pass's) and the
     seconds spent building the BVH and rendering (the AOV pass included).
@@ -40,11 +41,12 @@ class RenderResult:
     image: np.ndarray
     aovs: dict[str, np.ndarray] = field(default_factory=dict)
     stats: RenderStats = field(default_factory=RenderStats)
+    look: film.Look = film.DEFAULT_LOOK
 
     def to_srgb8(self) -> np.ndarray:
         """(height, width, 3) uint8: the image tone-mapped as a PNG is written
-        (``film.tonemap``: Reinhard, gamma 2.2)."""
-        return film.tonemap(self.image)
+        (``film.tonemap`` with the render's ``look``; by default Reinhard, gamma 2.2)."""
+        return film.tonemap(self.image, self.look)
 
     def save(self, path: str | os.PathLike, encoding: film.Encoding = film.DEFAULT_ENCODING
              ) -> list[Path]:  # fmt: skip
@@ -52,6 +54,8 @@ class RenderResult:
         8 or 16 bits, quality), with the AOVs in the same file (``.npz``, ``.exr``) or beside
         it; all or nothing, an existing file left as it was on failure. Returns the files
         written beside ``path``."""
+        if encoding.look is None:
+            encoding = encoding._replace(look=self.look)
         if not self.aovs:
             film.save_image(self.image, path, encoding)
             return []
@@ -106,13 +110,14 @@ class Renderer(Integrator):
                 seed=settings.seed,
                 progress=show,
             )
+        look = settings.look()
         if not names:
-            return RenderResult(image, {}, stats)
+            return RenderResult(image, {}, stats, look)
         began = time.perf_counter()
         layers = render_aovs(self, frame, names)
         stats.rays["aov"] = settings.width * settings.height  # one pixel-centre ray per pixel
         stats.render_s += time.perf_counter() - began
-        return RenderResult(image, layers, stats)
+        return RenderResult(image, layers, stats, look)
 
 
 def render(

@@ -29,10 +29,12 @@ DEFAULT_QUALITY = 90
 
 class Encoding(NamedTuple):
     """How a display image stores its pixels: ``bit_depth`` 8, or 16 for .png and .tif/.tiff;
-    ``quality`` 1 to 100 for the lossy .jpg/.jpeg and .webp (None: ``DEFAULT_QUALITY``)."""
+    ``quality`` 1 to 100 for the lossy .jpg/.jpeg and .webp (None: ``DEFAULT_QUALITY``);
+    ``look`` the tone mapping (``Look``; None: the default)."""
 
     bit_depth: int = 8
     quality: int | None = None
+    look: Look | None = None
 
 
 DEFAULT_ENCODING = Encoding()
@@ -125,25 +127,72 @@ class FilmBlock:
                 )
 
 
-def tonemap(image: np.ndarray) -> np.ndarray:
+TONEMAPS = ("reinhard", "aces", "none")
+TRANSFERS = ("gamma2.2", "srgb")
+
+
+class Look(NamedTuple):
+    """How linear radiance becomes display values: ``exposure`` in stops (the radiance times
+    ``2 ** exposure``), ``tonemap`` (``TONEMAPS``: Reinhard ``c / (1 + c)``, the ACES filmic
+    fit of Narkowicz 2015, or none: clipped at 1), ``transfer`` (``TRANSFERS``: a pure power
+    ``1/2.2``, or sRGB's piecewise curve). The default is the seed article's look."""
+
+    exposure: float = 0.0
+    tonemap: str = "reinhard"
+    transfer: str = "gamma2.2"
+
+
+DEFAULT_LOOK = Look()
+
+
+def tonemap(image: np.ndarray, look: Look = DEFAULT_LOOK) -> np.ndarray:
     """(h, w, 3) linear radiance → (h, w, 3) uint8 display values (``display_values``
     quantized to 8 bits). NaN is a bug upstream and raises ValueError."""
-    return quantize(display_values(image), 8)
+    return quantize(display_values(image, look), 8)
 
 
-def display_values(image: np.ndarray) -> np.ndarray:
-    """(h, w, 3) linear radiance → (h, w, 3) float32 display values in [0, 1].
-
-    Per channel: negatives clamp to 0, Reinhard ``c / (1 + c)`` (+inf maps to 1), gamma
-    ``1/2.2``. NaN is a bug upstream and raises ValueError.
+def display_values(image: np.ndarray, look: Look = DEFAULT_LOOK) -> np.ndarray:
+    """(h, w, 3) linear radiance → (h, w, 3) float32 display values in [0, 1], per channel:
+    negatives clamp to 0, then ``look``'s exposure, tone map (+inf maps to 1) and transfer
+    curve. The default (Reinhard, gamma 1/2.2) is computed as it always was. NaN is a bug
+    upstream and raises ValueError.
     """
+    if look.tonemap not in TONEMAPS or look.transfer not in TRANSFERS:
+        raise ValueError(f"look: tonemap must be one of {TONEMAPS} and transfer one of "
+                         f"{TRANSFERS}, got {look.tonemap!r} and {look.transfer!r}")  # fmt: skip
     image = np.asarray(image, np.float32)
     if np.isnan(image).any():
         raise ValueError("image contains NaN")
     linear = np.maximum(image, np.float32(0.0))
-    with np.errstate(invalid="ignore"):
-        mapped = np.where(np.isinf(linear), np.float32(1.0), linear / (np.float32(1.0) + linear))
+    if look.exposure:
+        linear = linear * np.float32(2.0**look.exposure)
+    with np.errstate(invalid="ignore", over="ignore"):
+        if look.tonemap == "reinhard":
+            mapped = np.where(np.isinf(linear), np.float32(1.0),
+                              linear / (np.float32(1.0) + linear))  # fmt: skip
+        elif look.tonemap == "aces":
+            mapped = np.where(np.isinf(linear), np.float32(1.0), aces(linear))
+        else:
+            mapped = np.minimum(linear, np.float32(1.0))
+    if look.transfer == "srgb":
+        return srgb_encode(mapped)
     return mapped ** np.float32(1.0 / GAMMA)
+
+
+def aces(linear: np.ndarray) -> np.ndarray:
+    """Narkowicz's fit of the ACES filmic curve, ``x (2.51 x + 0.03) / (x (2.43 x + 0.59) +
+    0.14)`` clipped to [0, 1], on finite non-negative float32 ``linear`` (same shape)."""
+    a, b, c, d, e = (np.float32(v) for v in (2.51, 0.03, 2.43, 0.59, 0.14))
+    # large x: the ratio tends to a / c > 1; dividing through by x keeps it finite
+    x = np.minimum(linear, np.float32(1e15))
+    return np.clip((x * (a * x + b)) / (x * (c * x + d) + e), np.float32(0.0), np.float32(1.0))
+
+
+def srgb_encode(mapped: np.ndarray) -> np.ndarray:
+    """sRGB's transfer curve (IEC 61966-2-1) on float32 values in [0, 1]: ``12.92 x`` up to
+    0.0031308, ``1.055 x^(1/2.4) - 0.055`` above."""
+    curve = np.float32(1.055) * mapped ** np.float32(1.0 / 2.4) - np.float32(0.055)
+    return np.where(mapped <= np.float32(0.0031308), np.float32(12.92) * mapped, curve)
 
 
 def quantize(display: np.ndarray, bits: int) -> np.ndarray:
@@ -218,7 +267,7 @@ def write_pixels(pixels: np.ndarray, handle: BinaryIO, suffix: str, quality: int
 
 def _write_display(suffix: str, image: np.ndarray, handle: BinaryIO,
                    encoding: Encoding = DEFAULT_ENCODING) -> None:  # fmt: skip
-    pixels = quantize(display_values(image), encoding.bit_depth)
+    pixels = quantize(display_values(image, encoding.look or DEFAULT_LOOK), encoding.bit_depth)
     write_pixels(pixels, handle, suffix, encoding.quality)
 
 

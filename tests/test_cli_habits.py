@@ -244,3 +244,48 @@ def test_render_writes_jpeg_and_16_bit_tiff_and_refuses_what_a_format_cannot_tak
                                   "--bit-depth", "16"))  # fmt: skip
     assert "b.webp" in line and "16-bit" in line
     assert not (tmp_path / "b.webp").exists()
+
+
+# -- 4. the look ------------------------------------------------------------------------------
+
+
+def test_the_look_is_a_scene_key_and_a_flag_and_no_lights_is_one_warning(tmp_path: Path) -> None:
+    base = (ROOT / "scenes" / "three_spheres.toml").read_text()
+    scene = tmp_path / "scene.toml"
+    scene.write_text(base)
+    keyed = tmp_path / "keyed.toml"
+    document = tomllib.loads(base)
+    document["render"].update(tonemap="aces", exposure=1.5, transfer="srgb")
+    keyed.write_text(tomli_w.dumps(document))
+    runs = {
+        "flags": [str(scene), "--tonemap", "aces", "--exposure", "1.5", "--transfer", "srgb"],
+        "keys": [str(keyed)],
+        "plain": [str(scene)],
+        "linear": [str(scene), "--tonemap", "aces"],
+    }
+    pictures = {}
+    for name, words in runs.items():
+        suffix = ".npy" if name == "linear" else ".png"
+        out = tmp_path / f"{name}{suffix}"
+        assert run_cli("render", *words, "-o", str(out), *TINY, "--quiet").returncode == 0
+        pictures[name] = np.load(out) if suffix == ".npy" else np.asarray(Image.open(out))
+    np.testing.assert_array_equal(pictures["flags"], pictures["keys"])
+    assert not np.array_equal(pictures["flags"], pictures["plain"])
+    from embree_rt.film import Look, tonemap
+
+    np.testing.assert_array_equal(pictures["plain"], tonemap(pictures["linear"]))  # look only
+    np.testing.assert_array_equal(
+        pictures["flags"], tonemap(pictures["linear"], Look(1.5, "aces", "srgb"))
+    )
+    line = one_line_error(run_cli("render", str(scene), "-o", str(tmp_path / "x.png"),
+                                  "-D", "render.tonemap=filmic"))  # fmt: skip
+    assert line.startswith("--set render.tonemap=filmic: render.tonemap: expected one of ")
+    dark = tmp_path / "dark.toml"
+    dark.write_text(SPHERE_ONLY)
+    result = run_cli("render", str(dark), "-o", str(tmp_path / "dark.png"), *TINY, "--quiet")
+    assert result.returncode == 0
+    assert result.stderr == f"embree-rt: warning: {dark}: lights: none: only the sky and " \
+        "ambient light show it\n"  # fmt: skip
+
+
+SPHERE_ONLY = "[[spheres]]\ncenter = [0.0, 1.0, 0.0]\nradius = 1.0\n"

@@ -425,3 +425,47 @@ def test_encodings_a_format_cannot_take_are_refused_before_writing(
     with pytest.raises(ValueError, match=message):
         save_image(linear_image(), tmp_path / name, encoding)
     assert list(tmp_path.iterdir()) == []
+
+
+# -- the look --------------------------------------------------------------------------------
+
+
+def test_the_default_look_is_the_seed_articles_bitwise() -> None:
+    image = linear_image(8)
+    for look in (film.Look(), film.Look(0.0, "reinhard", "gamma2.2")):
+        np.testing.assert_array_equal(tonemap(image, look), tonemap(image))
+        expected = np.vectorize(reference_tonemap)(image.astype(np.float64))
+        assert np.abs(tonemap(image, look).astype(int) - expected).max() <= 1
+
+
+def test_exposure_scales_the_light_by_powers_of_two() -> None:
+    image = linear_image(9)
+    for stops in (-2.0, 1.0, 3.0):
+        # times 2^k is exact in float32: the same display values, bitwise
+        np.testing.assert_array_equal(
+            film.display_values(image, film.Look(exposure=stops)),
+            film.display_values(image * np.float32(2.0**stops)),
+        )
+    brighter = film.display_values(image, film.Look(exposure=1.0))
+    assert (brighter >= film.display_values(image)).all()
+
+
+def test_aces_and_none_and_srgb_follow_their_formulas() -> None:
+    values = np.concatenate([np.linspace(0.0, 4.0, 2000), np.geomspace(1e-6, 1e6, 2000)])
+    image = values.astype(np.float32).reshape(-1, 1, 1).repeat(3, axis=2)
+    x = values.astype(np.float32).astype(np.float64)
+    aces = np.clip(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), 0, 1)
+    srgb = lambda c: np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)  # noqa: E731
+    cases = {
+        ("aces", "gamma2.2"): aces ** (1 / 2.2),
+        ("none", "gamma2.2"): np.minimum(x, 1.0) ** (1 / 2.2),
+        ("reinhard", "srgb"): srgb(x / (1 + x)),
+        ("aces", "srgb"): srgb(aces),
+    }
+    for (curve, transfer), expected in cases.items():
+        got = film.display_values(image, film.Look(tonemap=curve, transfer=transfer))[:, 0, 0]
+        np.testing.assert_allclose(got, expected, atol=2e-6, err_msg=f"{curve}, {transfer}")
+        assert np.all(np.diff(got[:2000]) >= 0)  # monotone
+    infinite = np.full((1, 1, 3), np.inf, np.float32)
+    for curve in film.TONEMAPS:
+        assert tonemap(infinite, film.Look(tonemap=curve)).tolist() == [[[255, 255, 255]]]

@@ -92,7 +92,7 @@ def render_frames_command(
         )
     frames = frame_range(args.frames, animation.frames) if animation is not None else None
     paths = output_paths(args.output, frames)
-    encoding = output_encoding(args)
+    encoding = output_encoding(args)._replace(look=scene.render.look())
     for path in paths.values():
         try:
             check_output_path(path, encoding)

@@ -138,9 +138,21 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
                         "(render.max_depth)"),
         "--seed": ("render.seed", "the sampler's seed (render.seed); random: the field's too"),
         "--fov": ("camera.fov", "vertical field of view in degrees (camera.fov)"),
+        "--exposure": ("render.exposure", "stops of exposure before the tone map, e.g. 1 "
+                       "doubles the light (render.exposure)"),
     }  # fmt: skip
     for flag, (key, text) in shortcuts.items():
-        parser.add_argument(flag, action=SetKey, key=key, metavar="N", help=text + SCENE_DEFAULT)
+        metavar = "EV" if flag == "--exposure" else "N"
+        parser.add_argument(flag, action=SetKey, key=key, metavar=metavar,
+                            help=text + SCENE_DEFAULT)  # fmt: skip
+    from embree_rt.film import TONEMAPS, TRANSFERS
+
+    parser.add_argument("--tonemap", action=SetKey, key="render.tonemap", choices=TONEMAPS,
+                        help="the tone map (render.tonemap)" + SCENE_DEFAULT + ", else "
+                        "reinhard")  # fmt: skip
+    parser.add_argument("--transfer", action=SetKey, key="render.transfer", choices=TRANSFERS,
+                        help="the display curve: a 2.2 power, or sRGB's piecewise curve "
+                        "(render.transfer)" + SCENE_DEFAULT + ", else gamma2.2")  # fmt: skip
     for flag, key in (("--camera-position", "camera.position"), ("--look-at", "camera.look_at")):
         parser.add_argument(flag, action=SetKey, key=key, nargs=3, metavar=("X", "Y", "Z"),
                             help=f"the camera's {key.split('.')[1]} ({key})" + SCENE_DEFAULT)

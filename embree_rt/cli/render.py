@@ -88,6 +88,11 @@ def render_and_save(
     from embree_rt.api import render
     from embree_rt.budget import MemoryBudgetError
 
+    if not scene.lights:
+        from embree_rt.scene.errors import warn_input
+
+        warn_input(f"{args.scene if getattr(args, 'scene', None) else 'the scene'}: lights: "
+                   "none: only the sky and ambient light show it")  # fmt: skip
     check_library()
     framed = args.frames or "{frame" in args.output  # an animation's pattern, or a mistake
     if scene.animation is not None or args.cluster or args.scheduler or framed:

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt.camera import Camera, Vec3, camera_problem
+from embree_rt.film import Look
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
@@ -49,13 +50,22 @@ class Background:
 
 @dataclass
 class RenderSettings:
-    """Image size, samples per pixel, bounces and seed of a render (a scene's ``render`` table)."""
+    """Image size, samples per pixel, bounces, seed and look of a render (a scene's ``render``
+    table)."""
 
     width: int = 640
     height: int = 360
     spp: int = 8
     max_depth: int = 6
     seed: int = 0
+    # How the image is shown (``film.Look``): stops of exposure, tone map, transfer curve.
+    exposure: float = 0.0
+    tonemap: str = "reinhard"
+    transfer: str = "gamma2.2"
+
+    def look(self) -> Look:
+        """The ``film.Look`` these settings ask for."""
+        return Look(exposure=self.exposure, tonemap=self.tonemap, transfer=self.transfer)
 
     def with_overrides(self, **values: int | None) -> RenderSettings:
         """These settings with each field named in ``values`` (width, height, spp, max_depth,
