@@ -211,6 +211,20 @@ def check_output_path(path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCO
     without the OpenEXR package.
     """
     target = Path(path)
+    check_image_name(target, encoding)
+    directory = target.parent
+    if not directory.is_dir():
+        raise ValueError(f"{target}: directory {directory} does not exist")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise ValueError(f"{target}: directory {directory} is not writable")
+    if target.is_dir():
+        raise ValueError(f"{target}: is a directory")
+
+
+def check_image_name(path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCODING) -> None:
+    """``check_output_path``'s checks of the name alone: a known extension that can take
+    ``encoding`` (ValueError), and OpenEXR present for ``.exr`` (RuntimeError)."""
+    target = Path(path)
     suffix = target.suffix.lower()
     if suffix not in IMAGE_SUFFIXES:
         raise ValueError(
@@ -219,13 +233,6 @@ def check_output_path(path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCO
         )
     if (problem := encoding_problem(suffix, encoding)) is not None:
         raise ValueError(f"{target}: {problem}")
-    directory = target.parent
-    if not directory.is_dir():
-        raise ValueError(f"{target}: directory {directory} does not exist")
-    if not os.access(directory, os.W_OK | os.X_OK):
-        raise ValueError(f"{target}: directory {directory} is not writable")
-    if target.is_dir():
-        raise ValueError(f"{target}: is a directory")
     if suffix == ".exr":
         _exr_module()
 
@@ -234,9 +241,10 @@ def _exr_module():
     try:
         import OpenEXR
     except ImportError:
+        from embree_rt.errors import install_hint
+
         raise RuntimeError(
-            "writing .exr images needs the OpenEXR package: pip install openexr "
-            "(or pip install 'embree-rt[exr]')"
+            f"writing .exr images needs the OpenEXR package: {install_hint('exr', 'openexr')}"
         ) from None
     return OpenEXR
 

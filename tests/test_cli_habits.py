@@ -289,3 +289,50 @@ def test_the_look_is_a_scene_key_and_a_flag_and_no_lights_is_one_warning(tmp_pat
 
 
 SPHERE_ONLY = "[[spheres]]\ncenter = [0.0, 1.0, 0.0]\nradius = 1.0\n"
+
+
+# -- 5. papercuts -----------------------------------------------------------------------------
+
+
+def test_info_into_a_closed_pipe_exits_quietly() -> None:
+    """`embree-rt info scene.toml | head -1`: here the reader is gone before a line is
+    written (head gone after its line is the same to the writer)."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "embree_rt", "info", str(ROOT / "scenes" / "mesh_and_spheres.toml")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
+    )  # fmt: skip
+    process.stdout.close()
+    stderr = process.stderr.read()
+    process.wait(timeout=120)
+    assert stderr == b""  # no traceback, no "this is a bug"
+    assert process.returncode == 141  # as a process SIGPIPE ended (yes | head)
+
+
+def test_info_prints_round_bounds_no_negative_memory_and_plurals_that_agree(
+    tmp_path: Path,
+) -> None:
+    scene = tmp_path / "scene.toml"
+    # float32 radii and centres that print as noise when widened to float64
+    np.savez(tmp_path / "s.npz", centers=np.array([[0.1, 3.1, -0.7]], np.float32),
+             radii=np.array([0.3], np.float32))  # fmt: skip
+    mesh = trimesh.creation.box()
+    mesh.export(tmp_path / "box.ply")
+    scene.write_text('[[sphere_arrays]]\nfile = "s.npz"\n[[meshes]]\nfile = "box.ply"\n'
+                     "translate = [5.0, 0.5, 0.0]\n")  # fmt: skip
+    result = run_cli("info", str(scene))
+    assert result.returncode == 0, result.stderr
+    info = dict(line.split(":", 1) for line in result.stdout.splitlines() if ":" in line)
+    assert info["bounds"].strip() == "[-0.2, 0, -1] .. [5.5, 3.4, 0.5]"
+    assert info["meshes"].strip() == "1 placement of 1 distinct mesh"
+    assert info["arrays"].strip() == "0 instance arrays holding 0 instances"
+    measured = float(info["memory"].split(",")[1].split("MiB")[0])
+    assert measured >= 0
+
+
+def test_a_frame_pattern_makes_its_directories(tmp_path: Path) -> None:
+    pattern = tmp_path / "shots" / "take1" / "f_{frame:04d}.png"
+    result = run_cli("render", str(ROOT / "scenes" / "animations" / "three_spheres_flight.toml"),
+                     "-o", str(pattern), *TINY, "--frames", "0:2", "--quiet")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert sorted(p.name for p in (tmp_path / "shots" / "take1").iterdir()) == [
+        "f_0000.png", "f_0001.png"]  # fmt: skip

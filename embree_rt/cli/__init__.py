@@ -4,6 +4,7 @@ serve the browser demo. ``main`` runs it; each command lives in a module of its 
 
 from __future__ import annotations
 
+import os
 import sys
 import traceback
 import warnings
@@ -26,6 +27,8 @@ __all__ = [
     "main",
 ]
 
+# What a process killed by SIGPIPE exits with (128 + 13), as `yes | head` does.
+EXIT_BROKEN_PIPE = 141
 COMMANDS = {
     "render": command_render,
     "random": command_random,
@@ -47,9 +50,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with one_line_warnings():
             COMMANDS[args.command](args)
+        sys.stdout.flush()  # here, where a closed pipe is caught, not at the interpreter's exit
     except KeyboardInterrupt:
         print("embree-rt: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # `embree-rt info scene.toml | head`: the reader had enough
+        # Python would flush stdout again at exit and fail once more: point it at nothing.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except InputError as error:  # scene files, flags, the user's files: one line
         print(f"embree-rt: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from embree_rt.errors import InputError
+from embree_rt.errors import InputError, install_hint
 from embree_rt.scene.animation import camera_at
 from embree_rt.scene.model import Scene
 
@@ -93,6 +93,13 @@ def render_frames_command(
     frames = frame_range(args.frames, animation.frames) if animation is not None else None
     paths = output_paths(args.output, frames)
     encoding = output_encoding(args)._replace(look=scene.render.look())
+    if frames is not None:  # the directories a pattern names (shots/f_{frame:04d}.png) are made
+        for directory in sorted({Path(path).parent for path in paths.values()}):
+            try:
+                directory.mkdir(parents=True, exist_ok=True)
+            except OSError as error:
+                raise InputError(f"-o: {args.output}: cannot make the directory {directory}: "
+                                 f"{error.strerror or error}") from None  # fmt: skip
     for path in paths.values():
         try:
             check_output_path(path, encoding)
@@ -163,7 +170,8 @@ def _render_on_cluster(
     except ImportError as error:
         flag = "--cluster" if args.cluster is not None else "--scheduler"
         raise InputError(
-            f"{flag}: needs Dask's distributed ({error}): pip install 'embree-rt[distributed]'"
+            f"{flag}: needs Dask's distributed ({error}): "
+            + install_hint("distributed", "distributed")
         ) from None
     with _quiet_dask(), distributed.connect(args.cluster, args.scheduler) as client:
         if isinstance(source, Path):  # every worker loads the file itself

@@ -19,9 +19,12 @@ def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) 
     """The image path's checks (``film.check_output_path``, with the ``film.Encoding``), and
     those of the AOV files beside it, as bad input: every ValueError it raises is about the
     path, its RuntimeError about OpenEXR missing for ``.exr``."""
-    from embree_rt.film import Encoding, check_output_path
+    from embree_rt.film import Encoding, check_image_name, check_output_path
 
     try:
+        if "{frame" in path:  # its directories are made, and checked, once the frames are known
+            check_image_name(path, encoding or Encoding())
+            return
         check_output_path(path, encoding or Encoding())
         if aovs:
             from embree_rt.aovs import aov_paths
