@@ -48,6 +48,10 @@ class RenderResult:
         (``film.tonemap`` with the render's ``look``; by default Reinhard, gamma 2.2)."""
         return film.tonemap(self.image, self.look)
 
+    def _repr_png_(self) -> bytes:
+        """The picture as PNG bytes (``to_srgb8``): what Jupyter shows for a result."""
+        return png_bytes(self.to_srgb8())
+
     def save(self, path: str | os.PathLike, encoding: film.Encoding = film.DEFAULT_ENCODING
              ) -> list[Path]:  # fmt: skip
         """Write the image to ``path`` by its extension (``film.IMAGE_SUFFIXES``; ``encoding``:
@@ -118,6 +122,31 @@ class Renderer(Integrator):
         stats.rays["aov"] = settings.width * settings.height  # one pixel-centre ray per pixel
         stats.render_s += time.perf_counter() - began
         return RenderResult(image, layers, stats, look)
+
+
+def png_bytes(pixels: np.ndarray) -> bytes:
+    """(h, w, 3) uint8 ``pixels`` as the bytes of a PNG file."""
+    import io
+
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(pixels).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+# A scene's notebook preview (``Scene._repr_png_``): small, one sample, two bounces.
+PREVIEW_WIDTH = 256
+PREVIEW_SPP = 1
+PREVIEW_DEPTH = 2
+
+
+def preview(scene: Scene) -> RenderResult:
+    """A quick look at ``scene``: ``PREVIEW_WIDTH`` pixels wide at its aspect ratio, one
+    sample per pixel, two bounces; its own camera and look."""
+    width = PREVIEW_WIDTH
+    height = max(1, round(width * scene.render.height / scene.render.width))
+    return render(scene, width=width, height=height, spp=PREVIEW_SPP, max_depth=PREVIEW_DEPTH)
 
 
 def render(

@@ -179,6 +179,34 @@ class Scene:
             self.floor = None
             self.notes.append("floor: none")
 
+    def __repr__(self) -> str:
+        """One short line: what the scene holds and how it renders (a dataclass's own repr
+        would print every sphere and matrix)."""
+        def count(number: int, noun: str) -> str:
+            return f"{number:,} {noun}{'' if number == 1 else 's'}"
+
+        parts = [count(len(self.sphere_radii), "sphere")]
+        if self.meshes:
+            distinct = len({id(placed.mesh) for placed in self.meshes})
+            parts.append(f"{len(self.meshes):,} mesh placements of {distinct:,} meshes")
+        if self.instances:
+            copies = sum(len(entry) for entry in self.instances)
+            parts.append(f"{copies:,} instances in {len(self.instances):,} arrays")
+        parts.append(count(len(self.lights), "light"))
+        parts.append("no floor" if self.floor is None else f"floor at y = {self.floor.height:g}")
+        settings = self.render
+        parts.append(f"{settings.width}x{settings.height} at {settings.spp} spp")
+        if self.animation is not None:
+            parts.append(f"{self.animation.frames} frames")
+        return f"Scene({', '.join(parts)})"
+
+    def _repr_png_(self) -> bytes:
+        """A quick preview as PNG bytes, what Jupyter shows for a scene: 256 pixels wide, one
+        sample, two bounces (``embree_rt.api.preview``)."""
+        from embree_rt.api import preview
+
+        return preview(self)._repr_png_()
+
     @property
     def material_names(self) -> list[str]:
         return list(self.materials)
