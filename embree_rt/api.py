@@ -21,7 +21,7 @@ import numpy as np
 
 from embree_rt import budget, film
 from embree_rt.aovs import check_aov_names, render_aovs, save_with_aovs
-from embree_rt.camera import Camera, camera_frame
+from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, Integrator, RenderStats
 from embree_rt.scene.model import RenderSettings, Scene
 
@@ -42,6 +42,8 @@ class RenderResult:
     aovs: dict[str, np.ndarray] = field(default_factory=dict)
     stats: RenderStats = field(default_factory=RenderStats)
     look: film.Look = film.DEFAULT_LOOK
+    # The camera the image was seen through (its size included), for dataset files.
+    camera: CameraFrame | None = None
 
     def to_srgb8(self) -> np.ndarray:
         """(height, width, 3) uint8: the image tone-mapped as a PNG is written
@@ -56,14 +58,15 @@ class RenderResult:
              ) -> list[Path]:  # fmt: skip
         """Write the image to ``path`` by its extension (``film.IMAGE_SUFFIXES``; ``encoding``:
         8 or 16 bits, quality), with the AOVs in the same file (``.npz``, ``.exr``) or beside
-        it; all or nothing, an existing file left as it was on failure. Returns the files
+        it, and with them the camera (``aovs.camera_data``: npz keys, a JSON sidecar); all or
+        nothing, an existing file left as it was on failure. Returns the files
         written beside ``path``."""
         if encoding.look is None:
             encoding = encoding._replace(look=self.look)
         if not self.aovs:
             film.save_image(self.image, path, encoding)
             return []
-        return save_with_aovs(self.image, self.aovs, path, encoding)
+        return save_with_aovs(self.image, self.aovs, path, encoding, camera=self.camera)
 
 
 class Renderer(Integrator):
@@ -116,12 +119,12 @@ class Renderer(Integrator):
             )
         look = settings.look()
         if not names:
-            return RenderResult(image, {}, stats, look)
+            return RenderResult(image, {}, stats, look, frame)
         began = time.perf_counter()
         layers = render_aovs(self, frame, names)
         stats.rays["aov"] = settings.width * settings.height  # one pixel-centre ray per pixel
         stats.render_s += time.perf_counter() - began
-        return RenderResult(image, layers, stats, look)
+        return RenderResult(image, layers, stats, look, frame)
 
 
 def png_bytes(pixels: np.ndarray) -> bytes:

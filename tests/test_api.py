@@ -64,13 +64,15 @@ def test_a_result_tone_maps_and_saves_itself(tmp_path: Path) -> None:
     result = rt.render(scene, aovs=["depth", "object_id"], **SIZE)
     np.testing.assert_array_equal(result.to_srgb8(), tonemap(result.image))
     assert result.to_srgb8().dtype == np.uint8
-    assert result.save(tmp_path / "both.npz") == []
+    assert result.save(tmp_path / "both.npz") == [tmp_path / "both.camera.json"]
     with np.load(tmp_path / "both.npz") as saved:
-        assert sorted(saved.files) == ["beauty", "depth", "object_id"]
+        assert sorted(saved.files) == ["K", "beauty", "depth", "object_id",
+                                       "world_to_camera_opencv", "world_to_camera_opengl"]
         np.testing.assert_array_equal(saved["beauty"], result.image)
         np.testing.assert_array_equal(saved["object_id"], result.aovs["object_id"])
     beside = result.save(tmp_path / "image.npy")
-    assert sorted(path.name for path in beside) == ["image.depth.npy", "image.object_id.npy"]
+    assert sorted(path.name for path in beside) == ["image.camera.json", "image.depth.npy",
+                                                    "image.object_id.npy"]  # fmt: skip
     plain = rt.render(scene, **SIZE)
     assert plain.save(tmp_path / "plain.png") == []
     assert sorted(path.name for path in tmp_path.iterdir() if path.name.startswith("plain")) == [

@@ -119,6 +119,8 @@ def render_frames_command(
             raise InputError(f"{path}: cannot write: {error.strerror or error}") from None
 
     if not cameras:
+        if frames is not None:
+            write_transforms(paths, scene, settings)
         if not args.quiet:
             print(f"embree-rt: all {len(paths)} frames are on disk (--overwrite renders them "
                   f"again) -> {args.output}", file=sys.stderr)  # fmt: skip
@@ -129,6 +131,8 @@ def render_frames_command(
     else:
         rays, render_s, where = _render_on_cluster(scene, args, settings, cameras, write, source)
     elapsed = time.perf_counter() - started
+    if frames is not None:
+        write_transforms(paths, scene, settings)
     if not args.quiet:
         skipped = len(paths) - len(todo)
         setup = "BVH" if where == "locally" else "cluster"
@@ -140,6 +144,29 @@ def render_frames_command(
             f"{rays / max(render_s, 1e-9) / 1e6:.1f} Mrays/s -> {args.output}",
             file=sys.stderr,
         )
+
+
+def write_transforms(paths: dict, scene: Scene, settings) -> Path:
+    """Write ``transforms.json`` (``aovs.nerf_transforms``) for an animation's frame files
+    ``paths`` (frame -> file) into the directory that holds them all; returns its path."""
+    import json
+    import os
+
+    from embree_rt.aovs import nerf_transforms
+    from embree_rt.camera import camera_frame
+    from embree_rt.film import write_atomically
+
+    folder = Path(os.path.commonpath([Path(path).resolve().parent for path in paths.values()]))
+    views = [(Path(path).resolve(), camera_frame(camera_at(scene.camera, scene.animation, f),
+                                                 settings.width, settings.height))
+             for f, path in paths.items()]  # fmt: skip
+    text = (json.dumps(nerf_transforms(views, folder), indent=2) + "\n").encode()
+    target = folder / "transforms.json"
+    try:
+        write_atomically([(target, lambda handle: handle.write(text))])
+    except OSError as error:
+        raise InputError(f"{target}: cannot write: {error.strerror or error}") from None
+    return target
 
 
 def _render_locally(scene, args, settings, cameras, write: Callable) -> tuple[int, float, str]:
