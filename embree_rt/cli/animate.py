@@ -162,6 +162,8 @@ def write_transforms(paths: dict, scene: Scene, settings) -> Path:
              for f, path in paths.items()]  # fmt: skip
     text = (json.dumps(nerf_transforms(views, folder), indent=2) + "\n").encode()
     target = folder / "transforms.json"
+    if target.is_file() and target.read_bytes() == text:
+        return target  # a rerun with every frame on disk touches nothing
     try:
         write_atomically([(target, lambda handle: handle.write(text))])
     except OSError as error:
