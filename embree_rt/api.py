@@ -152,6 +152,14 @@ def preview(scene: Scene) -> RenderResult:
     return render(scene, width=width, height=height, spp=PREVIEW_SPP, max_depth=PREVIEW_DEPTH)
 
 
+def preview_png(scene: Scene) -> bytes:
+    """``preview(scene)`` as PNG bytes: what Jupyter shows for a ``Scene``."""
+    return preview(scene)._repr_png_()
+
+
+Scene._repr_png_ = preview_png  # the scene model imports no renderer: it is given its preview
+
+
 def render(
     scene: Scene,
     *,

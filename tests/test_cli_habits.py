@@ -335,4 +335,4 @@ def test_a_frame_pattern_makes_its_directories(tmp_path: Path) -> None:
                      "-o", str(pattern), *TINY, "--frames", "0:2", "--quiet")  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert sorted(p.name for p in (tmp_path / "shots" / "take1").iterdir()) == [
-        "f_0000.png", "f_0001.png"]  # fmt: skip
+        "f_0000.png", "f_0001.png", "transforms.json"]  # fmt: skip

@@ -118,9 +118,7 @@ def render_frames_command(
         except OSError as error:
             raise InputError(f"{path}: cannot write: {error.strerror or error}") from None
 
-    if not cameras:
-        if frames is not None:
-            write_transforms(paths, scene, settings)
+    if not cameras:  # nothing to do: nothing is written, transforms.json included
         if not args.quiet:
             print(f"embree-rt: all {len(paths)} frames are on disk (--overwrite renders them "
                   f"again) -> {args.output}", file=sys.stderr)  # fmt: skip

@@ -212,12 +212,9 @@ class Scene:
             parts.append(f"{self.animation.frames} frames")
         return f"Scene({', '.join(parts)})"
 
-    def _repr_png_(self) -> bytes:
-        """A quick preview as PNG bytes, what Jupyter shows for a scene: 256 pixels wide, one
-        sample, two bounces (``embree_rt.api.preview``)."""
-        from embree_rt.api import preview
-
-        return preview(self)._repr_png_()
+    # ``_repr_png_``, the quick preview Jupyter shows for a scene, is given to the class by
+    # ``embree_rt.api`` (``preview_png``): rendering stands above the scene model, which
+    # imports none of it.
 
     @property
     def material_names(self) -> list[str]:
