@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -230,27 +231,37 @@ def _cosine(entries, e, table, px, py, pz):
     return (table[row, 9] * dx + table[row, 10] * dy + table[row, 11] * dz) / length
 
 
+class _Query(NamedTuple):
+    """One closest-point pass: the Embree scene and the callback, the frame (``shift``,
+    ``scale``, ``extent``), the tie ``tolerance``, the triangle table and the room for tied
+    triangles per point (``capacity``)."""
+
+    scene: int
+    callback: int
+    shift: np.ndarray
+    scale: float
+    extent: float
+    tolerance: float
+    table: np.ndarray
+    capacity: int
+
+
+class _Found(NamedTuple):
+    """The pass's answers for n points: ``closest`` (n, 3) float64, ``distance`` (n,) float64,
+    ``triangle`` (n,) int64, ``interior`` (n,) bool, ``overflow`` (n,) bool (more tied
+    triangles than ``capacity``)."""
+
+    closest: np.ndarray
+    distance: np.ndarray
+    triangle: np.ndarray
+    interior: np.ndarray
+    overflow: np.ndarray
+
+
 @njit(nogil=True, cache=True, error_model="numpy")
-def _closest_chunk(
-    scene,
-    callback,
-    first,
-    stop,
-    points,
-    shift,
-    scale,
-    extent,
-    tolerance,
-    table,
-    capacity,
-    scratch,
-    user,
-    closest,
-    distance,
-    triangle,
-    interior,
-    overflow,
-):
+def _closest_chunk(query, first, stop, points, scratch, user, found):
+    scene, callback, shift, scale, extent, tolerance, table, capacity = query
+    closest, distance, triangle, interior, overflow = found
     b = point_query.init_scratch(scratch)
     words = user.view(np.uint64)
     entries = user[_HEADER:]
@@ -293,88 +304,22 @@ def _closest_chunk(
 
 
 @njit(parallel=True, nogil=True, cache=True, error_model="numpy")
-def _closest(
-    scene,
-    callback,
-    points,
-    shift,
-    scale,
-    extent,
-    tolerance,
-    table,
-    capacity,
-    closest,
-    distance,
-    triangle,
-    interior,
-    overflow,
-):
+def _closest(query, points, found):
     n = points.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, point_query.SCRATCH_WORDS), np.uint32)
-    user = np.empty((n_chunks, _HEADER + _ENTRY * capacity), np.float64)
+    user = np.empty((n_chunks, _HEADER + _ENTRY * query.capacity), np.float64)
     for c in prange(n_chunks):
         _closest_chunk(
-            scene,
-            callback,
-            c * CHUNK,
-            min(n, (c + 1) * CHUNK),
-            points,
-            shift,
-            scale,
-            extent,
-            tolerance,
-            table,
-            capacity,
-            scratch[c],
-            user[c],
-            closest,
-            distance,
-            triangle,
-            interior,
-            overflow,
+            query, c * CHUNK, min(n, (c + 1) * CHUNK), points, scratch[c], user[c], found
         )
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _closest_serial(
-    scene,
-    callback,
-    points,
-    shift,
-    scale,
-    extent,
-    tolerance,
-    table,
-    capacity,
-    closest,
-    distance,
-    triangle,
-    interior,
-    overflow,
-):
+def _closest_serial(query, points, found):
     scratch = np.empty(point_query.SCRATCH_WORDS, np.uint32)
-    user = np.empty(_HEADER + _ENTRY * capacity, np.float64)
-    _closest_chunk(
-        scene,
-        callback,
-        0,
-        points.shape[0],
-        points,
-        shift,
-        scale,
-        extent,
-        tolerance,
-        table,
-        capacity,
-        scratch,
-        user,
-        closest,
-        distance,
-        triangle,
-        interior,
-        overflow,
-    )
+    user = np.empty(_HEADER + _ENTRY * query.capacity, np.float64)
+    _closest_chunk(query, 0, points.shape[0], points, scratch, user, found)
 
 
 @functools.cache
@@ -427,33 +372,31 @@ def closest_points(
     capacity = FIRST_CAPACITY
     while len(rows):
         subset = points if len(rows) == n else points[rows]
-        parts = (
+        found = _Found(
             np.zeros((len(rows), 3)),
             np.zeros(len(rows)),
             np.full(len(rows), -1, np.int64),
             np.zeros(len(rows), bool),
             np.zeros(len(rows), bool),
         )
-        arguments = (
+        query = _Query(
             scene,
             _visit.address,
-            subset,
             shift,
             float(scale),
             float(extent),
             float(tolerance),
             table,
             capacity,
-            *parts,
         )
         used = threads_for(len(rows), threads)
         if used == 1:
-            _closest_serial(*arguments)
+            _closest_serial(query, subset, found)
         else:
             with parallel_region:
                 numba.set_num_threads(used)
-                _closest(*arguments)
-        closest[rows], distance[rows], triangle[rows], interior[rows] = parts[:4]
-        rows = rows[parts[4]]  # tied with more triangles than there was room for: again
+                _closest(query, subset, found)
+        closest[rows], distance[rows], triangle[rows], interior[rows] = found[:4]
+        rows = rows[found.overflow]  # tied with more triangles than there was room for: again
         capacity *= 8
     return closest, distance, triangle, interior
