@@ -454,7 +454,6 @@ def render(
     spheres: str = "analytic",
     batch_size: int = DEFAULT_BATCH_SIZE,
     quiet: bool = True,
-    partition: int | None = None,
 ) -> RenderResult:
     """``embree_rt.render`` on ``client``'s cluster: the same (height, width, 3) float32 image,
     bit for bit (no AOVs: they are rendered locally). ``scene`` is a ``Scene`` (scattered once
@@ -462,18 +461,7 @@ def render(
     come from the scene's ``render`` table. The workers' renderers are freed afterwards; for
     several images or frames of one scene use a ``ClusterRenderer``, which builds once per
     worker for all of them.
-
-    ``partition``: render data-parallel instead, the scene cut into that many spatial bricks,
-    each held by one worker, shading here (``bricks.cluster``): for scenes bigger than one
-    worker's memory. ``batch_size`` is then the client's (default ``DATA_PARALLEL_BATCH_SIZE``).
     """
-    if partition is not None:
-        from embree_rt.bricks import cluster as bricks_cluster
-
-        return bricks_cluster.render(
-            scene, client, partition=partition, camera=camera, spheres=spheres, quiet=quiet,
-            width=width, height=height, spp=spp, max_depth=max_depth, seed=seed,
-        )  # fmt: skip
     local = scene if isinstance(scene, Scene) else _local_view(scene)
     settings = local.render.with_overrides(
         width=width, height=height, spp=spp, max_depth=max_depth, seed=seed
@@ -553,10 +541,9 @@ def connect(
     schedulers are ``InputError``s naming the flag."""
     if cluster is not None:
         count = _local_worker_count(cluster)
-        with (
-            local_cluster(count, silence_logs=logging.ERROR) as local,
-            distributed.Client(local) as client,
-        ):
+        with local_cluster(count, silence_logs=logging.ERROR) as local, distributed.Client(
+            local
+        ) as client:
             yield client
         return
     try:

@@ -81,7 +81,7 @@ def test_data_parallel_image_is_bitwise_the_local_image(cluster, name, as_path, 
 def test_a_field_of_1e6_spheres_made_brick_by_brick_is_bitwise_the_local_image(cluster) -> None:  # noqa: F811
     _, client = cluster
     plan = plan_field(1_000_000, seed=2)
-    result = bounded(rd.render, rd.FieldRecipe(plan), client, partition=2, **SMALL)
+    result = bounded(bc.render, rd.FieldRecipe(plan), client, partition=2, **SMALL)
     expected = rt.render(rt.random_field(1_000_000, seed=2), **SMALL).image
     assert np.array_equal(result.image, expected)
     assert result.stats.rays["primary"] == 160 * 90

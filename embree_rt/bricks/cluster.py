@@ -482,8 +482,8 @@ def render(
     quiet: bool = True,
     **overrides: int | None,
 ) -> RenderResult:
-    """``embree_rt.distributed.render`` with the scene cut into ``partition`` bricks on the
-    workers: the same image, bit for bit (see ``nearest`` for exact ties between bricks);
+    """``embree_rt.distributed.render``'s twin with the scene cut into ``partition`` bricks on
+    the workers: the same image, bit for bit (see ``nearest`` for exact ties between bricks);
     ``overrides`` are the settings (width, height, spp, max_depth, seed). The bricks are freed
     afterwards."""
     renderer = PartitionedRenderer(scene, client, partition=partition, spheres=spheres,
