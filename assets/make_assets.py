@@ -13,6 +13,8 @@ their own looks:
 - painted_ball.ply, an icosphere with a colour per vertex;
 - zero_normals.obj, an icosphere whose file gives every vertex the normal (0, 0, 0);
 - node_scaled.glb, a 100-unit box whose glTF node scales it by 0.01 (as Duck.glb's does);
+- gltf_materials.glb, the glTF material gallery: an emissive panel, a glass ball absorbing
+  toward blue-green, cut-out leaves and a normal-mapped panel (written by ``GltfWriter``);
 - still_life.glb, a multi-part glTF model (a table whose four legs are one mesh under four
   nodes, a polished metal ball, a glossy torus, a painted ball, the textured cube), each part
   in its own metallic-roughness material: what ``embree-rt render still_life.glb`` shows.
@@ -20,6 +22,9 @@ their own looks:
 
 from __future__ import annotations
 
+import io
+import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -170,6 +175,204 @@ def node_scaled() -> trimesh.Scene:
     return scene
 
 
+class GltfWriter:
+    """A small glTF 2.0 writer, for files whose every field is spelled out (trimesh's exporter
+    writes no samplers, extensions or second UV set): meshes of triangles with any attributes,
+    materials given as the JSON they are, PNG images; ``glb()`` is the binary file."""
+
+    def __init__(self) -> None:
+        self.json: dict = {"asset": {"version": "2.0", "generator": "embree_rt make_assets"},
+                           "scene": 0, "scenes": [{"nodes": []}], "nodes": [], "meshes": [],
+                           "materials": [], "textures": [], "images": [], "samplers": [],
+                           "accessors": [], "bufferViews": [], "buffers": []}  # fmt: skip
+        self.blob = bytearray()
+
+    def _view(self, data: bytes) -> int:
+        while len(self.blob) % 4:
+            self.blob.append(0)
+        self.json["bufferViews"].append(
+            {"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(data)}
+        )
+        self.blob += data
+        return len(self.json["bufferViews"]) - 1
+
+    def accessor(self, values: np.ndarray) -> int:
+        """An accessor of (n, k) float32 values (k = 1..4) or (n,) uint32 indices."""
+        values = np.asarray(values)
+        if values.dtype.kind in "iu":
+            values = np.ascontiguousarray(values.reshape(-1), np.uint32)
+            entry = {"componentType": 5125, "type": "SCALAR"}
+        else:
+            values = np.ascontiguousarray(values, np.float32).reshape(len(values), -1)
+            entry = {"componentType": 5126, "type": ("SCALAR", "VEC2", "VEC3", "VEC4")[
+                values.shape[1] - 1]}  # fmt: skip
+            entry["min"] = values.min(axis=0).tolist()
+            entry["max"] = values.max(axis=0).tolist()
+        entry.update(bufferView=self._view(values.tobytes()), count=len(values))
+        self.json["accessors"].append(entry)
+        return len(self.json["accessors"]) - 1
+
+    def texture(self, image: Image.Image, sampler: dict | None = None) -> int:
+        """A texture of ``image`` (stored as PNG) read through ``sampler`` (glTF's JSON)."""
+        stream = io.BytesIO()
+        image.save(stream, format="PNG")
+        self.json["images"].append({"bufferView": self._view(stream.getvalue()),
+                                    "mimeType": "image/png"})  # fmt: skip
+        texture = {"source": len(self.json["images"]) - 1}
+        if sampler is not None:
+            self.json["samplers"].append(sampler)
+            texture["sampler"] = len(self.json["samplers"]) - 1
+        self.json["textures"].append(texture)
+        return len(self.json["textures"]) - 1
+
+    def material(self, material: dict) -> int:
+        self.json["materials"].append(material)
+        return len(self.json["materials"]) - 1
+
+    def mesh(self, vertices: np.ndarray, faces: np.ndarray, material: int | None = None,
+             translation=(0.0, 0.0, 0.0), **attributes: np.ndarray) -> int:  # fmt: skip
+        """A mesh of one triangle primitive placed by a node at ``translation``; ``attributes``
+        by glTF name (NORMAL, TEXCOORD_0, TEXCOORD_1, TANGENT, COLOR_0), (n, k) float32."""
+        primitive = {
+            "attributes": {"POSITION": self.accessor(vertices),
+                           **{name: self.accessor(a) for name, a in attributes.items()}},
+            "indices": self.accessor(np.asarray(faces, np.uint32)),
+        }  # fmt: skip
+        if material is not None:
+            primitive["material"] = material
+        self.json["meshes"].append({"primitives": [primitive]})
+        self.json["nodes"].append({"mesh": len(self.json["meshes"]) - 1,
+                                   "translation": [float(t) for t in translation]})  # fmt: skip
+        self.json["scenes"][0]["nodes"].append(len(self.json["nodes"]) - 1)
+        return len(self.json["meshes"]) - 1
+
+    def glb(self) -> bytes:
+        document = {key: value for key, value in self.json.items() if value != []}
+        used = sorted({name for m in self.json["materials"] for name in m.get("extensions", {})}
+                      | {name for m in self.json["materials"] for info in _texture_infos(m)
+                         for name in info.get("extensions", {})})  # fmt: skip
+        if used:
+            document["extensionsUsed"] = used
+        while len(self.blob) % 4:
+            self.blob.append(0)
+        document["buffers"] = [{"byteLength": len(self.blob)}]
+        text = json.dumps(document, separators=(",", ":")).encode()
+        text += b" " * (-len(text) % 4)
+        body = (struct.pack("<I4s", len(text), b"JSON") + text
+                + struct.pack("<I4s", len(self.blob), b"BIN\x00") + bytes(self.blob))  # fmt: skip
+        return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+def _texture_infos(material: dict) -> list[dict]:
+    """Every textureInfo a glTF material holds (its own, its pbr block's, its extensions')."""
+    blocks = [material, material.get("pbrMetallicRoughness", {}),
+              *material.get("extensions", {}).values()]  # fmt: skip
+    return [value for block in blocks for key, value in block.items()
+            if key.endswith("Texture") and isinstance(value, dict)]  # fmt: skip
+
+
+def quad(size: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A square in the xy-plane centred at the origin facing +z: (4, 3) vertices, (2, 3) faces
+    (counter-clockwise seen from +z) and (4, 2) glTF UVs (v down: (0, 0) at the top left)."""
+    h = size / 2
+    vertices = np.array([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]], np.float32)
+    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+    return vertices, np.array([[0, 1, 2], [0, 2, 3]]), uv
+
+
+def _placed(vertices: np.ndarray, rotate_x: float = 0.0, rotate_y: float = 0.0,
+            translate=(0.0, 0.0, 0.0)) -> np.ndarray:  # fmt: skip
+    """``vertices`` (n, 3) turned about x, then y (degrees), then moved."""
+    matrix = trimesh.transformations.euler_matrix(np.radians(rotate_x), np.radians(rotate_y), 0,
+                                                  "sxyz")  # fmt: skip
+    return (vertices @ matrix[:3, :3].T + np.asarray(translate)).astype(np.float32)
+
+
+def leaf_alpha(size: int = 64) -> Image.Image:
+    """RGBA, white, opaque inside a pointed leaf with a round hole in it, clear elsewhere."""
+    y, x = np.mgrid[0:size, 0:size] / (size - 1) * 2 - 1  # x right, y down, in [-1, 1]
+    inside = np.abs(x) < 0.55 * (1 - y**2)
+    hole = (x**2 + (y + 0.25) ** 2) < 0.15**2
+    alpha = np.where(inside & ~hole, 255, 0).astype(np.uint8)
+    return Image.fromarray(np.dstack([np.full((size, size, 3), 255, np.uint8), alpha]), "RGBA")
+
+
+def bump_normals(size: int = 64, cells: int = 6) -> Image.Image:
+    """A tangent-space normal map (x right, y up, as glTF's) of a grid of round bumps."""
+    row, column = np.mgrid[0:size, 0:size] + 0.5
+    x = (column / size * cells) % 1 - 0.5
+    y = ((size - row) / size * cells) % 1 - 0.5  # up the image
+    r2 = x**2 + y**2
+    radius2 = 0.4**2
+    bump = r2 < radius2
+    height = np.sqrt(np.maximum(radius2 - r2, 1e-6))  # a spherical cap: dh/dx = -x / h
+    normal = np.dstack([np.where(bump, x / height, 0), np.where(bump, y / height, 0),
+                        np.ones_like(x)])  # fmt: skip
+    normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+    return Image.fromarray(np.round((normal + 1) / 2 * 255).astype(np.uint8), "RGB")
+
+
+def glowing_rings(size: int = 64) -> Image.Image:
+    """Concentric rings fading from warm to dark: the emissive texture of the gallery's panel."""
+    y, x = np.mgrid[0:size, 0:size] / (size - 1) * 2 - 1
+    glow = 0.5 + 0.5 * np.cos(np.sqrt(x**2 + y**2) * 4 * 2 * np.pi)
+    pixels = glow[..., None] * np.array([255, 190, 90]) + (1 - glow[..., None]) * [40, 10, 60]
+    return Image.fromarray(np.round(pixels).astype(np.uint8), "RGB")
+
+
+def gltf_materials_gallery() -> bytes:
+    """A GLB of the glTF material features together: an emissive panel (emissive texture and
+    strength), a glass ball (transmission, IOR, volume absorption), cut-out leaves (MASK, with
+    a hole in each) that cast leaf-shaped shadows, and a panel of bumps (normal map)."""
+    writer = GltfWriter()
+    linear = {"magFilter": 9729, "minFilter": 9729}
+    # The emissive panel, upright, facing the camera.
+    vertices, faces, uv = quad(1.3)
+    glow = writer.material({
+        "pbrMetallicRoughness": {"baseColorFactor": [0.05, 0.05, 0.05, 1], "metallicFactor": 0},
+        "emissiveFactor": [1.0, 1.0, 1.0],
+        "emissiveTexture": {"index": writer.texture(glowing_rings(), linear)},
+        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 1.5}},
+    })  # fmt: skip
+    writer.mesh(_placed(vertices, rotate_y=25, translate=(-1.9, 0.75, -0.6)), faces, glow,
+                TEXCOORD_0=uv)  # fmt: skip
+    # The glass ball, absorbing toward blue-green.
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.65)
+    glass = writer.material({
+        "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0,
+                                 "roughnessFactor": 0.05},
+        "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+                       "KHR_materials_ior": {"ior": 1.5},
+                       "KHR_materials_volume": {"thicknessFactor": 1.3,
+                                                "attenuationColor": [0.35, 0.8, 0.7],
+                                                "attenuationDistance": 0.6}},
+    })  # fmt: skip
+    writer.mesh(_placed(ball.vertices, translate=(0.0, 0.65, 0.2)), ball.faces, glass,
+                NORMAL=ball.vertex_normals)  # fmt: skip
+    # Leaves, tilted over the floor: cut out by MASK, seen from both sides.
+    leaf = writer.material({
+        "pbrMetallicRoughness": {"baseColorFactor": [0.25, 0.6, 0.15, 1], "metallicFactor": 0,
+                                 "baseColorTexture": {"index": writer.texture(leaf_alpha(),
+                                                                              linear)}},
+        "alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True,
+    })  # fmt: skip
+    for tilt, turn, place in ((-60, 20, (1.0, 1.2, 1.3)), (-70, -35, (0.45, 1.35, 1.8)),
+                              (-50, 70, (1.6, 1.05, 1.0))):  # fmt: skip
+        vertices, faces, uv = quad(0.8)
+        writer.mesh(_placed(vertices, rotate_x=tilt, rotate_y=turn, translate=place), faces, leaf,
+                    TEXCOORD_0=uv)  # fmt: skip
+    # The panel of bumps: flat geometry, its normals from the map.
+    vertices, faces, uv = quad(1.3)
+    bumps = writer.material({
+        "pbrMetallicRoughness": {"baseColorFactor": [0.85, 0.8, 0.75, 1], "metallicFactor": 0,
+                                 "roughnessFactor": 0.4},
+        "normalTexture": {"index": writer.texture(bump_normals(), linear)},
+    })  # fmt: skip
+    writer.mesh(_placed(vertices, rotate_y=-30, translate=(1.95, 0.75, -0.7)), faces, bumps,
+                TEXCOORD_0=uv)  # fmt: skip
+    return writer.glb()
+
+
 def _pbr(mesh: trimesh.Trimesh, color, metallic: float, roughness: float) -> trimesh.Trimesh:
     """``mesh`` in a glTF metallic-roughness material of linear ``color`` (RGB)."""
     material = trimesh.visual.material.PBRMaterial(baseColorFactor=[*color, 1.0],
@@ -229,6 +432,7 @@ def main(directory: Path = HERE) -> None:
     painted_ball().export(directory / "painted_ball.ply")
     write_zero_normals_obj(directory / "zero_normals.obj")
     node_scaled().export(directory / "node_scaled.glb")
+    (directory / "gltf_materials.glb").write_bytes(gltf_materials_gallery())
     still_life(texture).export(directory / "still_life.glb")
 
 

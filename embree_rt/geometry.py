@@ -18,7 +18,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt.embree import BVH, HitLabels, spheres_in_spatial_order
-from embree_rt.mesh_attributes import MeshColors, blend_normals, unit_vertex_normals
+from embree_rt.mesh_attributes import (
+    HitLooks,
+    MeshColors,
+    blend_normals,
+    mesh_hit_filter,
+    unit_vertex_normals,
+)
 from embree_rt.scene.model import MeshObject, Scene
 
 if TYPE_CHECKING:
@@ -58,7 +64,8 @@ class SurfaceHits:
     computed from (at least max |position|, and the object's |centre| + extent): its rounding
     error scales with it; ``incoming`` (3, k) float32, the direction of the ray that made it.
     ``colored`` (j,) int64 columns whose base colour is the surface's own (a mesh's texture or
-    vertex colours), ``color`` (3, j) float32 linear those colours; both None when none is.
+    vertex colours), ``color`` (3, j) float32 linear those colours; both None when none is;
+    ``looks`` the rest those hits show (``mesh_attributes.HitLooks``, rows ``colored``).
     ``prim_id``, ``inst_id``, ``inst_prim_id`` (k,) int32: Embree's primitive, top-level
     instance and instance-array copy ids of each hit (-1 on the floor; ``inst_id`` -1 on the
     sphere set; ``inst_prim_id`` -1 outside instance arrays), which name the object hit
@@ -76,6 +83,7 @@ class SurfaceHits:
     incoming: np.ndarray
     colored: np.ndarray | None = None
     color: np.ndarray | None = None
+    looks: HitLooks | None = None
     prim_id: np.ndarray | None = None
     inst_id: np.ndarray | None = None
     inst_prim_id: np.ndarray | None = None
@@ -154,7 +162,7 @@ class SceneGeometry:
     def _child(self, mesh: trimesh.Trimesh) -> int:
         child = BVH(threads=self.bvh.threads)
         self._children.append(child)
-        child.add_triangles(mesh.vertices, mesh.faces)
+        child.add_triangles(mesh.vertices, mesh.faces, mesh_hit_filter(mesh))
         child.commit()
         self._mesh_face_offset.append(sum(len(f) for f in self._mesh_faces))
         self._mesh_faces.append(np.asarray(mesh.faces, np.int64))
@@ -384,11 +392,26 @@ class SceneGeometry:
             inst_prim_id=records.inst_prim_id,
         )
         if self.mesh_colors and meshes.stop > meshes.start:  # mesh looks: textures, colours
-            surfaces.colored, surfaces.color = self.mesh_colors.hit_colors(
+            looks = self.mesh_colors.hit_looks(
                 records.inst_id[meshes], records.prim_id[meshes], records.u[meshes],
                 records.v[meshes], meshes.start,
             )  # fmt: skip
+            if looks is not None:
+                surfaces.colored, surfaces.color, surfaces.looks = looks.rows, looks.color, looks
+                if looks.normal is not None:
+                    self._apply_normal_maps(surfaces, records, looks)
         return records.rays, surfaces
+
+    def _apply_normal_maps(self, surfaces: SurfaceHits, records, looks: HitLooks) -> None:
+        """Replace the shading normals of the hits a normal map turns (``looks.normal``, in
+        their mesh's space) by those normals taken to world space."""
+        rows = looks.rows[looks.normal_at]
+        inst, inst_prim = records.inst_id[rows], records.inst_prim_id[rows]
+        world = self.bvh.instance_normals(inst, inst_prim, looks.normal.T)
+        if surfaces.flat:
+            surfaces.normal = surfaces.normal.copy()
+            surfaces.flat = False
+        surfaces.normal[:, rows] = _unit(np.ascontiguousarray(world, np.float32))
 
     def _smooth_normals(self, inst, inst_prim, prim, u, v, face_normal) -> np.ndarray:
         """(3, k) unit world shading normals of k mesh hits: the vertex normals interpolated at

@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.compiled import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
-from embree_rt.materials import MaterialTable
+from embree_rt.materials import MaterialTable, shading_shares
 from embree_rt.scene.model import Scene
 
 DEFAULT_BATCH_SIZE = 1 << 18
@@ -98,6 +99,24 @@ def surface_offset(scale: np.ndarray) -> np.ndarray:
     return (np.float32(RELATIVE_OFFSET) * (np.float32(1.0) + scale)).astype(np.float32, copy=False)
 
 
+class Tracer(Protocol):
+    """Where the integrator's two geometric stages come from: the nearest hits of a wavefront
+    (``intersect_compact``: the (k,) int64 rays that hit and their ``SurfaceHits``, floor hits
+    first) and whether shadow segments are blocked (``occluded_toward``: (k,) bool for the
+    segments from ``points[:, rows]`` to ``target``). ``SceneGeometry`` (one BVH of the whole
+    scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask."""
+
+    def intersect_compact(
+        self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
+    ) -> tuple[np.ndarray, SurfaceHits]: ...
+
+    def occluded_toward(
+        self, points: np.ndarray, rows: np.ndarray, target: np.ndarray
+    ) -> np.ndarray: ...
+
+    def close(self) -> None: ...
+
+
 class Integrator:
     """The Whitted integrator of one scene: builds its BVH once, then traces and shades batches
     of camera samples (``render_image``, ``trace_batch``, ``trace_pixels``). ``embree_rt.Renderer``
@@ -105,7 +124,10 @@ class Integrator:
 
     ``spheres``: how spheres enter the BVH (``geometry.SPHERE_MODES``); ``threads``: the worker
     threads (None: every core, ``batches.worker_count``); ``batch_size``: camera samples a batch
-    traces at most."""
+    traces at most.
+
+    ``tracer`` replaces the BVH: intersection and occlusion come from it (closed with the
+    integrator), shading stays here; ``spheres`` is then unused."""
 
     def __init__(
         self,
@@ -114,6 +136,7 @@ class Integrator:
         spheres: str = "analytic",
         threads: int | None = None,
         batch_size: int = DEFAULT_BATCH_SIZE,
+        tracer: Tracer | None = None,
     ) -> None:
         if batch_size < 1:
             raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
@@ -124,20 +147,36 @@ class Integrator:
         self.workers = worker_count(threads)
         retain_freed_memory()
         start = time.perf_counter()
-        self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
+        self.geometry: Tracer = tracer
+        if tracer is None:
+            self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
         self.build_s = time.perf_counter() - start
         # Material ids are the scene's materials in order, then the floor's.
         self.materials = table = MaterialTable.from_materials(
             [*scene.materials.values(), *([scene.floor.material] if scene.floor else [])]
         )
         # Per material: the seed article's blend of local shading, reflection and transmission.
-        local = (1.0 - table.reflectivity) * (1.0 - table.transparency)
         self.material_color = np.ascontiguousarray(table.color.T)  # (3, m)
-        self.ambient_share = (table.ambient * local).astype(np.float32)
-        self.diffuse_share = (table.diffuse * local).astype(np.float32)
-        self.reflect_share = (table.reflectivity * (1.0 - table.transparency)).astype(np.float32)
+        self.ambient_share, self.diffuse_share, self.reflect_share = shading_shares(
+            table.ambient, table.diffuse, table.reflectivity, table.transparency
+        )
         # Which materials are metals; None when none is (nothing to tint).
         self.metallic = table.metallic if table.metallic.any() else None
+        self.specular = table.specular
+        self.transparency = table.transparency
+        # Unlit materials show their colour alone: all of it as "ambient", nothing else, and
+        # no shadow rays (``lit``: None when every material is lit).
+        self.lit = None
+        if table.unlit.any():
+            self.lit = ~table.unlit
+            self.ambient_share = np.where(table.unlit, 1.0, self.ambient_share).astype(np.float32)
+            for name in ("diffuse_share", "reflect_share", "specular", "transparency"):
+                setattr(self, name, np.where(table.unlit, 0.0, getattr(self, name)).astype(
+                    np.float32))  # fmt: skip
+        # (3, m) glow and Beer–Lambert absorption per unit length; None when no material has any.
+        self.emission = np.ascontiguousarray(table.emission.T) if table.emission.any() else None
+        absorbs = (table.absorption > 0).any()
+        self.absorption = np.ascontiguousarray(table.absorption.T) if absorbs else None
         lights = scene.lights
         self.light_positions = np.array([lt.position for lt in lights], np.float32).reshape(-1, 3)
         self.light_rgb = np.array(
@@ -274,27 +313,90 @@ class Integrator:
         into ``work``; returns their reflection and refraction children."""
         d = rays.directions
         normal, face_normal, entering = self.facing_the_ray(d, surfaces)
+        material = surfaces.material
+        if self.absorption is not None:
+            self._absorb_inside(rays.weight, surfaces.t, material, entering)
         color = self.surface_color(surfaces)
         offset = surface_offset(surfaces.scale)
+        passing = self._see_through(rays, surfaces, face_normal, offset, work, spawn)
         outside = surfaces.position + face_normal * offset
-        material = surfaces.material
-        radiance = np.take(self.ambient_share, material) * color
-        self._add_direct_light(radiance, outside, normal, -d, color, material, work)
+        radiance = self._per_hit(self.ambient_share, surfaces, "ambient_share") * color
+        if surfaces.looks is not None and surfaces.looks.occlusion is not None:
+            radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
+        self._add_direct_light(radiance, outside, normal, -d, color, surfaces, work)
+        self._add_emission(radiance, surfaces)
         work.block.add(rays.pixel, rays.weight * radiance)
         if not spawn:
             return NO_RAYS
-        reflect_share = np.take(self.reflect_share, material)
+        reflect_share = self._per_hit(self.reflect_share, surfaces, "reflect_share")
         children = self._refraction_children(
             rays, surfaces, normal, face_normal, entering, color, offset, reflect_share, work
         )
         reflected = self._reflection_children(
-            rays, outside, normal, color, reflect_share, material, work
+            rays, outside, normal, color, reflect_share, surfaces, work
         )
         children.insert(0, reflected)
+        children.append(passing)
         children = [batch for batch in children if len(batch)]
         return RayBatch.concatenate(children) if children else NO_RAYS
 
     # -- the stages of shading --------------------------------------------------------------
+
+    @staticmethod
+    def _per_hit(table: np.ndarray, surfaces: SurfaceHits, name: str) -> np.ndarray:
+        """(k,) values of a per-material ``table`` at the hits' materials, with the hits'
+        own where a mesh's textures vary it (``HitLooks.shading[name]``)."""
+        values = np.take(table, surfaces.material)
+        looks = surfaces.looks
+        if looks is not None and looks.shading is not None:
+            values[looks.rows[looks.shading_at]] = looks.shading[name]
+        return values
+
+    def _absorb_inside(self, weight, t, material, entering) -> None:
+        """Beer–Lambert: a ray that reaches a glass surface from inside (not ``entering``) has
+        crossed ``t`` (k,) of that glass; its ``weight`` (3, k) is multiplied in place by
+        ``exp(-absorption · t)`` of the material's (3, m) absorption per unit length."""
+        absorption = np.take(self.absorption, material, axis=1)
+        inside = np.flatnonzero(~entering & (column_max(absorption) > 0))
+        if len(inside) == 0:
+            return
+        with np.errstate(invalid="ignore"):  # inf absorption over t = 0 absorbs nothing
+            optical_depth = np.take(absorption, inside, axis=1) * t[inside]
+        optical_depth = np.nan_to_num(optical_depth, nan=0.0)
+        weight[:, inside] *= np.exp(-optical_depth)
+
+    def _add_emission(self, radiance, surfaces: SurfaceHits) -> None:
+        """Add to ``radiance`` (3, k) the light the surfaces give off themselves: their
+        material's ``emission``, or per hit a mesh's emissive texture's."""
+        if self.emission is None:
+            return
+        emission = np.take(self.emission, surfaces.material, axis=1)
+        looks = surfaces.looks
+        if looks is not None and looks.emission is not None:
+            scatter(emission, looks.rows, looks.emission)
+        radiance += emission
+
+    def _see_through(self, rays, surfaces, face_normal, offset, work, spawn) -> RayBatch:
+        """See-through (glTF BLEND) hits of coverage a: the surface keeps ``a`` of each ray's
+        weight (scaled in place, so all it shows and spawns is weighed by it), and ``1 − a``
+        goes straight on past it, as a ray started just beyond the surface: returned (no rays
+        when none pass, or ``spawn`` is False)."""
+        looks = surfaces.looks
+        if looks is None or looks.coverage is None:
+            return NO_RAYS
+        rows = looks.rows
+        weight = np.take(rays.weight, rows, axis=1)
+        rays.weight[:, rows] = weight * looks.coverage
+        if not spawn:
+            return NO_RAYS
+        weight *= np.float32(1.0) - looks.coverage
+        keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
+        through = rows[keep]
+        beyond = np.take(surfaces.position, through, axis=1)
+        beyond -= np.take(face_normal, through, axis=1) * offset[through]
+        work.rays["refraction"] += len(keep)
+        return RayBatch(beyond, np.take(rays.directions, through, axis=1), rays.pixel[through],
+                        np.take(weight, keep, axis=1))  # fmt: skip
 
     @staticmethod
     def facing_the_ray(d: np.ndarray, surfaces: SurfaceHits):
@@ -324,7 +426,7 @@ class Integrator:
         returns the refracted rays, started just inside the surface, tinted by the glass."""
         table = self.materials
         material = surfaces.material
-        transparency = np.take(table.transparency, material)
+        transparency = self._per_hit(self.transparency, surfaces, "transparency")
         glass = np.flatnonzero(transparency > 0)
         if len(glass) == 0:
             return []
@@ -353,16 +455,18 @@ class Integrator:
         ]
 
     def _reflection_children(
-        self, rays, outside, normal, color, reflect_share, material, work
+        self, rays, outside, normal, color, reflect_share, surfaces, work
     ) -> RayBatch:
         """Mirrors, metals and glass's Fresnel share reflect: the mirror rays whose weight can
         still show, started just outside the surface. Most hits reflect a little, so the
         weights are formed on every row and only the rows kept are gathered."""
         weight = rays.weight * reflect_share
-        if self.metallic is not None:
+        looks = surfaces.looks
+        if self.metallic is not None or (looks is not None and looks.shading is not None):
             # Metals tint what they reflect by their colour; the rest reflect untinted. (Metals
             # are few: three row passes over them beat a tint factor formed on every row.)
-            metals = np.flatnonzero(np.take(self.metallic, material))
+            metallic = self.metallic if self.metallic is not None else self.materials.metallic
+            metals = np.flatnonzero(self._per_hit(metallic, surfaces, "metallic"))
             for row in range(3):
                 weight[row, metals] *= color[row, metals]
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
@@ -380,7 +484,7 @@ class Integrator:
         )
 
     def _add_direct_light(
-        self, radiance, points, normal, to_viewer, color, material, work: BatchWork
+        self, radiance, points, normal, to_viewer, color, surfaces, work: BatchWork
     ) -> None:
         """Add to ``radiance`` (3, n) the Blinn-Phong light from every point light that the
         ``points`` (3, n) see."""
@@ -389,12 +493,16 @@ class Integrator:
             return
         # Shadow rays only where the light is in front of the surface: the segment from the
         # point to the light, which the Embree layer builds from the points' columns.
-        diffuse = np.take(self.diffuse_share, material)
-        specular = np.take(self.materials.specular, material)
-        shininess = np.take(self.materials.shininess, material)
+        material = surfaces.material
+        diffuse = self._per_hit(self.diffuse_share, surfaces, "diffuse_share")
+        specular = self._per_hit(self.specular, surfaces, "specular")
+        # Unlit surfaces take no light: no shadow rays for them.
+        takes_light = None if self.lit is None else np.take(self.lit, material)
+        shininess = self._per_hit(self.materials.shininess, surfaces, "shininess")
         for light, position in enumerate(self.light_positions):
             to_light = position[:, None] - points
-            facing = np.flatnonzero(shading.dot(to_light, normal) > 0)
+            facing = shading.dot(to_light, normal) > 0
+            facing = np.flatnonzero(facing if takes_light is None else facing & takes_light)
             visible = ~self.geometry.occluded_toward(points, facing, position)
             work.rays["shadow"] += len(facing)
             lit = facing[visible]
@@ -426,4 +534,3 @@ class Integrator:
                     self.light_rgb[light],
                 ),
             )
-

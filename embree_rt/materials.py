@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -18,6 +19,14 @@ class Material:
     a mirror bounce, tinted by ``color`` when ``metallic`` (as metals reflect); ``transparency`` > 0
     makes the surface glass with index ``ior``: its reflected and refracted weights are split by
     Schlick's Fresnel term, and what it transmits is tinted by ``color``.
+
+    ``emission`` (linear RGB, any non-negative size) is light the surface gives off itself: it is
+    added to what the hit returns (a glowing surface, not a light source: it lights nothing
+    else). Glass absorbs along the path a ray travels inside it by Beer–Lambert's law: after a
+    distance ``attenuation_distance`` what is left of white light is ``attenuation_color``
+    (glTF's KHR_materials_volume; the default, an infinite distance, absorbs nothing).
+    ``unlit`` surfaces show their colour as it is, with no lighting, shadow, reflection or
+    transmission (glTF's KHR_materials_unlit).
     """
 
     color: RGB = (0.8, 0.8, 0.8)
@@ -29,6 +38,10 @@ class Material:
     transparency: float = 0.0
     ior: float = 1.0
     metallic: bool = False
+    emission: RGB = (0.0, 0.0, 0.0)
+    attenuation_color: RGB = (1.0, 1.0, 1.0)
+    attenuation_distance: float = math.inf
+    unlit: bool = False
 
     def __post_init__(self) -> None:
         if len(self.color) != 3 or any(float(c) < 0.0 for c in self.color):
@@ -41,7 +54,31 @@ class Material:
             raise ValueError(f"shininess: must be > 0, got {self.shininess}")
         if not self.ior >= 1.0:
             raise ValueError(f"ior: must be >= 1, got {self.ior}")
+        for name in ("emission", "attenuation_color"):
+            value = getattr(self, name)
+            if len(value) != 3 or not all(math.isfinite(float(c)) and float(c) >= 0 for c in value):
+                raise ValueError(f"{name}: expected three finite numbers >= 0, got {value!r}")
+            object.__setattr__(self, name, tuple(float(c) for c in value))
+        if any(c > 1.0 for c in self.attenuation_color):
+            raise ValueError(
+                f"attenuation_color: each must lie in [0, 1], got {list(self.attenuation_color)}"
+            )
+        if not self.attenuation_distance > 0.0:
+            raise ValueError(f"attenuation_distance: must be > 0, got {self.attenuation_distance}")
         object.__setattr__(self, "color", tuple(float(c) for c in self.color))
+
+    @property
+    def is_glass(self) -> bool:
+        return self.transparency > 0.0
+
+    @property
+    def absorption(self) -> tuple[float, float, float]:
+        """Beer–Lambert absorption coefficient per unit length, per channel: ``-ln(c) / d`` of
+        ``attenuation_color`` c and ``attenuation_distance`` d (a black channel absorbs all)."""
+        return tuple(
+            math.inf if c == 0.0 else -math.log(c) / self.attenuation_distance
+            for c in self.attenuation_color
+        )
 
 
 PRESETS: dict[str, Material] = {
@@ -71,6 +108,21 @@ def preset(name: str, **overrides: object) -> Material:
     return replace(base, **overrides)
 
 
+def shading_shares(
+    ambient: np.ndarray, diffuse: np.ndarray, reflectivity: np.ndarray, transparency: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The seed article's blend of local shading, mirror reflection and transmission, per
+    material or per hit ((n,) float32 each): the (n,) float32 shares of ambient and diffuse
+    light, ``ambient · local`` and ``diffuse · local`` with ``local = (1 − reflectivity)(1 −
+    transparency)``, and the mirror's share ``reflectivity · (1 − transparency)``."""
+    local = (1.0 - reflectivity) * (1.0 - transparency)
+    return (
+        (ambient * local).astype(np.float32),
+        (diffuse * local).astype(np.float32),
+        (reflectivity * (1.0 - transparency)).astype(np.float32),
+    )
+
+
 @dataclass(frozen=True)
 class Checker:
     """A procedural checkerboard in the xz-plane: squares of side ``size`` alternate two colors."""
@@ -88,7 +140,8 @@ class Checker:
 class MaterialTable:
     """Materials as arrays indexed by material id, so shading gathers per hit with one take.
 
-    ``color`` (m, 3) float32; the scalar fields (m,) float32.
+    ``color``, ``emission`` and ``absorption`` (m, 3) float32; the scalar fields (m,) float32;
+    ``metallic`` and ``unlit`` (m,) bool.
     """
 
     color: np.ndarray
@@ -100,6 +153,9 @@ class MaterialTable:
     transparency: np.ndarray
     ior: np.ndarray
     metallic: np.ndarray
+    emission: np.ndarray
+    absorption: np.ndarray
+    unlit: np.ndarray
 
     @classmethod
     def from_materials(cls, materials: list[Material]) -> MaterialTable:
@@ -116,4 +172,7 @@ class MaterialTable:
             transparency=column("transparency"),
             ior=column("ior"),
             metallic=np.array([m.metallic for m in materials], bool),
+            emission=np.array([m.emission for m in materials], np.float32).reshape(-1, 3),
+            absorption=np.array([m.absorption for m in materials], np.float32).reshape(-1, 3),
+            unlit=np.array([m.unlit for m in materials], bool),
         )

@@ -100,8 +100,12 @@ CASES = {
         ["spheres[0].center", "finite"],
     ),
     "fov zero": Case("scene.toml", "[camera]\nfov = 0\n", ["camera.fov", "> 0"]),
-    "spp zero": Case("scene.toml", "[render]\nspp = 0\n", ["render.spp", ">= 1"]),
-    "width -1 in file": Case("scene.toml", "[render]\nwidth = -1\n", ["render.width", ">= 1"]),
+    # (not spp or width: the runs' own --spp and --width replace the file's value before it is
+    # checked, as --set render.spp=1 would)
+    "max_depth -1 in file": Case(
+        "scene.toml", "[render]\nmax_depth = -1\n", ["render.max_depth", ">= 0"]
+    ),
+    "seed -1 in file": Case("scene.toml", "[render]\nseed = -1\n", ["render.seed", ">= 0"]),
     "width -1 flag": Case("scene.toml", SPHERE, ["--width", "-1"], flags=["--width", "-1"]),
     "undefined material": Case(
         "scene.toml", SPHERE + 'material = "nope"\n', ["spheres[0].material", "'nope'"]
@@ -231,7 +235,7 @@ def test_bad_input_leaves_an_existing_image_alone(name: str, bad_runs) -> None:
 
 
 def test_usage_errors_are_one_line_too(tmp_path: Path) -> None:
-    assert_one_line_error(run_cli(), ["required"])
+    assert_one_line_error(run_cli("render"), ["required", "scene", "--output"])
     assert_one_line_error(
         run_cli("random", "--count", "0", "-o", str(tmp_path / "x.png")), ["--count"]
     )
@@ -418,7 +422,8 @@ def test_ctrl_c_exits_130_and_keeps_the_old_image(tmp_path: Path) -> None:
 
 def _one_sphere_scene(folder: Path) -> Path:
     scene = folder / "scene.toml"
-    scene.write_text(SPHERE, encoding="utf-8")
+    # lit: a scene without lights would add a warning line to the stderr these tests read
+    scene.write_text(SPHERE + "[[lights]]\nposition = [3.0, 5.0, 4.0]\n", encoding="utf-8")
     return scene
 
 
@@ -602,7 +607,7 @@ import os, signal, sys
 import numpy as np
 from embree_rt import cli, film
 
-def write_half_then_stop(image, handle):
+def write_half_then_stop(image, handle, encoding=None):
     handle.write(b"\\x93NUMPY half an image")
     handle.flush()
     os.kill(os.getpid(), signal.SIGTERM)
@@ -692,27 +697,30 @@ THREE_SPHERES = str(ROOT / "scenes" / "three_spheres.toml")  # 1280x720 in its f
 HUGE_FLAGS = {
     "spp beyond int64": (
         ["render", THREE_SPHERES, "--spp", str(2**63)],
-        ["--spp: must be <= 9223372036854775807, got 9223372036854775808"],
+        ["--spp 9223372036854775808: render.spp: must be <= 9223372036854775807"],
     ),
     "seed beyond uint64": (
         ["render", THREE_SPHERES, "--seed", str(2**64)],
-        ["--seed: must be <= 18446744073709551615"],
+        ["--seed 18446744073709551616: render.seed: must be <= 18446744073709551615"],
     ),
     "samples beyond int64 with the file's size": (
         ["render", THREE_SPHERES, "--spp", str(2**62)],
-        ["--spp: a 1280x720 image at 4611686018427387904 spp", "more than", "int64"],
+        ["--spp 4611686018427387904: render.spp: a 1280x720 image at 4611686018427387904 spp",
+         "more than", "int64"],
     ),
     "samples beyond int64, the width a flag": (
         ["random", "--count", "5", "--width", str(2**62), "--height", "4"],
-        ["--width, --height: a 4611686018427387904x4 image", "int64"],
+        ["render.spp: a 4611686018427387904x4 image", "int64"],
     ),
     "one pixel of 2**62 samples": (
         ["render", THREE_SPHERES, "--spp", str(2**62), "--width", "1", "--height", "1"],
-        ["--spp: the samples in flight at 4611686018427387904 spp would need", "available"],
+        ["--spp 4611686018427387904: the samples in flight at 4611686018427387904 spp would",
+         "available"],
     ),
     "one pixel of 1e11 samples, random": (
         ["random", "--count", "5", "--spp", str(10**11), "--width", "1", "--height", "1"],
-        ["--spp: the samples in flight at 100000000000 spp would need", "available"],
+        ["--spp 100000000000: the samples in flight at 100000000000 spp would need",
+         "available"],
     ),
 }
 
@@ -732,7 +740,10 @@ def test_flag_values_beyond_what_a_render_can_number_or_hold_are_refused(
 
 def test_a_file_asking_one_pixel_too_many_samples_is_blamed_on_its_spp(tmp_path: Path) -> None:
     scene = tmp_path / "scene.toml"
-    scene.write_text(f"[render]\nwidth = 1\nheight = 1\nspp = {10**12}\n" + SPHERE)
+    scene.write_text(
+        f"[render]\nwidth = 1\nheight = 1\nspp = {10**12}\n[[lights]]\nposition = [0, 5, 0]\n"
+        + SPHERE
+    )
     result = run_cli("render", str(scene), "-o", str(tmp_path / "out.npy"), "--quiet")
     assert_one_line_error(result, [f"{scene}: render.spp: the samples in flight", "would need"])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]

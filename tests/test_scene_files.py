@@ -378,10 +378,10 @@ def _objects(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(centers), np.concatenate(tops)
 
 
-def test_the_shipped_scenes_are_the_five_of_the_issue_and_textured_meshes() -> None:
+def test_the_shipped_scenes_are_the_five_of_the_issue_textured_meshes_and_gltf_materials() -> None:
     assert [p.name for p in SCENES] == [
-        "material_spectrum.toml", "mesh_and_spheres.toml", "random_field.toml", "showcase.toml",
-        "textured_meshes.toml", "three_spheres.toml",
+        "gltf_materials.toml", "material_spectrum.toml", "mesh_and_spheres.toml",
+        "random_field.toml", "showcase.toml", "textured_meshes.toml", "three_spheres.toml",
     ]  # fmt: skip
 
 
@@ -1018,10 +1018,12 @@ def test_assets_are_what_make_assets_makes_one_per_format(tmp_path: Path) -> Non
         "trio.glb": make.trio(),
     }
     on_disk = sorted(p.name for p in (ROOT / "assets").iterdir() if p.suffix != ".py")
-    # and the meshes with looks of their own, which tests/test_mesh_looks.py checks
-    looks = ["node_scaled.glb", "painted_ball.ply", "quadrant_cube.glb", "quadrant_cube.mtl",
-             "quadrant_cube.obj", "quadrants.png", "still_life.glb",
-             "zero_normals.obj"]  # fmt: skip  (still_life: tests/test_real_world_files.py)
+    # and the meshes with looks of their own, which tests/test_mesh_looks.py checks, the glTF
+    # material gallery (tests/test_gltf_materials.py) and still_life.glb
+    # (tests/test_real_world_files.py)
+    looks = ["gltf_materials.glb", "node_scaled.glb", "painted_ball.ply", "quadrant_cube.glb",
+             "quadrant_cube.mtl", "quadrant_cube.obj", "quadrants.png", "still_life.glb",
+             "zero_normals.obj"]  # fmt: skip
     assert on_disk == sorted([*expected, *looks])
     document = {"floor": False, "meshes": [{"file": str(ROOT / "assets" / n)} for n in expected]}
     (tmp_path / "assets.json").write_text(json.dumps(document))

@@ -24,6 +24,7 @@ from embree_rt.embree import (
     user_spheres,
     world_normals,
 )
+from embree_rt.embree.alpha_filter import TriangleFilter
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
     as_indices,
@@ -168,6 +169,7 @@ class BVH:
         # The user-geometry spheres' user data (two addresses) and storage order, kept alive
         # here for as long as Embree may call the callbacks.
         self._sphere_user_data: list[tuple[np.ndarray, np.ndarray]] = []
+        self._hit_filters: list[TriangleFilter] = []
         # Inverse-transpose of each single instance's linear part, by geometry id: one
         # (g, 3, 3) table at commit (world_normals).
         self._normal_matrices: dict[int, np.ndarray] = {}
@@ -287,8 +289,11 @@ class BVH:
         self._sphere_buffers[geom_id] = (packed, slot)
         return geom_id
 
-    def add_triangles(self, vertices: np.ndarray, faces: np.ndarray) -> int:
-        """Add a triangle mesh: ``vertices`` (m, 3) float, ``faces`` (k, 3) int in [0, m)."""
+    def add_triangles(
+        self, vertices: np.ndarray, faces: np.ndarray, hit_filter: TriangleFilter | None = None
+    ) -> int:
+        """Add a triangle mesh: ``vertices`` (m, 3) float, ``faces`` (k, 3) int in [0, m);
+        ``hit_filter`` (``alpha_filter.triangle_filter``) cuts holes in it or hides its back."""
         vertices = as_points(vertices, "vertices")
         faces = as_triangle_indices(faces, "faces", len(vertices))
         self._live_scene()
@@ -309,6 +314,9 @@ class BVH:
         self.primitive_count += len(faces)
         if len(vertices):
             self.coordinate_bound = max(self.coordinate_bound, float(np.abs(vertices).max()))
+        if hit_filter is not None:
+            hit_filter.install(self._lib, geometry)
+            self._hit_filters.append(hit_filter)  # Embree reads its data while the BVH lives
         return self._attach(geometry, "adding triangles")
 
     def _check_instanceable(self, child: object, argument: str) -> None:
@@ -468,6 +476,12 @@ class BVH:
         if not self._committed:
             raise RuntimeError("commit() the BVH before querying it")
         _prepare_kernels()
+
+    def scene_address(self) -> int:
+        """The committed Embree scene's handle, for compiled queries defined outside this class
+        (``point_query``'s callers)."""
+        self._ready_to_query()
+        return self._live_scene()
 
     def _query_inputs(self, origins, directions, tnear, tfar):
         self._ready_to_query()

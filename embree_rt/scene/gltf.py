@@ -47,11 +47,30 @@ SUPPORTED_EXTENSIONS = {
     "EXT_mesh_gpu_instancing": "each instanced node becomes instance arrays",
     "KHR_lights_punctual": "the file's lights, when it is rendered on its own (point; spot and "
     "directional as point lights)",
+    "KHR_materials_emissive_strength": "the emission's strength",
+    "KHR_materials_transmission": "glass of that transparency, tinted by the base colour",
+    "KHR_materials_ior": "the glass's index of refraction",
+    "KHR_materials_volume": "Beer-Lambert absorption inside the glass",
+    "KHR_materials_unlit": "the base colour alone, no lights",
+    "KHR_texture_transform": "offset, rotation, scale and texCoord of each texture",
 }
+# Extensions with no counterpart in Blinn-Phong shading and Whitted rays, which the warning
+# naming what a file uses and embree_rt ignores says of them.
+NO_COUNTERPART_EXTENSIONS = (
+    "KHR_materials_clearcoat",
+    "KHR_materials_sheen",
+    "KHR_materials_specular",
+    "KHR_materials_iridescence",
+    "KHR_materials_anisotropy",
+    "KHR_materials_dispersion",
+    "KHR_materials_diffuse_transmission",
+)
 
 
 def extension_problem(name: str) -> str | None:
     """Why embree_rt cannot honour the glTF extension ``name``, or None when it can."""
+    if name in NO_COUNTERPART_EXTENSIONS:
+        return "no counterpart in embree_rt's Blinn-Phong shading"
     if name not in SUPPORTED_EXTENSIONS:
         return "not supported by embree_rt"
     if name == "KHR_draco_mesh_compression" and importlib.util.find_spec("DracoPy") is None:
@@ -132,7 +151,7 @@ def _parse_json(data: bytes) -> dict:
     return tree
 
 
-def _uri_path(root: Path, uri: str) -> Path | None:
+def uri_path(root: Path, uri: str) -> Path | None:
     """The file a glTF ``uri`` names, looked for as ``candidate_paths`` says, or None."""
     return next((p for p in candidate_paths(root, uri) if p.is_file()), None)
 
@@ -141,7 +160,7 @@ def _is_data_uri(uri: str) -> bool:
     return uri.startswith("data:")
 
 
-class _Buffers:
+class GltfBuffers:
     """The file's buffers, each read once when first asked for."""
 
     def __init__(self, path: Path, tree: dict, binary: bytes | None) -> None:
@@ -159,7 +178,7 @@ class _Buffers:
             elif _is_data_uri(uri):
                 self.loaded[index] = base64.b64decode(uri.split(",", 1)[1])
             else:
-                self.loaded[index] = _uri_path(self.path.parent, uri).read_bytes()
+                self.loaded[index] = uri_path(self.path.parent, uri).read_bytes()
         return self.loaded[index]
 
 
@@ -275,7 +294,7 @@ def prepare_gltf(path: Path) -> PreparedGltf:
     tree, binary = read_gltf(path)
     _check_extensions(path, tree)
     _check_files(path, tree)
-    buffers = _Buffers(path, tree, binary)
+    buffers = GltfBuffers(path, tree, binary)
     prepared = PreparedGltf()
     rewrite = False
     if any("sparse" in accessor for accessor in tree.get("accessors", [])):
@@ -310,10 +329,14 @@ def _check_extensions(path: Path, tree: dict) -> None:
         if (problem := extension_problem(name)) is not None:
             raise MeshFileError(f"extensionsRequired[{index}]",
                                 f"the file requires {name}, {problem}")  # fmt: skip
-    ignored = [name for name in tree.get("extensionsUsed") or [] if extension_problem(name)]
-    if ignored:
-        warn_input(f"{path}: extensionsUsed: {', '.join(ignored)} ignored (not supported by "
-                   "embree_rt); the file renders without them")  # fmt: skip
+    by_problem: dict[str, list[str]] = {}
+    for name in tree.get("extensionsUsed") or []:
+        if (problem := extension_problem(name)) is not None:
+            by_problem.setdefault(problem, []).append(name)
+    if by_problem:
+        ignored = "; ".join(f"{', '.join(names)} ignored ({problem})"
+                            for problem, names in by_problem.items())  # fmt: skip
+        warn_input(f"{path}: extensionsUsed: {ignored}; the file renders without them")
 
 
 def _check_files(path: Path, tree: dict) -> None:
@@ -323,7 +346,7 @@ def _check_files(path: Path, tree: dict) -> None:
             uri = item.get("uri") if isinstance(item, dict) else None
             if not isinstance(uri, str) or _is_data_uri(uri):
                 continue
-            if _uri_path(path.parent, uri) is not None:
+            if uri_path(path.parent, uri) is not None:
                 continue
             if group == "buffers":
                 raise MeshFileError(f"buffers[{index}].uri", f"no such file {uri!r} "
@@ -332,7 +355,7 @@ def _check_files(path: Path, tree: dict) -> None:
                        f"{path.parent}); the materials using it render without it")  # fmt: skip
 
 
-def _densify_sparse(tree: dict, buffers: _Buffers) -> None:
+def _densify_sparse(tree: dict, buffers: GltfBuffers) -> None:
     """Give every sparse accessor its applied values in a new buffer (a data URI appended to
     ``buffers``), so trimesh reads what the file means."""
     blob = bytearray()
@@ -354,7 +377,7 @@ def _densify_sparse(tree: dict, buffers: _Buffers) -> None:
     )
 
 
-def _instance_matrices(tree: dict, buffers: _Buffers, instancing: dict, key: str) -> np.ndarray:
+def _instance_matrices(tree: dict, buffers: GltfBuffers, instancing: dict, key: str) -> np.ndarray:
     """(n, 4, 4) float64 T·R·S of each instance of an ``EXT_mesh_gpu_instancing`` node."""
     attributes = instancing.get("attributes") or {}
     columns = {}

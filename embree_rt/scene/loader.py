@@ -19,6 +19,7 @@ import numpy as np
 
 from embree_rt import budget
 from embree_rt.camera import Camera, camera_problem
+from embree_rt.film import TONEMAPS, TRANSFERS
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.archives import Headers, array_headers, read_archive, unpacked_bytes
@@ -340,11 +341,20 @@ class SceneReader:
             spp=table.integer("spp", current.spp, low=1),
             max_depth=table.integer("max_depth", current.max_depth, low=0),
             seed=table.integer("seed", current.seed, low=0, high=SEED_LIMIT),
+            exposure=table.number("exposure", current.exposure, low=-64, high=64),
+            tonemap=self._choice(table, "tonemap", TONEMAPS, current.tonemap),
+            transfer=self._choice(table, "transfer", TRANSFERS, current.transfer),
         )
         table.finish()
         if (problem := render_problem(settings)) is not None:
             raise table.error(*problem)
         return settings
+
+    def _choice(self, table: Table, name: str, choices: tuple[str, ...], default: str) -> str:
+        value = table.string(name, default)
+        if value not in choices:
+            raise table.error(name, f"expected one of {', '.join(choices)}, got {value!r}")
+        return value
 
     def _camera(self, table: Table, current: Camera) -> Camera:
         camera = Camera(
@@ -389,6 +399,18 @@ class SceneReader:
             fields["ior"] = table.number("ior", low=1)
         if table.has("metallic"):
             fields["metallic"] = table.boolean("metallic", False)
+        if table.has("emission"):
+            fields["emission"] = table.color("emission")
+        if table.has("attenuation_color"):
+            fields["attenuation_color"] = table.color("attenuation_color")
+            if max(fields["attenuation_color"]) > 1.0:
+                raise table.error("attenuation_color", "each must lie in [0, 1], got "
+                                  f"{list(fields['attenuation_color'])}")  # fmt: skip
+        if table.has("attenuation_distance"):
+            fields["attenuation_distance"] = table.number("attenuation_distance", low=0,
+                                                          low_open=True)  # fmt: skip
+        if table.has("unlit"):
+            fields["unlit"] = table.boolean("unlit", False)
         return Material(**{**base.__dict__, **fields})
 
     def _material(self, table: Table) -> Material:

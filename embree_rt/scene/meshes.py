@@ -11,13 +11,19 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from embree_rt.materials import RGB, Material
-from embree_rt.scene.errors import MeshFileError, SceneError
+from embree_rt.materials import Material
+from embree_rt.scene.errors import MeshFileError, SceneError, warn_input
 from embree_rt.scene.gltf import MESH_INDEX_TAG, FileCamera, FileLight, PreparedGltf, prepare_gltf
+from embree_rt.scene.gltf_materials import (
+    LOOKS_KEY,
+    GltfLooks,
+    attach_gltf_looks,
+    metallic_roughness_material,
+)
 from embree_rt.scene.mesh_companions import candidate_paths
 from embree_rt.scene.obj import check_obj_files
 from embree_rt.scene.ply import with_strips
-from embree_rt.textures import texels_from_image
+from embree_rt.textures import DEFAULT_SAMPLER, Sampler, texels_from_image
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
@@ -103,6 +109,8 @@ def read_model(path: Path) -> LoadedModel:
         raise MeshFileError("(file)", f"cannot read mesh: {error}") from None
     if suffix == ".ply":
         loaded = with_strips(loaded)
+    if suffix in (".glb", ".gltf"):
+        read_gltf_looks(path, loaded)
     parts = mesh_parts(loaded) if isinstance(loaded, trimesh.Trimesh | trimesh.Scene) else []
     instanced = []
     for mesh_index, transforms, _ in prepared.instanced:
@@ -144,16 +152,23 @@ def load_mesh_parts(path: Path, file: object, key: str) -> list[tuple[trimesh.Tr
     return load_model(path, file, key).every_placement()
 
 
+def read_gltf_looks(path: Path, loaded: trimesh.Trimesh | trimesh.Scene) -> None:
+    """Attach to each of ``loaded``'s meshes what the glTF file ``path`` says of its material
+    beyond what trimesh keeps (``gltf_materials.attach_gltf_looks``); a file whose materials
+    cannot be read that way keeps trimesh's reading, with a one-line warning."""
+    meshes = list(loaded.geometry.values()) if isinstance(loaded, trimesh.Scene) else [loaded]
+    try:
+        attach_gltf_looks(path, meshes)
+    except (OSError, ValueError, KeyError, IndexError, TypeError) as error:
+        warn_input(f"{path}: glTF materials read as trimesh reads them only "
+                   f"({type(error).__name__}: {error})")  # fmt: skip
+
+
 # -- what a mesh looks like ----------------------------------------------------------------------
 
 # trimesh fills an MTL material's missing ``Kd`` with this grey; beside a ``map_Kd`` texture it
 # is read as no ``Kd`` at all (factor 1), or every such texture would render at 40% brightness.
 _TRIMESH_DEFAULT_RGBA = (102, 102, 102, 255)
-# glTF's metallic-roughness model → Blinn-Phong: highlight exponent range, and the mirror
-# reflectance at normal incidence of a dielectric (plastics, paint: about 4%) and of a metal.
-SHININESS_RANGE = (1.0, 4096.0)
-DIELECTRIC_REFLECTIVITY = 0.04
-METAL_REFLECTIVITY = 0.9
 
 
 @dataclass(frozen=True)
@@ -162,9 +177,11 @@ class MeshSurface:
 
     A point's base colour is ``factor`` × the texture at its interpolated UV × its interpolated
     vertex colour (or its face's colour), each factor present or not: ``factor`` (3,) float32;
-    ``texels`` (h, w, 4) float32, linear RGB and padding (``embree_rt.textures``), with ``uv``
+    ``texels`` (h, w, 4) float32, linear RGB and alpha (``embree_rt.textures``), with ``uv``
     (2, v) float32 per vertex; ``vertex_colors`` (3, v) float32; ``face_colors`` (3, f) float32.
-    Per-vertex arrays hold one vertex per column, so that gathers at the hits come out (3, n).
+    The texture is read as ``sampler`` says; ``looks`` is what a glTF file says besides
+    (emissive texture, alpha, ...: ``gltf_materials.GltfLooks``). Per-vertex arrays hold one
+    vertex per column, so that gathers at the hits come out (3, n).
     """
 
     factor: np.ndarray
@@ -172,6 +189,8 @@ class MeshSurface:
     uv: np.ndarray | None = None
     vertex_colors: np.ndarray | None = None
     face_colors: np.ndarray | None = None
+    sampler: Sampler = DEFAULT_SAMPLER
+    looks: GltfLooks | None = None
 
 
 def _rgb(rgba: object) -> np.ndarray:
@@ -232,39 +251,6 @@ def _base_color_factor(material: object) -> np.ndarray:
     return _rgb(diffuse)
 
 
-def metallic_roughness_material(color: RGB, metallic: float, roughness: float) -> Material:
-    """A Blinn-Phong ``Material`` that looks like glTF's metallic-roughness surface.
-
-    With smoothness ``s = 1 − roughness`` and ``m = metallic`` (both clipped to [0, 1]):
-
-    - ``shininess = 2 / α² − 2`` with ``α = roughness²``, the Blinn-Phong exponent whose lobe
-      matches a Beckmann/GGX lobe of width α (Walter et al. 2007), clipped to [1, 4096];
-    - ``specular = s · (0.5 + 0.4 m)``: no highlight on a fully rough surface, 0.5 (the glossy
-      preset) on a smooth dielectric, 0.9 (the metal preset) on a smooth metal;
-    - ``reflectivity = s² · (0.04 (1 − m) + 0.9 m)``: a smooth dielectric mirrors about 4% of
-      the scene, a smooth metal 90% (the mirror preset); roughness blurs a real reflection
-      away, which a sharp mirror bounce can only fade;
-    - ``diffuse = 0.85 · (1 − m · s)``: dielectrics keep the matte preset's diffuse, a smooth
-      metal has none (its colour is in what it reflects), a rough metal scatters like a matte
-      surface of its colour;
-    - ``metallic`` is ``m >= 0.5`` (metals tint their reflections and highlights' bounce).
-    """
-    m = float(np.clip(metallic, 0.0, 1.0))
-    roughness = float(np.clip(roughness, 0.0, 1.0))
-    s = 1.0 - roughness
-    alpha = roughness * roughness
-    low, high = SHININESS_RANGE
-    shininess = high if alpha == 0.0 else float(np.clip(2.0 / alpha**2 - 2.0, low, high))
-    return Material(
-        color=color,
-        diffuse=0.85 * (1.0 - m * s),
-        specular=s * (0.5 + 0.4 * m),
-        shininess=shininess,
-        reflectivity=s * s * (DIELECTRIC_REFLECTIVITY * (1.0 - m) + METAL_REFLECTIVITY * m),
-        metallic=m >= 0.5,
-    )
-
-
 def mesh_material(mesh: trimesh.Trimesh) -> Material | None:
     """The material a mesh's own file gives it, or None when it gives none (the caller's
     default applies).
@@ -277,6 +263,8 @@ def mesh_material(mesh: trimesh.Trimesh) -> Material | None:
     with ``Ns 0``). Colours are linear: glTF defines its factors and vertex colours so, and
     8-bit vertex colours of other formats are read the same way.
     """
+    if (looks := mesh.metadata.get(LOOKS_KEY)) is not None:
+        return looks.material
     visual = mesh.visual
     if (material := _file_material(visual)) is not None:
         color = tuple(float(c) for c in _base_color_factor(material))
@@ -329,14 +317,26 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
         factor, vertex_colors = factor * vertex_colors[0], None
     if face_colors is not None and np.ptp(face_colors, axis=0).max() == 0:
         factor, face_colors = factor * face_colors[0], None
-    if texels is None and vertex_colors is None and face_colors is None:
+    sampler = DEFAULT_SAMPLER
+    looks = mesh.metadata.get(LOOKS_KEY)
+    if looks is not None:  # the glTF file's own reading of its base colour
+        factor = looks.base_color_factor[:3].astype(np.float64)
+        texels = uv = None
+        if (base := looks.base_color) is not None:
+            texels, uv, sampler = base.texels, base.uv, base.sampler
+        if not looks.per_point:
+            looks = None
+    if texels is None and vertex_colors is None and face_colors is None and looks is None:
         return None
+
     return MeshSurface(
         factor=factor.astype(np.float32),
         texels=texels,
         uv=uv,
         vertex_colors=_columns(vertex_colors),
         face_colors=_columns(face_colors),
+        sampler=sampler,
+        looks=looks,
     )
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from embree_rt.materials import PRESETS
+from embree_rt.materials import PRESETS, Material
 from embree_rt.scene.animation import animation_document
 from embree_rt.scene.model import Scene
 
@@ -114,8 +114,17 @@ def look_document(scene: Scene) -> dict:
 
 def _material_dict(material) -> dict:
     fields = asdict(material)
-    fields["color"] = list(fields["color"])
+    # Keys a material leaves at their defaults (no glow, no absorption, lit) are not written.
+    for name, default in asdict(Material()).items():
+        if name in _OPTIONAL_MATERIAL_KEYS and fields[name] == default:
+            del fields[name]
+    for name, value in fields.items():
+        if isinstance(value, tuple):
+            fields[name] = list(value)
     return {"preset": "matte", **fields}
+
+
+_OPTIONAL_MATERIAL_KEYS = ("emission", "attenuation_color", "attenuation_distance", "unlit")
 
 
 def save_scene(scene: Scene, path: str | Path) -> None:
