@@ -18,9 +18,10 @@ import numpy as np
 
 from embree_rt import shading
 from embree_rt.batches import batch_ranges, ordered_results, worker_count
-from embree_rt.camera import CameraFrame, sample_rays, tiled_samples
+from embree_rt.camera import CameraFrame, camera_rays, sample_rays, tiled_samples
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.compiled import retain_freed_memory
+from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.materials import MaterialTable, shading_shares
@@ -63,10 +64,11 @@ class BatchWork:
 class RayBatch:
     """Rays in flight, one per column: ``origins``, ``directions`` (3, n) float32 (unit
     directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput. ``origins`` is
-    None for rays that have hit: their surface hits hold the points."""
+    None for rays that have hit (their surface hits hold the points) and for camera rays not
+    yet traced (made inside the query), whose ``directions`` are None until then."""
 
     origins: np.ndarray | None
-    directions: np.ndarray
+    directions: np.ndarray | None
     pixel: np.ndarray
     weight: np.ndarray
 
@@ -247,21 +249,29 @@ class Integrator:
         A pure function of its arguments and the scene, so any process holding the same scene
         computes the same block (``embree_rt.distributed`` runs it on Dask workers)."""
         work = BatchWork(FilmBlock(start // spp, count // spp))
-        origins, directions, pixel = sample_rays(
-            frame, spp, seed, tiled_samples(frame, spp, start, count)
-        )
-        rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
+        index, pixel = tiled_samples(frame, spp, start, count)
+        # Camera rays are made inside the first query, from their sample indices.
+        rays = RayBatch(None, None, pixel, np.ones((3, count), np.float32))
         work.rays["primary"] += count
-        self._trace(rays, work, max_depth)
+        self._trace(rays, work, max_depth, (camera_rays(frame, spp, seed), index))
         work.block.settle()  # in this worker thread, not in the one adding blocks to the film
         return work
 
-    def _trace(self, rays: RayBatch, work: BatchWork, max_depth: int) -> None:
+    def _trace(
+        self, rays: RayBatch, work: BatchWork, max_depth: int,
+        camera: tuple[CameraRays, np.ndarray] | None = None,
+    ) -> None:  # fmt: skip
+        """Trace ``rays`` and their children to ``max_depth``; with ``camera`` (its
+        ``CameraRays`` and the (n,) sample indices of ``rays``), ``rays`` are those camera
+        samples and their origins and directions (None) are made inside the first query."""
         depth = 0
         while len(rays):
-            rows, surfaces = self.geometry.intersect_compact(
-                rays.origins, rays.directions, coherent=depth == 0
-            )
+            if depth == 0 and camera is not None:
+                rows, surfaces, rays.directions = self.geometry.intersect_camera(*camera)
+            else:
+                rows, surfaces = self.geometry.intersect_compact(
+                    rays.origins, rays.directions, coherent=depth == 0
+                )
             if len(rows) < len(rays):
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False
