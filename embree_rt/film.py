@@ -10,6 +10,8 @@ from typing import BinaryIO
 
 import numpy as np
 
+from embree_rt.compiled import film_sums
+
 GAMMA = 2.2
 IMAGE_SUFFIXES = (".png", ".npy", ".npz", ".exr")
 
@@ -46,45 +48,43 @@ class FilmBlock:
     """Sums for the ``count`` consecutive pixels from ``first``: what one batch of camera samples
     accumulates on its own (no locking, and cheaper than bincounts over the whole film).
 
-    Samples are kept as added and summed once, when ``sums`` is read: one bincount per channel
-    for the whole batch instead of one per bounce (each of which would sweep all ``count``
-    pixels however few samples it adds).
+    Each sample is summed into its pixel as it is added (``compiled.film_sums``), in float64,
+    in the order added: the sums are bitwise those of one ``np.bincount`` per channel over all
+    the samples concatenated.
     """
 
     def __init__(self, first: int, count: int) -> None:
         self.first = int(first)
         self.count = int(count)
         self._sums = np.zeros((3, self.count), np.float64)
-        self._pixels: list[np.ndarray] = []
-        self._rgb: list[np.ndarray] = []
 
     def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:
-        """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block.
-        The arrays are kept, not copied, until ``sums`` is read: do not modify them."""
-        if len(pixel):
-            self._pixels.append(pixel)
-            self._rgb.append(rgb)
+        """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block."""
+        self._check(film_sums.add_samples(self._sums, self.first, pixel, rgb), pixel, None)
+
+    def add_weighted(
+        self, pixel: np.ndarray, weight: np.ndarray, rgb: np.ndarray,
+        columns: np.ndarray | None = None,
+    ) -> None:  # fmt: skip
+        """``add(pixel[columns], weight[:, columns] * rgb)`` with no temporaries: ``pixel``
+        (n,) int64, ``weight`` (3, n) float32 ray weights, ``rgb`` (3, k) float32, ``columns``
+        (k,) int64 the rays ``rgb`` belongs to (None: all n, k = n)."""
+        outside = film_sums.add_weighted(self._sums, self.first, pixel, weight, rgb, columns)
+        self._check(outside, pixel, columns)
+
+    def _check(self, outside: int, pixel: np.ndarray, columns: np.ndarray | None) -> None:
+        """Raise ValueError naming sample ``outside``'s pixel unless it is -1 (all inside)."""
+        if outside >= 0:
+            at = outside if columns is None else columns[outside]
+            raise ValueError(
+                f"pixel {int(pixel[at])} is outside the block's pixels "
+                f"{self.first}..{self.first + self.count - 1}"
+            )
 
     @property
     def sums(self) -> np.ndarray:
         """(3, count) float64 per-pixel sums of everything added so far."""
-        self.settle()
         return self._sums
-
-    def settle(self) -> None:
-        """Sum the samples added so far into the block's pixels. The renderer calls it in the
-        thread that traced the batch: the thread adding blocks to the film then only adds."""
-        if self._pixels:
-            # (concatenating a single part would only copy it)
-            pixels = self._pixels[0] if len(self._pixels) == 1 else np.concatenate(self._pixels)
-            rgb = self._rgb[0] if len(self._rgb) == 1 else np.concatenate(self._rgb, axis=1)
-            local = pixels - self.first
-            self._pixels.clear()
-            self._rgb.clear()
-            for channel in range(3):
-                self._sums[channel] += np.bincount(
-                    local, weights=rgb[channel], minlength=self.count
-                )
 
 
 def tonemap(image: np.ndarray) -> np.ndarray:

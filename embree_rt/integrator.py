@@ -254,7 +254,6 @@ class Integrator:
         rays = RayBatch(None, None, pixel, np.ones((3, count), np.float32))
         work.rays["primary"] += count
         self._trace(rays, work, max_depth, (camera_rays(frame, spp, seed), index))
-        work.block.settle()  # in this worker thread, not in the one adding blocks to the film
         return work
 
     def _trace(
@@ -278,7 +277,7 @@ class Integrator:
                 escaped = np.flatnonzero(escaped)
                 sky = shading.sky(np.take(rays.directions, escaped, axis=1), self.horizon,
                                   self.zenith)  # fmt: skip
-                work.block.add(rays.pixel[escaped], np.take(rays.weight, escaped, axis=1) * sky)
+                work.block.add_weighted(rays.pixel, rays.weight, sky, escaped)
             # The hits' origins are not needed again: their surfaces say where they are.
             hit_rays = RayBatch(
                 None,
@@ -308,7 +307,7 @@ class Integrator:
             radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
         self._add_direct_light(radiance, outside, normal, -d, color, surfaces, work)
         self._add_emission(radiance, surfaces)
-        work.block.add(rays.pixel, rays.weight * radiance)
+        work.block.add_weighted(rays.pixel, rays.weight, radiance)
         if not spawn:
             return NO_RAYS
         reflect_share = self._per_hit(self.reflect_share, surfaces, "reflect_share")
