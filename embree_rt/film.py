@@ -39,9 +39,7 @@ class Film:
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
         # One pass: divide in float64, round once to float32, written pixel-major.
-        mean = np.empty((self.width * self.height, 3), np.float32)
-        np.divide(self._sum.T, spp, out=mean, casting="same_kind")
-        return mean.reshape(self.height, self.width, 3)
+        return film_sums.mean_image(self._sum, spp).reshape(self.height, self.width, 3)
 
 
 class FilmBlock:
@@ -63,12 +61,12 @@ class FilmBlock:
         self._check(film_sums.add_samples(self._sums, self.first, pixel, rgb), pixel, None)
 
     def add_weighted(
-        self, pixel: np.ndarray, weight: np.ndarray, rgb: np.ndarray,
+        self, pixel: np.ndarray, weight: np.ndarray | None, rgb: np.ndarray,
         columns: np.ndarray | None = None,
     ) -> None:  # fmt: skip
         """``add(pixel[columns], weight[:, columns] * rgb)`` with no temporaries: ``pixel``
-        (n,) int64, ``weight`` (3, n) float32 ray weights, ``rgb`` (3, k) float32, ``columns``
-        (k,) int64 the rays ``rgb`` belongs to (None: all n, k = n)."""
+        (n,) int64, ``weight`` (3, n) float32 ray weights (None: all ones), ``rgb`` (3, k)
+        float32, ``columns`` (k,) int64 the rays ``rgb`` belongs to (None: all n, k = n)."""
         outside = film_sums.add_weighted(self._sums, self.first, pixel, weight, rgb, columns)
         self._check(outside, pixel, columns)
 

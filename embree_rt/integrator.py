@@ -65,12 +65,13 @@ class RayBatch:
     """Rays in flight, one per column: ``origins``, ``directions`` (3, n) float32 (unit
     directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput. ``origins`` is
     None for rays that have hit (their surface hits hold the points) and for camera rays not
-    yet traced (made inside the query), whose ``directions`` are None until then."""
+    yet traced (made inside the query), whose ``directions`` are None until then and whose
+    ``weight`` is None: all ones, never spread into an array (1 · x is x, bit for bit)."""
 
     origins: np.ndarray | None
     directions: np.ndarray | None
     pixel: np.ndarray
-    weight: np.ndarray
+    weight: np.ndarray | None
 
     def __len__(self) -> int:
         return len(self.pixel)
@@ -251,7 +252,7 @@ class Integrator:
         work = BatchWork(FilmBlock(start // spp, count // spp))
         index, pixel = tiled_samples(frame, spp, start, count)
         # Camera rays are made inside the first query, from their sample indices.
-        rays = RayBatch(None, None, pixel, np.ones((3, count), np.float32))
+        rays = RayBatch(None, None, pixel, None)
         work.rays["primary"] += count
         self._trace(rays, work, max_depth, (camera_rays(frame, spp, seed), index))
         return work
@@ -279,12 +280,11 @@ class Integrator:
                                   self.zenith)  # fmt: skip
                 work.block.add_weighted(rays.pixel, rays.weight, sky, escaped)
             # The hits' origins are not needed again: their surfaces say where they are.
-            hit_rays = RayBatch(
-                None,
-                surfaces.incoming,
-                np.take(rays.pixel, rows),
-                np.take(rays.weight, rows, axis=1),
-            )
+            if rays.weight is None:  # camera rays: unit weights, made for the hits alone
+                weight = np.ones((3, len(rows)), np.float32)
+            else:
+                weight = np.take(rays.weight, rows, axis=1)
+            hit_rays = RayBatch(None, surfaces.incoming, np.take(rays.pixel, rows), weight)
             rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
 
@@ -495,8 +495,11 @@ class Integrator:
                 # direction), cheaper than gathering seven arrays and scattering back.
                 seen = np.zeros(n, np.float32)
                 seen[facing] = visible
-                length = np.sqrt(shading.dot(to_light, to_light))
-                direction = to_light * (seen / np.maximum(length, np.float32(1e-30)))
+                # direction = to_light · seen / max(|to_light|, 1e-30), formed in place
+                scale = np.sqrt(shading.dot(to_light, to_light))
+                np.maximum(scale, np.float32(1e-30), out=scale)
+                np.divide(seen, scale, out=scale)
+                direction = np.multiply(to_light, scale, out=to_light)
                 radiance += shading.blinn_phong(
                     normal, to_viewer, direction, color, diffuse, specular, shininess,
                     self.light_rgb[light],

@@ -37,7 +37,8 @@ def add_samples(sums, first, pixel, rgb):
 def add_weighted(sums, first, pixel, weight, rgb, columns):
     """``add_samples`` of the float32 products ``weight[:, j] * rgb[:, k]``, j = ``columns[k]``
     ((k,) int64; ``weight`` (3, n) float32 and ``pixel`` (n,) read at those columns) or, with
-    ``columns`` None, j = k. Returns as ``add_samples`` does, with k for the sample."""
+    ``columns`` None, j = k; ``weight`` None: all ones (1 · x is x, bit for bit). Returns as
+    ``add_samples`` does, with k for the sample."""
     count = sums.shape[1]
     n = rgb.shape[1]
     for k in range(n):
@@ -48,7 +49,27 @@ def add_weighted(sums, first, pixel, weight, rgb, columns):
     for k in range(n):
         j = k if columns is None else columns[k]
         p = pixel[j] - first
-        sums[0, p] += np.float64(weight[0, j] * rgb[0, k])
-        sums[1, p] += np.float64(weight[1, j] * rgb[1, k])
-        sums[2, p] += np.float64(weight[2, j] * rgb[2, k])
+        if weight is None:
+            sums[0, p] += np.float64(rgb[0, k])
+            sums[1, p] += np.float64(rgb[1, k])
+            sums[2, p] += np.float64(rgb[2, k])
+        else:
+            sums[0, p] += np.float64(weight[0, j] * rgb[0, k])
+            sums[1, p] += np.float64(weight[1, j] * rgb[1, k])
+            sums[2, p] += np.float64(weight[2, j] * rgb[2, k])
     return -1
+
+
+@njit(nogil=True, cache=True)
+def mean_image(sums, spp):
+    """(n, 3) float32 pixel-major means of the (3, n) float64 ``sums`` over ``spp`` samples:
+    each divided in float64 and rounded once to float32, as NumPy's
+    ``np.divide(sums.T, spp, out=float32)`` does, in one pass."""
+    n = sums.shape[1]
+    mean = np.empty((n, 3), np.float32)
+    divisor = np.float64(spp)
+    for p in range(n):
+        mean[p, 0] = np.float32(sums[0, p] / divisor)
+        mean[p, 1] = np.float32(sums[1, p] / divisor)
+        mean[p, 2] = np.float32(sums[2, p] / divisor)
+    return mean
