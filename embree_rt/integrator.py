@@ -276,8 +276,8 @@ class Integrator:
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False
                 escaped = np.flatnonzero(escaped)
-                sky = shading.sky(np.take(rays.directions, escaped, axis=1), self.horizon,
-                                  self.zenith)  # fmt: skip
+                # the sky depends on the directions' heights alone: gather only those
+                sky = shading.sky_at(rays.directions[1][escaped], self.horizon, self.zenith)
                 work.block.add_weighted(rays.pixel, rays.weight, sky, escaped)
             # The hits' origins are not needed again: their surfaces say where they are.
             if rays.weight is None:  # camera rays: unit weights, made for the hits alone
@@ -427,14 +427,10 @@ class Integrator:
         inside = np.take(surfaces.position, through, axis=1)
         inside -= np.take(face_normal, through, axis=1) * offset[through]
         work.rays["refraction"] += len(keep)
-        return [
-            RayBatch(
-                inside,
-                np.take(refracted, keep, axis=1),
-                rays.pixel[through],
-                np.take(weight, keep, axis=1),
-            )
-        ]
+        if len(keep) < len(glass):  # (when every ray is kept, its arrays are the children's)
+            refracted = np.take(refracted, keep, axis=1)
+            weight = np.take(weight, keep, axis=1)
+        return [RayBatch(inside, refracted, rays.pixel[through], weight)]
 
     def _reflection_children(
         self, rays, outside, normal, color, reflect_share, surfaces, work
@@ -454,10 +450,12 @@ class Integrator:
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
         if len(keep) == 0:
             return NO_RAYS
+        work.rays["reflection"] += len(keep)
+        if len(keep) == len(weight[0]):  # every hit reflects: no gathers
+            return RayBatch(outside, shading.reflect(rays.directions, normal), rays.pixel, weight)
         reflected = shading.reflect(
             np.take(rays.directions, keep, axis=1), np.take(normal, keep, axis=1)
         )
-        work.rays["reflection"] += len(keep)
         return RayBatch(
             np.take(outside, keep, axis=1),
             reflected,

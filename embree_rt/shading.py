@@ -196,7 +196,12 @@ def sky(directions: np.ndarray, horizon: np.ndarray, zenith: np.ndarray) -> np.n
     With ``t = clip(y, 0, 1)``: ``(1 - t) · horizon + t · zenith``; below the horizon the
     horizon color. ``horizon`` and ``zenith`` are RGB, (3,) or (3, n).
     """
-    t = np.clip(np.asarray(directions, np.float32)[1], np.float32(0.0), np.float32(1.0))
+    return sky_at(np.asarray(directions, np.float32)[1], horizon, zenith)
+
+
+def sky_at(height: np.ndarray, horizon: np.ndarray, zenith: np.ndarray) -> np.ndarray:
+    """``sky`` of directions given by their (n,) float32 y components ``height`` alone."""
+    t = np.clip(height, np.float32(0.0), np.float32(1.0))
     horizon = _as_columns(horizon)
     zenith = _as_columns(zenith)
     return ((np.float32(1.0) - t) * horizon + t * zenith).astype(np.float32, copy=False)
