@@ -201,20 +201,35 @@ def sky(directions: np.ndarray, horizon: np.ndarray, zenith: np.ndarray) -> np.n
 
 def sky_at(height: np.ndarray, horizon: np.ndarray, zenith: np.ndarray) -> np.ndarray:
     """``sky`` of directions given by their (n,) float32 y components ``height`` alone."""
-    t = np.clip(height, np.float32(0.0), np.float32(1.0))
-    horizon = _as_columns(horizon)
-    zenith = _as_columns(zenith)
-    return ((np.float32(1.0) - t) * horizon + t * zenith).astype(np.float32, copy=False)
+    t = np.clip(np.asarray(height, np.float32), np.float32(0.0), np.float32(1.0))
+    color = (np.float32(1.0) - t) * _as_columns(horizon)
+    color += t * _as_columns(zenith)
+    return color
 
 
 def checker(points: np.ndarray, checker: Checker) -> np.ndarray:
     """(3, n) float32 checkerboard color at (3, n) ``points``, by squares of the xz-plane:
     ``checker.color_a`` where ``floor(x / size) + floor(z / size)`` is even, else ``color_b``."""
     # float64 so the square a point falls in does not depend on float32 rounding of x / size.
-    x = np.asarray(points[0], np.float64)
-    z = np.asarray(points[2], np.float64)
     # The parity taken in float64, not through int64: a far hit (a grazing ray meets the floor
     # at any distance) over a small square passes 2**63 squares; beyond 2**53 all are even.
-    odd = np.fmod(np.floor(x / checker.size) + np.floor(z / checker.size), 2.0) != 0.0
+    # floor(x / size) + floor(z / size), formed in place in the copies of x and z.
+    x, z = (np.array(points[axis], np.float64) for axis in (0, 2))
+    for square in (x, z):
+        np.divide(square, checker.size, out=square)
+        np.floor(square, out=square)
+    x += z
+    odd = odd_integers(x)
     palette = np.array([checker.color_a, checker.color_b], np.float32).T  # (3, 2): even, odd
     return np.take(palette, odd.astype(np.intp), axis=1)
+
+
+def odd_integers(values: np.ndarray) -> np.ndarray:
+    """(n,) bool ``np.fmod(values, 2.0) != 0`` of (n,) float64 integer-valued ``values`` (or
+    ±inf, NaN), bit for bit, some fifty times faster than libm's ``fmod``: ``v / 2`` is exact,
+    and its floor times 2 gives ``v`` back exactly when ``v`` is even (every float64 from 2**53
+    up is); ±inf and NaN count as odd, as ``fmod`` makes them NaN."""
+    half = values * 0.5
+    np.floor(half, out=half)
+    half *= 2.0
+    return (half != values) | np.isinf(values)
