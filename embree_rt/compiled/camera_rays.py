@@ -113,12 +113,14 @@ def sample_directions(camera, index):
 @njit(nogil=True, cache=True)
 def tile_order(width, spp, tile_width, tile_height, first, stop):
     """The samples of pixels ``[first, stop)`` in tile order: (k,) int64 sample indices and
-    (k,) int64 their pixels, k = (stop - first) spp. Tiles of ``tile_width`` x ``tile_height``
-    pixels left to right along each band of ``tile_height`` rows (the last tile of a row cut at
-    the image's edge), pixels row-major inside a tile, each pixel's samples together in order."""
+    (k,) int64 their pixels (the same array at 1 spp), k = (stop - first) spp. Tiles of
+    ``tile_width`` x ``tile_height`` pixels left to right along each band of ``tile_height``
+    rows (the last tile of a row cut at the image's edge), pixels row-major inside a tile, each
+    pixel's samples together in order."""
     n = (stop - first) * spp
     index = np.empty(n, np.int64)
-    pixel = np.empty(n, np.int64)
+    # at 1 spp a sample's index is its pixel's: one array serves as both
+    pixel = index if spp == 1 else np.empty(n, np.int64)
     if n == 0:
         return index, pixel
     k = 0
