@@ -12,6 +12,15 @@ sums that come back.
     python benchmarks/distributed_scale.py                    # 1e5 spheres, 960x540, 4 spp
     python benchmarks/distributed_scale.py --count 1000000 --rounds 3
 
+With ``--partition K`` it measures data-parallel rendering instead (``embree_rt.bricks``): the
+field cut into K bricks on a ``LocalCluster`` of ``--workers`` processes, each generating and
+building only its bricks, shading on the client; against one local render on 2 threads in a
+process of its own. Both images must be bitwise equal. Reported: render times, the peak
+resident memory of each worker, of the client and of the single process, and the rays that
+crossed to the bricks (each ray is sent to every brick whose box it reaches).
+
+    python benchmarks/distributed_scale.py --partition 2 --count 10000000 --spp 1 --rounds 2
+
 Prints one JSON object on stdout.
 """
 
@@ -20,10 +29,14 @@ from __future__ import annotations
 import argparse
 import json
 import pickle
+import resource
 import statistics
 import time
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
 
 import distributed
+import numpy as np
 
 from embree_rt import Renderer
 from embree_rt import distributed as rd
@@ -38,6 +51,88 @@ def empty_task(i: int) -> int:
     return i
 
 
+def peak_rss_bytes() -> int:
+    """This process's peak resident memory (Linux reports kilobytes)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def local_renders(count: int, image: dict, rounds: int) -> dict:
+    """In a process of its own: the field made and rendered on 2 threads, a warm-up and
+    ``rounds`` renders; their times, the image and the process's peak memory."""
+    started = time.perf_counter()
+    scene = random_field(count)
+    made_s = time.perf_counter() - started
+    with Renderer(scene, threads=2) as renderer:
+        result = renderer.render(**image)
+        times = []
+        for _ in range(rounds):
+            result = renderer.render(**image)
+            times.append(result.stats.render_s)
+        build_s = renderer.build_s
+    return {"field_s": made_s, "build_s": build_s, "render_s": times, "image": result.image,
+            "rays": result.stats.total_rays, "peak_rss": peak_rss_bytes()}  # fmt: skip
+
+
+def data_parallel(args: argparse.Namespace) -> dict:
+    """The ``--partition`` mode: see the module docstring."""
+    from embree_rt.bricks.cluster import PartitionedRenderer
+
+    image = {"width": args.width, "height": args.height, "spp": args.spp, "max_depth": 6, "seed": 0}
+    settings = RenderSettings(args.width, args.height, args.spp, max_depth=6, seed=0)
+    with ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn")) as pool:
+        local = pool.submit(local_renders, args.count, image, args.rounds).result()
+    recipe = rd.FieldRecipe(plan_field(args.count))
+    with (
+        rd.local_cluster(args.workers, silence_logs=50) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        client.wait_for_workers(args.workers)
+        started = time.perf_counter()
+        renderer = PartitionedRenderer(recipe, client, partition=args.partition)
+        setup_s = time.perf_counter() - started
+        try:
+            camera = renderer.scene.camera
+            times = []
+            for _ in range(args.rounds + 1):  # the first renders warm the client's kernels
+                began = time.perf_counter()
+                picture = renderer.render(settings, camera)
+                times.append(time.perf_counter() - began)
+            traffic = renderer.brick_set.traffic
+            workers_peak = client.run(peak_rss_bytes)
+        finally:
+            renderer.release()
+    names = ("rays", "ray_sends", "segments", "segment_sends", "ties")
+    per_image = {name: getattr(traffic, name) // (args.rounds + 1) for name in names}
+    local_median = statistics.median(local["render_s"])
+    parallel_median = statistics.median(times[1:])
+    gb = 1e-9
+    return {
+        "count": args.count,
+        "image": f"{args.width}x{args.height} at {args.spp} spp",
+        "bricks": args.partition,
+        "workers": args.workers,
+        "bitwise_equal": bool(np.array_equal(picture, local["image"])),
+        "local_2_threads": {
+            "field_s": round(local["field_s"], 2),
+            "build_s": round(local["build_s"], 2),
+            "render_s": [round(t, 3) for t in local["render_s"]],
+            "peak_rss_gb": round(local["peak_rss"] * gb, 3),
+        },
+        "data_parallel": {
+            "setup_s_field_and_bricks": round(setup_s, 2),
+            "render_s": [round(t, 3) for t in times],
+            "peak_rss_gb_per_worker": sorted(round(v * gb, 3) for v in workers_peak.values()),
+            "peak_rss_gb_client": round(peak_rss_bytes() * gb, 3),
+        },
+        "data_parallel_over_local": round(parallel_median / local_median, 3),
+        "worker_peak_over_single_process": round(max(workers_peak.values()) / local["peak_rss"], 3),
+        "traffic_per_image": per_image,
+        "sends_per_ray": round(per_image["ray_sends"] / max(per_image["rays"], 1), 3),
+        "sends_per_segment": round(per_image["segment_sends"] / max(per_image["segments"], 1), 3),
+        "rays_per_image": local["rays"],
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--count", type=int, default=100_000, help="spheres")
@@ -47,7 +142,12 @@ def main() -> None:
     parser.add_argument("--batch-size", type=int, default=DEFAULT_BATCH_SIZE)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--empty-tasks", type=int, default=500)
+    parser.add_argument("--partition", type=int, help="data-parallel mode: bricks")
+    parser.add_argument("--workers", type=int, default=2, help="data-parallel mode: workers")
     args = parser.parse_args()
+    if args.partition is not None:
+        print(json.dumps(data_parallel(args), indent=2))
+        return
 
     settings = RenderSettings(args.width, args.height, args.spp, max_depth=6, seed=0)
     image = {"width": args.width, "height": args.height, "spp": args.spp, "max_depth": 6, "seed": 0}

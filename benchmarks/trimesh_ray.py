@@ -1,13 +1,20 @@
-"""embree_rt.trimesh_ray against trimesh's own ray backends, taking turns; prints JSON.
+"""embree_rt.trimesh_ray against trimesh's own ray and proximity backends and Open3D, taking
+turns; prints JSON.
 
 Meshes: a subdivided sphere (icosphere, 1.3e6 triangles), the project's torus asset (trimesh
 ships no models, so no featuretype mesh; ``assets/torus.obj``) and a 1e5-triangle scan-like
 mesh (a noisy height field). Queries: first hit (``intersects_first``) and multi-hit
 (``intersects_location``, all hits) of rays from a sphere around the mesh toward random points
-in its box, and ``contains_points`` of random points in the box. Backends: ours (2 threads),
-trimesh's ``ray_pyembree`` (embreex, one thread) and, on a small sample, its pure-NumPy
-``ray_triangle``. Each turn runs every backend once on the same inputs; rows report the median
-rate over turns and ``vs_embreex``, the median over turns of our rate ÷ embreex's.
+in its box, ``contains_points`` of random points in the box, and for the same points
+``on_surface`` (closest point) and ``signed_distance`` (closed meshes only). Backends: ours
+(2 threads), trimesh's ``ray_pyembree`` (embreex, one thread), on a small sample its pure-NumPy
+``ray_triangle`` and its own ``ProximityQuery`` (rtree and NumPy), and, when ``open3d`` is
+installed (``open3d-cpu``, the ``bench`` extra), Open3D's ``RaycastingScene`` on 2 threads
+(Embree 4 too): ``cast_rays``, ``list_intersections`` (and the count-only
+``count_intersections``), ``compute_occupancy`` (one ray a point), ``compute_closest_points``
+and ``compute_signed_distance``. Each turn runs every backend once on the same inputs; rows
+report the median rate over turns and ``vs_<backend>``, the median over turns of our rate ÷
+that backend's (its rate taken on its own sample, where smaller).
 
 ``--ceiling``: instead, what bounds the first-hit query. The same rays, already in the BVH's
 local frame (float32, unit directions, as ``RayMeshIntersector`` makes them), through the bare
@@ -44,7 +51,7 @@ import trimesh
 from trimesh.ray import ray_pyembree, ray_triangle
 
 from embree_rt.embree import BVH
-from embree_rt.trimesh_ray import RayMeshIntersector
+from embree_rt.trimesh_ray import ProximityQuery, RayMeshIntersector
 from embree_rt.trimesh_ray.local_frame import ordered_local_rays
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
@@ -161,10 +168,85 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
     }  # fmt: skip
 
 
+class Open3DScene:
+    """Open3D's ``RaycastingScene`` on ``threads`` threads, answering the benchmark's queries:
+    rays as given (origins, directions (n, 3) float64) become its (n, 6) float32 tensor."""
+
+    def __init__(self, mesh: trimesh.Trimesh, threads: int = 2) -> None:
+        import open3d
+
+        self._core = open3d.core
+        self.scene = open3d.t.geometry.RaycastingScene()
+        self.scene.add_triangles(open3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+                                 open3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))  # fmt: skip
+        self.threads = threads
+
+    def _rays(self, origins, directions):
+        return self._core.Tensor(np.hstack([origins, directions]).astype(np.float32))
+
+    def _points(self, points):
+        return self._core.Tensor(np.asarray(points, np.float32))
+
+    def first_hit(self, origins, directions) -> np.ndarray:
+        answer = self.scene.cast_rays(self._rays(origins, directions), nthreads=self.threads)
+        return answer["primitive_ids"].numpy()
+
+    def all_hits(self, origins, directions) -> np.ndarray:
+        """(k,) ray index of every hit; the answer also holds the hit points' coordinates."""
+        answer = self.scene.list_intersections(self._rays(origins, directions),
+                                               nthreads=self.threads)  # fmt: skip
+        return answer["ray_ids"].numpy()
+
+    def hit_counts(self, origins, directions) -> np.ndarray:
+        return self.scene.count_intersections(self._rays(origins, directions),
+                                              nthreads=self.threads).numpy()  # fmt: skip
+
+    def occupancy(self, points) -> np.ndarray:
+        return self.scene.compute_occupancy(self._points(points), nthreads=self.threads).numpy()
+
+    def closest_points(self, points) -> np.ndarray:
+        answer = self.scene.compute_closest_points(self._points(points), nthreads=self.threads)
+        return answer["points"].numpy()
+
+    def signed_distance(self, points) -> np.ndarray:
+        return self.scene.compute_signed_distance(self._points(points),
+                                                  nthreads=self.threads).numpy()  # fmt: skip
+
+
+def open3d_available() -> bool:
+    try:
+        import open3d  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def take_turns(runs: dict, turns: int) -> dict[str, list[float]]:
+    """``runs``: name -> (function of no arguments, items it answers); every run once a turn,
+    in the same order. Returns name -> rate (items/s) of each turn."""
+    rates: dict[str, list[float]] = {key: [] for key in runs}
+    for _ in range(turns):
+        for key, (run, count) in runs.items():
+            rates[key].append(count / timed(run))
+    return rates
+
+
+def row(rates: dict[str, list[float]], ours: str) -> dict:
+    """Median rates (k items/s) and ``vs_<name>``: median over turns of ours ÷ each other's."""
+    out = {f"{key}_k_s": round(float(np.median(v)) / 1e3, 2) for key, v in rates.items()}
+    for key, v in rates.items():
+        if key != ours:
+            out[f"vs_{key}"] = round(float(np.median(
+                [a / b for a, b in zip(rates[ours], v, strict=True)])), 2)  # fmt: skip
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--rays", type=int, default=200_000)
     parser.add_argument("--reference-rays", type=int, default=2_000)
+    parser.add_argument("--reference-points", type=int, default=1_000,
+                        help="points for trimesh's own (slow) proximity queries")
     parser.add_argument("--turns", type=int, default=3)
     parser.add_argument("--ceiling", action="store_true",
                         help="bare nearest-hit rates instead (see the docstring)")
@@ -178,59 +260,107 @@ def main() -> None:
         for name, mesh in meshes.items():
             print(json.dumps(ceiling(name, mesh, args.rays, args.turns)), flush=True)
         return
-    rows = []
+    with_open3d = open3d_available()
     for name, mesh in meshes.items():
-        origins, directions = rays(mesh, args.rays, seed=1)
-        points = np.random.default_rng(2).uniform(mesh.bounds[0], mesh.bounds[1], (args.rays, 3))
-        # ray_triangle's r-tree hands it every triangle in each ray's bounding box (most of a
-        # sphere's for a ray through it): its memory grows as rays x triangles
-        reference_rays = max(3, min(args.reference_rays, 4_000_000 // len(mesh.faces)))
-        small = slice(0, reference_rays)
-        backends = {
-            "embree_rt": RayMeshIntersector(mesh),
-            "embreex": ray_pyembree.RayMeshIntersector(mesh),
-            "ray_triangle": ray_triangle.RayMeshIntersector(mesh),
+        for line in mesh_rows(name, mesh, args, with_open3d):
+            print(json.dumps(line), flush=True)
+
+
+def mesh_rows(name: str, mesh: trimesh.Trimesh, args, with_open3d: bool):
+    """One mesh's rows, query by query (each yielded once its turns are done)."""
+    n = args.rays
+    origins, directions = rays(mesh, n, seed=1)
+    points = np.random.default_rng(2).uniform(mesh.bounds[0], mesh.bounds[1], (n, 3))
+    # ray_triangle's r-tree hands it every triangle in each ray's bounding box (most of a
+    # sphere's for a ray through it): its memory grows as rays x triangles
+    reference_rays = max(3, min(args.reference_rays, 4_000_000 // len(mesh.faces)))
+    few = slice(0, reference_rays)
+    few_points = slice(0, args.reference_points)
+    start = time.perf_counter()
+    ours = RayMeshIntersector(mesh)
+    ours.intersects_first(origins[:10], directions[:10])
+    build_ours = time.perf_counter() - start
+    start = time.perf_counter()
+    embreex = ray_pyembree.RayMeshIntersector(mesh)
+    embreex.intersects_first(origins[:10], directions[:10])
+    build_embreex = time.perf_counter() - start
+    numpy_rays = ray_triangle.RayMeshIntersector(mesh)
+    numpy_rays.intersects_first(origins[:10], directions[:10])
+    nearest = ProximityQuery(mesh)
+    nearest.on_surface(points[:10])
+    their_nearest = trimesh.proximity.ProximityQuery(mesh)
+    their_nearest.on_surface(points[:10])
+    o, d, p = origins, directions, points
+    queries = {
+        "first_hit": {
+            "embree_rt": (lambda: ours.intersects_first(o, d), n),
+            "embreex": (lambda: embreex.intersects_first(o, d), n),
+            "ray_triangle": (lambda: numpy_rays.intersects_first(o[few], d[few]),
+                             reference_rays),
+        },
+        "multi_hit": {
+            "embree_rt": (lambda: ours.intersects_location(o, d), n),
+            "embreex": (lambda: embreex.intersects_location(o, d), n),
+            "ray_triangle": (lambda: numpy_rays.intersects_location(o[few], d[few]),
+                             reference_rays),
+        },
+        "contains_points": {
+            "embree_rt": (lambda: ours.contains_points(p), n),
+            "embreex": (lambda: embreex.contains_points(p), n),
+            "ray_triangle": (lambda: numpy_rays.contains_points(p[few]), reference_rays),
+        },
+        "on_surface": {
+            "embree_rt": (lambda: nearest.on_surface(p), n),
+            "trimesh": (lambda: their_nearest.on_surface(p[few_points]),
+                        len(p[few_points])),
+        },
+    }
+    if mesh.is_watertight:  # a sign needs an inside
+        queries["signed_distance"] = {
+            "embree_rt": (lambda: nearest.signed_distance(p), n),
+            "trimesh": (lambda: their_nearest.signed_distance(p[few_points]),
+                        len(p[few_points])),
         }
+    extra = {}
+    if with_open3d:
         start = time.perf_counter()
-        backends["embree_rt"].intersects_first(origins[:10], directions[:10])
-        build_ours = time.perf_counter() - start
-        start = time.perf_counter()
-        backends["embreex"].intersects_first(origins[:10], directions[:10])
-        build_embreex = time.perf_counter() - start
-        backends["ray_triangle"].intersects_first(origins[:10], directions[:10])
-        o, d, p = origins, directions, points
-        queries = {
-            "first_hit": lambda b, s, o=o, d=d: b.intersects_first(o[s], d[s]),
-            "multi_hit": lambda b, s, o=o, d=d: b.intersects_location(o[s], d[s]),
-            "contains_points": lambda b, s, p=p: b.contains_points(p[s]),
-        }
-        for query, run in queries.items():
-            rates: dict[str, list[float]] = {key: [] for key in backends}
-            for _ in range(args.turns):
-                for key, backend in backends.items():
-                    rows_used = small if key == "ray_triangle" else slice(None)
-                    count = reference_rays if key == "ray_triangle" else args.rays
-                    rates[key].append(count / timed(run, backend, rows_used))
-            ratios = [ours / theirs for ours, theirs in zip(rates["embree_rt"], rates["embreex"],
-                                                           strict=True)]  # fmt: skip
-            hits = {}
-            if query == "multi_hit":
-                ours_hits = len(backends["embree_rt"].intersects_location(origins, directions)[1])
-                theirs = len(backends["embreex"].intersects_location(origins, directions)[1])
-                hits = {"hits_embree_rt": ours_hits, "hits_embreex": theirs}
-            rows.append({
-                "mesh": name, "triangles": len(mesh.faces), "query": query,
-                "rays": args.rays, "ray_triangle_rays": reference_rays,
-                **{f"{key}_krays_s": round(float(np.median(v)) / 1e3, 1)
-                   for key, v in rates.items()},
-                "vs_embreex": round(float(np.median(ratios)), 2),
-                "vs_ray_triangle": round(float(np.median(rates["embree_rt"]))
-                                         / float(np.median(rates["ray_triangle"])), 1),
-                "build_s_embree_rt": round(build_ours, 3),
-                "build_s_embreex": round(build_embreex, 3),
-                **hits,
-            })  # fmt: skip
-            print(json.dumps(rows[-1]), flush=True)
+        open3d_scene = Open3DScene(mesh)
+        open3d_scene.first_hit(origins[:10], directions[:10])
+        extra["build_s_open3d"] = round(time.perf_counter() - start, 3)
+        queries["first_hit"]["open3d"] = (lambda: open3d_scene.first_hit(o, d), n)
+        queries["multi_hit"]["open3d"] = (lambda: open3d_scene.all_hits(o, d), n)
+        queries["multi_hit"]["open3d_count_only"] = (lambda: open3d_scene.hit_counts(o, d),
+                                                     n)  # fmt: skip
+        if mesh.is_watertight:
+            queries["contains_points"]["open3d"] = (lambda: open3d_scene.occupancy(p), n)
+            queries["signed_distance"]["open3d"] = (
+                lambda: open3d_scene.signed_distance(p), n)  # fmt: skip
+        queries["on_surface"]["open3d"] = (lambda: open3d_scene.closest_points(p), n)
+    for query, runs in queries.items():
+        answers = {}
+        if query == "multi_hit":
+            answers["hits_embree_rt"] = len(ours.intersects_location(o, d)[1])
+            answers["hits_embreex"] = len(embreex.intersects_location(o, d)[1])
+            if with_open3d:
+                answers["hits_open3d"] = len(open3d_scene.all_hits(o, d))
+                counts = np.bincount(ours.intersects_location(o, d)[1], minlength=n)
+                answers["rays_whose_count_differs_open3d"] = int(
+                    (counts != open3d_scene.hit_counts(o, d)).sum())  # fmt: skip
+        if query == "on_surface" and with_open3d:
+            # distances, not points: a point about equidistant from several triangles has
+            # closest points far apart, each engine naming its own
+            distance = nearest.on_surface(p)[1]
+            theirs = np.linalg.norm(open3d_scene.closest_points(p) - p, axis=1)
+            answers["distance_gap_open3d_max"] = float(np.abs(distance - theirs).max()
+                                                       / mesh.scale)  # fmt: skip
+        yield {
+            "mesh": name, "triangles": len(mesh.faces), "query": query, "rays": n,
+            "ray_triangle_rays": reference_rays, "trimesh_points": args.reference_points,
+            "load_average": round(os.getloadavg()[0], 2),
+            **row(take_turns(runs, args.turns), "embree_rt"),
+            "build_s_embree_rt": round(build_ours, 3),
+            "build_s_embreex": round(build_embreex, 3), **extra, **answers,
+        }  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ and the render's statistics.
 from embree_rt.aovs import AOV_NAMES, save_with_aovs
 from embree_rt.api import Renderer, RenderResult, render
 from embree_rt.camera import Camera
-from embree_rt.film import save_image
+from embree_rt.film import Encoding, Look, save_image, tonemap
 from embree_rt.integrator import RenderStats
 from embree_rt.materials import PRESETS, Checker, Material, preset
 from embree_rt.scene.errors import SceneError
@@ -16,6 +16,7 @@ from embree_rt.scene.loader import load_scene
 from embree_rt.scene.model import Background, Floor, MeshObject, PointLight, RenderSettings, Scene
 from embree_rt.scene.random_field import random_field
 from embree_rt.scene.writer import save_scene
+from embree_rt.version import __version__
 
 __all__ = [
     "AOV_NAMES",
@@ -23,7 +24,9 @@ __all__ = [
     "Background",
     "Camera",
     "Checker",
+    "Encoding",
     "Floor",
+    "Look",
     "Material",
     "MeshObject",
     "PointLight",
@@ -33,6 +36,7 @@ __all__ = [
     "Renderer",
     "Scene",
     "SceneError",
+    "__version__",
     "load_scene",
     "preset",
     "random_field",
@@ -40,4 +44,5 @@ __all__ = [
     "save_image",
     "save_scene",
     "save_with_aovs",
+    "tonemap",
 ]

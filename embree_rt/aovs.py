@@ -10,6 +10,10 @@ what the beauty shades.
 
 - ``depth`` (h, w) float32: distance from the camera position to the first hit along the
   pixel-centre ray; inf where the ray escapes.
+- ``z_depth`` (h, w) float32: planar depth, the hit's distance along the camera's viewing
+  axis (``depth`` times the cosine of the ray's angle to the axis), what a depth sensor and
+  OpenCV's projection take; inf where the ray escapes.
+- ``position`` (h, w, 3) float32: the world-space hit point; inf where the ray escapes.
 - ``normal`` (h, w, 3) float32: unit world-space shading normal, turned to face the camera;
   zero where the ray escapes.
 - ``albedo`` (h, w, 3) float32 linear: the surface colour (material colour, a mesh's texture
@@ -32,7 +36,13 @@ import numpy as np
 
 from embree_rt import film
 from embree_rt.batches import batch_ranges, ordered_results
-from embree_rt.camera import pixel_center_rays
+from embree_rt.camera import (
+    camera_to_world_opengl,
+    intrinsics,
+    pixel_center_rays,
+    world_to_camera_opencv,
+    world_to_camera_opengl,
+)
 from embree_rt.columns import scatter
 
 if TYPE_CHECKING:
@@ -41,14 +51,18 @@ if TYPE_CHECKING:
     from embree_rt.integrator import Integrator
     from embree_rt.scene.model import Scene
 
-AOV_NAMES = ("depth", "normal", "albedo", "object_id", "material_id")
+AOV_NAMES = ("depth", "z_depth", "position", "normal", "albedo", "object_id", "material_id")
 NOTHING_ID = -1
 FLOOR_ID = -2
-# Bytes a pixel of every AOV holds (float32 depth, normal and albedo, int32 ids), for the budget.
-AOV_BYTES = {"depth": 4, "normal": 12, "albedo": 12, "object_id": 4, "material_id": 4}
+# Bytes a pixel of every AOV holds (float32 depths, positions, normals and albedo, int32 ids),
+# for the budget.
+AOV_BYTES = {"depth": 4, "z_depth": 4, "position": 12, "normal": 12, "albedo": 12,
+             "object_id": 4, "material_id": 4}  # fmt: skip
 # The EXR channels of each AOV, in the order of the array's last axis.
 EXR_CHANNELS = {
     "depth": ("depth.Z",),
+    "z_depth": ("z_depth.Z",),
+    "position": ("position.X", "position.Y", "position.Z"),
     "normal": ("normal.X", "normal.Y", "normal.Z"),
     "albedo": ("albedo.R", "albedo.G", "albedo.B"),
     "object_id": ("object_id.id",),
@@ -117,6 +131,8 @@ def empty_aovs(names: tuple[str, ...], pixels: int) -> dict[str, np.ndarray]:
     and albedo (pixels, 3) zero, ids (pixels,) -1."""
     empty = {
         "depth": lambda: np.full(pixels, np.inf, np.float32),
+        "z_depth": lambda: np.full(pixels, np.inf, np.float32),
+        "position": lambda: np.full((pixels, 3), np.inf, np.float32),
         "normal": lambda: np.zeros((pixels, 3), np.float32),
         "albedo": lambda: np.zeros((pixels, 3), np.float32),
         "object_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
@@ -153,6 +169,11 @@ def render_aovs(
         if "depth" in flat:
             # The rays start at the camera position with unit directions: t is the distance.
             flat["depth"][hit] = surfaces.t
+        if "z_depth" in flat:  # t times the cosine to the viewing axis (-w)
+            cosine = -(frame.w.astype(np.float32) @ np.take(directions, rows, axis=1))
+            flat["z_depth"][hit] = surfaces.t * cosine
+        if "position" in flat:
+            fill_vectors("position", batch, hit, surfaces.position)
         # The integrator's own stages, not copies of them: the normal it shades with, turned
         # to the side the ray came from, and the colour it lights.
         if "normal" in flat:
@@ -195,8 +216,67 @@ def aov_paths(path: str | os.PathLike, names: tuple[str, ...]) -> dict[str, Path
     return {name: target.with_name(f"{target.stem}.{name}{target.suffix}") for name in names}
 
 
+def camera_data(frame: CameraFrame) -> dict[str, np.ndarray]:
+    """The camera of an image, as dataset tools take it: ``K`` (3, 3) float64 intrinsics
+    (OpenCV's pixel convention, ``camera.intrinsics``), ``world_to_camera_opencv`` and
+    ``world_to_camera_opengl`` (4, 4) float64 extrinsics (OpenCV's axes: y down, looking down
+    +z; OpenGL's and Blender's: y up, looking down -z)."""
+    return {
+        "K": intrinsics(frame),
+        "world_to_camera_opencv": world_to_camera_opencv(frame),
+        "world_to_camera_opengl": world_to_camera_opengl(frame),
+    }
+
+
+def camera_json_path(path: str | os.PathLike) -> Path:
+    """The camera sidecar of the image ``path``: ``render.camera.json`` beside ``render.png``."""
+    target = Path(path)
+    return target.with_name(f"{target.stem}.camera.json")
+
+
+def _camera_json(frame: CameraFrame) -> bytes:
+    import json
+
+    record = {"width": frame.width, "height": frame.height,
+              **{name: matrix.tolist() for name, matrix in camera_data(frame).items()}}  # fmt: skip
+    return (json.dumps(record, indent=2) + "\n").encode()
+
+
+def nerf_transforms(views: list[tuple[Path, CameraFrame]], folder: Path) -> dict:
+    """The ``transforms.json`` that NeRF tools read for the images ``views`` (path, the frame
+    it was seen through; one image size), their paths relative to ``folder`` (where the file
+    goes), extension included: ``camera_angle_x`` (horizontal field of view, radians),
+    ``fl_x``, ``fl_y``, ``cx``, ``cy``, ``w``, ``h`` (pixels, centres at c + 1/2 as those tools
+    place them), and ``frames[]`` of ``file_path`` and ``transform_matrix``, camera-to-world in
+    OpenGL's convention (``camera.camera_to_world_opengl``); a frame whose field of view
+    differs from the first's carries its own ``camera_angle_x``, ``fl_x`` and ``fl_y``."""
+    import math
+    import os
+
+    def lens(frame: CameraFrame) -> dict:
+        K = intrinsics(frame)
+        return {"camera_angle_x": 2.0 * math.atan(frame.half_width), "fl_x": K[0, 0],
+                "fl_y": K[1, 1]}  # fmt: skip
+
+    first = views[0][1]
+    K = intrinsics(first)
+    frames = []
+    for path, frame in views:
+        entry = {"file_path": "./" + Path(os.path.relpath(path, folder)).as_posix(),
+                 "transform_matrix": camera_to_world_opengl(frame).tolist()}  # fmt: skip
+        if lens(frame) != lens(first):  # a zoom: the frame's own (tools read these per frame)
+            entry.update(lens(frame))
+        frames.append(entry)
+    return {**lens(first), "cx": K[0, 2] + 0.5, "cy": K[1, 2] + 0.5, "w": first.width,
+            "h": first.height, "frames": frames}  # fmt: skip
+
+
 def save_with_aovs(
-    image: np.ndarray, aovs: dict[str, np.ndarray], path: str | os.PathLike
+    image: np.ndarray,
+    aovs: dict[str, np.ndarray],
+    path: str | os.PathLike,
+    encoding: film.Encoding = film.DEFAULT_ENCODING,
+    camera: CameraFrame | None = None,
 ) -> list[Path]:
     """Write the (h, w, 3) float32 linear beauty ``image`` and its ``aovs`` (``render_aovs``)
     to ``path`` by its extension, all or nothing (``film.write_atomically``); returns the files
@@ -205,38 +285,44 @@ def save_with_aovs(
     ``.npz``: ``beauty`` and one array per AOV under its name. ``.exr``: the beauty as R, G, B
     and the AOVs as the layers of ``EXR_CHANNELS``, float32, the ids as UINT channels holding
     the int32 values' bits (read them back with ``.view(np.int32)``: -1 is 0xFFFFFFFF).
-    ``.png``: the beauty as ``save_image`` writes it and each AOV beside it, visualised
-    (``visualize``); ``.npy``: the beauty and each AOV's array beside it.
+    ``.png`` and the other display formats: the beauty as ``save_image`` writes it (with
+    ``encoding``) and each AOV beside it in the same format, visualised (``visualize``, 8
+    bits); ``.npy``: the beauty and each AOV's array beside it.
+
+    With ``camera`` (the frame the image was seen through), its ``camera_data`` goes with
+    them: as ``.npz`` keys, and as a JSON sidecar (``camera_json_path``) beside every format.
     """
-    film.check_output_path(path)
+    film.check_output_path(path, encoding)
     image = film.check_image_shape(image, path)
     target = Path(path)
     suffix = target.suffix.lower()
     beauty = np.asarray(image, np.float32)
+    arrays = {} if camera is None else camera_data(camera)
     if suffix == ".npz":
-        files = [(target, lambda handle: np.savez(handle, beauty=beauty, **aovs))]
+        files = [(target, lambda handle: np.savez(handle, beauty=beauty, **aovs, **arrays))]
     elif suffix == ".exr":
         files = [(target, lambda handle: film.write_exr_channels(exr_channels(beauty, aovs),
                                                                  handle))]  # fmt: skip
     else:
         writer = film.WRITERS[suffix]
-        files = [(target, lambda handle: writer(image, handle))]
+        files = [(target, lambda handle: writer(image, handle, encoding))]
         for name, side in aov_paths(target, tuple(aovs)).items():
-            files.append((side, _side_writer(suffix, name, aovs[name])))
+            files.append((side, _side_writer(suffix, name, aovs[name], encoding)))
+    if camera is not None:
+        record = _camera_json(camera)
+        files.append((camera_json_path(target), lambda handle: handle.write(record)))
     film.write_atomically(files)
     return [side for side, _ in files[1:]]
 
 
-def _side_writer(suffix: str, name: str, values: np.ndarray):
+def _side_writer(suffix: str, name: str, values: np.ndarray, encoding: film.Encoding):
     """A writer(handle) of the AOV ``name``'s ``values`` as a file of its own."""
 
     def write(handle: BinaryIO) -> None:
         if suffix == ".npy":
             np.save(handle, values)
         else:
-            from PIL import Image
-
-            Image.fromarray(visualize(name, values)).save(handle, format="PNG")
+            film.write_pixels(visualize(name, values), handle, suffix, encoding.quality)
 
     return write
 
@@ -270,6 +356,15 @@ def visualize(name: str, values: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore"):
             level = np.where(finite, nearest / np.maximum(values, nearest), 0.0)
         return np.repeat(_to_bytes(level)[..., None], 3, axis=2)
+    if name == "z_depth":
+        return visualize("depth", values)
+    if name == "position":  # each axis over the range of the hits, escapes black
+        finite = np.isfinite(values).all(axis=-1)
+        if not finite.any():
+            return np.zeros((*values.shape[:2], 3), np.uint8)
+        low, high = values[finite].min(axis=0), values[finite].max(axis=0)
+        scaled = (values - low) / np.maximum(high - low, 1e-30)
+        return _to_bytes(np.where(finite[..., None], scaled, 0.0))
     if name == "normal":
         hit = np.any(values != 0, axis=-1, keepdims=True)
         return _to_bytes(np.where(hit, (values + 1.0) / 2.0, 0.0))

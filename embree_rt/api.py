@@ -21,7 +21,7 @@ import numpy as np
 
 from embree_rt import budget, film
 from embree_rt.aovs import check_aov_names, render_aovs, save_with_aovs
-from embree_rt.camera import Camera, camera_frame
+from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, Integrator, RenderStats
 from embree_rt.scene.model import RenderSettings, Scene
 
@@ -31,7 +31,8 @@ class RenderResult:
     """What one render made.
 
     ``image`` (height, width, 3) float32 is the linear HDR radiance (the mean of the samples,
-    not tone-mapped: ``to_srgb8`` gives the 8-bit picture a PNG holds); ``aovs`` maps each AOV
+    not tone-mapped: ``to_srgb8`` gives the 8-bit picture a PNG holds, by ``look``, the
+    scene's ``render`` exposure, tone map and transfer curve); ``aovs`` maps each AOV
     asked for to its (height, width) or (height, width, 3) array (``embree_rt.aovs``), empty
     when none were; ``stats`` counts the rays by kind (``"aov"``: the AOV pass's) and the
     seconds spent building the BVH and rendering (the AOV pass included).
@@ -40,20 +41,32 @@ class RenderResult:
     image: np.ndarray
     aovs: dict[str, np.ndarray] = field(default_factory=dict)
     stats: RenderStats = field(default_factory=RenderStats)
+    look: film.Look = film.DEFAULT_LOOK
+    # The camera the image was seen through (its size included), for dataset files.
+    camera: CameraFrame | None = None
 
     def to_srgb8(self) -> np.ndarray:
         """(height, width, 3) uint8: the image tone-mapped as a PNG is written
-        (``film.tonemap``: Reinhard, gamma 2.2)."""
-        return film.tonemap(self.image)
+        (``film.tonemap`` with the render's ``look``; by default Reinhard, gamma 2.2)."""
+        return film.tonemap(self.image, self.look)
 
-    def save(self, path: str | os.PathLike) -> list[Path]:
-        """Write the image to ``path`` by its extension (``.png``, ``.npy``, ``.npz``, ``.exr``),
-        with the AOVs in the same file (``.npz``, ``.exr``) or beside it; all or nothing, an
-        existing file left as it was on failure. Returns the files written beside ``path``."""
+    def _repr_png_(self) -> bytes:
+        """The picture as PNG bytes (``to_srgb8``): what Jupyter shows for a result."""
+        return png_bytes(self.to_srgb8())
+
+    def save(self, path: str | os.PathLike, encoding: film.Encoding = film.DEFAULT_ENCODING
+             ) -> list[Path]:  # fmt: skip
+        """Write the image to ``path`` by its extension (``film.IMAGE_SUFFIXES``; ``encoding``:
+        8 or 16 bits, quality), with the AOVs in the same file (``.npz``, ``.exr``) or beside
+        it, and with them the camera (``aovs.camera_data``: npz keys, a JSON sidecar); all or
+        nothing, an existing file left as it was on failure. Returns the files
+        written beside ``path``."""
+        if encoding.look is None:
+            encoding = encoding._replace(look=self.look)
         if not self.aovs:
-            film.save_image(self.image, path)
+            film.save_image(self.image, path, encoding)
             return []
-        return save_with_aovs(self.image, self.aovs, path)
+        return save_with_aovs(self.image, self.aovs, path, encoding, camera=self.camera)
 
 
 class Renderer(Integrator):
@@ -104,13 +117,47 @@ class Renderer(Integrator):
                 seed=settings.seed,
                 progress=show,
             )
+        look = settings.look()
         if not names:
-            return RenderResult(image, {}, stats)
+            return RenderResult(image, {}, stats, look, frame)
         began = time.perf_counter()
         layers = render_aovs(self, frame, names)
         stats.rays["aov"] = settings.width * settings.height  # one pixel-centre ray per pixel
         stats.render_s += time.perf_counter() - began
-        return RenderResult(image, layers, stats)
+        return RenderResult(image, layers, stats, look, frame)
+
+
+def png_bytes(pixels: np.ndarray) -> bytes:
+    """(h, w, 3) uint8 ``pixels`` as the bytes of a PNG file."""
+    import io
+
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(pixels).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+# A scene's notebook preview (``Scene._repr_png_``): small, one sample, two bounces.
+PREVIEW_WIDTH = 256
+PREVIEW_SPP = 1
+PREVIEW_DEPTH = 2
+
+
+def preview(scene: Scene) -> RenderResult:
+    """A quick look at ``scene``: ``PREVIEW_WIDTH`` pixels wide at its aspect ratio, one
+    sample per pixel, two bounces; its own camera and look."""
+    width = PREVIEW_WIDTH
+    height = max(1, round(width * scene.render.height / scene.render.width))
+    return render(scene, width=width, height=height, spp=PREVIEW_SPP, max_depth=PREVIEW_DEPTH)
+
+
+def preview_png(scene: Scene) -> bytes:
+    """``preview(scene)`` as PNG bytes: what Jupyter shows for a ``Scene``."""
+    return preview(scene)._repr_png_()
+
+
+Scene._repr_png_ = preview_png  # the scene model imports no renderer: it is given its preview
 
 
 def render(

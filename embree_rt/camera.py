@@ -281,3 +281,47 @@ def _rays_through(
     origins = np.empty((3, len(pixel)), np.float32)
     origins[:] = frame.origin.astype(np.float32)[:, None]
     return origins, directions, pixel
+
+
+# -- the camera as dataset tools take it ------------------------------------------------------
+
+# OpenCV's camera axes (x right, y down, z forward) in OpenGL's / Blender's (x right, y up, z
+# backward): the two world-to-camera matrices differ by this flip of y and z.
+OPENCV_FROM_OPENGL = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+def intrinsics(frame: CameraFrame) -> np.ndarray:
+    """(3, 3) float64 K of the pinhole ``frame`` in OpenCV's pixel convention: a camera-space
+    point (x, y, z) (OpenCV axes) lands at column ``fx x / z + cx``, row ``fy y / z + cy``, and
+    the centre of pixel (column c, row r) is at (c, r), so ``cx = width / 2 - 1/2``. (Tools that
+    put pixel centres at c + 1/2, as NeRF's and Blender's do, take ``cx + 1/2``, ``cy + 1/2``.)"""
+    fx = frame.width / (2.0 * frame.half_width)
+    fy = frame.height / (2.0 * frame.half_height)
+    return np.array([[fx, 0.0, frame.width / 2.0 - 0.5],
+                     [0.0, fy, frame.height / 2.0 - 0.5],
+                     [0.0, 0.0, 1.0]])  # fmt: skip
+
+
+def world_to_camera_opengl(frame: CameraFrame) -> np.ndarray:
+    """(4, 4) float64 world-to-camera matrix with OpenGL's and Blender's camera axes: x right,
+    y up, the camera looking down -z."""
+    rotation = np.stack([frame.u, frame.v, frame.w])
+    matrix = np.eye(4)
+    matrix[:3, :3] = rotation
+    matrix[:3, 3] = -rotation @ frame.origin
+    return matrix
+
+
+def world_to_camera_opencv(frame: CameraFrame) -> np.ndarray:
+    """(4, 4) float64 world-to-camera matrix with OpenCV's camera axes: x right, y down, the
+    camera looking down +z (what ``intrinsics`` projects)."""
+    return OPENCV_FROM_OPENGL @ world_to_camera_opengl(frame)
+
+
+def camera_to_world_opengl(frame: CameraFrame) -> np.ndarray:
+    """(4, 4) float64 camera-to-world matrix in OpenGL's convention: the columns are the
+    camera's right, up and backward axes and its position (NeRF's ``transform_matrix``)."""
+    matrix = np.eye(4)
+    matrix[:3, :3] = np.stack([frame.u, frame.v, frame.w], axis=1)
+    matrix[:3, 3] = frame.origin
+    return matrix

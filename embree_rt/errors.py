@@ -12,3 +12,10 @@ from __future__ import annotations
 class InputError(Exception):
     """Bad input, not a bug. ``str()`` is the whole message: one line that names the file, flag
     or key at fault and the problem."""
+
+
+def install_hint(extra: str, packages: str) -> str:
+    """How to install what an optional feature needs, in words that work for the way embree_rt
+    is installed (from a checkout, not from a package index): the packages themselves, or the
+    checkout's ``extra``."""
+    return f"pip install {packages} (or, from the embree_rt checkout: pip install '.[{extra}]')"

@@ -1,19 +1,59 @@
-"""The film: linear accumulation, Reinhard tone mapping, gamma, and atomic image files."""
+"""The film: linear accumulation, Reinhard tone mapping, gamma, and atomic image files.
+
+Display images (.png, .jpg/.jpeg, .tif/.tiff, .webp) hold the tone-mapped picture, 8 bits a
+channel through Pillow, or 16 (``Encoding.bit_depth``; .png and .tif/.tiff) for grading: Pillow
+holds no 16-bit RGB image (its 16-bit modes are single-channel), so 16-bit PNG goes through
+pypng and 16-bit TIFF through tifffile, both small pure-Python writers. Data images (.npy, .npz,
+.exr) hold the linear float32 radiance."""
 
 from __future__ import annotations
 
 import os
 import secrets
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, NamedTuple
 
 import numpy as np
 
 from embree_rt.compiled import film_sums
 
 GAMMA = 2.2
-IMAGE_SUFFIXES = (".png", ".npy", ".npz", ".exr")
+# Display formats: Pillow's name for each extension.
+PILLOW_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF",
+                  ".tiff": "TIFF", ".webp": "WEBP"}  # fmt: skip
+IMAGE_SUFFIXES = (*PILLOW_FORMATS, ".npy", ".npz", ".exr")
+SIXTEEN_BIT_SUFFIXES = (".png", ".tif", ".tiff")
+QUALITY_SUFFIXES = (".jpg", ".jpeg", ".webp")
+DEFAULT_QUALITY = 90
+
+
+class Encoding(NamedTuple):
+    """How a display image stores its pixels: ``bit_depth`` 8, or 16 for .png and .tif/.tiff;
+    ``quality`` 1 to 100 for the lossy .jpg/.jpeg and .webp (None: ``DEFAULT_QUALITY``);
+    ``look`` the tone mapping (``Look``; None: the default)."""
+
+    bit_depth: int = 8
+    quality: int | None = None
+    look: Look | None = None
+
+
+DEFAULT_ENCODING = Encoding()
+
+
+def encoding_problem(suffix: str, encoding: Encoding) -> str | None:
+    """What keeps ``encoding`` from applying to a file with the extension ``suffix``, or None."""
+    if encoding.bit_depth not in (8, 16):
+        return f"bit depth must be 8 or 16, got {encoding.bit_depth}"
+    if encoding.bit_depth == 16 and suffix not in SIXTEEN_BIT_SUFFIXES:
+        return f"16-bit images are written as {', '.join(SIXTEEN_BIT_SUFFIXES)}, not {suffix}"
+    if encoding.quality is not None:
+        if suffix not in QUALITY_SUFFIXES:
+            return f"quality applies to the lossy {', '.join(QUALITY_SUFFIXES)}, not {suffix}"
+        if not 1 <= encoding.quality <= 100:
+            return f"quality must be 1 to 100, got {encoding.quality}"
+    return None
 
 
 class Film:
@@ -85,35 +125,91 @@ class FilmBlock:
         return self._sums
 
 
-def tonemap(image: np.ndarray) -> np.ndarray:
-    """(h, w, 3) linear radiance → (h, w, 3) uint8 display values.
+TONEMAPS = ("reinhard", "aces", "none")
+TRANSFERS = ("gamma2.2", "srgb")
 
-    Per channel: negatives clamp to 0, Reinhard ``c / (1 + c)`` (+inf maps to 1), gamma
-    ``1/2.2``, then ``round(255 ·)``. NaN is a bug upstream and raises ValueError.
+
+class Look(NamedTuple):
+    """How linear radiance becomes display values: ``exposure`` in stops (the radiance times
+    ``2 ** exposure``), ``tonemap`` (``TONEMAPS``: Reinhard ``c / (1 + c)``, the ACES filmic
+    fit of Narkowicz 2015, or none: clipped at 1), ``transfer`` (``TRANSFERS``: a pure power
+    ``1/2.2``, or sRGB's piecewise curve). The default is the seed article's look."""
+
+    exposure: float = 0.0
+    tonemap: str = "reinhard"
+    transfer: str = "gamma2.2"
+
+
+DEFAULT_LOOK = Look()
+
+
+def tonemap(image: np.ndarray, look: Look = DEFAULT_LOOK) -> np.ndarray:
+    """(h, w, 3) linear radiance → (h, w, 3) uint8 display values (``display_values``
+    quantized to 8 bits). NaN is a bug upstream and raises ValueError."""
+    return quantize(display_values(image, look), 8)
+
+
+def display_values(image: np.ndarray, look: Look = DEFAULT_LOOK) -> np.ndarray:
+    """(h, w, 3) linear radiance → (h, w, 3) float32 display values in [0, 1], per channel:
+    negatives clamp to 0, then ``look``'s exposure, tone map (+inf maps to 1) and transfer
+    curve. The default (Reinhard, gamma 1/2.2) is computed as it always was. NaN is a bug
+    upstream and raises ValueError.
     """
+    if look.tonemap not in TONEMAPS or look.transfer not in TRANSFERS:
+        raise ValueError(f"look: tonemap must be one of {TONEMAPS} and transfer one of "
+                         f"{TRANSFERS}, got {look.tonemap!r} and {look.transfer!r}")  # fmt: skip
     image = np.asarray(image, np.float32)
     if np.isnan(image).any():
         raise ValueError("image contains NaN")
     linear = np.maximum(image, np.float32(0.0))
-    with np.errstate(invalid="ignore"):
-        mapped = np.where(np.isinf(linear), np.float32(1.0), linear / (np.float32(1.0) + linear))
-    display = mapped ** np.float32(1.0 / GAMMA)
-    return np.clip(np.rint(display * np.float32(255.0)), 0, 255).astype(np.uint8)
+    if look.exposure:
+        linear = linear * np.float32(2.0**look.exposure)
+    with np.errstate(invalid="ignore", over="ignore"):
+        if look.tonemap == "reinhard":
+            mapped = np.where(np.isinf(linear), np.float32(1.0),
+                              linear / (np.float32(1.0) + linear))  # fmt: skip
+        elif look.tonemap == "aces":
+            mapped = np.where(np.isinf(linear), np.float32(1.0), aces(linear))
+        else:
+            mapped = np.minimum(linear, np.float32(1.0))
+    if look.transfer == "srgb":
+        return srgb_encode(mapped)
+    return mapped ** np.float32(1.0 / GAMMA)
 
 
-def check_output_path(path: str | os.PathLike) -> None:
-    """Check, before any rendering, that an image can be written to ``path``.
+def aces(linear: np.ndarray) -> np.ndarray:
+    """Narkowicz's fit of the ACES filmic curve, ``x (2.51 x + 0.03) / (x (2.43 x + 0.59) +
+    0.14)`` clipped to [0, 1], on finite non-negative float32 ``linear`` (same shape)."""
+    a, b, c, d, e = (np.float32(v) for v in (2.51, 0.03, 2.43, 0.59, 0.14))
+    # large x: the ratio tends to a / c > 1; dividing through by x keeps it finite
+    x = np.minimum(linear, np.float32(1e15))
+    return np.clip((x * (a * x + b)) / (x * (c * x + d) + e), np.float32(0.0), np.float32(1.0))
 
-    Raises ValueError naming the path for an unknown extension, a missing or unwritable
-    directory, or a directory in the way; RuntimeError for ``.exr`` without the OpenEXR package.
+
+def srgb_encode(mapped: np.ndarray) -> np.ndarray:
+    """sRGB's transfer curve (IEC 61966-2-1) on float32 values in [0, 1]: ``12.92 x`` up to
+    0.0031308, ``1.055 x^(1/2.4) - 0.055`` above."""
+    curve = np.float32(1.055) * mapped ** np.float32(1.0 / 2.4) - np.float32(0.055)
+    return np.where(mapped <= np.float32(0.0031308), np.float32(12.92) * mapped, curve)
+
+
+def quantize(display: np.ndarray, bits: int) -> np.ndarray:
+    """Float display values in [0, 1] → uint8 (``bits`` 8) or uint16 (16): ``round((2^bits -
+    1) ·)``, clipped."""
+    top = float(2**bits - 1)
+    dtype = np.uint8 if bits == 8 else np.uint16
+    return np.clip(np.rint(display * np.float32(top)), 0, top).astype(dtype)
+
+
+def check_output_path(path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCODING) -> None:
+    """Check, before any rendering, that an image can be written to ``path`` as ``encoding``.
+
+    Raises ValueError naming the path for an unknown extension, an encoding it cannot take, a
+    missing or unwritable directory, or a directory in the way; RuntimeError for ``.exr``
+    without the OpenEXR package.
     """
     target = Path(path)
-    suffix = target.suffix.lower()
-    if suffix not in IMAGE_SUFFIXES:
-        raise ValueError(
-            f"{target}: unknown image extension {target.suffix or '(none)'!r}; "
-            f"use one of {', '.join(IMAGE_SUFFIXES)}"
-        )
+    check_image_name(target, encoding)
     directory = target.parent
     if not directory.is_dir():
         raise ValueError(f"{target}: directory {directory} does not exist")
@@ -121,6 +217,20 @@ def check_output_path(path: str | os.PathLike) -> None:
         raise ValueError(f"{target}: directory {directory} is not writable")
     if target.is_dir():
         raise ValueError(f"{target}: is a directory")
+
+
+def check_image_name(path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCODING) -> None:
+    """``check_output_path``'s checks of the name alone: a known extension that can take
+    ``encoding`` (ValueError), and OpenEXR present for ``.exr`` (RuntimeError)."""
+    target = Path(path)
+    suffix = target.suffix.lower()
+    if suffix not in IMAGE_SUFFIXES:
+        raise ValueError(
+            f"{target}: unknown image extension {target.suffix or '(none)'!r}; "
+            f"use one of {', '.join(IMAGE_SUFFIXES)}"
+        )
+    if (problem := encoding_problem(suffix, encoding)) is not None:
+        raise ValueError(f"{target}: {problem}")
     if suffix == ".exr":
         _exr_module()
 
@@ -129,28 +239,53 @@ def _exr_module():
     try:
         import OpenEXR
     except ImportError:
+        from embree_rt.errors import install_hint
+
         raise RuntimeError(
-            "writing .exr images needs the OpenEXR package: pip install openexr "
-            "(or pip install 'embree-rt[exr]')"
+            f"writing .exr images needs the OpenEXR package: {install_hint('exr', 'openexr')}"
         ) from None
     return OpenEXR
 
 
-def _write_png(image: np.ndarray, handle: BinaryIO) -> None:
+def write_pixels(pixels: np.ndarray, handle: BinaryIO, suffix: str, quality: int | None = None
+                 ) -> None:  # fmt: skip
+    """Write (h, w, 3) uint8 or uint16 display ``pixels`` as the display format of ``suffix``
+    (``PILLOW_FORMATS``) to ``handle``: uint8 through Pillow (``quality`` for JPEG and WebP),
+    uint16 as 16-bit RGB PNG (pypng) or TIFF (tifffile)."""
+    height, width, _ = pixels.shape
+    if pixels.dtype == np.uint16:
+        if suffix == ".png":
+            import png
+
+            writer = png.Writer(width, height, greyscale=False, bitdepth=16)
+            writer.write(handle, pixels.reshape(height, width * 3))
+        else:
+            import tifffile
+
+            tifffile.imwrite(handle, pixels, photometric="rgb")
+        return
     from PIL import Image
 
-    Image.fromarray(tonemap(image)).save(handle, format="PNG")
+    name = PILLOW_FORMATS[suffix]
+    options = {"quality": quality or DEFAULT_QUALITY} if suffix in QUALITY_SUFFIXES else {}
+    Image.fromarray(pixels).save(handle, format=name, **options)
 
 
-def _write_npy(image: np.ndarray, handle: BinaryIO) -> None:
+def _write_display(suffix: str, image: np.ndarray, handle: BinaryIO,
+                   encoding: Encoding = DEFAULT_ENCODING) -> None:  # fmt: skip
+    pixels = quantize(display_values(image, encoding.look or DEFAULT_LOOK), encoding.bit_depth)
+    write_pixels(pixels, handle, suffix, encoding.quality)
+
+
+def _write_npy(image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING) -> None:
     np.save(handle, np.asarray(image, np.float32))
 
 
-def _write_npz(image: np.ndarray, handle: BinaryIO) -> None:
+def _write_npz(image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING) -> None:
     np.savez(handle, beauty=np.asarray(image, np.float32))
 
 
-def _write_exr(image: np.ndarray, handle: BinaryIO) -> None:
+def _write_exr(image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING) -> None:
     write_exr_channels({"RGB": np.ascontiguousarray(image, np.float32)}, handle)
 
 
@@ -164,9 +299,10 @@ def write_exr_channels(channels: dict[str, np.ndarray], handle: BinaryIO) -> Non
         exr.write(os.fspath(handle.name))
 
 
-# Writers by extension: writer(image, binary file handle opened on the temp file's path).
-WRITERS: dict[str, Callable[[np.ndarray, BinaryIO], None]] = {
-    ".png": _write_png,
+# Writers by extension: writer(image, binary file handle opened on the temp file's path,
+# Encoding).
+WRITERS: dict[str, Callable[..., None]] = {
+    **{suffix: partial(_write_display, suffix) for suffix in PILLOW_FORMATS},
     ".npy": _write_npy,
     ".npz": _write_npz,
     ".exr": _write_exr,
@@ -181,19 +317,21 @@ def check_image_shape(image: np.ndarray, path: str | os.PathLike) -> np.ndarray:
     return image
 
 
-def save_image(image: np.ndarray, path: str | os.PathLike) -> None:
+def save_image(image: np.ndarray, path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCODING
+               ) -> None:  # fmt: skip
     """Write the (h, w, 3) float32 linear ``image`` to ``path`` by its extension
-    (case-insensitive): ``.png`` tone-mapped 8-bit, ``.npy``, ``.npz`` (as ``beauty``) and
-    ``.exr`` linear float32.
+    (case-insensitive): ``.png``, ``.jpg``/``.jpeg``, ``.tif``/``.tiff``, ``.webp`` tone-mapped
+    (``encoding``: 8 or 16 bits, quality), ``.npy``, ``.npz`` (as ``beauty``) and ``.exr``
+    linear float32.
 
     Atomic (``write_atomically``): on any failure, Ctrl-C included, an existing file at
     ``path`` is left as it was and no partial file is left.
     """
-    check_output_path(path)
+    check_output_path(path, encoding)
     image = check_image_shape(image, path)
     target = Path(path)
     writer = WRITERS[target.suffix.lower()]
-    write_atomically([(target, lambda handle: writer(image, handle))])
+    write_atomically([(target, lambda handle: writer(image, handle, encoding))])
 
 
 def write_atomically(files: list[tuple[Path, Callable[[BinaryIO], None]]]) -> None:

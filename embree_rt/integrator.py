@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -101,6 +102,24 @@ def surface_offset(scale: np.ndarray) -> np.ndarray:
     return (np.float32(RELATIVE_OFFSET) * (np.float32(1.0) + scale)).astype(np.float32, copy=False)
 
 
+class Tracer(Protocol):
+    """Where the integrator's two geometric stages come from: the nearest hits of a wavefront
+    (``intersect_compact``: the (k,) int64 rays that hit and their ``SurfaceHits``, floor hits
+    first) and whether shadow segments are blocked (``occluded_toward``: (k,) bool for the
+    segments from ``points[:, rows]`` to ``target``). ``SceneGeometry`` (one BVH of the whole
+    scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask."""
+
+    def intersect_compact(
+        self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
+    ) -> tuple[np.ndarray, SurfaceHits]: ...
+
+    def occluded_toward(
+        self, points: np.ndarray, rows: np.ndarray, target: np.ndarray
+    ) -> np.ndarray: ...
+
+    def close(self) -> None: ...
+
+
 class Integrator:
     """The Whitted integrator of one scene: builds its BVH once, then traces and shades batches
     of camera samples (``render_image``, ``trace_batch``, ``trace_pixels``). ``embree_rt.Renderer``
@@ -108,7 +127,10 @@ class Integrator:
 
     ``spheres``: how spheres enter the BVH (``geometry.SPHERE_MODES``); ``threads``: the worker
     threads (None: every core, ``batches.worker_count``); ``batch_size``: camera samples a batch
-    traces at most."""
+    traces at most.
+
+    ``tracer`` replaces the BVH: intersection and occlusion come from it (closed with the
+    integrator), shading stays here; ``spheres`` is then unused."""
 
     def __init__(
         self,
@@ -117,6 +139,7 @@ class Integrator:
         spheres: str = "analytic",
         threads: int | None = None,
         batch_size: int = DEFAULT_BATCH_SIZE,
+        tracer: Tracer | None = None,
     ) -> None:
         if batch_size < 1:
             raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
@@ -127,7 +150,9 @@ class Integrator:
         self.workers = worker_count(threads)
         retain_freed_memory()
         start = time.perf_counter()
-        self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
+        self.geometry: Tracer = tracer
+        if tracer is None:
+            self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
         self.build_s = time.perf_counter() - start
         # Material ids are the scene's materials in order, then the floor's.
         self.materials = table = MaterialTable.from_materials(
@@ -517,4 +542,3 @@ class Integrator:
                     self.light_rgb[light],
                 ),
             )
-

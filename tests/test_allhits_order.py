@@ -156,7 +156,8 @@ def test_settled_decided_and_finished_hits_are_the_same_on_one_thread_and_two():
         np.testing.assert_array_equal(x, y)
     parts = [np.concatenate(arrays) for arrays in zip(answers[0][:3], decided[0], strict=True)]
     order = np.random.default_rng(5).permutation(len(origins))  # as if traced in that order
-    finished = [finished_hits(*parts, order, len(origins), 3, scene.fans()[0], 1.0, origins,
+    finished = [finished_hits(*parts, order, len(origins), 3, scene.fans()[0], scene.planes, 1.0,
+                              1e-5, origins,
                               directions, True, None, threads) for threads in (1, 2)]
     assert len(finished[0][0]) > len(origins)
     for x, y in zip(*finished, strict=True):

@@ -210,7 +210,7 @@ def test_frames_are_written_by_pattern_skipped_when_present_and_equal_local_fram
     result = run_cli("render", str(path), "-o", pattern, "--frames", "1:4")
     assert result.returncode == 0, result.stderr
     assert sorted(p.name for p in (tmp_path / "shots").iterdir()) == [
-        "f_001.npy", "f_002.npy", "f_003.npy",
+        "f_001.npy", "f_002.npy", "f_003.npy", "transforms.json",  # poses for NeRF tools
     ]  # fmt: skip
     assert kept.read_bytes() == b"already here"  # on disk: skipped
     scene = rt.load_scene(path)

@@ -464,12 +464,16 @@ def test_exr_layers_read_back_by_openexr(tmp_path: Path, rendered) -> None:
     with OpenEXR.File(str(path), separate_channels=True) as exr:
         channels = {name: channel.pixels for name, channel in exr.channels().items()}
     assert set(channels) == {
-        "R", "G", "B", "depth.Z", "normal.X", "normal.Y", "normal.Z", "albedo.R", "albedo.G",
-        "albedo.B", "object_id.id", "material_id.id",
+        "R", "G", "B", "depth.Z", "z_depth.Z", "position.X", "position.Y", "position.Z",
+        "normal.X", "normal.Y", "normal.Z", "albedo.R", "albedo.G", "albedo.B", "object_id.id",
+        "material_id.id",
     }  # fmt: skip
     for axis, name in enumerate("RGB"):
         np.testing.assert_array_equal(channels[name], beauty[..., axis])
     np.testing.assert_array_equal(channels["depth.Z"], layers["depth"])
+    np.testing.assert_array_equal(channels["z_depth.Z"], layers["z_depth"])
+    for axis, name in enumerate("XYZ"):
+        np.testing.assert_array_equal(channels[f"position.{name}"], layers["position"][..., axis])
     for axis, name in enumerate("XYZ"):
         np.testing.assert_array_equal(channels[f"normal.{name}"], layers["normal"][..., axis])
     for axis, name in enumerate("RGB"):
@@ -572,6 +576,9 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
                           text=True, timeout=120, cwd=ROOT)  # fmt: skip
 
 
+CAMERA_KEYS = ("K", "world_to_camera_opencv", "world_to_camera_opengl")
+
+
 def test_the_command_writes_aovs_and_names_the_files(tmp_path: Path) -> None:
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE_TOML)
@@ -579,7 +586,8 @@ def test_the_command_writes_aovs_and_names_the_files(tmp_path: Path) -> None:
     png = tmp_path / "out.png"
     result = run_cli("render", str(scene), "-o", str(png), "--aov", "object_id,depth", *size)
     assert result.returncode == 0, result.stderr
-    sides = [tmp_path / "out.object_id.png", tmp_path / "out.depth.png"]
+    sides = [tmp_path / "out.object_id.png", tmp_path / "out.depth.png",
+             tmp_path / "out.camera.json"]  # fmt: skip
     assert result.stdout.splitlines() == [str(side) for side in sides]
     assert all(side.is_file() for side in sides) and png.is_file()
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
@@ -588,9 +596,9 @@ def test_the_command_writes_aovs_and_names_the_files(tmp_path: Path) -> None:
     npz = tmp_path / "out.npz"
     result = run_cli("random", "--count", "40", "-o", str(npz), "--aov", "material_id", *size)
     assert result.returncode == 0, result.stderr
-    assert result.stdout == ""
+    assert result.stdout == f"{tmp_path / 'out.camera.json'}\n"  # beside the .npz
     with np.load(npz) as data:
-        assert sorted(data.files) == ["beauty", "material_id"]
+        assert sorted(data.files) == sorted(["beauty", "material_id", *CAMERA_KEYS])
         assert data["material_id"].shape == (16, 24)
         assert (data["material_id"] >= 0).any()
 
@@ -603,8 +611,8 @@ def test_an_unknown_aov_is_one_line_exit_2_and_writes_nothing(tmp_path: Path) ->
     result = run_cli("render", str(scene), "-o", str(old), "--aov", "depth,segmentation")
     assert result.returncode == 2
     assert result.stderr.splitlines() == [
-        "embree-rt: error: --aov: unknown AOV 'segmentation'; choose from depth, normal, albedo, "
-        "object_id, material_id"
+        "embree-rt: error: --aov: unknown AOV 'segmentation'; choose from depth, z_depth, "
+        "position, normal, albedo, object_id, material_id"
     ]
     assert old.read_bytes() == b"an old image"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png", "s.toml"]
@@ -629,3 +637,82 @@ def test_info_lists_objects_and_materials_with_their_ids(capsys) -> None:
     materials = [line.split(":", 1)[1].strip() for line in lines
                  if line.startswith("  material ")]  # fmt: skip
     assert materials == [*scene.material_names, "floor"]
+
+
+# -- the camera with the pixels -------------------------------------------------------------------
+
+
+def test_the_saved_camera_projects_each_hit_onto_its_pixels_centre(tmp_path: Path) -> None:
+    """The AOV pass traces one unjittered ray through each pixel centre (whatever the spp):
+    the position it hits, projected with the saved K and OpenCV extrinsics, must land on that
+    centre, (column, row) in OpenCV's pixel convention. The positions are float32 of a scene a
+    few units across seen from ~6 units: their rounding moves a projection by ~1e-5 pixel, so
+    1e-3 pixel is a tolerance with room and still far below a pixel."""
+    import json
+
+    scene = rt.Scene(camera=rt.Camera(position=(1.0, 2.5, 6.0), look_at=(0.0, 0.5, 0.0),
+                                      fov=50.0))  # fmt: skip
+    scene.lights.append(rt.PointLight(position=(3.0, 6.0, 4.0)))
+    scene.add_sphere((0.0, 1.0, 0.0), 1.0, "matte")
+    scene.add_sphere((-1.8, 0.5, 0.6), 0.5, "mirror")
+    result = rt.render(scene, width=40, height=30, spp=1, aovs=["depth", "z_depth", "position"])
+    written = result.save(tmp_path / "view.npz")
+    assert written == [tmp_path / "view.camera.json"]
+    with np.load(tmp_path / "view.npz") as data:
+        K, opencv, opengl = (data[k] for k in CAMERA_KEYS)
+        depth, z_depth, position = data["depth"], data["z_depth"], data["position"]
+    record = json.loads((tmp_path / "view.camera.json").read_text())
+    assert (record["width"], record["height"]) == (40, 30)
+    for key, matrix in zip(CAMERA_KEYS, (K, opencv, opengl), strict=True):
+        np.testing.assert_array_equal(np.array(record[key]), matrix)
+
+    hit = np.isfinite(depth)
+    assert 0.3 < hit.mean() < 1.0  # spheres and floor, and some sky
+    assert np.isinf(position[~hit]).all() and np.isinf(z_depth[~hit]).all()
+    rows, columns = np.nonzero(hit)
+    points = np.c_[position[hit].astype(np.float64), np.ones(hit.sum())]
+    camera = (opencv @ points.T)[:3]
+    assert (camera[2] > 0).all()  # in front: OpenCV looks down +z
+    pixel = K @ camera
+    np.testing.assert_allclose(pixel[0] / pixel[2], columns, atol=1e-3)
+    np.testing.assert_allclose(pixel[1] / pixel[2], rows, atol=1e-3)
+    # OpenGL's camera: the same frame with y and z flipped, looking down -z
+    np.testing.assert_array_equal(opengl, np.diag([1.0, -1.0, -1.0, 1.0]) @ opencv)
+    assert ((opengl @ points.T)[2] < 0).all()
+
+    # z-depth: the distance times the cosine of the pixel's ray to the axis, that ray read
+    # from K alone; and the camera-space z of the hit
+    rays = np.linalg.inv(K) @ np.stack([columns, rows, np.ones(len(rows))])
+    cosine = 1.0 / np.linalg.norm(rays, axis=0)
+    np.testing.assert_allclose(z_depth[hit], depth[hit] * cosine, rtol=1e-5)
+    np.testing.assert_allclose(z_depth[hit], camera[2], rtol=1e-5)
+
+
+def test_an_animation_writes_the_transforms_json_nerf_tools_read(tmp_path: Path) -> None:
+    import json
+
+    from embree_rt.scene.animation import camera_at
+
+    flight = Path(__file__).resolve().parent.parent / "scenes" / "animations"
+    pattern = tmp_path / "shots" / "f_{frame:03d}.png"
+    result = run_cli("render", str(flight / "three_spheres_flight.toml"), "-o", str(pattern),
+                     "--width", "32", "--height", "18", "--spp", "1", "--frames", "10:13",
+                     "--quiet")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    transforms = json.loads((tmp_path / "shots" / "transforms.json").read_text())
+    scene = rt.load_scene(flight / "three_spheres_flight.toml")
+    assert [f["file_path"] for f in transforms["frames"]] == [
+        "./f_010.png", "./f_011.png", "./f_012.png"]  # fmt: skip
+    assert (transforms["w"], transforms["h"]) == (32, 18)
+    for number, frame in zip(range(10, 13), transforms["frames"], strict=True):
+        camera = camera_at(scene.camera, scene.animation, number)
+        pose = np.array(frame["transform_matrix"])
+        np.testing.assert_allclose(pose[:3, 3], camera.position, atol=1e-12)
+        view = np.subtract(camera.look_at, camera.position)
+        np.testing.assert_allclose(-pose[:3, 2], view / np.linalg.norm(view), atol=1e-12)
+        np.testing.assert_allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-12)
+        assert pose[1, 1] > 0  # up is up: OpenGL's y
+        fov_x = frame.get("camera_angle_x", transforms["camera_angle_x"])
+        half_y = np.tan(np.radians(camera.fov) / 2)
+        assert fov_x == pytest.approx(2 * np.arctan(half_y * 32 / 18))
+        assert (tmp_path / "shots" / frame["file_path"]).is_file()

@@ -64,13 +64,15 @@ def test_a_result_tone_maps_and_saves_itself(tmp_path: Path) -> None:
     result = rt.render(scene, aovs=["depth", "object_id"], **SIZE)
     np.testing.assert_array_equal(result.to_srgb8(), tonemap(result.image))
     assert result.to_srgb8().dtype == np.uint8
-    assert result.save(tmp_path / "both.npz") == []
+    assert result.save(tmp_path / "both.npz") == [tmp_path / "both.camera.json"]
     with np.load(tmp_path / "both.npz") as saved:
-        assert sorted(saved.files) == ["beauty", "depth", "object_id"]
+        assert sorted(saved.files) == ["K", "beauty", "depth", "object_id",
+                                       "world_to_camera_opencv", "world_to_camera_opengl"]
         np.testing.assert_array_equal(saved["beauty"], result.image)
         np.testing.assert_array_equal(saved["object_id"], result.aovs["object_id"])
     beside = result.save(tmp_path / "image.npy")
-    assert sorted(path.name for path in beside) == ["image.depth.npy", "image.object_id.npy"]
+    assert sorted(path.name for path in beside) == ["image.camera.json", "image.depth.npy",
+                                                    "image.object_id.npy"]  # fmt: skip
     plain = rt.render(scene, **SIZE)
     assert plain.save(tmp_path / "plain.png") == []
     assert sorted(path.name for path in tmp_path.iterdir() if path.name.startswith("plain")) == [
@@ -83,3 +85,53 @@ def test_bad_aov_names_are_refused_before_anything_is_built() -> None:
         rt.render(small_scene(), aovs=["depth", "bogus"], **SIZE)
     with rt.Renderer(small_scene(), threads=1) as renderer, pytest.raises(TypeError):
         renderer.render(aovs="depth", **SIZE)
+
+
+# -- in a notebook ----------------------------------------------------------------------------
+
+
+def test_a_renderer_builds_its_bvh_once_whatever_the_camera_and_settings(monkeypatch) -> None:
+    from embree_rt import integrator
+
+    builds = []
+    built = integrator.SceneGeometry
+
+    def counted(*args, **kwargs):
+        builds.append(args)
+        return built(*args, **kwargs)
+
+    monkeypatch.setattr(integrator, "SceneGeometry", counted)
+    scene = small_scene()
+    with rt.Renderer(scene) as renderer:
+        first = renderer.render(**SIZE)
+        other = replace(scene.camera, position=(3.0, 2.0, 5.0), fov=30.0)
+        second = renderer.render(camera=other, width=20, height=12, spp=1, max_depth=1,
+                                 aovs=["depth"])  # fmt: skip
+    assert len(builds) == 1
+    assert first.image.shape == (24, 40, 3) and second.image.shape == (12, 20, 3)
+    assert second.aovs["depth"].shape == (12, 20)  # the AOVs seen by the other camera too
+
+
+def test_results_and_scenes_show_themselves_in_a_notebook() -> None:
+    import io
+
+    from PIL import Image
+
+    scene = small_scene()
+    result = rt.render(scene, **SIZE)
+    with Image.open(io.BytesIO(result._repr_png_())) as shown:
+        np.testing.assert_array_equal(np.asarray(shown), result.to_srgb8())
+    looked = rt.render(scene, **SIZE)
+    looked.look = rt.Look(exposure=1.0, tonemap="aces")
+    assert not np.array_equal(looked.to_srgb8(), result.to_srgb8())
+    np.testing.assert_array_equal(looked.to_srgb8(), rt.tonemap(looked.image, looked.look))
+
+    text = repr(scene)
+    assert text == "Scene(3 spheres, 1 light, floor at y = 0, 640x360 at 8 spp)"
+    many = rt.random_field(5000, seed=1)
+    assert len(repr(many)) < 120  # a summary, not five thousand spheres
+    with Image.open(io.BytesIO(scene._repr_png_())) as preview:  # 256 wide, the scene's aspect
+        assert preview.size == (256, 144) and preview.mode == "RGB"
+        pixels = np.asarray(preview)
+    expected = rt.render(scene, width=256, height=144, spp=1, max_depth=2)
+    np.testing.assert_array_equal(pixels, expected.to_srgb8())

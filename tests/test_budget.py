@@ -63,8 +63,9 @@ CASES = {
     "random --count": (["random", "--count", str(HUGE_COUNT), "-o", "out.png"], None, "--count: "),
     "--width --height": (
         ["render", "scene.toml", "-o", "out.png", *HUGE_SIZE_FLAGS],
-        "[[spheres]]\ncenter = [0.0, 1.0, 0.0]\nradius = 1.0\n",
-        "--width, --height: ",
+        "[[spheres]]\ncenter = [0.0, 1.0, 0.0]\nradius = 1.0\n"
+        "[[lights]]\nposition = [2.0, 4.0, 2.0]\n",  # lit: no no-lights warning beside the error
+        "--width 100000, --height 100000: ",
     ),
     "random_field.count": (
         ["render", "scene.toml", "-o", "out.png"],

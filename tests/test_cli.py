@@ -99,8 +99,12 @@ CASES = {
         ["spheres[0].center", "finite"],
     ),
     "fov zero": Case("scene.toml", "[camera]\nfov = 0\n", ["camera.fov", "> 0"]),
-    "spp zero": Case("scene.toml", "[render]\nspp = 0\n", ["render.spp", ">= 1"]),
-    "width -1 in file": Case("scene.toml", "[render]\nwidth = -1\n", ["render.width", ">= 1"]),
+    # (not spp or width: the runs' own --spp and --width replace the file's value before it is
+    # checked, as --set render.spp=1 would)
+    "max_depth -1 in file": Case(
+        "scene.toml", "[render]\nmax_depth = -1\n", ["render.max_depth", ">= 0"]
+    ),
+    "seed -1 in file": Case("scene.toml", "[render]\nseed = -1\n", ["render.seed", ">= 0"]),
     "width -1 flag": Case("scene.toml", SPHERE, ["--width", "-1"], flags=["--width", "-1"]),
     "undefined material": Case(
         "scene.toml", SPHERE + 'material = "nope"\n', ["spheres[0].material", "'nope'"]
@@ -230,7 +234,7 @@ def test_bad_input_leaves_an_existing_image_alone(name: str, bad_runs) -> None:
 
 
 def test_usage_errors_are_one_line_too(tmp_path: Path) -> None:
-    assert_one_line_error(run_cli(), ["required"])
+    assert_one_line_error(run_cli("render"), ["required", "scene", "--output"])
     assert_one_line_error(
         run_cli("random", "--count", "0", "-o", str(tmp_path / "x.png")), ["--count"]
     )
@@ -417,7 +421,8 @@ def test_ctrl_c_exits_130_and_keeps_the_old_image(tmp_path: Path) -> None:
 
 def _one_sphere_scene(folder: Path) -> Path:
     scene = folder / "scene.toml"
-    scene.write_text(SPHERE, encoding="utf-8")
+    # lit: a scene without lights would add a warning line to the stderr these tests read
+    scene.write_text(SPHERE + "[[lights]]\nposition = [3.0, 5.0, 4.0]\n", encoding="utf-8")
     return scene
 
 

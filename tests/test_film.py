@@ -279,7 +279,7 @@ class DiskFullError(Exception):
 
 
 @pytest.mark.parametrize("error", [DiskFullError, KeyboardInterrupt, MemoryError])
-@pytest.mark.parametrize("suffix", [".png", ".npy", ".exr"])
+@pytest.mark.parametrize("suffix", [".png", ".npy", ".exr", ".jpg", ".tif"])
 def test_a_writer_failing_midway_leaves_the_old_image_untouched(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, suffix: str, error: type[BaseException]
 ) -> None:
@@ -289,7 +289,7 @@ def test_a_writer_failing_midway_leaves_the_old_image_untouched(
     mode = path.stat().st_mode
     calls = []
 
-    def half_a_writer(image: np.ndarray, handle) -> None:
+    def half_a_writer(image: np.ndarray, handle, encoding=None) -> None:
         calls.append(handle)
         handle.write(b"\x89PNG half an image")
         handle.flush()
@@ -315,7 +315,7 @@ def test_a_writer_failing_midway_leaves_the_old_image_untouched(
 @pytest.mark.parametrize(
     "name, message",
     [
-        ("render.jpg", "unknown image extension"),
+        ("render.bmp", "unknown image extension"),
         ("render", "unknown image extension"),
         ("render.png.bak", "unknown image extension"),
         ("render.np", "unknown image extension"),
@@ -332,7 +332,7 @@ def test_bad_paths_are_refused_before_anything_is_written(
     path = tmp_path / name
     calls = []
     for suffix in film.WRITERS:
-        monkeypatch.setitem(film.WRITERS, suffix, lambda image, handle: calls.append(handle))
+        monkeypatch.setitem(film.WRITERS, suffix, lambda image, handle, *_: calls.append(handle))
     with pytest.raises(ValueError, match=message) as error:
         check_output_path(path)
     assert str(path) in str(error.value)
@@ -347,3 +347,125 @@ def test_images_of_the_wrong_shape_are_refused(tmp_path: Path) -> None:
         with pytest.raises(ValueError, match="image"):
             save_image(np.zeros(shape, np.float32), tmp_path / "render.npy")
     assert list(tmp_path.iterdir()) == []
+
+
+# -- display formats and 16 bits ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "suffix, name, lossless",
+    [(".png", "PNG", True), (".tif", "TIFF", True), (".TIFF", "TIFF", True),
+     (".jpg", "JPEG", False), (".jpeg", "JPEG", False), (".webp", "WEBP", False)],
+)  # fmt: skip
+def test_display_formats_round_trip_through_pillow(
+    tmp_path: Path, suffix: str, name: str, lossless: bool
+) -> None:
+    # smooth ramps, which lossy codecs keep (random pixels would lose their chroma)
+    rows, columns = 0.5 + np.mgrid[0 : 4 * HEIGHT, 0 : 4 * WIDTH] / 16.0
+    image = np.stack([columns, rows, np.full_like(rows, 0.7)], axis=-1).astype(np.float32)
+    path = tmp_path / f"render{suffix}"
+    save_image(image, path)
+    with Image.open(path) as loaded:
+        assert loaded.format == name and loaded.mode == "RGB"
+        assert loaded.size == (4 * WIDTH, 4 * HEIGHT)
+        pixels = np.asarray(loaded).astype(int)
+    difference = np.abs(pixels - tonemap(image).astype(int))
+    if lossless:
+        assert difference.max() == 0
+    else:  # lossy at the default quality: close on average
+        assert difference.mean() < 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+
+def test_quality_trades_size_for_fidelity(tmp_path: Path) -> None:
+    image = linear_image(6)
+    sizes = {}
+    for quality in (20, 95):
+        path = tmp_path / f"q{quality}.jpg"
+        save_image(image, path, film.Encoding(quality=quality))
+        sizes[quality] = path.stat().st_size
+    assert sizes[20] < sizes[95]
+
+
+@pytest.mark.parametrize("suffix", [".png", ".tif", ".tiff"])
+def test_sixteen_bit_images_hold_the_tone_map_to_16_bits(tmp_path: Path, suffix: str) -> None:
+    image = linear_image(7)
+    path = tmp_path / f"render{suffix}"
+    save_image(image, path, film.Encoding(bit_depth=16))
+    with Image.open(path) as loaded:  # Pillow reads it (as 8-bit RGB: it holds no 16-bit RGB)
+        assert loaded.mode == "RGB" and loaded.size == (WIDTH, HEIGHT)
+    if suffix == ".png":
+        import png
+
+        _, _, rows, info = png.Reader(filename=str(path)).asDirect()
+        assert (info["bitdepth"], info["planes"]) == (16, 3)
+        pixels = np.array([list(row) for row in rows], np.uint16).reshape(HEIGHT, WIDTH, 3)
+    else:
+        import tifffile
+
+        pixels = tifffile.imread(path)
+    assert pixels.dtype == np.uint16 and pixels.shape == (HEIGHT, WIDTH, 3)
+    # the same curve as 8 bits, in plain Python, to 65535 steps
+    expected = np.vectorize(lambda c: 65535 * (max(c, 0) / (1 + max(c, 0))) ** (1 / 2.2))(
+        image.astype(np.float64))  # fmt: skip
+    assert np.abs(pixels - expected).max() <= 1
+    assert np.abs(pixels / 257.0 - tonemap(image)).max() <= 0.5 + 1e-9  # 8 bits: rounded
+
+
+@pytest.mark.parametrize(
+    "name, encoding, message",
+    [("render.jpg", film.Encoding(bit_depth=16), "16-bit"),
+     ("render.npy", film.Encoding(bit_depth=16), "16-bit"),
+     ("render.png", film.Encoding(quality=80), "quality applies"),
+     ("render.webp", film.Encoding(quality=101), "1 to 100")],
+)  # fmt: skip
+def test_encodings_a_format_cannot_take_are_refused_before_writing(
+    tmp_path: Path, name: str, encoding: film.Encoding, message: str
+) -> None:
+    with pytest.raises(ValueError, match=message):
+        save_image(linear_image(), tmp_path / name, encoding)
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- the look --------------------------------------------------------------------------------
+
+
+def test_the_default_look_is_the_seed_articles_bitwise() -> None:
+    image = linear_image(8)
+    for look in (film.Look(), film.Look(0.0, "reinhard", "gamma2.2")):
+        np.testing.assert_array_equal(tonemap(image, look), tonemap(image))
+        expected = np.vectorize(reference_tonemap)(image.astype(np.float64))
+        assert np.abs(tonemap(image, look).astype(int) - expected).max() <= 1
+
+
+def test_exposure_scales_the_light_by_powers_of_two() -> None:
+    image = linear_image(9)
+    for stops in (-2.0, 1.0, 3.0):
+        # times 2^k is exact in float32: the same display values, bitwise
+        np.testing.assert_array_equal(
+            film.display_values(image, film.Look(exposure=stops)),
+            film.display_values(image * np.float32(2.0**stops)),
+        )
+    brighter = film.display_values(image, film.Look(exposure=1.0))
+    assert (brighter >= film.display_values(image)).all()
+
+
+def test_aces_and_none_and_srgb_follow_their_formulas() -> None:
+    values = np.concatenate([np.linspace(0.0, 4.0, 2000), np.geomspace(1e-6, 1e6, 2000)])
+    image = values.astype(np.float32).reshape(-1, 1, 1).repeat(3, axis=2)
+    x = values.astype(np.float32).astype(np.float64)
+    aces = np.clip(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), 0, 1)
+    srgb = lambda c: np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)  # noqa: E731
+    cases = {
+        ("aces", "gamma2.2"): aces ** (1 / 2.2),
+        ("none", "gamma2.2"): np.minimum(x, 1.0) ** (1 / 2.2),
+        ("reinhard", "srgb"): srgb(x / (1 + x)),
+        ("aces", "srgb"): srgb(aces),
+    }
+    for (curve, transfer), expected in cases.items():
+        got = film.display_values(image, film.Look(tonemap=curve, transfer=transfer))[:, 0, 0]
+        np.testing.assert_allclose(got, expected, atol=2e-6, err_msg=f"{curve}, {transfer}")
+        assert np.all(np.diff(got[:2000]) >= 0)  # monotone
+    infinite = np.full((1, 1, 3), np.inf, np.float32)
+    for curve in film.TONEMAPS:
+        assert tonemap(infinite, film.Look(tonemap=curve)).tolist() == [[[255, 255, 255]]]

@@ -286,8 +286,8 @@ def test_info_reports_instances_meshes_triangles_and_memory(tmp_path: Path):
     info = {k.strip(): v.strip() for k, v in (line.split(":", 1) for line in
                                               result.stdout.splitlines())}  # fmt: skip
     assert info["instances"] == "9"
-    assert info["arrays"] == "1 instance arrays holding 9 instances"
-    assert info["meshes"] == "9 placements of 1 distinct meshes"
+    assert info["arrays"] == "1 instance array holding 9 instances"
+    assert info["meshes"] == "9 placements of 1 distinct mesh"
     assert info["triangles"] == "20 stored, 180 placed"
     assert "MiB (estimate)" in info["memory"] and "MiB measured" in info["memory"]
 

@@ -13,7 +13,7 @@ from trimesh.constants import tol
 from trimesh.ray import ray_pyembree, ray_triangle
 
 from embree_rt import trimesh_ray
-from embree_rt.trimesh_ray import RayMeshIntersector
+from embree_rt.trimesh_ray import ProximityQuery, RayMeshIntersector
 
 pytest.importorskip("rtree")  # ray_triangle's broad phase; in the project's test extras
 
@@ -65,6 +65,36 @@ def _narrow_phase(mesh: trimesh.Trimesh, origins, directions):
     barycentric = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], location)
     hit = ((barycentric > -tol.zero) & (barycentric < 1 + tol.zero)).all(axis=1) & (distance > 0)
     return tri[hit], ray[hit], distance[hit]
+
+
+def _crossings(mesh: trimesh.Trimesh, index_tri, index_ray, distance):
+    """The brute force's hits (``_narrow_phase``) counted one per crossing of the surface, in
+    plain NumPy and Python: a ray's hits within 1e-9 of the mesh's size of each other are at
+    one point; there, triangles sharing a vertex position (not all three: coincident faces are
+    separate sheets) are one crossing, named by its lowest index. Returns (index_tri,
+    index_ray) of the crossings."""
+    _, position = np.unique(mesh.vertices, axis=0, return_inverse=True)
+    corners = [set(row) for row in position.reshape(-1)[mesh.faces].tolist()]
+    tolerance = 1e-9 * mesh.scale
+    out_tri, out_ray = [], []
+    for r in np.unique(index_ray):
+        rows = np.flatnonzero(index_ray == r)
+        rows = rows[np.lexsort((index_tri[rows], distance[rows]))]
+        runs = np.split(rows, np.flatnonzero(np.diff(distance[rows]) > tolerance) + 1)
+        for run in runs:
+            sheets: list[list[int]] = []
+            for t in sorted(index_tri[run].tolist()):
+                for sheet in sheets:
+                    same_place = any(corners[t] == corners[u] for u in sheet)
+                    meets = any(corners[t] & corners[u] for u in sheet)
+                    if meets and not same_place:
+                        sheet.append(t)
+                        break
+                else:
+                    sheets.append([t])
+            out_tri += [sheet[0] for sheet in sheets]
+            out_ray += [r] * len(sheets)
+    return np.array(out_tri, np.int64), np.array(out_ray, np.int64)
 
 
 SCALES = [(1e-4, 0.0), (1.0, 0.0), (1e8, 0.0), (1.0, 1e6)]
@@ -129,10 +159,12 @@ def test_lines_through_a_convex_solid_hit_it_twice(name, scale):
     assert np.bincount(index_ray, minlength=1000).tolist() == [1] * 1000
 
 
-@pytest.mark.parametrize("scale", [1.0, 1e8])
-def test_edge_and_vertex_hits_count_as_ray_triangle_counts_them(scale):
-    """Rays straight through edges and vertices: intersects_id reports every triangle there
-    (as ray_triangle does), intersects_location each point once.
+@pytest.mark.parametrize("scale", [1e-4, 1.0, 1e8])
+def test_edge_and_vertex_hits_count_once_per_crossing(scale):
+    """Rays straight through edges and vertices of convex solids: the triangles there are those
+    ray_triangle's float64 test accepts, and intersects_id, intersects_location and
+    intersects_first report each crossing once, on the lowest index among them (trimesh's
+    embree backend's contract: a line through a convex solid, 2 hits).
 
     Known limit: Embree's float32 test (robust mode too) has holes about one float32 ulp of the
     ray's coordinates wide at vertices (measured: a ray 300 units out, aimed at an icosphere
@@ -153,7 +185,10 @@ def test_edge_and_vertex_hits_count_as_ray_triangle_counts_them(scale):
         ours = RayMeshIntersector(mesh)
         tri, ray = ours.intersects_id(origins, directions)
         ref_tri, ref_ray, ref_distance = _narrow_phase(mesh, origins, directions)
-        found, expected = _pairs(tri, ray), _pairs(ref_tri, ref_ray)
+        # every targeted vertex or edge has more than one triangle there
+        assert (np.bincount(ref_ray, minlength=len(origins)) >= 3).all()
+        found, expected = _pairs(tri, ray), _pairs(*_crossings(mesh, ref_tri, ref_ray,
+                                                               ref_distance))  # fmt: skip
         assert found <= expected
         missed_rays = {r for r, _ in expected - found}
         assert len(missed_rays) <= 0.02 * len(origins)
@@ -163,18 +198,19 @@ def test_edge_and_vertex_hits_count_as_ray_triangle_counts_them(scale):
             point = origins[r] + unit * distance
             nearest = np.linalg.norm(mesh.vertices[mesh.faces[t]] - point, axis=1).min()
             assert nearest <= 1e-6 * mesh.scale
-        if scale == 1.0:
-            reference = ray_triangle.RayMeshIntersector(mesh)
-            assert expected == _pairs(*reference.intersects_id(origins, directions))
-        # every targeted vertex or edge was hit on more than one triangle
-        counts = np.bincount(ray, minlength=len(origins))
         hit_rays = np.setdiff1d(np.arange(len(origins)), list(missed_rays))
-        assert (counts[hit_rays] >= 3).all()
-        _, loc_ray, _ = ours.intersects_location(origins, directions)
-        points = np.bincount(loc_ray, minlength=len(origins))
-        assert (points[hit_rays] == 2).all()
-        # first hits on an edge or vertex name the lowest-index triangle there (Embree's own
-        # nearest-hit query names any of them: these rays go through the exact path)
+        assert (np.bincount(ray, minlength=len(origins))[hit_rays] == 2).all()
+        if scale == 1.0:  # ray_triangle merges points rounded to 1e-8: right at unit scale
+            reference = ray_triangle.RayMeshIntersector(mesh)
+            _, ref_loc_ray, _ = reference.intersects_location(origins, directions)
+            assert (np.bincount(ref_loc_ray, minlength=len(origins))[hit_rays] == 2).all()
+        locations, loc_ray, loc_tri = ours.intersects_location(origins, directions)
+        assert _pairs(loc_tri, loc_ray) == found
+        with_locations = ours.intersects_id(origins, directions, return_locations=True)
+        for x, y in zip(with_locations, (tri, ray, locations), strict=True):
+            np.testing.assert_array_equal(x, y)
+        # first hits: the nearest crossing's triangle (Embree's own nearest-hit query names any
+        # of them: these rays go through the exact path)
         first = ours.intersects_first(origins, directions)
         for r in hit_rays:
             rows = np.flatnonzero(ref_ray == r)
@@ -182,16 +218,44 @@ def test_edge_and_vertex_hits_count_as_ray_triangle_counts_them(scale):
             assert first[r] == ref_tri[rows][nearest].min()
 
 
-def test_rays_along_faces_and_edges_count_as_ray_triangle():
+def test_a_ray_touching_a_silhouette_edge_meets_the_surface_once():
+    """A ray through an edge where the surface does not cross (a box's edge, from outside, the
+    ray between the two faces' planes): both triangles there pass ray_triangle's float64 test
+    and the ray stays outside; the point is reported once, as intersects_first names it."""
+    box = trimesh.creation.box()  # [-0.5, 0.5]^3
+    # through the edge x = y = 0.5 at z = 0.1 (its midpoint is at z = 0), leaving the box
+    # outside on both sides: direction (1, -1, 0) grazes the corner between the two faces
+    origins = np.array([[0.0, 1.0, 0.1], [0.25, 0.75, -0.2]])
+    directions = np.array([[1.0, -1.0, 0.0], [1.0, -1.0, 0.0]])
+    ref_tri, ref_ray, ref_distance = _narrow_phase(box, origins, directions)
+    assert np.bincount(ref_ray, minlength=2).tolist() == [2, 2]  # both faces, one point each
+    faces = box.face_normals[ref_tri]
+    assert (np.einsum("ij,ij->i", faces, directions[ref_ray]) != 0).all()
+    expected = _pairs(*_crossings(box, ref_tri, ref_ray, ref_distance))
+    assert len(expected) == 2
+    ours = RayMeshIntersector(box)
+    assert _pairs(*ours.intersects_id(origins, directions)) == expected
+    locations, loc_ray, loc_tri = ours.intersects_location(origins, directions)
+    assert _pairs(loc_tri, loc_ray) == expected
+    np.testing.assert_allclose(locations[:, :2], [[0.5, 0.5]] * 2, atol=1e-12)
+    first = ours.intersects_first(origins, directions)
+    assert _pairs(first, np.arange(2)) == expected
+
+
+def test_rays_along_faces_and_edges_count_once_per_crossing():
     """Colinear cases: a ray in the plane of a face (it meets that face at |cos| = 0, which
-    trimesh's planes_lines does not count) and a ray along an edge of the box."""
+    trimesh's planes_lines does not count) and a ray along an edge of the box: the faces it
+    crosses are ray_triangle's, one hit per crossing."""
     box = trimesh.creation.box()  # [-0.5, 0.5]^3
     origins = np.array([[-2.0, 0.5, 0.3], [-2.0, 0.5, 0.5], [0.3, -2.0, -0.5], [-2.0, 0.2, 0.1]])
     directions = np.array([[1.0, 0, 0], [1.0, 0, 0], [0, 1.0, 0], [1.0, 0, 0]])
     ours = RayMeshIntersector(box)
     reference = ray_triangle.RayMeshIntersector(box)
     tri, ray = ours.intersects_id(origins, directions)
-    assert _pairs(tri, ray) == _pairs(*reference.intersects_id(origins, directions))
+    ref_tri, ref_ray, ref_distance = _narrow_phase(box, origins, directions)
+    assert _pairs(ref_tri, ref_ray) == _pairs(*reference.intersects_id(origins, directions))
+    assert _pairs(tri, ray) == _pairs(*_crossings(box, ref_tri, ref_ray, ref_distance))
+    assert np.bincount(ray, minlength=4).tolist() == [2, 2, 2, 2]  # in at x = -0.5, out at 0.5
     assert np.bincount(ray, minlength=4)[3] == 2  # the control ray: in one side, out the other
     # no face the rays run along is ever reported
     along = np.abs(np.einsum("ij,ij->i", box.face_normals[tri], directions[ray])) <= 1e-5
@@ -235,6 +299,31 @@ def test_max_hits_keeps_the_nearest_hits_in_trimesh_order():
     assert np.bincount(all_ray).tolist() == [10, 10, 10]
     assert len(all_tri) == 30
     assert tri.dtype == np.int64 and ray.dtype == np.int64 and locations.dtype == np.float64
+
+
+def test_max_hits_counts_crossings_through_crowded_vertices():
+    """A ray through the centre of a cylinder's caps meets 32 triangles at each, one crossing
+    each: max_hits = 2 must still find the far cap, however many hits the near one fills the
+    trace's room with (closed form: z = -2 and 2). The nearest max_hits crossings, at every
+    max_hits, and with the other rays of the batch unchanged."""
+    mesh = trimesh.creation.cylinder(radius=1.0, height=4.0, sections=32)
+    origins = np.array([[0.0, 0.0, -5.0], [0.3, 0.2, -5.0], [0.0, 0.0, 5.0], [0.0, 0.0, 0.0]])
+    directions = np.tile([0.0, 0.0, 1.0], (4, 1))
+    directions[2] = [0.0, 0.0, -1.0]
+    ours = RayMeshIntersector(mesh)
+    for max_hits in (1, 2, 3, 100):
+        tri, ray, locations = ours.intersects_id(origins, directions, max_hits=max_hits,
+                                                 return_locations=True)  # fmt: skip
+        expected = [min(max_hits, 2)] * 3 + [1]
+        assert np.bincount(ray, minlength=4).tolist() == expected
+        z = {r: locations[ray == r, 2].tolist() for r in range(4)}
+        np.testing.assert_allclose(z[0], [-2.0, 2.0][:max_hits], atol=1e-12)
+        np.testing.assert_allclose(z[1], [-2.0, 2.0][:max_hits], atol=1e-12)
+        np.testing.assert_allclose(z[2], [2.0, -2.0][:max_hits], atol=1e-12)
+        np.testing.assert_allclose(z[3], [2.0], atol=1e-12)
+        ranks = [list(ray[:k]).count(r) for k, r in enumerate(ray)]
+        assert ranks == sorted(ranks)  # depth-major, as trimesh orders hits
+        assert (np.abs(np.einsum("ij,ij->i", mesh.face_normals[tri], directions[ray])) > 0.99).all()
 
 
 def test_order_and_dtypes_match_trimeshs_embree_backend():
@@ -334,19 +423,30 @@ def test_install_makes_new_meshes_use_it():
         trimesh_ray.install()
         mesh = trimesh.creation.box()
         assert isinstance(mesh.ray, RayMeshIntersector)
-        assert not isinstance(trimesh.Trimesh(mesh.vertices, mesh.faces, use_embree=False).ray,
-                              RayMeshIntersector)  # fmt: skip
+        assert isinstance(mesh.nearest, ProximityQuery)
+        plain = trimesh.Trimesh(mesh.vertices, mesh.faces, use_embree=False)
+        assert not isinstance(plain.ray, RayMeshIntersector)
+        assert not isinstance(plain.nearest, ProximityQuery)
         assert mesh.contains([[0, 0, 0], [2, 0, 0]]).tolist() == [True, False]
+        # the box's closest point to (2, 0.1, 0.2) is (0.5, 0.1, 0.2), 1.5 away (closed form)
+        closest, distance, _ = mesh.nearest.on_surface([[2.0, 0.1, 0.2]])
+        np.testing.assert_allclose(closest, [[0.5, 0.1, 0.2]], atol=1e-12)
+        np.testing.assert_allclose(distance, [1.5], atol=1e-12)
+        unpickled = pickle.loads(pickle.dumps(mesh)).nearest  # the Embree scene rebuilt
+        assert isinstance(unpickled, ProximityQuery)
+        np.testing.assert_array_equal(unpickled.on_surface([[2.0, 0.1, 0.2]])[0], closest)
     finally:
         trimesh_ray.uninstall()
     assert not isinstance(trimesh.creation.box().ray, RayMeshIntersector)
+    assert not isinstance(trimesh.creation.box().nearest, ProximityQuery)
 
 
 @pytest.mark.parametrize("scale", [1e-4, 1.0, 1e8])
 @pytest.mark.parametrize("gap", [0.0, 3e-7, 3e-6])
 def test_close_and_coincident_sheets_each_hit_once(scale, gap):
     """Three sheets ``gap`` apart (relative to the mesh's size; 0: coincident faces) and one
-    more far away: every line through them hits 4 sheets, as ray_triangle counts. (trimesh
+    more far away: every line through them hits 4 sheets, as ray_triangle counts, one hit a
+    sheet where it passes through an edge. (trimesh
     5.2's embree backend steps past each hit by 1e-6 of the mesh's size and finds 2 here
     whenever the gap is below that: measured at every scale.)"""
     corners = np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
@@ -361,6 +461,16 @@ def test_close_and_coincident_sheets_each_hit_once(scale, gap):
     tri, ray = ours.intersects_id(origins, directions)
     assert np.bincount(ray, minlength=300).tolist() == [4] * 300
     assert _pairs(tri, ray) == _pairs(*_narrow_phase(mesh, origins, directions)[:2])
+    # straight up through the sheets' diagonal edge (x = y): two triangles of each sheet meet
+    # there, one crossing a sheet, coincident sheets included
+    along = np.linspace(-0.8, 0.8, 50)
+    origins = np.column_stack([along, along, np.full(50, -1.0)]) * scale
+    directions = np.tile([0.0, 0.0, 1.0], (50, 1))
+    tri, ray = ours.intersects_id(origins, directions)
+    ref_tri, ref_ray, ref_distance = _narrow_phase(mesh, origins, directions)
+    assert np.bincount(ref_ray, minlength=50).tolist() == [8] * 50
+    assert np.bincount(ray, minlength=50).tolist() == [4] * 50
+    assert _pairs(tri, ray) == _pairs(*_crossings(mesh, ref_tri, ref_ray, ref_distance))
 
 
 @pytest.mark.parametrize("scale", [1e-4, 1.0, 1e8])
@@ -415,11 +525,12 @@ def test_vertex_positions_are_grouped_as_numpy_unique_groups_them() -> None:
     assert len(set(ids[:10])) == 1
 
 
-def test_settled_overflowing_and_edge_rays_in_one_batch_match_ray_triangle():
+def test_settled_overflowing_and_edge_rays_in_one_batch_match_the_brute_force():
     """One batch mixing the multi-hit query's three routes: rays clear of edges (settled in the
     compiled pass), rays through edge midpoints (decided in float64 with their neighbours) and
     rays through ten sheets (more hits than the first trace has room for: traced again). Every
-    (ray, triangle) pair must be ray_triangle's, each ray's hits nearest first, depth-major."""
+    (ray, triangle) pair must be ray_triangle's, one per crossing, each ray's hits nearest
+    first, depth-major."""
     corners = np.array([[-2.0, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]])
     sheets = trimesh.Trimesh(np.vstack([corners + np.array([0, 0, z]) for z in range(10)]),
                              np.vstack([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * z
@@ -436,10 +547,11 @@ def test_settled_overflowing_and_edge_rays_in_one_batch_match_ray_triangle():
                             random_directions])  # fmt: skip
     ours = RayMeshIntersector(mesh)
     _, ray, locations = ours.intersects_id(origins, directions, return_locations=True)
-    ref_tri, ref_ray, _ = _narrow_phase(mesh, origins, directions)
+    ref_tri, ref_ray, ref_distance = _narrow_phase(mesh, origins, directions)
     assert np.bincount(ray, minlength=len(origins))[:3].tolist() == [10, 10, 10]
     tri_all, ray_all = ours.intersects_id(origins, directions)
-    assert _pairs(tri_all, ray_all) == _pairs(ref_tri, ref_ray)
+    assert _pairs(tri_all, ray_all) == _pairs(*_crossings(mesh, ref_tri, ref_ray, ref_distance))
+    assert np.bincount(ray_all, minlength=len(origins))[3:63].tolist() == [2] * 60  # the ball
     ranks = np.zeros(len(ray), int)
     seen = np.zeros(len(origins), int)
     for k, r in enumerate(ray):

@@ -4,8 +4,11 @@ serve the browser demo. ``main`` runs it; each command lives in a module of its 
 
 from __future__ import annotations
 
+import os
 import sys
 import traceback
+import warnings
+from contextlib import contextmanager
 
 from embree_rt.cli.errors import BUG_REPORT, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED
 from embree_rt.cli.info import command_info
@@ -24,6 +27,8 @@ __all__ = [
     "main",
 ]
 
+# What a process killed by SIGPIPE exits with (128 + 13), as `yes | head` does.
+EXIT_BROKEN_PIPE = 141
 COMMANDS = {
     "render": command_render,
     "random": command_random,
@@ -35,15 +40,24 @@ COMMANDS = {
 def main(argv: list[str] | None = None) -> int:
     """Run the command ``argv`` (default: the process's arguments); returns the exit code."""
     parser = build_parser()
+    if not (sys.argv[1:] if argv is None else argv):  # bare `embree-rt`: what it can do
+        print(parser.format_help(), end="", file=sys.stderr)
+        return EXIT_BAD_INPUT
     try:
         args = parser.parse_args(argv)
     except SystemExit as exit_:
         return int(exit_.code or 0)
     try:
-        COMMANDS[args.command](args)
+        with one_line_warnings():
+            COMMANDS[args.command](args)
+        sys.stdout.flush()  # here, where a closed pipe is caught, not at the interpreter's exit
     except KeyboardInterrupt:
         print("embree-rt: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # `embree-rt info scene.toml | head`: the reader had enough
+        # Python would flush stdout again at exit and fail once more: point it at nothing.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except InputError as error:  # scene files, flags, the user's files: one line
         print(f"embree-rt: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -53,3 +67,22 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BUG
     return 0
 
+
+
+@contextmanager
+def one_line_warnings():
+    """Print each ``InputWarning`` (what a file asks for that is rendered differently or left
+    out) as one line, ``embree-rt: warning: MESSAGE``; other warnings as Python prints them."""
+    from embree_rt.scene.errors import InputWarning
+
+    with warnings.catch_warnings():
+        shown = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, InputWarning):
+                print(f"embree-rt: warning: {message}", file=sys.stderr)
+            else:
+                shown(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield

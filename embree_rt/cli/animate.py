@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from embree_rt.errors import InputError
+from embree_rt.errors import InputError, install_hint
 from embree_rt.scene.animation import camera_at
 from embree_rt.scene.model import Scene
 
@@ -74,8 +74,10 @@ def render_frames_command(
 ) -> None:
     """``embree-rt render|random`` for an animated scene or on a cluster (``--cluster``,
     ``--scheduler``): render the frames and write each to its file. ``source`` is what workers
-    make the scene from: the scene file's path, or the random field's ``FieldPlan``; ``made``
+    make the scene from: the scene file's path, the random field's ``FieldPlan``, or the
+    ``Scene`` itself (scattered to them); ``made``
     as in the command's summary line."""
+    from embree_rt.cli.checks import output_encoding
     from embree_rt.film import check_output_path, save_image
 
     animation = scene.animation
@@ -90,9 +92,17 @@ def render_frames_command(
         )
     frames = frame_range(args.frames, animation.frames) if animation is not None else None
     paths = output_paths(args.output, frames)
+    encoding = output_encoding(args)._replace(look=scene.render.look())
+    if frames is not None:  # the directories a pattern names (shots/f_{frame:04d}.png) are made
+        for directory in sorted({Path(path).parent for path in paths.values()}):
+            try:
+                directory.mkdir(parents=True, exist_ok=True)
+            except OSError as error:
+                raise InputError(f"-o: {args.output}: cannot make the directory {directory}: "
+                                 f"{error.strerror or error}") from None  # fmt: skip
     for path in paths.values():
         try:
-            check_output_path(path)
+            check_output_path(path, encoding)
         except (ValueError, RuntimeError) as error:
             raise InputError(str(error)) from None
     redo = args.overwrite or frames is None
@@ -104,11 +114,11 @@ def render_frames_command(
     def write(frame: int | None, image: np.ndarray) -> None:
         path = paths[frame]
         try:
-            save_image(image, path)
+            save_image(image, path, encoding)
         except OSError as error:
             raise InputError(f"{path}: cannot write: {error.strerror or error}") from None
 
-    if not cameras:
+    if not cameras:  # nothing to do: nothing is written, transforms.json included
         if not args.quiet:
             print(f"embree-rt: all {len(paths)} frames are on disk (--overwrite renders them "
                   f"again) -> {args.output}", file=sys.stderr)  # fmt: skip
@@ -119,6 +129,8 @@ def render_frames_command(
     else:
         rays, render_s, where = _render_on_cluster(scene, args, settings, cameras, write, source)
     elapsed = time.perf_counter() - started
+    if frames is not None:
+        write_transforms(paths, scene, settings)
     if not args.quiet:
         skipped = len(paths) - len(todo)
         setup = "BVH" if where == "locally" else "cluster"
@@ -130,6 +142,31 @@ def render_frames_command(
             f"{rays / max(render_s, 1e-9) / 1e6:.1f} Mrays/s -> {args.output}",
             file=sys.stderr,
         )
+
+
+def write_transforms(paths: dict, scene: Scene, settings) -> Path:
+    """Write ``transforms.json`` (``aovs.nerf_transforms``) for an animation's frame files
+    ``paths`` (frame -> file) into the directory that holds them all; returns its path."""
+    import json
+    import os
+
+    from embree_rt.aovs import nerf_transforms
+    from embree_rt.camera import camera_frame
+    from embree_rt.film import write_atomically
+
+    folder = Path(os.path.commonpath([Path(path).resolve().parent for path in paths.values()]))
+    views = [(Path(path).resolve(), camera_frame(camera_at(scene.camera, scene.animation, f),
+                                                 settings.width, settings.height))
+             for f, path in paths.items()]  # fmt: skip
+    text = (json.dumps(nerf_transforms(views, folder), indent=2) + "\n").encode()
+    target = folder / "transforms.json"
+    if target.is_file() and target.read_bytes() == text:
+        return target  # a rerun with every frame on disk touches nothing
+    try:
+        write_atomically([(target, lambda handle: handle.write(text))])
+    except OSError as error:
+        raise InputError(f"{target}: cannot write: {error.strerror or error}") from None
+    return target
 
 
 def _render_locally(scene, args, settings, cameras, write: Callable) -> tuple[int, float, str]:
@@ -160,17 +197,28 @@ def _render_on_cluster(
     except ImportError as error:
         flag = "--cluster" if args.cluster is not None else "--scheduler"
         raise InputError(
-            f"{flag}: needs Dask's distributed ({error}): pip install 'embree-rt[distributed]'"
+            f"{flag}: needs Dask's distributed ({error}): "
+            + install_hint("distributed", "distributed")
         ) from None
     with _quiet_dask(), distributed.connect(args.cluster, args.scheduler) as client:
         if isinstance(source, Path):  # every worker loads the file itself
             source = distributed.SceneFile(str(source.resolve()))
-        else:  # every worker generates the field itself
+        elif not isinstance(source, Scene):  # a FieldPlan: every worker generates the field
             source = distributed.FieldRecipe(source)
-        renderer = distributed.ClusterRenderer(source, client, spheres=args.spheres)
+        if args.partition is None:
+            renderer = distributed.ClusterRenderer(source, client, spheres=args.spheres)
+        else:  # data-parallel: each worker holds bricks of the scene
+            from embree_rt.bricks.cluster import PartitionedRenderer
+
+            renderer = PartitionedRenderer(
+                source, client, partition=args.partition, spheres=args.spheres
+            )
         total = settings.width * settings.height * settings.spp * len(cameras)
-        with distributed.progress_bar(total, args.quiet) as show:
-            renderer.render_frames(settings, cameras, write, progress=show)
+        try:
+            with distributed.progress_bar(total, args.quiet) as show:
+                renderer.render_frames(settings, cameras, write, progress=show)
+        finally:
+            renderer.release()
         workers = len(client.nthreads())
     where = f"on {workers} Dask worker{'s' if workers != 1 else ''}"
     return renderer.stats.total_rays, renderer.stats.render_s, where

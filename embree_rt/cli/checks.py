@@ -8,14 +8,24 @@ import argparse
 from embree_rt.cli.errors import UsageError
 
 
-def check_output(path: str, aovs: tuple[str, ...] | None = None) -> None:
-    """The image path's checks (``film.check_output_path``), and those of the AOV files beside
-    it, as bad input: every ValueError it raises is about the path, its RuntimeError about
-    OpenEXR missing for ``.exr``."""
-    from embree_rt.film import check_output_path
+def output_encoding(args: argparse.Namespace):
+    """The ``film.Encoding`` of ``--bit-depth`` and ``--quality``."""
+    from embree_rt.film import Encoding
+
+    return Encoding(bit_depth=args.bit_depth, quality=args.quality)
+
+
+def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) -> None:
+    """The image path's checks (``film.check_output_path``, with the ``film.Encoding``), and
+    those of the AOV files beside it, as bad input: every ValueError it raises is about the
+    path, its RuntimeError about OpenEXR missing for ``.exr``."""
+    from embree_rt.film import Encoding, check_image_name, check_output_path
 
     try:
-        check_output_path(path)
+        if "{frame" in path:  # its directories are made, and checked, once the frames are known
+            check_image_name(path, encoding or Encoding())
+            return
+        check_output_path(path, encoding or Encoding())
         if aovs:
             from embree_rt.aovs import aov_paths
 
@@ -50,7 +60,11 @@ def memory_key(error, args: argparse.Namespace) -> str:
     """The input to blame for a ``MemoryBudgetError``: the flags or the scene file's keys."""
     scene_file = getattr(args, "scene", None)
     if error.largest == "image":
-        if scene_file is None or args.width is not None or args.height is not None:
+        size = ("render.width", "render.height")
+        flags = [setting.origin for setting in args.settings if setting.key in size]
+        if flags:
+            return ", ".join(flags)
+        if scene_file is None:
             return "--width, --height"
         return f"{scene_file}: render.width, render.height"
     return "--count" if scene_file is None else f"{scene_file}: spheres"

@@ -14,10 +14,10 @@ from embree_rt.cli.checks import check_library
 def command_info(args: argparse.Namespace) -> None:
     from embree_rt import budget
     from embree_rt.aovs import id_listing
+    from embree_rt.cli.scene_input import read_scene
     from embree_rt.geometry import SceneGeometry, sphere_kind
-    from embree_rt.scene import load_scene
 
-    scene = load_scene(args.scene)
+    scene, _ = read_scene(args)
     check_library()
     resident_before = resident_bytes()
     started = time.perf_counter()
@@ -47,11 +47,14 @@ def command_info(args: argparse.Namespace) -> None:
         arrayed=in_arrays - sphere_instances,
     )
     print(f"scene:      {args.scene}")
+    for note in scene.notes:  # what was chosen for a mesh file rendered on its own
+        print(f"note:       {note}")
     print(f"spheres:    {spheres:,}")
-    print(f"meshes:     {placements:,} placements of {len(distinct):,} distinct meshes")
+    meshes = count(len(distinct), "distinct mesh")
+    print(f"meshes:     {count(placements, 'placement')} of {meshes}")
     print(f"triangles:  {unique_triangles:,} stored, {triangles:,} placed")
     print(f"instances:  {instances:,}")
-    print(f"arrays:     {arrays:,} instance arrays holding {in_arrays:,} instances")
+    print(f"arrays:     {count(arrays, 'instance array')} holding {count(in_arrays, 'instance')}")
     print(f"lights:     {len(scene.lights)}")
     print(f"materials:  {len(scene.materials)}")
     floor = f"y = {scene.floor.height:g}" if scene.floor else "none"
@@ -60,14 +63,28 @@ def command_info(args: argparse.Namespace) -> None:
         print("bounds:     empty")
     else:
         low, high = bounds
-        print(f"bounds:     {np.round(low, 3).tolist()} .. {np.round(high, 3).tolist()}")
+        print(f"bounds:     {point(low)} .. {point(high)}")
     print(f"BVH build:  {build_s:.3f} s")
     print(
         f"memory:     ~{estimate / 2**20:.1f} MiB (estimate), "
-        f"{resident_growth / 2**20:.1f} MiB measured (resident set growth while building)"
+        # (the resident set can shrink meanwhile, as freed pages go back: growth is >= 0)
+        f"{max(resident_growth, 0) / 2**20:.1f} MiB measured (resident set growth while "
+        "building)"
     )
     for line in id_listing(scene, floor_material):
         print(line)
+
+
+def count(number: int, noun: str) -> str:
+    """``number`` with ``noun``, plural unless one: "1 distinct mesh", "2 instance arrays"."""
+    plural = noun + ("es" if noun.endswith(("sh", "ch", "s", "x")) else "s")
+    return f"{number:,} {noun if number == 1 else plural}"
+
+
+def point(values: np.ndarray) -> str:
+    """Coordinates to 6 significant digits: float32 scene data without its binary noise
+    (3.1, not 3.0999999046325684)."""
+    return "[" + ", ".join(f"{float(v):.6g}" for v in values) + "]"
 
 
 def resident_bytes() -> int:

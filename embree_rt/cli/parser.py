@@ -9,15 +9,66 @@ from embree_rt.cli.errors import EXIT_BAD_INPUT
 
 # geometry.SPHERE_MODES, spelled out so that --help does not load Embree and numba.
 SPHERE_CHOICES = ("analytic", "point", "mesh")
+SCENE_HELP = (
+    "scene or mesh file: a .toml or .json scene, or a mesh (.obj, .ply, .stl, .off, .glb, "
+    ".gltf) shown on its own, from its own camera and lights or framed and lit by default"
+)
+SCENE_DEFAULT = "; default: the scene's"
+NO_FLOOR_HELP = "leave out the floor (a mesh file's, or the scene file's)"
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Help that ends each flag's text with its default, where it has one worth saying."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        quiet = (None, False, argparse.SUPPRESS)
+        if "%(default)" in text or any(action.default is value for value in quiet):
+            return text
+        return f"{text} (default: %(default)s)"
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line on stderr and exit code 2."""
+    """argparse, but a usage error is one line on stderr and exit code 2, and a mistyped flag
+    or command gets a "did you mean"."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+        self.argv: list[str] = []
+
+    def parse_known_args(self, args=None, namespace=None):
+        self.argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         message = message.removeprefix("argument ")
-        print(f"embree-rt: error: {message}", file=sys.stderr)
+        print(f"embree-rt: error: {message}{self.suggestion(message)}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT)
+
+    def suggestion(self, message: str) -> str:
+        """" (did you mean ...?)" for the first unrecognized flag close to one the command
+        takes, or an invalid command close to one; "" otherwise."""
+        import difflib
+        import re
+
+        commands = next((action.choices for action in self._actions
+                         if isinstance(action, argparse._SubParsersAction)), {})  # fmt: skip
+        if message.startswith("command: invalid choice:"):
+            known = list(commands)
+            words = re.findall(r"invalid choice: '([^']*)'", message)
+        elif message.startswith("unrecognized arguments:"):
+            command = next((commands[word] for word in self.argv if word in commands), self)
+            known = [flag for action in command._actions for flag in action.option_strings]
+            words = [word.split("=")[0] for word in message.split(":", 1)[1].split()
+                     if word.startswith("-")]  # fmt: skip
+        else:
+            return ""
+        for word in words:
+            close = difflib.get_close_matches(word, known, n=1, cutoff=0.6)
+            if close:
+                return f" (did you mean {close[0]!r}?)"
+        return ""
 
 
 def int_at_least(low: int):
@@ -46,11 +97,78 @@ def aov_list(text: str) -> tuple[str, ...]:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
-def add_render_flags(parser: argparse.ArgumentParser) -> None:
-    positive, non_negative = int_at_least(1), int_at_least(0)
+class SetKey(argparse.Action):
+    """Appends a ``settings.Setting`` to ``args.settings``, in the order the flags come:
+    ``--set KEY=VALUE``, or a flag that stands for one key (``key``): ``--width 32`` is
+    ``--set render.width=32``. Values are checked when the scene is read, by the loader."""
+
+    def __init__(self, option_strings, dest, key: str | None = None, **kwargs) -> None:
+        self.key = key
+        super().__init__(option_strings, "settings", default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        from embree_rt.scene.settings import Setting, parse_assignment, parse_value
+
+        if self.key is None:
+            try:
+                setting = parse_assignment(values)
+            except ValueError as error:
+                raise argparse.ArgumentError(self, str(error)) from None
+        else:
+            words = values if isinstance(values, list) else [values]
+            value = [parse_value(word) for word in words] if self.nargs else parse_value(values)
+            setting = Setting(self.key, value, " ".join([option_string, *words]))
+        namespace.settings = (*namespace.settings, setting)
+
+
+def add_setting_flags(parser: argparse.ArgumentParser) -> None:
+    """``--set`` and the flags that stand for one scene key each."""
+    parser.set_defaults(settings=())  # (before the flags: theirs is SUPPRESS, not shown)
     parser.add_argument(
-        "-o", "--output", required=True, help="image to write: .png, .npy, .npz or .exr"
-    )
+        "-D", "--set", action=SetKey, metavar="KEY=VALUE",
+        help="set any scene key, named as in the scene file: camera.fov=35, "
+        "lights[0].intensity=2, materials.gold.shininess=200, render.max_depth=3 (the value is "
+        "read as TOML, else as a string; repeatable, the last wins)",
+    )  # fmt: skip
+    shortcuts = {
+        "--width": ("render.width", "image width in pixels (render.width)"),
+        "--height": ("render.height", "image height in pixels (render.height)"),
+        "--spp": ("render.spp", "samples per pixel (render.spp)"),
+        "--max-depth": ("render.max_depth", "bounces of reflection and refraction "
+                        "(render.max_depth)"),
+        "--seed": ("render.seed", "the sampler's seed (render.seed); random: the field's too"),
+        "--fov": ("camera.fov", "vertical field of view in degrees (camera.fov)"),
+        "--exposure": ("render.exposure", "stops of exposure before the tone map, e.g. 1 "
+                       "doubles the light (render.exposure)"),
+    }  # fmt: skip
+    for flag, (key, text) in shortcuts.items():
+        metavar = "EV" if flag == "--exposure" else "N"
+        parser.add_argument(flag, action=SetKey, key=key, metavar=metavar,
+                            help=text + SCENE_DEFAULT)  # fmt: skip
+    from embree_rt.film import TONEMAPS, TRANSFERS
+
+    parser.add_argument("--tonemap", action=SetKey, key="render.tonemap", choices=TONEMAPS,
+                        help="the tone map (render.tonemap)" + SCENE_DEFAULT + ", else "
+                        "reinhard")  # fmt: skip
+    parser.add_argument("--transfer", action=SetKey, key="render.transfer", choices=TRANSFERS,
+                        help="the display curve: a 2.2 power, or sRGB's piecewise curve "
+                        "(render.transfer)" + SCENE_DEFAULT + ", else gamma2.2")  # fmt: skip
+    for flag, key in (("--camera-position", "camera.position"), ("--look-at", "camera.look_at")):
+        parser.add_argument(flag, action=SetKey, key=key, nargs=3, metavar=("X", "Y", "Z"),
+                            help=f"the camera's {key.split('.')[1]} ({key})" + SCENE_DEFAULT)
+
+
+def add_render_flags(parser: argparse.ArgumentParser) -> None:
+    positive = int_at_least(1)
+    parser.add_argument(
+        "-o", "--output", required=True, metavar="IMAGE",
+        help="image to write: .png, .jpg, .tif, .webp (tone-mapped), .npy, .npz or .exr "
+        "(linear float32)",
+    )  # fmt: skip
+    parser.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
+                        help="bits per channel of a .png or .tif")  # fmt: skip
+    parser.add_argument("--quality", type=int_at_least(1), metavar="Q",
+                        help="1 to 100, of a .jpg or .webp (default: 90)")  # fmt: skip
     parser.add_argument(
         "--aov",
         type=aov_list,
@@ -58,12 +176,9 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         help="also write AOVs, any of depth,normal,albedo,object_id,material_id: in the .npz or "
         ".exr, or one file each beside a .png or .npy",
     )
-    parser.add_argument("--width", type=positive)
-    parser.add_argument("--height", type=positive)
-    parser.add_argument("--spp", type=positive, help="samples per pixel")
-    parser.add_argument("--max-depth", type=non_negative)
-    parser.add_argument("--seed", type=non_negative)
-    parser.add_argument("--threads", type=positive, help="default: all cores")
+    add_setting_flags(parser)
+    parser.add_argument("-t", "--threads", "--nthreads", type=positive, metavar="N",
+                        help="worker threads (default: all cores)")  # fmt: skip
     parser.add_argument(
         "--spheres",
         choices=SPHERE_CHOICES,
@@ -75,6 +190,17 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
     cluster = parser.add_mutually_exclusive_group()  # embree_rt/distributed.py
     cluster.add_argument("--cluster", metavar="local:N", help="render on N local Dask workers")
     cluster.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="render on a Dask cluster")
+    parser.add_argument(
+        "--partition",
+        type=positive,
+        metavar="K",
+        help="with --cluster or --scheduler: cut the scene into K spatial bricks, each held by "
+        "one worker (scenes bigger than one machine's memory; shading on this machine)",
+    )
+
+
+def add_animation_flags(parser: argparse.ArgumentParser) -> None:
+    """The flags of a scene file's [animation] (not of a random field, which has none)."""
     parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
     parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
 
@@ -84,12 +210,18 @@ def build_parser() -> argparse.ArgumentParser:
         prog="embree-rt",
         description="Whitted-style ray tracing of scenes with very many objects, on Embree.",
     )
+    from embree_rt.version import __version__
+
+    parser.add_argument("--version", action="version", version=f"embree-rt {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
-    render = commands.add_parser("render", help="render a scene file (TOML or JSON)")
-    render.add_argument("scene", help="scene file")
+    render = commands.add_parser("render", help="render a scene file or a mesh file")
+    render.add_argument("scene", help=SCENE_HELP)
+    render.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
     add_render_flags(render)
+    add_animation_flags(render)
     random = commands.add_parser("random", help="render a random sphere field of N spheres")
-    random.add_argument("--count", type=int_at_least(1), required=True)
+    random.add_argument("--count", type=int_at_least(1), required=True, metavar="N",
+                        help="spheres in the field")  # fmt: skip
     random.add_argument("--save-scene", help="also write the generated scene to this file")
     random.add_argument(
         "--instance",
@@ -98,17 +230,15 @@ def build_parser() -> argparse.ArgumentParser:
         "floor, turned at random about y), all through one Embree instance array",
     )
     add_render_flags(random)
+    random.set_defaults(frames=None, overwrite=False)
     info = commands.add_parser("info", help="describe a scene: objects, bounds, build time")
-    info.add_argument("scene", help="scene file")
-    info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic")
+    info.add_argument("scene", help=SCENE_HELP)
+    info.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
+    info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic",
+                      help="how spheres enter the BVH, as render's --spheres")  # fmt: skip
+    add_setting_flags(info)
     serve = commands.add_parser("serve", help="the 2D ray demo and a live preview in a browser")
     serve.add_argument("scene", nargs="?", help="scene file (default: the showcase)")
     serve.add_argument("--host", default="127.0.0.1", help="address to listen on")
     serve.add_argument("--port", type=int_at_least(0), default=8000, help="0: any free port")
     return parser
-
-
-def render_overrides(args: argparse.Namespace) -> dict[str, int | None]:
-    """The render settings the flags override (None: the scene's), for
-    ``RenderSettings.with_overrides``."""
-    return {name: getattr(args, name) for name in ("width", "height", "spp", "max_depth", "seed")}

@@ -10,18 +10,23 @@ from pathlib import Path
 
 import numpy as np
 
-from embree_rt.cli.checks import check_library, check_output, memory_key, writing
+from embree_rt.cli.checks import (
+    check_library,
+    check_output,
+    memory_key,
+    output_encoding,
+    writing,
+)
 from embree_rt.cli.errors import UsageError
-from embree_rt.cli.parser import render_overrides
 
 
 def command_render(args: argparse.Namespace) -> None:
-    from embree_rt.scene import load_scene
+    from embree_rt.cli.scene_input import read_scene
 
-    check_output(args.output, args.aov)
+    check_output(args.output, args.aov, output_encoding(args))
     started = time.perf_counter()
-    scene = load_scene(args.scene)
-    render_and_save(scene, args, ("load", time.perf_counter() - started), Path(args.scene))
+    scene, source = read_scene(args)
+    render_and_save(scene, args, ("load", time.perf_counter() - started), source)
 
 
 def command_random(args: argparse.Namespace) -> None:
@@ -33,25 +38,36 @@ def command_random(args: argparse.Namespace) -> None:
     )
     from embree_rt.scene.writer import save_scene
 
-    check_output(args.output, args.aov)
+    check_output(args.output, args.aov, output_encoding(args))
     if args.save_scene is not None:
         target = Path(args.save_scene)
         if target.suffix.lower() not in (".toml", ".json"):
             raise UsageError(f"--save-scene: {target}: expected a .toml or .json file name")
         if not target.parent.is_dir():
             raise UsageError(f"--save-scene: {target}: directory {target.parent} does not exist")
+    from embree_rt.cli.scene_input import only_render_settings
+    from embree_rt.scene.model import Scene
+    from embree_rt.scene.settings import apply_to_scene
+
     started = time.perf_counter()
+    made_from = "the random field"
+    # The field's seed is the render's (--seed, --set render.seed), checked as the scene's is.
+    seeds = [setting for setting in args.settings if setting.key == "render.seed"]
+    probe = Scene()
+    apply_to_scene(probe, seeds, made_from)
     try:
-        plan = plan_field(args.count, seed=0 if args.seed is None else args.seed)
+        plan = plan_field(args.count, seed=probe.render.seed)
     except FieldParameterError as error:  # the flags' values, refused by the field itself
         raise UsageError(f"--{error.name}: {error.problem}") from None
     scene = field_scene(plan)
-    scene.render = scene.render.with_overrides(**render_overrides(args))
+    apply_to_scene(scene, args.settings, made_from)
     mesh = None if args.instance is None else instance_mesh(args.instance)
-    require_memory_for_field(plan.count, scene.render, args)
     # A cluster's workers generate a plain field themselves, from its plan; a field of
-    # instances, or one to be saved, is made here.
-    on_workers = bool(args.cluster or args.scheduler) and args.save_scene is None and mesh is None
+    # instances, one to be saved, or one changed beyond its render settings is made here.
+    from_plan = mesh is None and only_render_settings(args.settings)
+    on_workers = bool(args.cluster or args.scheduler) and args.save_scene is None and from_plan
+    if not (on_workers and args.partition):  # in bricks, each worker checks its own
+        require_memory_for_field(plan.count, scene.render, args)
     if not on_workers:
         add_field_spheres(scene, plan)
     if mesh is not None:
@@ -61,19 +77,26 @@ def command_random(args: argparse.Namespace) -> None:
     generate_s = time.perf_counter() - started
     if args.save_scene is not None:
         writing(args.save_scene, lambda: save_scene(scene, args.save_scene))
-    render_and_save(scene, args, ("generate", generate_s), None if mesh is not None else plan)
+    render_and_save(scene, args, ("generate", generate_s), plan if from_plan else scene)
 
 
 def render_and_save(
     scene, args: argparse.Namespace, made: tuple[str, float], source: object = None
 ) -> None:
-    """Render ``scene`` with the flags' overrides and save it; ``made`` is how the scene was
+    """Render ``scene`` (the settings already applied) and save it; ``made`` is how the scene was
     made and the seconds it took ("generate" or "load"), for the summary line; ``source`` the
     scene file or field plan a cluster's workers make the scene from."""
     from embree_rt.api import render
     from embree_rt.budget import MemoryBudgetError
 
-    scene.render = scene.render.with_overrides(**render_overrides(args))
+    if args.partition is not None and not (args.cluster or args.scheduler):
+        raise UsageError("--partition: bricks are held by Dask workers: add --cluster local:N or "
+                         "--scheduler ADDRESS")  # fmt: skip
+    if not scene.lights:
+        from embree_rt.scene.errors import warn_input
+
+        warn_input(f"{args.scene if getattr(args, 'scene', None) else 'the scene'}: lights: "
+                   "none: only the sky and ambient light show it")  # fmt: skip
     check_library()
     framed = args.frames or "{frame" in args.output  # an animation's pattern, or a mistake
     if scene.animation is not None or args.cluster or args.scheduler or framed:
@@ -96,9 +119,10 @@ def render_and_save(
         )
     except MemoryBudgetError as error:
         raise UsageError(f"{memory_key(error, args)}: {error}") from None
-    check_output(args.output, args.aov)  # again: the directory may have gone meanwhile
+    encoding = output_encoding(args)
+    check_output(args.output, args.aov, encoding)  # again: the directory may have gone meanwhile
     written: list[Path] = []
-    writing(args.output, lambda: written.extend(result.save(args.output)))
+    writing(args.output, lambda: written.extend(result.save(args.output, encoding)))
     for side in written:  # the AOV files beside the image, for scripts to pick up
         print(side)
     stats = result.stats

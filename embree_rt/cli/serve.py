@@ -13,7 +13,9 @@ def command_serve(args: argparse.Namespace) -> None:
 
     needed = ("starlette", "uvicorn", "websockets")
     if any(importlib.util.find_spec(name) is None for name in needed):
-        raise UsageError("serve needs the web extra: pip install 'embree-rt[web]'")
+        from embree_rt.errors import install_hint
+
+        raise UsageError(f"serve needs the web extra: {install_hint('web', ' '.join(needed))}")
     check_library()
     from embree_rt.web.serve import serve
 

@@ -27,6 +27,7 @@ def _pointer_to(element):
 words64 = _pointer_to(types.uint64)
 words32 = _pointer_to(types.uint32)
 floats = _pointer_to(types.float32)
+doubles = _pointer_to(types.float64)
 ints = _pointer_to(types.int32)
 
 

@@ -479,6 +479,12 @@ class BVH:
             raise RuntimeError("commit() the BVH before querying it")
         _prepare_kernels()
 
+    def scene_address(self) -> int:
+        """The committed Embree scene's handle, for compiled queries defined outside this class
+        (``point_query``'s callers)."""
+        self._ready_to_query()
+        return self._live_scene()
+
     def _query_inputs(self, origins, directions, tnear, tfar):
         self._ready_to_query()
         origins = as_points(origins, "origins")

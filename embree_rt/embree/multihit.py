@@ -176,10 +176,11 @@ def _put64(words, k, value):
 
 
 @njit(inline="always")
-def _prepare_scratch(words, filter_address):
+def _prepare_scratch(scene, words, filter_address):
     """Lay out RTCRayHit, RTCIntersectArguments and our context in ``words`` (a uint32 row:
     the same element type as the kernels' packets, which numba's parallel loops handle);
-    returns the 4-byte word offsets of the three."""
+    returns the tracer ``_trace_one`` takes: (scene, words, and the 4-byte word offsets of the
+    three)."""
     rayhit = _aligned16(words)
     args = rayhit + 2 * _RAYHIT_WORDS64
     context = args + 2 * ARGS_WORDS
@@ -193,15 +194,15 @@ def _prepare_scratch(words, filter_address):
     # rtcInitRayQueryContext: instID[0] = instPrimID[0] = RTC_INVALID_GEOMETRY_ID
     words[context] = INVALID_ID
     words[context + 1] = INVALID_ID
-    return rayhit, args, context
+    return scene, words, rayhit, args, context
 
 
 @njit(inline="always")
-def _trace_one(
-    scene, words, rayhit, args, context, origin, direction, tnear, tfar, buffers, capacity
-):
-    """Trace one ray, recording its hits in the (capacity,) buffers at the addresses
-    ``buffers`` (t, prim, u, v, cos); returns (count, more)."""
+def _trace_one(tracer, origin, direction, tnear, tfar, rows):
+    """Trace one ray, recording its hits in ``rows`` = (t, prim, u, v, cos), (capacity,)
+    float32, int32, float32, float32, float32 each; returns (count, more)."""
+    scene, words, rayhit, args, context = tracer
+    t, prim, u, v, cos = rows
     floats = words.view(np.float32)
     b = rayhit
     floats[b + RAY_ORG] = origin[0]
@@ -219,10 +220,13 @@ def _trace_one(
     words[b + HIT_GEOM_ID] = INVALID_ID
     words[b + HIT_INST_ID] = INVALID_ID
     _put64(words, context + 2 * CONTEXT_COUNT, 0)
-    _put64(words, context + 2 * CONTEXT_CAPACITY, capacity)
+    _put64(words, context + 2 * CONTEXT_CAPACITY, t.shape[0])
     _put64(words, context + 2 * CONTEXT_MORE, 0)
-    for k in range(5):
-        _put64(words, context + 2 * (CONTEXT_T + k), buffers[k])
+    _put64(words, context + 2 * CONTEXT_T, t.ctypes.data)
+    _put64(words, context + 2 * (CONTEXT_T + 1), prim.ctypes.data)
+    _put64(words, context + 2 * (CONTEXT_T + 2), u.ctypes.data)
+    _put64(words, context + 2 * (CONTEXT_T + 3), v.ctypes.data)
+    _put64(words, context + 2 * (CONTEXT_T + 4), cos.ctypes.data)
     base = words.ctypes.data
     rtc_intersect1(scene, base + 4 * rayhit, base + 4 * args)
     return np.int64(words[context + 2 * CONTEXT_COUNT]), words[context + 2 * CONTEXT_MORE] != 0
@@ -248,29 +252,10 @@ def _sort_hits(count, t, prim, u, v, cos):
 def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
     origins, directions, tnear, tfar = rays
     t, prim, u, v, cos, count, more = hits
-    capacity = t.shape[1]
-    rayhit, args, context = _prepare_scratch(words, filter_address)
-    buffers = np.empty(5, np.uint64)
+    tracer = _prepare_scratch(scene, words, filter_address)
     for i in range(first, stop):
-        # the addresses of row i of each (n, capacity) output
-        buffers[0] = t.ctypes.data + 4 * i * capacity
-        buffers[1] = prim.ctypes.data + 4 * i * capacity
-        buffers[2] = u.ctypes.data + 4 * i * capacity
-        buffers[3] = v.ctypes.data + 4 * i * capacity
-        buffers[4] = cos.ctypes.data + 4 * i * capacity
-        found, dropped = _trace_one(
-            scene,
-            words,
-            rayhit,
-            args,
-            context,
-            origins[i],
-            directions[i],
-            tnear[i],
-            tfar[i],
-            buffers,
-            capacity,
-        )
+        rows = (t[i], prim[i], u[i], v[i], cos[i])
+        found, dropped = _trace_one(tracer, origins[i], directions[i], tnear[i], tfar[i], rows)
         _sort_hits(found, t[i], prim[i], u[i], v[i], cos[i])
         count[i] = found
         more[i] = dropped
@@ -291,30 +276,13 @@ def _all_hits(scene, filter_address, rays, hits):
 def _parity_chunk(scene, filter_address, words, first, stop, origins, directions, screen, parity):
     capacity, edge_band, graze = screen
     odd, clear = parity
-    rayhit, args, context = _prepare_scratch(words, filter_address)
+    tracer = _prepare_scratch(scene, words, filter_address)
     hits = np.empty((4, capacity), np.float32)
     prims = np.empty(capacity, np.int32)
     t, u, v, cos = hits[0], hits[1], hits[2], hits[3]
-    buffers = np.empty(5, np.uint64)
-    buffers[0] = t.ctypes.data
-    buffers[1] = prims.ctypes.data
-    buffers[2] = u.ctypes.data
-    buffers[3] = v.ctypes.data
-    buffers[4] = cos.ctypes.data
+    rows = (t, prims, u, v, cos)
     for i in range(first, stop):
-        found, dropped = _trace_one(
-            scene,
-            words,
-            rayhit,
-            args,
-            context,
-            origins[i],
-            directions[i],
-            0.0,
-            np.inf,
-            buffers,
-            capacity,
-        )
+        found, dropped = _trace_one(tracer, origins[i], directions[i], 0.0, np.inf, rows)
         ok = not dropped
         for k in range(found):
             band = edge_band[prims[k]]

@@ -19,6 +19,7 @@ import numpy as np
 
 from embree_rt import budget
 from embree_rt.camera import Camera, camera_problem
+from embree_rt.film import TONEMAPS, TRANSFERS
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.archives import Headers, array_headers, read_archive, unpacked_bytes
@@ -327,11 +328,20 @@ class SceneReader:
             spp=table.integer("spp", current.spp, low=1),
             max_depth=table.integer("max_depth", current.max_depth, low=0),
             seed=table.integer("seed", current.seed, low=0, high=SEED_LIMIT),
+            exposure=table.number("exposure", current.exposure, low=-64, high=64),
+            tonemap=self._choice(table, "tonemap", TONEMAPS, current.tonemap),
+            transfer=self._choice(table, "transfer", TRANSFERS, current.transfer),
         )
         table.finish()
         if (problem := render_problem(settings)) is not None:
             raise table.error(*problem)
         return settings
+
+    def _choice(self, table: Table, name: str, choices: tuple[str, ...], default: str) -> str:
+        value = table.string(name, default)
+        if value not in choices:
+            raise table.error(name, f"expected one of {', '.join(choices)}, got {value!r}")
+        return value
 
     def _camera(self, table: Table, current: Camera) -> Camera:
         camera = Camera(

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt.camera import Camera, Vec3, camera_problem
+from embree_rt.film import Look
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.instances import MeshInstances
@@ -49,13 +50,22 @@ class Background:
 
 @dataclass
 class RenderSettings:
-    """Image size, samples per pixel, bounces and seed of a render (a scene's ``render`` table)."""
+    """Image size, samples per pixel, bounces, seed and look of a render (a scene's ``render``
+    table)."""
 
     width: int = 640
     height: int = 360
     spp: int = 8
     max_depth: int = 6
     seed: int = 0
+    # How the image is shown (``film.Look``): stops of exposure, tone map, transfer curve.
+    exposure: float = 0.0
+    tonemap: str = "reinhard"
+    transfer: str = "gamma2.2"
+
+    def look(self) -> Look:
+        """The ``film.Look`` these settings ask for."""
+        return Look(exposure=self.exposure, tonemap=self.tonemap, transfer=self.transfer)
 
     def with_overrides(self, **values: int | None) -> RenderSettings:
         """These settings with each field named in ``values`` (width, height, spp, max_depth,
@@ -180,6 +190,31 @@ class Scene:
         else:
             self.floor = None
             self.notes.append("floor: none")
+
+    def __repr__(self) -> str:
+        """One short line: what the scene holds and how it renders (a dataclass's own repr
+        would print every sphere and matrix)."""
+        def count(number: int, noun: str) -> str:
+            return f"{number:,} {noun}{'' if number == 1 else 's'}"
+
+        parts = [count(len(self.sphere_radii), "sphere")]
+        if self.meshes:
+            distinct = len({id(placed.mesh) for placed in self.meshes})
+            parts.append(f"{len(self.meshes):,} mesh placements of {distinct:,} meshes")
+        if self.instances:
+            copies = sum(len(entry) for entry in self.instances)
+            parts.append(f"{copies:,} instances in {len(self.instances):,} arrays")
+        parts.append(count(len(self.lights), "light"))
+        parts.append("no floor" if self.floor is None else f"floor at y = {self.floor.height:g}")
+        settings = self.render
+        parts.append(f"{settings.width}x{settings.height} at {settings.spp} spp")
+        if self.animation is not None:
+            parts.append(f"{self.animation.frames} frames")
+        return f"Scene({', '.join(parts)})"
+
+    # ``_repr_png_``, the quick preview Jupyter shows for a scene, is given to the class by
+    # ``embree_rt.api`` (``preview_png``): rendering stands above the scene model, which
+    # imports none of it.
 
     @property
     def material_names(self) -> list[str]:

@@ -20,7 +20,7 @@ memory).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -202,26 +202,96 @@ def add_field_spheres(scene: Scene, plan: FieldPlan, *, threads: int | None = No
     centers = np.empty((count, 3), np.float32)
     radii = np.empty(count, np.float32)
     materials = np.empty(count, np.int32)
-    heroes = HEROES[: plan.heroes]
-    for row, ((x, z), material) in enumerate(heroes):
+    _hero_spheres(scene, plan, centers, radii, materials)
+    if plan.small:
+        rings, make = _ring_maker(scene, plan)
+
+        def fill(ring: _Ring) -> None:
+            rows = slice(plan.heroes + ring.first, plan.heroes + ring.first + ring.count)
+            make(ring, centers[rows], radii[rows], materials[rows])
+
+        with ThreadPoolExecutor(max_workers=worker_count(threads)) as pool:
+            for _ in pool.map(fill, rings):  # re-raises a ring's error
+                pass
+    scene.add_spheres(centers, radii, materials, copy=False)
+
+
+def add_field_spheres_where(
+    scene: Scene,
+    plan: FieldPlan,
+    keep: Callable[[np.ndarray], np.ndarray],
+    *,
+    within: tuple[tuple[float, float], tuple[float, float]] | None = None,
+    threads: int | None = None,
+) -> np.ndarray:
+    """Generate the field's spheres as ``add_field_spheres`` does, but add to ``scene`` only
+    those whose (k, 3) float32 centres ``keep`` accepts ((k,) bool), in the field's order:
+    bit for bit the spheres of the whole field, with no more memory than the kept ones and a
+    ring per thread. ``within``: ((x0, z0), (x1, z1)), a box (bounds may be infinite) holding
+    every centre ``keep`` accepts: the rings that cannot reach it are not generated. Returns
+    (m,) int64 the kept spheres' rows in the whole field (their object ids)."""
+    heroes = (np.empty((plan.heroes, 3), np.float32), np.empty(plan.heroes, np.float32),
+              np.empty(plan.heroes, np.int32))  # fmt: skip
+    _hero_spheres(scene, plan, *heroes)
+    kept = keep(heroes[0])
+    pieces = [(np.flatnonzero(kept).astype(np.int64), *(part[kept] for part in heroes))]
+    if plan.small:
+        rings, make = _ring_maker(scene, plan)
+        if within is not None:
+            rings = [ring for ring in rings if _ring_reaches(ring, within, plan.spacing)]
+
+        def fill(ring: _Ring) -> tuple[np.ndarray, ...]:
+            centers = np.empty((ring.count, 3), np.float32)
+            radii = np.empty(ring.count, np.float32)
+            materials = np.empty(ring.count, np.int32)
+            make(ring, centers, radii, materials)
+            rows = np.flatnonzero(keep(centers))
+            return (rows + (plan.heroes + ring.first), centers[rows], radii[rows],
+                    materials[rows])  # fmt: skip
+
+        with ThreadPoolExecutor(max_workers=worker_count(threads)) as pool:
+            pieces.extend(pool.map(fill, rings))
+    ids, centers, radii, materials = (np.concatenate(part) for part in zip(*pieces, strict=True))
+    del pieces
+    scene.add_spheres(centers, radii, materials, copy=False)
+    return ids
+
+
+def _ring_reaches(
+    ring: _Ring, box: tuple[tuple[float, float], tuple[float, float]], spacing: float
+) -> bool:
+    """Whether a sphere of ``ring`` can have its centre in the (x, z) ``box``: some cell centre
+    of the ring (a sphere strays less than half a cell from it) within a cell of the box."""
+    (x0, z0), (x1, z1) = box
+    x0, z0, x1, z1 = x0 - spacing, z0 - spacing, x1 + spacing, z1 + spacing
+    near_x = max(x0, 0.0, -x1)
+    near_z = max(z0, 0.0, -z1)
+    far_x = max(abs(x0), abs(x1))
+    far_z = max(abs(z0), abs(z1))
+    return near_x * near_x + near_z * near_z < ring.high and far_x**2 + far_z**2 >= ring.low
+
+
+def _hero_spheres(scene: Scene, plan: FieldPlan, centers, radii, materials) -> None:
+    """Write the field's heroes into the first rows of ``centers`` (n, 3) float32, ``radii``
+    and ``materials`` (n,)."""
+    for row, ((x, z), material) in enumerate(HEROES[: plan.heroes]):
         centers[row] = (x, HERO_RADIUS, z)
         radii[row] = HERO_RADIUS
         materials[row] = scene.material_index(material)
-    if plan.small:
-        hero_xz = np.array([xz for xz, _ in heroes], np.float64).reshape(-1, 2)
-        layout = _CellLayout(plan.spacing, hero_xz)
-        draws = _SphereDraws(plan, first_material=scene.material_index(f"{plan.mix[0][0]}_00"))
 
-        def make(ring: _Ring) -> None:
-            x, z, rank = layout.cells(ring)
-            rows = slice(plan.heroes + ring.first, plan.heroes + ring.first + ring.count)
-            draws.fill(ring.first, x, z, rank, centers[rows], radii[rows], materials[rows])
 
-        rings = layout.rings(plan.small, RING_CELLS)
-        with ThreadPoolExecutor(max_workers=worker_count(threads)) as pool:
-            for _ in pool.map(make, rings):  # re-raises a ring's error
-                pass
-    scene.add_spheres(centers, radii, materials, copy=False)
+def _ring_maker(scene: Scene, plan: FieldPlan):
+    """The field's rings of small spheres, and ``make(ring, centers, radii, materials)``, which
+    writes a ring's spheres into (ring.count, 3) / (ring.count,) arrays in the field's order."""
+    hero_xz = np.array([xz for xz, _ in HEROES[: plan.heroes]], np.float64).reshape(-1, 2)
+    layout = _CellLayout(plan.spacing, hero_xz)
+    draws = _SphereDraws(plan, first_material=scene.material_index(f"{plan.mix[0][0]}_00"))
+
+    def make(ring: _Ring, centers, radii, materials) -> None:
+        x, z, rank = layout.cells(ring)
+        draws.fill(ring.first, x, z, rank, centers, radii, materials)
+
+    return layout.rings(plan.small, RING_CELLS), make
 
 
 def random_field(

@@ -166,6 +166,15 @@ def _gather_chunk(first, stop, bound, places, positions, work, kept, out):
             out_distance[places[a] + i] = distance[bound[a] + i]
 
 
+@njit(inline="always")
+def _offsets(counts):
+    """(m + 1,) int64 starts of m consecutive ranges of ``counts`` (m,) int64 entries."""
+    offsets = np.zeros(counts.shape[0] + 1, np.int64)
+    for a in range(counts.shape[0]):
+        offsets[a + 1] = offsets[a] + counts[a]
+    return offsets
+
+
 @njit(parallel=True, nogil=True, cache=True, error_model="numpy")
 def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
     # in parallel over chunks of rays, each in its own ranges (a prefix sum of bounds, then of
@@ -186,9 +195,7 @@ def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
             fans,
             totals,
         )
-    bound = np.zeros(m + 1, np.int64)
-    for a in range(m):
-        bound[a + 1] = bound[a] + totals[a]
+    bound = _offsets(totals)
     # candidates, tested (decided in float64, else Embree's hit stands), tris, distance
     work = (
         np.empty(bound[m], np.int64),
@@ -212,9 +219,7 @@ def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
             work,
             kept,
         )
-    places = np.zeros(m + 1, np.int64)
-    for a in range(m):
-        places[a + 1] = places[a] + kept[a]
+    places = _offsets(kept)
     out = (
         np.empty(places[m], np.int64),
         np.empty(places[m], np.int64),

@@ -1,7 +1,18 @@
 """Multi-hit results finished in one compiled pass: the query's parts merged by ray, a ray's
-hits at one point merged, each ray cut to its nearest ``capacity``, and all put in trimesh's
-order (every ray's first hit, rays ascending, then every ray's second hit, ...), with the hit
-points if asked.
+hits at one point made one hit per surface crossing, each ray cut to its nearest ``capacity``,
+and all put in trimesh's order (every ray's first hit, rays ascending, then every ray's second
+hit, ...), with the hit points if asked.
+
+One hit per crossing: a ray through an edge or a vertex hits every triangle there that
+ray_triangle's float64 test accepts (``decided_hits``); those hits, at one point (equal float64
+distances) on triangles meeting there (sharing a vertex position), are one crossing of the
+surface, reported once, on the lowest triangle index among them. Faces in the same place
+(coincident sheets: all three positions shared) are separate surfaces and each crossed. A ray
+that only touches the surface at an edge or a vertex (a silhouette: the faces there turn one to
+the ray and one away, so the ray stays on one side) meets the surface at that one point too, and
+it is reported once, as a crossing is: the hits say where a ray meets the surface, as
+``intersects_first`` does, not the parity of a point (``contains_points`` recasts every ray
+that passes within float32 reach of an edge instead of counting it).
 
 In NumPy these were a stable argsort by ray and its gathers, the point merging's passes, the
 ranks, the cut and a counting sort by rank: about a tenth of an all-hits query on a small mesh.
@@ -22,48 +33,137 @@ from embree_rt.compiled.pointers import prefetch
 from embree_rt.compiled.work_split import parallel_region, threads_for
 
 _EPS64 = np.finfo(np.float64).eps
+_SAME_POINT_ULPS = 1e4
 _AHEAD = 16
 CHUNK = 4096  # rays per parallel iteration
 
 
 @njit(inline="always")
-def _share_a_vertex(canonical, a, b):
+def _shared_positions(canonical, a, b):
+    # how many of triangle a's corner positions are among b's (3: the same triangle's place)
+    shared = 0
     for i in range(3):
-        for j in range(3):
-            if canonical[a, i] == canonical[b, j]:
-                return True
-    return False
+        if (
+            canonical[a, i] == canonical[b, 0]
+            or canonical[a, i] == canonical[b, 1]
+            or (canonical[a, i] == canonical[b, 2])
+        ):
+            shared += 1
+    return shared
+
+
+@njit(inline="always")
+def _same_point(planes, directions, ray, tri_a, distance_a, tri_b, distance_b, size, parallel_cos):
+    # Two hits of a ray are at one point if their float64 plane distances agree to within the
+    # rounding of the planes' formula (a few ulps of the coordinates, over the |cos| of the
+    # ray with each plane) and the width of ray_triangle's tol.zero band at an edge: 1e4 ulps
+    # of the distance plus the mesh's size, over the smaller |cos|.
+    gap = abs(distance_a - distance_b)
+    scale = _SAME_POINT_ULPS * _EPS64 * (max(abs(distance_a), abs(distance_b)) + size)
+    if gap > scale / parallel_cos:  # the loosest it can be: most pairs stop here
+        return False
+    smaller = 1.0
+    for tri in (tri_a, tri_b):
+        along = abs(
+            planes[tri, 3] * directions[ray, 0]
+            + planes[tri, 4] * directions[ray, 1]
+            + planes[tri, 5] * directions[ray, 2]
+        )
+        smaller = min(smaller, max(along, parallel_cos))
+    return gap <= scale / smaller
 
 
 @njit(nogil=True, cache=True)
-def _merge_chunk(first_ray, stop_ray, starts, capacity, merge, grouped, kept):
-    # each ray's hits at one point merged (kept: the run's lowest triangle, in the run's
-    # place), then cut to `capacity`, in place; `kept` hits per ray. merge: (merge_points,
-    # canonical, size); grouped: (tris, distance) of the hits grouped by ray
-    merge_points, canonical, size = merge
+def _one_hit_per_crossing(tris, distance, canonical, crossing_tris, crossing_distance):
+    """The hits of one ray at one point, ``tris``, ``distance`` (m,), as crossings of the
+    surface: a hit joins a crossing holding a triangle it meets at an edge or a vertex (sharing
+    a vertex position), unless the crossing already holds a triangle in the same place (all
+    three positions shared: a coincident sheet, which is another crossing). Triangles are taken
+    by ascending index, so each crossing is named by its lowest. Writes the crossings' triangles
+    and distances into ``crossing_tris``, ``crossing_distance`` sorted by (distance, triangle)
+    and returns how many."""
+    m = tris.shape[0]
+    order = np.argsort(tris)
+    group = np.empty(m, np.int64)
+    groups = 0
+    for a in range(m):
+        ta = tris[order[a]]
+        chosen = -1
+        for g in range(groups):
+            joins, blocked = False, False
+            for b in range(a):
+                if group[b] != g:
+                    continue
+                shared = _shared_positions(canonical, ta, tris[order[b]])
+                if shared == 3:
+                    blocked = True
+                    break
+                joins = joins or shared > 0
+            if joins and not blocked:
+                chosen = g
+                break
+        if chosen < 0:
+            chosen = groups
+            groups += 1
+            crossing_tris[chosen] = ta  # the crossing's lowest index
+            crossing_distance[chosen] = distance[order[a]]
+        group[a] = chosen
+    for i in range(1, groups):  # by (distance, triangle), as every ray's hits
+        f, d = crossing_tris[i], crossing_distance[i]
+        j = i - 1
+        while j >= 0 and (
+            crossing_distance[j] > d or (crossing_distance[j] == d and crossing_tris[j] > f)
+        ):
+            crossing_tris[j + 1], crossing_distance[j + 1] = crossing_tris[j], crossing_distance[j]
+            j -= 1
+        crossing_tris[j + 1], crossing_distance[j + 1] = f, d
+    return groups
+
+
+@njit(nogil=True, cache=True)
+def _merge_chunk(first_ray, stop_ray, starts, capacity, merge, directions, grouped, kept):
+    # each ray's hits at one point made one hit per crossing (``_one_hit_per_crossing``, in
+    # the run's place), then cut to `capacity`, in place; `kept` hits per ray. merge:
+    # (canonical, planes, size, parallel_cos); grouped: (tris, distance) of the hits grouped by
+    # ray
+    canonical, planes, size, parallel_cos = merge
     grouped_tris, grouped_distance = grouped
     for r in range(first_ray, stop_ray):
         first, stop = starts[r], starts[r + 1]
         out = first
         k = first
         while k < stop and out - first < capacity:
-            best = k
             j = k + 1
-            # runs of hits on triangles sharing a vertex position at distances equal to within
-            # float64 rounding of the mesh's size are one point
-            while (
-                merge_points
-                and j < stop
-                and abs(grouped_distance[j] - grouped_distance[j - 1])
-                <= (1e3 * _EPS64 * (abs(grouped_distance[j]) + size))
-                and _share_a_vertex(canonical, grouped_tris[j - 1], grouped_tris[j])
+            while j < stop and _same_point(
+                planes,
+                directions,
+                r,
+                grouped_tris[j - 1],
+                grouped_distance[j - 1],
+                grouped_tris[j],
+                grouped_distance[j],
+                size,
+                parallel_cos,
             ):
-                if grouped_tris[j] < grouped_tris[best]:
-                    best = j
                 j += 1
-            grouped_tris[out] = grouped_tris[best]
-            grouped_distance[out] = grouped_distance[best]
-            out += 1
+            if j - k == 1:
+                grouped_tris[out] = grouped_tris[k]
+                grouped_distance[out] = grouped_distance[k]
+                out += 1
+            else:  # rare: a ray through an edge, a vertex or coincident faces
+                crossing_tris = np.empty(j - k, np.int64)
+                crossing_distance = np.empty(j - k, np.float64)
+                crossings = _one_hit_per_crossing(
+                    grouped_tris[k:j].copy(),
+                    grouped_distance[k:j].copy(),
+                    canonical,
+                    crossing_tris,
+                    crossing_distance,
+                )
+                for i in range(min(crossings, capacity - (out - first))):
+                    grouped_tris[out] = crossing_tris[i]
+                    grouped_distance[out] = crossing_distance[i]
+                    out += 1
             k = j
         kept[r] = out - first
 
@@ -92,8 +192,8 @@ def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped, points, out)
 
 @njit(parallel=True, nogil=True, cache=True)
 def _finish(parts, order, ray_count, capacity, merge, points, scratch):
-    # parts: (rays, tris, distance); merge: (merge_points, canonical, size); points: (origins,
-    # directions, with_locations); scratch: (starts, cursor, kept, grouped_tris,
+    # parts: (rays, tris, distance); merge: (canonical, planes, size, parallel_cos); points:
+    # (origins, directions, with_locations); scratch: (starts, cursor, kept, grouped_tris,
     # grouped_distance)
     rays, tris, distance = parts
     with_locations = points[2]
@@ -120,11 +220,18 @@ def _finish(parts, order, ray_count, capacity, merge, points, scratch):
         cursor[ray] = slot + 1
         grouped_tris[slot] = tris[k]
         grouped_distance[slot] = distance[k]
-    # 2. in parallel over chunks of rays: merged and cut, in each ray's own range
+    # 2. in parallel over chunks of rays: one hit per crossing and cut, in each ray's range
     n_chunks = (ray_count + CHUNK - 1) // CHUNK
     for c in prange(n_chunks):
         _merge_chunk(
-            c * CHUNK, min(ray_count, (c + 1) * CHUNK), starts, capacity, merge, grouped, kept
+            c * CHUNK,
+            min(ray_count, (c + 1) * CHUNK),
+            starts,
+            capacity,
+            merge,
+            points[1],
+            grouped,
+            kept,
         )
     # 3. depth-major: rays with more than d hits, ascending, for each depth d; each chunk's
     # hits of depth d follow the earlier chunks' (a prefix sum over chunks, depth by depth), so
@@ -161,8 +268,10 @@ def finished_hits(
     order: np.ndarray | None,
     ray_count: int,
     capacity: int,
-    canonical: np.ndarray | None,
+    canonical: np.ndarray,
+    planes: np.ndarray,
     size: float,
+    parallel_cos: float,
     origins: np.ndarray,
     directions: np.ndarray,
     with_locations: bool,
@@ -175,13 +284,16 @@ def finished_hits(
     ``rays``, ``tris`` (k,) int64, ``distance`` (k,) float64: hits in parts, each ray's hits
     contiguous in one part and sorted by (distance, triangle); with ``order`` (n,) int64, rays
     are positions in it (the hit's ray is ``order[rays[k]]``). ``ray_count``: n. ``capacity``:
-    hits kept a ray, its nearest. ``canonical`` (triangles, 3) int64 vertex-position ids of each
-    triangle's corners, to merge a ray's hits at one point (consecutive hits on triangles
-    sharing a vertex position, at distances equal to within 1e3 float64 ulps of ``size`` plus
-    the distance: the lowest triangle index stands for them), or None not to merge.
-    ``origins``, ``directions`` (n, 3) float64: the points are ``origins[ray] + directions[ray]
-    * distance``. ``scratch``: a function ``(name, size, dtype) -> (size,) array`` lending
-    working space (or None for new arrays); ``threads``: how many to run on (the answer is
+    crossings kept a ray, its nearest. ``canonical`` (triangles, 3) int64 vertex-position ids
+    of each triangle's corners and ``planes`` (triangles, 6) float64 (first vertex, unit
+    normal): a ray's hits at one point (float64 distances equal to within 1e4 ulps of the
+    distance plus ``size``, over the smaller |cos| of ray and plane, at least ``parallel_cos``,
+    the |cos| below which no hit was kept) on triangles meeting at an edge or a vertex there
+    are one crossing, named by its lowest triangle index (``_one_hit_per_crossing``; coincident
+    faces stay apart). ``origins``, ``directions`` (n, 3) float64, directions unit: the points
+    are ``origins[ray] + directions[ray] * distance``. ``scratch``: a function ``(name, size,
+    dtype) -> (size,) array`` lending working space (or None for new arrays); ``threads``: how
+    many to run on (the answer is
     the same for any).
     """
     if scratch is None:
@@ -196,9 +308,10 @@ def finished_hits(
         np.ascontiguousarray(distance, np.float64),
     )
     merge = (
-        canonical is not None,
-        np.zeros((1, 3), np.int64) if canonical is None else canonical,
+        np.ascontiguousarray(canonical, np.int64),
+        np.ascontiguousarray(planes, np.float64),
         float(size),
+        float(parallel_cos),
     )
     points = (
         np.ascontiguousarray(origins, np.float64),

@@ -2,7 +2,7 @@
 
 The same methods, arguments, return values, dtypes and hit order as
 ``trimesh.ray.ray_pyembree.RayMeshIntersector``, traced on all cores, with multiple hits that
-are exact at any scale. ``install()`` makes every new ``trimesh.Trimesh`` use it.
+are exact at any scale. ``trimesh_ray.install()`` makes every new ``trimesh.Trimesh`` use it.
 
 How each hit is found exactly once: every ray is traced *once* with an Embree intersection
 filter that records every triangle Embree's watertight test accepts and rejects it, so the
@@ -11,22 +11,25 @@ query from the last hit, so no offset to choose and no distance rule that could 
 a hit: a triangle is reported at most once per ray whatever the scale, and the watertight
 (``RTC_SCENE_FLAG_ROBUST``) test lets no ray slip between two triangles sharing an edge.
 
-Conventions, those of trimesh's pure-NumPy ``ray_triangle``:
+Conventions: which triangles a ray hits is ``ray_triangle``'s float64 test (trimesh's pure
+NumPy backend); how they are counted is trimesh's embree backend's contract, one hit per
+crossing of the surface:
 
-- A ray through an edge or a vertex hits every triangle there that ``ray_triangle``'s float64
-  test accepts (barycentrics within ``tol.zero`` of the triangle): ``intersects_id`` returns each
-  of them, as ``ray_triangle`` does. Embree's float32 test may accept one or both near an edge,
-  so every Embree hit within float32 reach of an edge (``local_scene``), or grazing its triangle,
-  is decided again in float64 against the triangles around it (those sharing a vertex position
-  with it) by ``ray_triangle``'s own formulas. Triangles meeting only at T-junctions (no
-  shared vertex position) are not looked up.
+- A ray through an edge or a vertex meets every triangle there that ``ray_triangle``'s float64
+  test accepts (barycentrics within ``tol.zero`` of the triangle). Embree's float32 test may
+  accept one or both near an edge, so every Embree hit within float32 reach of an edge
+  (``local_scene``), or grazing its triangle, is decided again in float64 against the triangles
+  around it (those sharing a vertex position with it) by ``ray_triangle``'s own formulas
+  (``decided_hits``). Triangles meeting only at T-junctions (no shared vertex position) are not
+  looked up.
+- Those triangles at one point are one crossing: ``intersects_id``, ``intersects_location`` and
+  ``intersects_first`` report it once, on the lowest triangle index there (``finished_hits``;
+  faces in the same place, coincident sheets, are each crossed). A ray that only touches the
+  surface at a silhouette edge or vertex also meets it at one point and reports it once. Where
+  ``ray_triangle`` merges points by rounding them to 1e-8 absolute (at unit scale, not at 1e8),
+  this holds at any scale.
 - A ray meeting a triangle at |cos| <= 1e-5 (in its plane, to float64 precision) does not hit
   it, as ``trimesh.intersections.planes_lines`` rules.
-- ``intersects_location`` (and ``intersects_id(..., return_locations=True)``) reports each
-  point once: hits of one ray at the same point on triangles sharing a vertex count once (the
-  lowest face index), as ``ray_triangle`` merges equal locations — but scale-free, where
-  ``ray_triangle`` rounds locations to 1e-8 absolute (so it merges edge hits at unit scale and
-  not at 1e8).
 - Where ``ray_triangle`` keeps hits up to 1e-6 (absolute) *behind* the origin, a ray here hits
   only what lies ahead of its origin by more than float32 resolution (``tnear``, see
   ``intersects_id``): a ray starting on a surface does not hit that surface again. Pass
@@ -39,9 +42,6 @@ the hit triangle's plane, as trimesh computes them.
 """
 
 from __future__ import annotations
-
-import functools
-import inspect
 
 import numpy as np
 import trimesh
@@ -105,6 +105,26 @@ def _plane_distance(scene, origins, directions, rays, tris):
     """float64 distance along each ray to its triangle's plane, and |cos| of the angle between
     ray and normal, trimesh's planes_lines formula (compiled: ``plane_distances``)."""
     return plane_distances(scene.planes, origins, directions, rays, tris)
+
+
+def _spliced(hits, rows, again):
+    """``hits``: a multi-hit answer ``(rays (m,) int64, tris (m,) int64, locations (m, 3)
+    float64 or None)`` in trimesh's order (every ray's first hit, rays ascending, then every
+    ray's second ...), with the hits of rays ``rows`` (k,) int64 replaced by ``again``, the
+    answer for those rays alone (its rays index ``rows``), in the same order."""
+    rays, tris, locations = hits
+    keep = ~np.isin(rays, rows)
+    rays = np.concatenate([rays[keep], rows[again[0]]])
+    tris = np.concatenate([tris[keep], again[1]])
+    # a hit's depth: how many hits of its ray come before it (each ray's hits are in order)
+    order = np.argsort(rays, kind="stable")
+    starts = np.searchsorted(rays[order], rays[order])
+    depth = np.empty(len(rays), np.int64)
+    depth[order] = np.arange(len(rays)) - starts
+    placed = np.lexsort((rays, depth))
+    if locations is not None:
+        locations = np.concatenate([locations[keep], again[2]])[placed]
+    return rays[placed], tris[placed], locations
 
 
 class _HitList:
@@ -183,27 +203,25 @@ class RayMeshIntersector:
         return near, True
 
     def _hits(
-        self,
-        origins,
-        directions,
-        max_hits,
-        tnear,
-        one_per_point=False,
-        reorder=False,
-        with_locations=False,
+        self, origins, directions, max_hits, tnear, reorder=False, with_locations=False, room=None
     ):
         """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
         ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
         ``with_locations``, the points (k, 3) float64 (else None); each ray's hits by distance,
-        then triangle; with ``one_per_point``, the hits of a ray at one point (an edge, a
-        vertex) as one, the lowest-index triangle there.
+        then triangle, one hit per crossing of the surface (at an edge or a vertex, the
+        lowest-index triangle there: ``finished_hits``).
 
         With ``reorder`` (and a big mesh: ``scene.bounds``) the rays are traced, and every step
         but the last run, in a coherent order (``local_frame.ordered_local_rays``); each ray's
-        hits are computed from its own row alone, so they are the same in any order."""
+        hits are computed from its own row alone, so they are the same in any order.
+
+        ``room``: Embree hits recorded a ray (default ``max_hits`` + 4). Hits at one point
+        become one crossing, so a ray whose recorded hits overflowed it and gave fewer than
+        ``max_hits`` crossings (a ray through a vertex many triangles share) may have more:
+        such rays are traced again with four times the room."""
         scene = self._scene
         n = len(origins)
-        given_origins, given_directions = origins, directions
+        given_origins, given_directions, given_tnear = origins, directions, tnear
         traced_order = None
         if reorder and scene.bounds is not None:
             (
@@ -239,7 +257,8 @@ class RayMeshIntersector:
         capacity = max(1, int(max_hits))
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
         # pairs, so that the nearest `capacity` survive
-        room = capacity + 4
+        room = capacity + 4 if room is None else room
+        truncated = []  # positions of rays whose final trace had more hits than its room
         # Most rays hit a few triangles: trace with a little room first and again, with all of
         # it, only the rays that overflowed (so the hit arrays stay small).
         first_room = min(room, FIRST_ROOM)
@@ -285,6 +304,8 @@ class RayMeshIntersector:
             # buffers as traced (a second trace with more room records the same hits in the same
             # order); the others are traced again first.
             overflowed = result[6] if room > first_room else np.zeros(len(messy), bool)
+            if room <= first_room:
+                truncated.append(first + np.flatnonzero(messy & result[6]))
             complete_rows = np.flatnonzero(messy & ~overflowed)
             hits.append(self._decided(complete_rows, first + complete_rows, result, world, rules))
             pending_parts.append(first + np.flatnonzero(messy & overflowed))
@@ -297,22 +318,42 @@ class RayMeshIntersector:
                 local_origins[which], local_directions[which], block_near, np.inf, room
             )
             hits.append(self._decided(np.arange(len(which)), which, result, world, rules))
+            truncated.append(which[result[6]])
         rays, tris, distance = hits.arrays()
-        return finished_hits(
+        finished = finished_hits(
             rays,
             tris,
             distance,
             traced_order,
             n,
             capacity,
-            scene.fans()[0] if one_per_point else None,
+            scene.fans()[0],
+            scene.planes,
             scene.extent / scene.scale,
+            _PARALLEL_COS,
             given_origins,
             given_directions,
             with_locations,
             scene.scratch,
             scene.bvh.threads,
         )
+        truncated = np.concatenate(truncated) if truncated else np.zeros(0, np.int64)
+        if traced_order is not None:
+            truncated = traced_order[truncated]
+        short = truncated[np.bincount(finished[0], minlength=n)[truncated] < capacity]
+        if not len(short):
+            return finished
+        if given_tnear is not None and np.ndim(given_tnear):
+            given_tnear = np.broadcast_to(given_tnear, (n,))[short]
+        again = self._hits(
+            given_origins[short],
+            given_directions[short],
+            capacity,
+            given_tnear,
+            with_locations=with_locations,
+            room=4 * room,
+        )
+        return _spliced(finished, short, again)
 
     def _decided(self, rows, positions, result, world, rules):
         """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
@@ -362,7 +403,6 @@ class RayMeshIntersector:
                 util.unitize(directions[again]),
                 1,
                 None if near is None else near[again],
-                True,
             )
             first[again] = -1
             first[again[more[0]]] = more[1]
@@ -386,9 +426,9 @@ class RayMeshIntersector:
         default, as in trimesh 5's embree backend) or only the first; ``tnear`` (scalar or
         (n,), world units): report hits at distance >= tnear; by default hits beyond a few
         float32 ulps of the origin, so a ray starting on a surface does not hit it. Order: all
-        first hits by ray, then all second hits, ... (as trimesh's embree backend). With
-        ``return_locations`` a point where a ray meets several triangles (an edge, a vertex) is
-        reported once.
+        first hits by ray, then all second hits, ... (as trimesh's embree backend). One hit per
+        crossing of the surface: where a ray meets several triangles at one point (an edge, a
+        vertex) the lowest index of them stands for the point (module docstring).
         """
         if not multiple_hits:
             origins, given_directions = _ray_arrays(ray_origins, ray_directions)
@@ -404,13 +444,7 @@ class RayMeshIntersector:
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions = _as_rays(ray_origins, ray_directions)
         rays, tris, locations = self._hits(
-            origins,
-            directions,
-            max_hits,
-            tnear,
-            one_per_point=return_locations,
-            reorder=True,
-            with_locations=return_locations,
+            origins, directions, max_hits, tnear, reorder=True, with_locations=return_locations
         )
         if return_locations:
             return tris, rays, locations
@@ -420,7 +454,7 @@ class RayMeshIntersector:
         self, ray_origins, ray_directions, multiple_hits: bool = True, *, tnear=None
     ):
         """Where rays hit: ``(locations (m, 3) float64, index_ray (m,) int64, index_tri (m,)
-        int64)``, each point once (see ``intersects_id``)."""
+        int64)``, one per crossing of the surface (see ``intersects_id``)."""
         index_tri, index_ray, locations = self.intersects_id(
             ray_origins,
             ray_directions,
@@ -492,37 +526,3 @@ class RayMeshIntersector:
 
     def __copy__(self, *args) -> RayMeshIntersector:
         return RayMeshIntersector(geometry=self.mesh, scale_to_box=self._scale_to_box)
-
-
-# -- opting in for every new Trimesh --------------------------------------------------------------
-
-_original_init = None
-
-
-def install() -> None:
-    """Make every ``trimesh.Trimesh`` created from now on use this intersector (where trimesh
-    would have used its embree backend: ``use_embree=True``, its default). ``uninstall()``
-    undoes it."""
-    global _original_init
-    if _original_init is not None:
-        return
-    original = trimesh.Trimesh.__init__
-    signature = inspect.signature(original)
-
-    @functools.wraps(original)
-    def __init__(self, *args, **kwargs):  # noqa: N807
-        original(self, *args, **kwargs)
-        bound = signature.bind(self, *args, **kwargs)
-        if bound.arguments.get("use_embree", True):
-            self.ray = RayMeshIntersector(self)
-
-    _original_init = original
-    trimesh.Trimesh.__init__ = __init__
-
-
-def uninstall() -> None:
-    """Undo ``install()``: new meshes get trimesh's own ray backend again."""
-    global _original_init
-    if _original_init is not None:
-        trimesh.Trimesh.__init__ = _original_init
-        _original_init = None

@@ -1,0 +1,52 @@
+"""What the command's scene argument names: a scene file (TOML or JSON) or a mesh file rendered
+on its own (``Scene.from_file``), and what a cluster's workers make the scene from."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from embree_rt.scene.model import Scene
+
+SCENE_SUFFIXES = (".toml", ".json")
+
+
+def is_mesh_file(path: str | Path) -> bool:
+    """Whether ``path`` names a mesh file rather than a scene file, by its extension; raises
+    ``SceneError`` for an extension that is neither's."""
+    suffix = Path(path).suffix.lower()
+    if suffix in SCENE_SUFFIXES:
+        return False
+    from embree_rt.scene.meshes import MESH_SUFFIXES  # trimesh: ~1 s to import
+
+    if suffix in MESH_SUFFIXES:
+        return True
+    from embree_rt.scene.errors import SceneError
+
+    raise SceneError(path, "(file)", f"expected a scene file ({', '.join(SCENE_SUFFIXES)}) or "
+                     f"a mesh file ({', '.join(MESH_SUFFIXES)})")  # fmt: skip
+
+
+def read_scene(args: argparse.Namespace) -> tuple[Scene, Path | Scene]:
+    """The scene ``args.scene`` names, with ``--no-floor`` and the settings (``--set`` and the
+    flags standing for a key), and the source a cluster's workers make it from: the scene
+    file's path when they can load it as it is (they load a path with ``load_scene``; the
+    render settings travel with the frames), else the ``Scene`` itself (scattered to them)."""
+    from embree_rt.scene.settings import Setting, apply_to_scene, load_scene_with
+
+    settings = list(args.settings)
+    path = Path(args.scene)
+    if is_mesh_file(path):
+        scene = Scene.from_file(path, floor=not args.no_floor)
+        apply_to_scene(scene, settings, str(path))
+        return scene, scene
+    if args.no_floor:
+        settings.append(Setting("floor", False, "--no-floor"))
+    scene = load_scene_with(path, settings)
+    return scene, (path if only_render_settings(settings) else scene)
+
+
+def only_render_settings(settings) -> bool:
+    """Whether ``settings`` change the render settings alone (which travel with the frames to
+    a cluster's workers), so workers can make the scene themselves."""
+    return all(setting.key.startswith("render.") for setting in settings)
