@@ -22,7 +22,7 @@ from embree_rt.batches import batch_ranges, ordered_results, worker_count
 from embree_rt.camera import CameraFrame, camera_rays, sample_rays, tiled_samples
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.compiled import retain_freed_memory
-from embree_rt.compiled.camera_rays import CameraRays
+from embree_rt.compiled.camera_rays import CameraRays, sample_directions
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.materials import MaterialTable, shading_shares
@@ -107,7 +107,9 @@ class Tracer(Protocol):
     (``intersect_compact``: the (k,) int64 rays that hit and their ``SurfaceHits``, floor hits
     first) and whether shadow segments are blocked (``occluded_toward``: (k,) bool for the
     segments from ``points[:, rows]`` to ``target``). ``SceneGeometry`` (one BVH of the whole
-    scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask."""
+    scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask.
+    A tracer may also make camera rays inside its query (``SceneGeometry.intersect_camera``);
+    one that does not is given them as columns."""
 
     def intersect_compact(
         self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
@@ -292,7 +294,7 @@ class Integrator:
         depth = 0
         while len(rays):
             if depth == 0 and camera is not None:
-                rows, surfaces, rays.directions = self.geometry.intersect_camera(*camera)
+                rows, surfaces, rays.directions = self._camera_hits(*camera)
             else:
                 rows, surfaces = self.geometry.intersect_compact(
                     rays.origins, rays.directions, coherent=depth == 0
@@ -312,6 +314,20 @@ class Integrator:
             hit_rays = RayBatch(None, surfaces.incoming, np.take(rays.pixel, rows), weight)
             rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
+
+    def _camera_hits(
+        self, camera: CameraRays, index: np.ndarray
+    ) -> tuple[np.ndarray, SurfaceHits, np.ndarray]:
+        """The camera samples ``index``' hits (``SceneGeometry.intersect_camera``: rays that
+        hit, their surfaces, all (3, n) directions), made inside the query when the tracer can
+        (a tracer of bricks is asked for the same rays as columns)."""
+        intersect_camera = getattr(self.geometry, "intersect_camera", None)
+        if intersect_camera is not None:
+            return intersect_camera(camera, index)
+        directions = sample_directions(camera, index)
+        origins = np.repeat(camera.origin[:, None], len(index), axis=1)
+        rows, surfaces = self.geometry.intersect_compact(origins, directions, coherent=True)
+        return rows, surfaces, directions
 
     def _shade(
         self, rays: RayBatch, surfaces: SurfaceHits, work: BatchWork, spawn: bool
