@@ -7,6 +7,14 @@ replay of the recorded rays through the bare BVH queries (no shading) on as many
 end over raw rays/s: pairs taken close together keep the ratio fair on a noisy shared machine.
 ``render_s`` and ``raw_rays_per_s`` are the best of their runs.
 
+``stages`` is where one more render's time goes, rendered on one worker thread so that the
+stages add up to its ``render_s``: ``camera`` (the batches' tile order and the camera rays,
+which are made inside the first query: their share is timed apart by making the same rays
+again), ``traversal`` (Embree's nearest-hit queries), ``records`` (hit records and surface
+normals and looks around them), ``shadow`` (the shadow-segment queries), ``film`` (sums into
+the film and the final image) and ``shading`` (the rest: NumPy shading and the wavefront's
+bookkeeping). The instruments cost a few microseconds a call.
+
     python benchmarks/render_scale.py                       # 1e3..1e6 spheres, 1920x1080, 1 spp
     python benchmarks/render_scale.py --counts 1000000 --threads 1
 
@@ -20,12 +28,17 @@ import json
 import resource
 import threading
 import time
+from contextlib import contextmanager
 
 import numpy as np
 
-from embree_rt import Renderer
+from embree_rt import Renderer, film, integrator
+from embree_rt.compiled.camera_rays import sample_directions
+from embree_rt.embree import camera_query, kernels
 from embree_rt.integrator import DEFAULT_BATCH_SIZE
 from embree_rt.scene import random_field
+
+STAGES = ("camera", "traversal", "records", "shading", "shadow", "film")
 
 
 def peak_rss_mb() -> float:
@@ -48,6 +61,14 @@ class RecordingGeometry:
         with self._lock:
             self.log.append(("intersect", origins, directions, tfar, coherent))
         return self.geometry.intersect_compact(origins, directions, tnear, tfar, coherent)
+
+    def intersect_camera(self, camera, index):
+        rows, surfaces, directions = self.geometry.intersect_camera(camera, index)
+        # The camera rays, made inside the query, as the rays they are.
+        origins = np.repeat(camera.origin[:, None], directions.shape[1], axis=1)
+        with self._lock:
+            self.log.append(("intersect", origins, directions, np.inf, True))
+        return rows, surfaces, directions
 
     def occluded_toward(self, points, rows, target):
         # The shadow segments as the rays they are: from each point to the target, t in [0, 1].
@@ -74,7 +95,15 @@ def replay(renderer: Renderer, log: list, threads: int | None = None) -> float:
     and nothing else: no hit records, no floor plane), on ``threads`` threads (by default as
     many as the render had)."""
     bvh = renderer.geometry.bvh
+    render_threads = bvh.threads  # the renderer's own (1: its workers query side by side)
     bvh.threads = renderer.workers if threads is None else threads
+    try:
+        return _replay(bvh, log)
+    finally:
+        bvh.threads = render_threads
+
+
+def _replay(bvh, log: list) -> float:
     # Compile and warm the kernels this thread count uses, outside the timing.
     # (numba compiles per memory layout: these are Fortran-ordered (n, 3) views, as logged.)
     _, origins, directions, _, _ = log[0]
@@ -97,6 +126,100 @@ def replay(renderer: Renderer, log: list, threads: int | None = None) -> float:
     return elapsed
 
 
+class StageClock:
+    """Seconds spent per stage by wrapped functions, each call's time less that of the wrapped
+    calls it makes (a records pass that calls the traversal kernel counts only its own time).
+    One thread at a time."""
+
+    def __init__(self) -> None:
+        self.seconds = dict.fromkeys(STAGES, 0.0)
+        self._inner: list[float] = []
+
+    def wrap(self, stage: str, function):
+        def timed(*args, **kwargs):
+            self._inner.append(0.0)
+            start = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                elapsed = time.perf_counter() - start
+                inner = self._inner.pop()
+                self.seconds[stage] += elapsed - inner
+                if self._inner:
+                    self._inner[-1] += elapsed
+        return timed
+
+
+@contextmanager
+def patched(targets: list[tuple[object, str, object]]):
+    """Set each (owner, name, value) for the duration, then put the originals back."""
+    saved = [(owner, name, getattr(owner, name)) for owner, name, _ in targets]
+    try:
+        for owner, name, value in targets:
+            setattr(owner, name, value)
+        yield
+    finally:
+        for owner, name, value in saved:
+            setattr(owner, name, value)
+
+
+def stage_breakdown(renderer: Renderer, image: dict) -> dict:
+    """Seconds per stage (``STAGES``) of one render of ``image`` on one worker thread, and its
+    ``render_s``."""
+    clock = StageClock()
+    camera_batches = []
+    make_camera, make_order = integrator.camera_rays, integrator.tiled_samples
+
+    def camera_rays(frame, spp, seed):
+        camera = make_camera(frame, spp, seed)
+        camera_batches.append(camera)
+        return camera
+
+    def tiled_samples(*args):
+        index, pixel = make_order(*args)
+        camera_batches.append(index)
+        return index, pixel
+
+    geometry = renderer.geometry
+    wrap = clock.wrap
+    targets = [
+        (integrator, "tiled_samples", wrap("camera", tiled_samples)),
+        (integrator, "camera_rays", wrap("camera", camera_rays)),
+        (camera_query, "intersect_camera_serial",
+         wrap("traversal", camera_query.intersect_camera_serial)),
+        (kernels, "intersect_serial", wrap("traversal", kernels.intersect_serial)),
+        (geometry, "intersect_camera", wrap("records", geometry.intersect_camera)),
+        (geometry, "intersect_compact", wrap("records", geometry.intersect_compact)),
+        (geometry, "occluded_toward", wrap("shadow", geometry.occluded_toward)),
+        (film.FilmBlock, "add", wrap("film", film.FilmBlock.add)),
+        (film.FilmBlock, "add_weighted", wrap("film", film.FilmBlock.add_weighted)),
+        (film.Film, "add_block", wrap("film", film.Film.add_block)),
+        (film.Film, "image", wrap("film", film.Film.image)),
+    ]  # fmt: skip
+    workers, renderer.workers = renderer.workers, 1
+    try:
+        with patched(targets):
+            render_s = renderer.render(**image).stats.render_s
+    finally:
+        renderer.workers = workers
+        for owner, name, _ in targets:  # instance attributes: back to the class's methods
+            if owner is geometry:
+                vars(geometry).pop(name, None)
+    # The camera rays were made inside the traversal kernel: make them again, timed, and move
+    # that time from traversal to camera.
+    indices, cameras = camera_batches[0::2], camera_batches[1::2]
+    sample_directions(cameras[0], indices[0][:1])  # loaded (or compiled) outside the timing
+    start = time.perf_counter()
+    for camera, index in zip(cameras, indices, strict=True):
+        sample_directions(camera, index)
+    rays_s = time.perf_counter() - start
+    seconds = clock.seconds
+    seconds["camera"] += rays_s
+    seconds["traversal"] -= rays_s
+    seconds["shading"] = render_s - sum(v for k, v in seconds.items() if k != "shading")
+    return {"render_s": round(render_s, 4), **{k: round(seconds[k], 4) for k in STAGES}}
+
+
 def run(count: int, args: argparse.Namespace) -> dict:
     scene = random_field(count, seed=args.seed)
     image = dict(width=args.width, height=args.height, spp=args.spp, max_depth=args.max_depth,
@@ -117,6 +240,7 @@ def run(count: int, args: argparse.Namespace) -> dict:
             render_s.append(renderer.render(**image).stats.render_s)
             raw_s.append(replay(renderer, log))
         efficiency = float(np.median(np.divide(raw_s, render_s[1:])))
+        stages = stage_breakdown(renderer, image)
         best_s = min(render_s)
         rays = sum(rays_by_kind.values())
         return {
@@ -137,6 +261,7 @@ def run(count: int, args: argparse.Namespace) -> dict:
             "efficiency": round(efficiency, 3),
             "peak_rss_mb": round(peak_rss, 1),
             "repeat": args.repeat,
+            "stages_one_thread": stages,
         }
 
 

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from embree_rt.sampling import uniform_pair
+from embree_rt.compiled.camera_rays import CameraRays, sample_directions, tile_order
+from embree_rt.sampling import hash_key
 
 Vec3 = tuple[float, float, float]
 
@@ -189,11 +190,13 @@ TILE_WIDTH = 4
 TILE_HEIGHT = 2
 
 
-def tiled_samples(frame: CameraFrame, spp: int, start: int, count: int) -> np.ndarray:
-    """(count,) int64: the global sample indices ``[start, start + count)`` (whole pixels, as
-    ``batch_ranges`` cuts them) reordered pixel by pixel into tiles of ``TILE_WIDTH`` x
-    ``TILE_HEIGHT`` pixels: tiles left to right along each pair of rows, inside a tile row-major,
-    each pixel's samples together in sample order.
+def tiled_samples(
+    frame: CameraFrame, spp: int, start: int, count: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The global sample indices ``[start, start + count)`` (whole pixels, as ``batch_ranges``
+    cuts them) reordered pixel by pixel into tiles of ``TILE_WIDTH`` x ``TILE_HEIGHT`` pixels:
+    tiles left to right along each pair of rows, inside a tile row-major, each pixel's samples
+    together in sample order. Returns the (count,) int64 indices and (count,) int64 pixels.
 
     The order is the global tile order restricted to these pixels, so any two samples keep the
     same relative order however the image is cut into batches: the film sums each pixel's
@@ -204,29 +207,21 @@ def tiled_samples(frame: CameraFrame, spp: int, start: int, count: int) -> np.nd
     if start % spp or count % spp:
         raise ValueError(f"samples {start}..{start + count} do not cover whole pixels at {spp} spp")
     first, stop = start // spp, (start + count) // spp
-    if stop == first:
-        return np.zeros(0, np.int64)
-    width = frame.width
-    top = first // width // TILE_HEIGHT * TILE_HEIGHT
-    pairs = ((stop - 1) // width - top) // TILE_HEIGHT + 1
-    tiles_across = -(-width // TILE_WIDTH)
-    # pixel numbers as (row pair, tile, row in tile, column in tile), one row pair a line
-    row = np.arange(top, top + pairs * TILE_HEIGHT, dtype=np.int64).reshape(-1, 1, TILE_HEIGHT, 1)
-    column = (np.arange(tiles_across, dtype=np.int64).reshape(1, -1, 1, 1) * TILE_WIDTH
-              + np.arange(TILE_WIDTH, dtype=np.int64).reshape(1, 1, 1, -1))  # fmt: skip
-    lines = (row * width + column).reshape(pairs, -1)
-    if width % TILE_WIDTH:  # the last tile of a row reaches past the image: drop those
-        inside = np.broadcast_to(column < width, (1, tiles_across, TILE_HEIGHT, TILE_WIDTH))
-        lines = lines[:, inside.ravel()]
-    # only the first and the last row pair can hold pixels outside the batch
-    head = lines[0][(lines[0] >= first) & (lines[0] < stop)]
-    if pairs == 1:
-        pixel = head
-    else:
-        pixel = np.concatenate([head, lines[1:-1].ravel(), lines[-1][lines[-1] < stop]])
-    if spp == 1:
-        return pixel
-    return (pixel[:, None] * spp + np.arange(spp, dtype=np.int64)).ravel()
+    return tile_order(frame.width, spp, TILE_WIDTH, TILE_HEIGHT, first, stop)
+
+
+def camera_rays(frame: CameraFrame, spp: int, seed: int) -> CameraRays:
+    """What the ray of each camera sample of a render at ``spp`` samples per pixel and ``seed``
+    depends on besides its index, for the compiled code that makes the rays."""
+    nx, ny, cells = strata(spp)
+    u, v, w, origin = (np.ascontiguousarray(axis, np.float32)
+                       for axis in (frame.u, frame.v, frame.w, frame.origin))  # fmt: skip
+    return CameraRays(
+        origin, u, v, w,
+        2.0 * frame.half_width / frame.width, float(frame.half_width),
+        2.0 * frame.half_height / frame.height, float(frame.half_height),
+        frame.width, spp, nx, ny, cells, hash_key(seed, 0),
+    )  # fmt: skip
 
 
 def sample_rays(
@@ -238,21 +233,17 @@ def sample_rays(
     Sample i belongs to pixel ``i // spp`` (row-major, row 0 at the top, column 0 at the left)
     and is sample ``s = i % spp`` of it, placed in cell ``strata(spp)[2][s]`` of the pixel's
     jitter grid and jittered inside it by ``sampling.uniform_pair(seed, i, 0)``: sample i of a
-    render is the same ray whichever call, batch or order makes it. Returns origins (3, n)
-    float32, unit directions (3, n) float32 and pixel (n,) int64."""
-    nx, ny, cells = strata(spp)
-    # Floor division and remainder by a scalar, not np.divmod: NumPy divides by a constant
-    # through libdivide only in these two (13x faster here).
-    pixel = index // spp if spp > 1 else index
-    row = pixel // frame.width
-    col = pixel % frame.width
-    jitter_x, jitter_y = uniform_pair(seed, index, 0)
-    if spp > 1:
-        cell = cells[index % spp]
-        cell_y, cell_x = cell // nx, cell % nx
-        jitter_x = (cell_x + jitter_x) / nx
-        jitter_y = (cell_y + jitter_y) / ny
-    return _rays_through(frame, col + jitter_x, row + jitter_y, pixel)
+    render is the same ray whichever call, batch or order makes it. The point on the image
+    plane is worked out in float64 (the jitter must survive being added to a column number in
+    the thousands) and rounded once to float32; the direction ``u x + v y - w`` and its
+    normalisation are float32 (``compiled.camera_rays.sample_direction``). Returns origins
+    (3, n) float32, unit directions (3, n) float32 and pixel (n,) int64."""
+    index = np.ascontiguousarray(index, np.int64)
+    spp = _positive_integer(spp, "spp")
+    directions = sample_directions(camera_rays(frame, spp, seed), index)
+    origins = np.empty((3, len(index)), np.float32)
+    origins[:] = frame.origin.astype(np.float32)[:, None]
+    return origins, directions, index // spp
 
 
 def pixel_center_rays(
@@ -274,7 +265,7 @@ def _rays_through(
     frame: CameraFrame, column: np.ndarray, row: np.ndarray, pixel: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rays from the eye through the image points at (n,) float64 ``column``, ``row`` (in
-    pixels, from the top left corner), for ``sample_rays`` and ``pixel_center_rays``."""
+    pixels, from the top left corner), for ``pixel_center_rays``."""
     # Screen coordinates, x = (2 column / width - 1) half_width and y = (1 - 2 row / height)
     # half_height, in float64: the jitter must survive being added to a column number in the
     # thousands.

@@ -17,6 +17,8 @@ from typing import BinaryIO, NamedTuple
 
 import numpy as np
 
+from embree_rt.compiled import film_sums
+
 GAMMA = 2.2
 # Display formats: Pillow's name for each extension.
 PILLOW_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF",
@@ -78,23 +80,16 @@ class Film:
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
         # One pass: divide in float64, round once to float32, written pixel-major.
-        mean = np.empty((self.width * self.height, 3), np.float32)
-        np.divide(self._sum.T, spp, out=mean, casting="same_kind")
-        return mean.reshape(self.height, self.width, 3)
+        return film_sums.mean_image(self._sum, spp).reshape(self.height, self.width, 3)
 
 
 class FilmBlock:
     """Sums for the ``count`` consecutive pixels from ``first``: what one batch of camera samples
     accumulates on its own (no locking, and cheaper than bincounts over the whole film).
 
-    Samples are kept as added and summed when ``sums`` is read, or as soon as more than
-    ``hold`` are held: a few bincounts per channel for the whole batch instead of one per
-    bounce (each of which would sweep all ``count`` pixels however few samples it adds), while
-    what a block holds stays bounded however many bounces add to it. ``hold`` None: no bound.
-
-    Each pixel's sum is formed sample by sample in the order the samples were added, however
-    the adds are grouped into settlings: bincount adds its weights in input order, and a
-    settling passes the sums so far as the first weight of each pixel (0.0 + s is s exactly).
+    Each sample is summed into its pixel as it is added (``compiled.film_sums``), in float64,
+    in the order added: the sums are bitwise those of one ``np.bincount`` per channel over all
+    the samples concatenated.
     """
 
     def __init__(self, first: int, count: int, hold: int | None = None) -> None:
@@ -104,45 +99,34 @@ class FilmBlock:
         self.held = 0  # samples added and not yet summed
         self._settled = False  # whether _sums holds samples already
         self._sums = np.zeros((3, self.count), np.float64)
-        self._pixels: list[np.ndarray] = []
-        self._rgb: list[np.ndarray] = []
 
     def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:
-        """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block.
-        The arrays are kept, not copied, until they are summed: do not modify them."""
-        if len(pixel):
-            self._pixels.append(pixel)
-            self._rgb.append(rgb)
-            self.held += len(pixel)
-            if self.hold is not None and self.held > self.hold:
-                self.settle()
+        """Add (3, n) float32 ``rgb`` to the (n,) int64 ``pixel`` indices inside the block."""
+        self._check(film_sums.add_samples(self._sums, self.first, pixel, rgb), pixel, None)
+
+    def add_weighted(
+        self, pixel: np.ndarray, weight: np.ndarray | None, rgb: np.ndarray,
+        columns: np.ndarray | None = None,
+    ) -> None:  # fmt: skip
+        """``add(pixel[columns], weight[:, columns] * rgb)`` with no temporaries: ``pixel``
+        (n,) int64, ``weight`` (3, n) float32 ray weights (None: all ones), ``rgb`` (3, k)
+        float32, ``columns`` (k,) int64 the rays ``rgb`` belongs to (None: all n, k = n)."""
+        outside = film_sums.add_weighted(self._sums, self.first, pixel, weight, rgb, columns)
+        self._check(outside, pixel, columns)
+
+    def _check(self, outside: int, pixel: np.ndarray, columns: np.ndarray | None) -> None:
+        """Raise ValueError naming sample ``outside``'s pixel unless it is -1 (all inside)."""
+        if outside >= 0:
+            at = outside if columns is None else columns[outside]
+            raise ValueError(
+                f"pixel {int(pixel[at])} is outside the block's pixels "
+                f"{self.first}..{self.first + self.count - 1}"
+            )
 
     @property
     def sums(self) -> np.ndarray:
         """(3, count) float64 per-pixel sums of everything added so far."""
-        self.settle()
         return self._sums
-
-    def settle(self) -> None:
-        """Sum the samples held into the block's pixels. The renderer calls it in the thread
-        that traced the batch: the thread adding blocks to the film then only adds."""
-        if not self._pixels:
-            return
-        # (concatenating a single part would only copy it)
-        pixels = self._pixels[0] if len(self._pixels) == 1 else np.concatenate(self._pixels)
-        rgb = self._rgb[0] if len(self._rgb) == 1 else np.concatenate(self._rgb, axis=1)
-        local = pixels - self.first
-        if self._settled:  # the sums so far come first, as one more sample per pixel
-            local = np.concatenate([np.arange(self.count), local])
-        self._pixels.clear()
-        self._rgb.clear()
-        self.held = 0
-        for channel in range(3):
-            weights = rgb[channel]
-            if self._settled:
-                weights = np.concatenate([self._sums[channel], weights])
-            self._sums[channel] = np.bincount(local, weights=weights, minlength=self.count)
-        self._settled = True
 
 
 TONEMAPS = ("reinhard", "aces", "none")

@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.embree import BVH, HitLabels, spheres_in_spatial_order
+from embree_rt.compiled.camera_rays import CameraRays
+from embree_rt.embree import BVH, HitLabels, HitRecords, spheres_in_spatial_order
 from embree_rt.mesh_attributes import (
     HitLooks,
     MeshColors,
@@ -368,6 +369,20 @@ class SceneGeometry:
         camera rays (Embree's coherent query; the same answers, found faster)."""
         records = self.bvh.intersect_records(origins, directions, self.labels, tnear, tfar,
                                              coherent)  # fmt: skip
+        return records.rays, self._surfaces(records)
+
+    def intersect_camera(
+        self, camera: CameraRays, index: np.ndarray
+    ) -> tuple[np.ndarray, SurfaceHits, np.ndarray]:
+        """``intersect_compact`` of the camera rays of samples ``index`` (n,) int64, made
+        inside the query (``BVH.intersect_camera_records``): the (k,) ray numbers that hit,
+        their ``SurfaceHits``, and the (3, n) float32 directions of all n rays."""
+        records, directions = self.bvh.intersect_camera_records(camera, index, self.labels)
+        return records.rays, self._surfaces(records), directions
+
+    def _surfaces(self, records: HitRecords) -> SurfaceHits:
+        """The ``SurfaceHits`` of a query's hit records: smooth and normal-mapped shading
+        normals and mesh looks added to the records' geometric ones."""
         face_normal = records.normal
         normal = face_normal
         meshes = records.group("other")
@@ -400,7 +415,7 @@ class SceneGeometry:
                 surfaces.colored, surfaces.color, surfaces.looks = looks.rows, looks.color, looks
                 if looks.normal is not None:
                     self._apply_normal_maps(surfaces, records, looks)
-        return records.rays, surfaces
+        return surfaces
 
     def _apply_normal_maps(self, surfaces: SurfaceHits, records, looks: HitLooks) -> None:
         """Replace the shading normals of the hits a normal map turns (``looks.normal``, in

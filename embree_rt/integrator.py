@@ -19,9 +19,10 @@ import numpy as np
 
 from embree_rt import shading
 from embree_rt.batches import batch_ranges, ordered_results, worker_count
-from embree_rt.camera import CameraFrame, sample_rays, tiled_samples
+from embree_rt.camera import CameraFrame, camera_rays, sample_rays, tiled_samples
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.compiled import retain_freed_memory
+from embree_rt.compiled.camera_rays import CameraRays, sample_directions
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.materials import MaterialTable, shading_shares
@@ -64,12 +65,14 @@ class BatchWork:
 class RayBatch:
     """Rays in flight, one per column: ``origins``, ``directions`` (3, n) float32 (unit
     directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput. ``origins`` is
-    None for rays that have hit: their surface hits hold the points."""
+    None for rays that have hit (their surface hits hold the points) and for camera rays not
+    yet traced (made inside the query), whose ``directions`` are None until then and whose
+    ``weight`` is None: all ones, never spread into an array (1 · x is x, bit for bit)."""
 
     origins: np.ndarray | None
-    directions: np.ndarray
+    directions: np.ndarray | None
     pixel: np.ndarray
-    weight: np.ndarray
+    weight: np.ndarray | None
 
     def __len__(self) -> int:
         return len(self.pixel)
@@ -104,7 +107,9 @@ class Tracer(Protocol):
     (``intersect_compact``: the (k,) int64 rays that hit and their ``SurfaceHits``, floor hits
     first) and whether shadow segments are blocked (``occluded_toward``: (k,) bool for the
     segments from ``points[:, rows]`` to ``target``). ``SceneGeometry`` (one BVH of the whole
-    scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask."""
+    scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask.
+    A tracer may also make camera rays inside its query (``SceneGeometry.intersect_camera``);
+    one that does not is given them as columns."""
 
     def intersect_compact(
         self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
@@ -271,40 +276,58 @@ class Integrator:
         ``batch_ranges`` cuts them) through every bounce: their film block and ray counts.
         A pure function of its arguments and the scene, so any process holding the same scene
         computes the same block (``embree_rt.distributed`` runs it on Dask workers)."""
-        # The block sums its samples whenever it holds more than the batch's camera samples: a
-        # batch holds no more for a thousand bounces than for two.
-        work = BatchWork(FilmBlock(start // spp, count // spp, hold=count))
-        origins, directions, pixel = sample_rays(
-            frame, spp, seed, tiled_samples(frame, spp, start, count)
-        )
-        rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
+        work = BatchWork(FilmBlock(start // spp, count // spp))
+        index, pixel = tiled_samples(frame, spp, start, count)
+        # Camera rays are made inside the first query, from their sample indices.
+        rays = RayBatch(None, None, pixel, None)
         work.rays["primary"] += count
-        self._trace(rays, work, max_depth)
-        work.block.settle()  # in this worker thread, not in the one adding blocks to the film
+        self._trace(rays, work, max_depth, (camera_rays(frame, spp, seed), index))
         return work
 
-    def _trace(self, rays: RayBatch, work: BatchWork, max_depth: int) -> None:
+    def _trace(
+        self, rays: RayBatch, work: BatchWork, max_depth: int,
+        camera: tuple[CameraRays, np.ndarray] | None = None,
+    ) -> None:  # fmt: skip
+        """Trace ``rays`` and their children to ``max_depth``; with ``camera`` (its
+        ``CameraRays`` and the (n,) sample indices of ``rays``), ``rays`` are those camera
+        samples and their origins and directions (None) are made inside the first query."""
         depth = 0
         while len(rays):
-            rows, surfaces = self.geometry.intersect_compact(
-                rays.origins, rays.directions, coherent=depth == 0
-            )
+            if depth == 0 and camera is not None:
+                rows, surfaces, rays.directions = self._camera_hits(*camera)
+            else:
+                rows, surfaces = self.geometry.intersect_compact(
+                    rays.origins, rays.directions, coherent=depth == 0
+                )
             if len(rows) < len(rays):
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False
                 escaped = np.flatnonzero(escaped)
-                sky = shading.sky(np.take(rays.directions, escaped, axis=1), self.horizon,
-                                  self.zenith)  # fmt: skip
-                work.block.add(rays.pixel[escaped], np.take(rays.weight, escaped, axis=1) * sky)
+                # the sky depends on the directions' heights alone: gather only those
+                sky = shading.sky_at(rays.directions[1][escaped], self.horizon, self.zenith)
+                work.block.add_weighted(rays.pixel, rays.weight, sky, escaped)
             # The hits' origins are not needed again: their surfaces say where they are.
-            hit_rays = RayBatch(
-                None,
-                surfaces.incoming,
-                np.take(rays.pixel, rows),
-                np.take(rays.weight, rows, axis=1),
-            )
+            if rays.weight is None:  # camera rays: unit weights, made for the hits alone
+                weight = np.ones((3, len(rows)), np.float32)
+            else:
+                weight = np.take(rays.weight, rows, axis=1)
+            hit_rays = RayBatch(None, surfaces.incoming, np.take(rays.pixel, rows), weight)
             rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
+
+    def _camera_hits(
+        self, camera: CameraRays, index: np.ndarray
+    ) -> tuple[np.ndarray, SurfaceHits, np.ndarray]:
+        """The camera samples ``index``' hits (``SceneGeometry.intersect_camera``: rays that
+        hit, their surfaces, all (3, n) directions), made inside the query when the tracer can
+        (a tracer of bricks is asked for the same rays as columns)."""
+        intersect_camera = getattr(self.geometry, "intersect_camera", None)
+        if intersect_camera is not None:
+            return intersect_camera(camera, index)
+        directions = sample_directions(camera, index)
+        origins = np.repeat(camera.origin[:, None], len(index), axis=1)
+        rows, surfaces = self.geometry.intersect_compact(origins, directions, coherent=True)
+        return rows, surfaces, directions
 
     def _shade(
         self, rays: RayBatch, surfaces: SurfaceHits, work: BatchWork, spawn: bool
@@ -325,7 +348,7 @@ class Integrator:
             radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
         self._add_direct_light(radiance, outside, normal, -d, color, surfaces, work)
         self._add_emission(radiance, surfaces)
-        work.block.add(rays.pixel, rays.weight * radiance)
+        work.block.add_weighted(rays.pixel, rays.weight, radiance)
         if not spawn:
             return NO_RAYS
         reflect_share = self._per_hit(self.reflect_share, surfaces, "reflect_share")
@@ -445,14 +468,10 @@ class Integrator:
         inside = np.take(surfaces.position, through, axis=1)
         inside -= np.take(face_normal, through, axis=1) * offset[through]
         work.rays["refraction"] += len(keep)
-        return [
-            RayBatch(
-                inside,
-                np.take(refracted, keep, axis=1),
-                rays.pixel[through],
-                np.take(weight, keep, axis=1),
-            )
-        ]
+        if len(keep) < len(glass):  # (when every ray is kept, its arrays are the children's)
+            refracted = np.take(refracted, keep, axis=1)
+            weight = np.take(weight, keep, axis=1)
+        return [RayBatch(inside, refracted, rays.pixel[through], weight)]
 
     def _reflection_children(
         self, rays, outside, normal, color, reflect_share, surfaces, work
@@ -472,10 +491,12 @@ class Integrator:
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
         if len(keep) == 0:
             return NO_RAYS
+        work.rays["reflection"] += len(keep)
+        if len(keep) == len(weight[0]):  # every hit reflects: no gathers
+            return RayBatch(outside, shading.reflect(rays.directions, normal), rays.pixel, weight)
         reflected = shading.reflect(
             np.take(rays.directions, keep, axis=1), np.take(normal, keep, axis=1)
         )
-        work.rays["reflection"] += len(keep)
         return RayBatch(
             np.take(outside, keep, axis=1),
             reflected,
@@ -513,8 +534,11 @@ class Integrator:
                 # direction), cheaper than gathering seven arrays and scattering back.
                 seen = np.zeros(n, np.float32)
                 seen[facing] = visible
-                length = np.sqrt(shading.dot(to_light, to_light))
-                direction = to_light * (seen / np.maximum(length, np.float32(1e-30)))
+                # direction = to_light · seen / max(|to_light|, 1e-30), formed in place
+                scale = np.sqrt(shading.dot(to_light, to_light))
+                np.maximum(scale, np.float32(1e-30), out=scale)
+                np.divide(seen, scale, out=scale)
+                direction = np.multiply(to_light, scale, out=to_light)
                 radiance += shading.blinn_phong(
                     normal, to_viewer, direction, color, diffuse, specular, shininess,
                     self.light_rgb[light],

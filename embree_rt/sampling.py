@@ -27,12 +27,19 @@ def _hash_bits(seed: int, index: np.ndarray, dimension: int) -> np.ndarray:
         raise TypeError(f"index: expected an integer array, got dtype {index.dtype}")
     if int(dimension) != dimension or dimension < 0:
         raise ValueError(f"dimension: expected a non-negative integer, got {dimension!r}")
+    key = hash_key(seed, dimension)
+    with np.errstate(over="ignore"):
+        return _splitmix64(index.astype(np.uint64) ^ key)
+
+
+def hash_key(seed: int, dimension: int) -> np.uint64:
+    """The uint64 key of (``seed``, ``dimension``): sample i's hash is ``splitmix64(i ^ key)``
+    (compiled code that draws the same numbers takes the key from here)."""
     with np.errstate(over="ignore"):
         # Hashing the seed before adding the dimension keeps every (seed, dimension) pair on its
         # own 64-bit key: no two pairs alias, as they would with key = seed * k + dimension.
         seed_key = _splitmix64(np.uint64(int(seed) & _UINT64_MASK))
-        key = _splitmix64(seed_key + np.uint64(int(dimension) & _UINT64_MASK))
-        return _splitmix64(index.astype(np.uint64) ^ key)
+        return _splitmix64(seed_key + np.uint64(int(dimension) & _UINT64_MASK))
 
 
 def _unit_float(bits24: np.ndarray) -> np.ndarray:

@@ -328,8 +328,9 @@ def test_batches_trace_their_samples_in_tiles_of_four_by_two_pixels() -> None:
     width, height, spp = 10, 7, 3  # a width the tiles do not divide, an odd height
     frame = camera_frame(Camera(position=(0, 0, 0), look_at=(0, 0, -1)), width, height)
     total = width * height * spp
-    whole = tiled_samples(frame, spp, 0, total)
+    whole, whole_pixel = tiled_samples(frame, spp, 0, total)
     assert np.array_equal(np.sort(whole), np.arange(total))
+    assert np.array_equal(whole_pixel, whole // spp)
     pixel = whole[::spp] // spp
     # each pixel's samples together, in sample order
     assert np.array_equal(whole.reshape(-1, spp), pixel[:, None] * spp + np.arange(spp))
@@ -345,7 +346,8 @@ def test_batches_trace_their_samples_in_tiles_of_four_by_two_pixels() -> None:
     rank[whole] = np.arange(total)
     for bounds in ([0, 9, 31, 70], [0, 1, 2, 69, 70], [0, 35, 70]):
         for a, b in itertools.pairwise(bounds):
-            part = tiled_samples(frame, spp, a * spp, (b - a) * spp)
+            part, part_pixel = tiled_samples(frame, spp, a * spp, (b - a) * spp)
+            assert np.array_equal(part_pixel, part // spp)
             assert np.array_equal(np.sort(part), np.arange(a * spp, b * spp))
             assert np.all(np.diff(rank[part]) > 0)
     with pytest.raises(ValueError, match="whole pixels"):

@@ -10,9 +10,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.compiled.work_split import parallel_region
-from embree_rt.embree import device as device_module
 from embree_rt.embree import (
+    camera_query,
     instance_arrays,
     kernels,
     library,
@@ -24,6 +25,7 @@ from embree_rt.embree import (
     user_spheres,
     world_normals,
 )
+from embree_rt.embree import device as device_module
 from embree_rt.embree.alpha_filter import TriangleFilter
 from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
@@ -492,7 +494,22 @@ class BVH:
 
     def _raw_hits(self, origins, directions, tnear, tfar, coherent=False) -> Hits:
         """Embree's answers as it gives them (normals in object space) for validated rays."""
-        n = len(origins)
+        hits = self._empty_hits(len(origins))
+        if len(origins):
+            arguments = (
+                self._query(coherent),
+                kernels.Rays(origins, directions, tnear, tfar),
+                self._nearest(hits),
+                self._copy_numbers(hits),
+            )
+            self._run_query(kernels.intersect_serial, kernels.intersect, arguments)
+        return hits
+
+    def _copy_numbers(self, hits: Hits) -> np.ndarray | None:
+        """Where the kernels write instance-array copy numbers: None when there are none."""
+        return hits.inst_prim_id if self.array_count else None
+
+    def _empty_hits(self, n: int) -> Hits:
         hits = Hits(
             t=np.empty(n, np.float32),
             geom_id=np.empty(n, np.int32),
@@ -505,14 +522,6 @@ class BVH:
         # Only instance arrays have copy numbers to copy out; otherwise every hit's is -1.
         copies = bool(self.array_count)
         hits.inst_prim_id = np.empty(n, np.int32) if copies else np.full(n, -1, np.int32)
-        if n:
-            arguments = (
-                self._query(coherent),
-                kernels.Rays(origins, directions, tnear, tfar),
-                self._nearest(hits),
-                hits.inst_prim_id if copies else None,
-            )
-            self._run_query(kernels.intersect_serial, kernels.intersect, arguments)
         return hits
 
     def _query(self, coherent: bool) -> kernels.Query:
@@ -565,6 +574,31 @@ class BVH:
         directions = np.ascontiguousarray(directions, np.float32)
         rows, columns, near, far = self._query_inputs(origins.T, directions.T, tnear, tfar)
         hits = self._raw_hits(rows, columns, near, far, coherent)
+        return self._records(origins, directions, near, far, hits, labels)
+
+    def intersect_camera_records(
+        self, camera: CameraRays, index: np.ndarray, labels: HitLabels
+    ) -> tuple[HitRecords, np.ndarray]:
+        """``intersect_records`` of the camera rays of samples ``index`` (n,) int64 (below
+        ``width * height * spp`` of ``camera``), made inside the query (``camera_query``):
+        bitwise the records of ``camera.sample_rays``' rays, coherent. Returns the records and
+        the rays' (3, n) float32 unit directions."""
+        self._ready_to_query()
+        index = np.ascontiguousarray(index, np.int64)
+        n = len(index)
+        directions = np.empty((3, n), np.float32)
+        rays = camera_query.camera_query_rays(camera.origin, directions)
+        hits = self._empty_hits(n)
+        if n:
+            arguments = (self._query(True), camera, index, directions, rays, self._nearest(hits),
+                         self._copy_numbers(hits))  # fmt: skip
+            self._run_query(camera_query.intersect_camera_serial, camera_query.intersect_camera,
+                            arguments)  # fmt: skip
+        origins = np.broadcast_to(camera.origin[:, None], (3, n))
+        return self._records(origins, directions, rays.tnear, rays.tfar, hits, labels), directions
+
+    def _records(self, origins, directions, near, far, hits: Hits, labels: HitLabels):
+        """The ``HitRecords`` of raw ``hits`` of rays given as (3, n) columns."""
         spheres, sphere_slot = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
         sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
         has_plane = labels.plane_y is not None

@@ -1,0 +1,59 @@
+"""Nearest hits of camera rays made inside the kernel from their sample indices.
+
+A render's first bounce asks for the rays of a batch of camera samples. Made in NumPy they are
+two (3, n) arrays formed in a dozen passes (hash, jitter, screen position, direction, length),
+then validated and read again by the query. Here each chunk of samples has its directions
+written by ``compiled.camera_rays`` (bitwise the rays ``camera.sample_rays`` gives) into the
+one array shading needs afterwards, and is traced at once while they are in cache; the eye,
+``tnear`` and ``tfar`` are the same for every ray and are never spread into arrays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from embree_rt.compiled.camera_rays import write_directions
+from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, Rays, intersect_chunk
+
+
+def camera_query_rays(origin: np.ndarray, directions: np.ndarray) -> Rays:
+    """The ``kernels.Rays`` view of n camera rays from one (3,) float32 ``origin`` along the
+    columns of (3, n) float32 ``directions`` (as the kernels below fill them), t in [0, inf]:
+    the eye, tnear and tfar repeated by zero strides, not copied."""
+    n = directions.shape[1]
+    return Rays(
+        np.broadcast_to(origin, (n, 3)),
+        directions.T,
+        np.broadcast_to(np.float32(0.0), (n,)),
+        np.broadcast_to(np.float32(np.inf), (n,)),
+    )
+
+
+@njit(nogil=True, cache=True)
+def _camera_chunk(query, words, first, stop, camera, index, directions, rays, hits, inst_prim):
+    write_directions(camera, index, first, stop, directions)
+    intersect_chunk(query, words, first, stop, rays, hits, inst_prim)
+
+
+# ``query`` a ``kernels.Query``; ``camera`` a ``compiled.camera_rays.CameraRays``, ``index``
+# (n,) int64 sample indices; ``directions`` (3, n) float32 to fill, ``rays`` its
+# ``camera_query_rays`` view; ``hits`` a ``kernels.NearestHits`` and ``inst_prim`` (n,) int32 or
+# None, as ``kernels.intersect`` fills them.
+
+
+@njit(parallel=True, nogil=True, cache=True)
+def intersect_camera(query, camera, index, directions, rays, hits, inst_prim):
+    n = index.shape[0]
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
+    for c in prange(n_chunks):
+        _camera_chunk(query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), camera, index,
+                      directions, rays, hits, inst_prim)  # fmt: skip
+
+
+@njit(nogil=True, cache=True)
+def intersect_camera_serial(query, camera, index, directions, rays, hits, inst_prim):
+    scratch = np.empty(SCRATCH_WORDS, np.uint32)
+    _camera_chunk(query, scratch, 0, index.shape[0], camera, index, directions, rays, hits,
+                  inst_prim)  # fmt: skip
