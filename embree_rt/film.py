@@ -92,12 +92,9 @@ class FilmBlock:
     the samples concatenated.
     """
 
-    def __init__(self, first: int, count: int, hold: int | None = None) -> None:
+    def __init__(self, first: int, count: int) -> None:
         self.first = int(first)
         self.count = int(count)
-        self.hold = hold
-        self.held = 0  # samples added and not yet summed
-        self._settled = False  # whether _sums holds samples already
         self._sums = np.zeros((3, self.count), np.float64)
 
     def add(self, pixel: np.ndarray, rgb: np.ndarray) -> None:

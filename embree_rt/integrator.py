@@ -261,7 +261,7 @@ class Integrator:
             raise ValueError(f"sample: must lie in [0, {spp}), got {sample}")
         index = np.arange(first, first + count, dtype=np.int64) * spp + sample
         origins, directions, pixel = sample_rays(frame, spp, seed, index)
-        work = BatchWork(FilmBlock(first, count, hold=count))
+        work = BatchWork(FilmBlock(first, count))
         rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
         work.rays["primary"] += count
         self._trace(rays, work, max_depth)

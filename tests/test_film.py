@@ -143,13 +143,13 @@ def test_film_blocks_split_from_one_batch_add_up_to_the_same_image() -> None:
     np.testing.assert_allclose(blocked.image(2), direct.image(2), rtol=1e-12)
 
 
-def test_film_block_settling_as_it_goes_sums_bitwise_as_one_settling() -> None:
-    """A block that sums whenever it holds more than ``hold`` samples gives bitwise the sums of
-    one that sums once at the end: both add each pixel's samples one by one in float64 in the
-    order they were added (bincount's loop), the later settlings starting from the sums so far;
-    IEEE-754 addition is correctly rounded on every x86-64 ISA, so the same additions in the
-    same order give the same bits. Values spread over 12 decades, so that another order (sums
-    of the groups added up) gives other bits: asserted, so the test can tell."""
+def test_film_block_summing_as_it_goes_is_bitwise_one_bincount_of_all_samples() -> None:
+    """A block sums each sample into its pixel as it is added, in float64, in the order added:
+    bitwise one ``np.bincount`` per channel over all the samples concatenated (bincount adds its
+    weights in input order too). IEEE-754 addition is correctly rounded on every x86-64 ISA, so
+    the same additions in the same order give the same bits. Values spread over 12 decades, so
+    that another order (sums of the groups added up) gives other bits: asserted, so the test can
+    tell."""
     first, count = 4, 9
     rng = np.random.default_rng(7)
     adds = []
@@ -157,22 +157,18 @@ def test_film_block_settling_as_it_goes_sums_bitwise_as_one_settling() -> None:
         pixel = rng.integers(first, first + count, size).astype(np.int64)
         rgb = (10.0 ** rng.uniform(-6, 6, (3, size))).astype(np.float32)
         adds.append((pixel, rgb))
-    at_end, as_it_goes = FilmBlock(first, count), FilmBlock(first, count, hold=50)
-    settlings = 0
+    as_it_goes = FilmBlock(first, count)
     for pixel, rgb in adds:
-        at_end.add(pixel, rgb)
-        before = as_it_goes.held
         as_it_goes.add(pixel, rgb)
-        settlings += as_it_goes.held < before + len(pixel)
-        assert as_it_goes.held <= 50
-    assert settlings >= 10
-    np.testing.assert_array_equal(as_it_goes.sums, at_end.sums)
-    assert as_it_goes.sums.tobytes() == at_end.sums.tobytes()
+    local = np.concatenate([pixel for pixel, _ in adds]) - first
+    weights = np.concatenate([rgb for _, rgb in adds], axis=1).astype(np.float64)
+    at_end = np.stack([np.bincount(local, weights=w, minlength=count) for w in weights])
+    assert as_it_goes.sums.tobytes() == at_end.tobytes()
     grouped = np.zeros((3, count))
     for pixel, rgb in adds:
         grouped += block_sums(first, count, pixel, rgb)
-    assert grouped.tobytes() != at_end.sums.tobytes()
-    np.testing.assert_allclose(grouped, at_end.sums, rtol=1e-12)
+    assert grouped.tobytes() != at_end.tobytes()
+    np.testing.assert_allclose(grouped, at_end, rtol=1e-12)
 
 
 def block_sums(first: int, count: int, pixel: np.ndarray, rgb: np.ndarray) -> np.ndarray:
