@@ -14,6 +14,9 @@ what the beauty shades.
   axis (``depth`` times the cosine of the ray's angle to the axis), what a depth sensor and
   OpenCV's projection take; inf where the ray escapes.
 - ``position`` (h, w, 3) float32: the world-space hit point; inf where the ray escapes.
+- ``uv`` (h, w, 2) float32: the texture coordinates (u, v) of the hit, interpolated as the
+  mesh's base-colour texture is read there; inf where the ray escapes and on hits that have
+  none (spheres, the floor, meshes without a texture or shown in a scene material).
 - ``normal`` (h, w, 3) float32: unit world-space shading normal, turned to face the camera;
   zero where the ray escapes.
 - ``albedo`` (h, w, 3) float32 linear: the surface colour (material colour, a mesh's texture
@@ -51,18 +54,19 @@ if TYPE_CHECKING:
     from embree_rt.integrator import Integrator
     from embree_rt.scene.model import Scene
 
-AOV_NAMES = ("depth", "z_depth", "position", "normal", "albedo", "object_id", "material_id")
+AOV_NAMES = ("depth", "z_depth", "position", "uv", "normal", "albedo", "object_id", "material_id")
 NOTHING_ID = -1
 FLOOR_ID = -2
-# Bytes a pixel of every AOV holds (float32 depths, positions, normals and albedo, int32 ids),
+# Bytes a pixel of every AOV holds (float32 depths, positions, UVs, normals and albedo, int32 ids),
 # for the budget.
-AOV_BYTES = {"depth": 4, "z_depth": 4, "position": 12, "normal": 12, "albedo": 12,
+AOV_BYTES = {"depth": 4, "z_depth": 4, "position": 12, "uv": 8, "normal": 12, "albedo": 12,
              "object_id": 4, "material_id": 4}  # fmt: skip
 # The EXR channels of each AOV, in the order of the array's last axis.
 EXR_CHANNELS = {
     "depth": ("depth.Z",),
     "z_depth": ("z_depth.Z",),
     "position": ("position.X", "position.Y", "position.Z"),
+    "uv": ("uv.U", "uv.V"),
     "normal": ("normal.X", "normal.Y", "normal.Z"),
     "albedo": ("albedo.R", "albedo.G", "albedo.B"),
     "object_id": ("object_id.id",),
@@ -127,12 +131,14 @@ def hit_object_ids(surfaces: SurfaceHits, geometry: SceneGeometry) -> np.ndarray
 
 
 def empty_aovs(names: tuple[str, ...], pixels: int) -> dict[str, np.ndarray]:
-    """The AOV arrays of ``pixels`` pixels where every ray escapes: depth (pixels,) inf, normal
-    and albedo (pixels, 3) zero, ids (pixels,) -1."""
+    """The AOV arrays of ``pixels`` pixels where every ray escapes: depth (pixels,) inf,
+    position (pixels, 3) and uv (pixels, 2) inf, normal and albedo (pixels, 3) zero, ids
+    (pixels,) -1."""
     empty = {
         "depth": lambda: np.full(pixels, np.inf, np.float32),
         "z_depth": lambda: np.full(pixels, np.inf, np.float32),
         "position": lambda: np.full((pixels, 3), np.inf, np.float32),
+        "uv": lambda: np.full((pixels, 2), np.inf, np.float32),
         "normal": lambda: np.zeros((pixels, 3), np.float32),
         "albedo": lambda: np.zeros((pixels, 3), np.float32),
         "object_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
@@ -145,7 +151,8 @@ def render_aovs(
     integrator: Integrator, frame: CameraFrame, names: tuple[str, ...]
 ) -> dict[str, np.ndarray]:
     """The AOVs ``names`` of ``integrator``'s scene seen through the camera ``frame``: name ->
-    (height, width) or (height, width, 3) array (see the module's docstring for each).
+    (height, width), (height, width, 2) or (height, width, 3) array (see the module's
+    docstring for each).
 
     One ray through each pixel centre, in the integrator's batches and on its workers; each
     batch fills its own pixels, so the result does not depend on the batch size or thread count.
@@ -157,8 +164,8 @@ def render_aovs(
     flat = empty_aovs(names, width * height)
 
     def fill_vectors(name: str, batch: tuple[int, int], hit: np.ndarray, values) -> None:
-        # A batch is a run of pixels: its block of the pixel-major (pixels, 3) array, seen as
-        # (3, count) columns, takes three cheap 1-D scatters (no transposed copy at the end).
+        # A batch is a run of pixels: its block of the pixel-major (pixels, c) array, seen as
+        # (c, count) columns, takes c cheap 1-D scatters (no transposed copy at the end).
         start, count = batch
         scatter(flat[name][start : start + count].T, hit - start, values)
 
@@ -174,6 +181,9 @@ def render_aovs(
             flat["z_depth"][hit] = surfaces.t * cosine
         if "position" in flat:
             fill_vectors("position", batch, hit, surfaces.position)
+        if "uv" in flat and surfaces.looks is not None and surfaces.looks.uv is not None:
+            # The coordinates the texture lookup used (inf on the untextured among them).
+            fill_vectors("uv", batch, hit[surfaces.colored], surfaces.looks.uv)
         # The integrator's own stages, not copies of them: the normal it shades with, turned
         # to the side the ray came from, and the colour it lights.
         if "normal" in flat:
@@ -347,8 +357,9 @@ def visualize(name: str, values: np.ndarray) -> np.ndarray:
     """(h, w, 3) uint8 picture of the AOV ``name``'s ``values`` (as ``render_aovs`` returns).
 
     depth: inverse depth, nearest hit white, falling toward black with distance (escapes
-    black); normal: ``(n + 1) / 2`` as RGB (escapes black); albedo: gamma 2.2; ids: distinct
-    colours (``id_colors``)."""
+    black); position: each axis over the range of the hits as RGB; uv: u and v over the range
+    of the hits that have them as red and green (the others black); normal: ``(n + 1) / 2``
+    as RGB (escapes black); albedo: gamma 2.2; ids: distinct colours (``id_colors``)."""
     if name == "depth":
         finite = np.isfinite(values)
         # (Never zero: a camera on a surface would make every other depth infinitely far.)
@@ -358,13 +369,10 @@ def visualize(name: str, values: np.ndarray) -> np.ndarray:
         return np.repeat(_to_bytes(level)[..., None], 3, axis=2)
     if name == "z_depth":
         return visualize("depth", values)
-    if name == "position":  # each axis over the range of the hits, escapes black
-        finite = np.isfinite(values).all(axis=-1)
-        if not finite.any():
-            return np.zeros((*values.shape[:2], 3), np.uint8)
-        low, high = values[finite].min(axis=0), values[finite].max(axis=0)
-        scaled = (values - low) / np.maximum(high - low, 1e-30)
-        return _to_bytes(np.where(finite[..., None], scaled, 0.0))
+    if name == "position":
+        return _over_the_hits(values)
+    if name == "uv":  # blue zero
+        return _over_the_hits(np.concatenate([values, np.zeros_like(values[..., :1])], axis=-1))
     if name == "normal":
         hit = np.any(values != 0, axis=-1, keepdims=True)
         return _to_bytes(np.where(hit, (values + 1.0) / 2.0, 0.0))
@@ -373,6 +381,17 @@ def visualize(name: str, values: np.ndarray) -> np.ndarray:
     if name in ("object_id", "material_id"):
         return id_colors(values)
     raise ValueError(f"unknown AOV {name!r}; choose from {', '.join(AOV_NAMES)}")
+
+
+def _over_the_hits(values: np.ndarray) -> np.ndarray:
+    """(h, w, 3) uint8 of (h, w, 3) float32 ``values``: each channel over its range among the
+    pixels whose values are all finite, the others black (a channel equal everywhere is 0)."""
+    finite = np.isfinite(values).all(axis=-1)
+    if not finite.any():
+        return np.zeros((*values.shape[:2], 3), np.uint8)
+    low, high = values[finite].min(axis=0), values[finite].max(axis=0)
+    scaled = (values - low) / np.maximum(high - low, 1e-30)
+    return _to_bytes(np.where(finite[..., None], scaled, 0.0))
 
 
 def _to_bytes(values: np.ndarray) -> np.ndarray:

@@ -95,7 +95,9 @@ class HitLooks:
     parameters that metallic-roughness and transmission textures vary, by name (the
     integrator's per-material tables': "ambient_share", "diffuse_share", "reflect_share",
     "specular", "shininess", "transparency" (j,) float32 and "metallic" (j,) bool), of the hits
-    at positions ``shading_at`` (j,) int64 among these (None: the materials')."""
+    at positions ``shading_at`` (j,) int64 among these (None: the materials'). ``uv`` (2, k)
+    float32 the coordinates the base-colour texture is read at, inf at hits on a mesh without
+    that texture (None: no hit is on one)."""
 
     rows: np.ndarray
     color: np.ndarray
@@ -106,6 +108,7 @@ class HitLooks:
     occlusion: np.ndarray | None = None
     shading: dict[str, np.ndarray] | None = None
     shading_at: np.ndarray | None = None
+    uv: np.ndarray | None = None
 
 
 def surface_looks(
@@ -131,16 +134,17 @@ def surface_looks(
     looks = surface.looks
     color = np.empty((3, len(face)), np.float32)
     color[:] = surface.factor[:, None]
-    alpha = None
+    alpha = uv = None
     if surface.texels is not None:
-        sample = sample_texture(surface.texels, blend(surface.uv), surface.sampler)
+        uv = blend(surface.uv)
+        sample = sample_texture(surface.texels, uv, surface.sampler)
         color *= sample[:3]
         alpha = sample[3]
     if surface.vertex_colors is not None:
         color *= blend(surface.vertex_colors)
     if surface.face_colors is not None:
         color *= np.take(surface.face_colors, face, axis=1)
-    result = HitLooks(np.zeros(0, np.int64), color)
+    result = HitLooks(np.zeros(0, np.int64), color, uv=uv)
     if looks is None:
         return result
     if looks.alpha_mode == "BLEND":
@@ -421,6 +425,11 @@ def _gather_looks(parts: list[HitLooks], count: int) -> HitLooks:
         for part in parts:
             if part.occlusion is not None:
                 looks.occlusion[part.rows] = part.occlusion
+    if any(part.uv is not None for part in parts):
+        looks.uv = np.full((2, count), np.inf, np.float32)
+        for part in parts:
+            if part.uv is not None:
+                scatter(looks.uv, part.rows, part.uv)
     if any(part.coverage is not None for part in parts):
         looks.coverage = np.ones(count, np.float32)
         for part in parts:

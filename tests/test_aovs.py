@@ -181,6 +181,7 @@ def test_the_aovs_have_the_documented_shapes_and_types(rendered) -> None:
     assert list(layers) == list(AOV_NAMES)
     for name, shape, dtype in (
         ("depth", (HEIGHT, WIDTH), np.float32), ("normal", (HEIGHT, WIDTH, 3), np.float32),
+        ("uv", (HEIGHT, WIDTH, 2), np.float32),
         ("albedo", (HEIGHT, WIDTH, 3), np.float32), ("object_id", (HEIGHT, WIDTH), np.int32),
         ("material_id", (HEIGHT, WIDTH), np.int32),
     ):  # fmt: skip
@@ -409,6 +410,69 @@ def test_a_textured_meshs_albedo_is_its_texture() -> None:
     np.testing.assert_array_equal(object_id[decided], 0)  # the first and only object
 
 
+def test_uv_is_the_textured_quads_own_coordinates_and_inf_elsewhere(tmp_path: Path) -> None:
+    """A textured quad seen head-on, its UVs an affine map of its own x, y (so interpolating
+    them over either triangle gives that map exactly), beside a sphere and an untextured box
+    over the floor: the ``uv`` AOV of each quad pixel is the map, applied in float64 to the
+    hit point its ``position`` AOV gives (taken back into the quad's space); every pixel that
+    hits anything else or escapes holds inf, and the picture beside a .png shows those black."""
+    rng = np.random.default_rng(27)
+    texture = Image.fromarray(rng.integers(0, 256, (4, 4, 3), dtype=np.uint8), "RGB")
+    vertices = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    linear, offset = np.array([[1.5, 0.3], [-0.2, 0.8]]), np.array([0.1, -0.4])
+    uv = vertices[:, :2] @ linear.T + offset  # repeats past [0, 1] and goes negative
+    material = trimesh.visual.material.PBRMaterial(
+        baseColorTexture=texture, metallicFactor=0.0, roughnessFactor=1.0
+    )
+    visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
+    quad = trimesh.Trimesh(vertices, faces, process=False, visual=visual)
+    scene = rt.Scene(camera=rt.Camera(position=(0.0, 1.0, 5.0), look_at=(0.0, 1.0, 0.0), fov=45))
+    transform = np.eye(4)
+    transform[:3, 3] = (-0.6, 1.3, 0.0)
+    scene.add_mesh(quad, transform=transform)
+    scene.add_sphere((1.6, 1.0, 0.5), 0.6, "matte")
+    box = trimesh.creation.box(extents=(0.5, 0.5, 0.5))
+    scene.add_mesh(box, "matte", transform=trimesh.transformations.translation_matrix(
+        (1.2, 0.25, 1.5)))  # fmt: skip
+    result = rt.render(scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=1,
+                       aovs=["uv", "position", "object_id"])  # fmt: skip
+    layers = result.aovs
+    assert layers["uv"].shape == (HEIGHT, WIDTH, 2) and layers["uv"].dtype == np.float32
+    got, object_id = flat(layers["uv"]), flat(layers["object_id"])
+    # Spheres are numbered first: the sphere is 0, the quad 1, the box 2.
+    on_quad = object_id == 1
+    assert on_quad.sum() > 300
+    for other in (0, 2, FLOOR_ID, NOTHING_ID):  # each kind of pixel without UVs is there
+        assert (object_id == other).sum() > 10, other
+    assert np.isinf(got[~on_quad]).all()
+    assert np.isfinite(got[on_quad]).all()
+
+    position = flat(layers["position"])[on_quad].astype(np.float64)
+    local = position - transform[:3, 3]
+    expected = local[:, :2] @ linear.T + offset
+    # A hundredth of the UV one pixel spans: a pixel's footprint on the quad, through the map.
+    frame = camera_frame(scene.camera, WIDTH, HEIGHT)
+    footprint = 2.0 * 5.0 * frame.half_width / WIDTH
+    atol = 0.01 * footprint * np.linalg.norm(linear, 2)
+    assert_close(got[on_quad], expected, atol=atol)
+    assert np.ptp(expected, axis=0).min() > 1.0  # across the quad, not one corner
+
+    path = tmp_path / "uv.png"
+    written = save_with_aovs(result.image, {"uv": layers["uv"]}, path)
+    assert written == [tmp_path / "uv.uv.png"]
+    with Image.open(written[0]) as image:
+        assert image.mode == "RGB" and image.size == (WIDTH, HEIGHT)
+        picture = np.asarray(image).reshape(-1, 3)
+    assert (picture[~on_quad] == 0).all()
+    assert (picture[on_quad, 2] == 0).all()  # blue unused
+    # Red and green rise with u and v: the lowest u is black in red, the highest full red.
+    for axis in (0, 1):
+        values = got[on_quad, axis]
+        assert picture[on_quad, axis][np.argmin(values)] == 0
+        assert picture[on_quad, axis][np.argmax(values)] == 255
+
+
 def test_a_scene_of_only_the_floor_and_sky() -> None:
     scene = rt.Scene(camera=rt.Camera(position=(0.0, 1.0, 4.0), look_at=(0.0, 0.5, 0.0)))
     _, layers = render_with_aovs(scene)
@@ -464,7 +528,8 @@ def test_exr_layers_read_back_by_openexr(tmp_path: Path, rendered) -> None:
     with OpenEXR.File(str(path), separate_channels=True) as exr:
         channels = {name: channel.pixels for name, channel in exr.channels().items()}
     assert set(channels) == {
-        "R", "G", "B", "depth.Z", "z_depth.Z", "position.X", "position.Y", "position.Z",
+        "R", "G", "B", "depth.Z", "z_depth.Z", "position.X", "position.Y", "position.Z", "uv.U",
+        "uv.V",
         "normal.X", "normal.Y", "normal.Z", "albedo.R", "albedo.G", "albedo.B", "object_id.id",
         "material_id.id",
     }  # fmt: skip
@@ -474,6 +539,8 @@ def test_exr_layers_read_back_by_openexr(tmp_path: Path, rendered) -> None:
     np.testing.assert_array_equal(channels["z_depth.Z"], layers["z_depth"])
     for axis, name in enumerate("XYZ"):
         np.testing.assert_array_equal(channels[f"position.{name}"], layers["position"][..., axis])
+    for axis, name in enumerate("UV"):
+        np.testing.assert_array_equal(channels[f"uv.{name}"], layers["uv"][..., axis])
     for axis, name in enumerate("XYZ"):
         np.testing.assert_array_equal(channels[f"normal.{name}"], layers["normal"][..., axis])
     for axis, name in enumerate("RGB"):

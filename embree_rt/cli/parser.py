@@ -181,6 +181,8 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
 
 
 def add_render_flags(parser: argparse.ArgumentParser) -> None:
+    from embree_rt.aovs import AOV_NAMES
+
     positive = int_at_least(1)
     parser.add_argument(
         "-o", "--output", required=True, metavar="IMAGE",
@@ -195,8 +197,8 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         "--aov",
         type=aov_list,
         metavar="NAMES",
-        help="also write AOVs, any of depth,normal,albedo,object_id,material_id: in the .npz or "
-        ".exr, or one file each beside a .png or .npy",
+        help=f"also write AOVs, any of {','.join(AOV_NAMES)}: in the .npz or .exr, or one "
+        "file each beside a .png or .npy",
     )
     add_setting_flags(parser)
     parser.add_argument("-t", "--threads", "--nthreads", type=positive, metavar="N",
