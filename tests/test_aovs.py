@@ -679,7 +679,7 @@ def test_an_unknown_aov_is_one_line_exit_2_and_writes_nothing(tmp_path: Path) ->
     assert result.returncode == 2
     assert result.stderr.splitlines() == [
         "embree-rt: error: --aov: unknown AOV 'segmentation'; choose from depth, z_depth, "
-        "position, normal, albedo, object_id, material_id"
+        "position, uv, normal, albedo, object_id, material_id"
     ]
     assert old.read_bytes() == b"an old image"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png", "s.toml"]
