@@ -266,6 +266,15 @@ class _Frame:
     pending: int
 
 
+def single_frame(render_frames: Callable, settings: RenderSettings, camera: Camera,
+                 progress=None) -> np.ndarray:  # fmt: skip
+    """The (height, width, 3) float32 linear image of ``camera`` from a cluster renderer's
+    ``render_frames(settings, cameras, on_frame, progress)``: one frame, asked as a sequence."""
+    images = []
+    render_frames(settings, [(0, camera)], lambda _, image: images.append(image), progress)
+    return images[0]
+
+
 class ClusterRenderer:
     """Renders one scene on ``client``'s cluster: frames (one camera each) share the workers'
     renderers; ``render_frames`` keeps a few frames in flight so no worker idles between them.
@@ -318,9 +327,7 @@ class ClusterRenderer:
 
     def render(self, settings: RenderSettings, camera: Camera, progress=None) -> np.ndarray:
         """One (height, width, 3) float32 linear image seen by ``camera``."""
-        images = []
-        self.render_frames(settings, [(0, camera)], lambda _, image: images.append(image), progress)
-        return images[0]
+        return single_frame(self.render_frames, settings, camera, progress)
 
     def render_frames(
         self,

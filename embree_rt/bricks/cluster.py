@@ -54,6 +54,7 @@ from embree_rt.distributed import (
     SceneSource,
     WorkerSceneError,
     progress_bar,
+    single_frame,
 )
 from embree_rt.errors import InputError
 from embree_rt.geometry import sphere_kind
@@ -407,9 +408,7 @@ class PartitionedRenderer:
         progress: Callable[[ClusterProgress], None] | None = None,
     ) -> np.ndarray:
         """One (height, width, 3) float32 linear image seen by ``camera``."""
-        images = []
-        self.render_frames(settings, [(0, camera)], lambda _, image: images.append(image), progress)
-        return images[0]
+        return single_frame(self.render_frames, settings, camera, progress)
 
     def render_frames(
         self,
