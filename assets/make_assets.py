@@ -42,8 +42,9 @@ CUBE_FACTOR = (1.0, 0.6, 0.2)
 
 
 def torus() -> trimesh.Trimesh:
-    return trimesh.creation.torus(major_radius=0.6, minor_radius=0.22, major_sections=48,
-                                  minor_sections=24)  # fmt: skip
+    return trimesh.creation.torus(
+        major_radius=0.6, minor_radius=0.22, major_sections=48, minor_sections=24
+    )
 
 
 def gem() -> trimesh.Trimesh:
@@ -181,10 +182,20 @@ class GltfWriter:
     materials given as the JSON they are, PNG images; ``glb()`` is the binary file."""
 
     def __init__(self) -> None:
-        self.json: dict = {"asset": {"version": "2.0", "generator": "embree_rt make_assets"},
-                           "scene": 0, "scenes": [{"nodes": []}], "nodes": [], "meshes": [],
-                           "materials": [], "textures": [], "images": [], "samplers": [],
-                           "accessors": [], "bufferViews": [], "buffers": []}  # fmt: skip
+        self.json: dict = {
+            "asset": {"version": "2.0", "generator": "embree_rt make_assets"},
+            "scene": 0,
+            "scenes": [{"nodes": []}],
+            "nodes": [],
+            "meshes": [],
+            "materials": [],
+            "textures": [],
+            "images": [],
+            "samplers": [],
+            "accessors": [],
+            "bufferViews": [],
+            "buffers": [],
+        }
         self.blob = bytearray()
 
     def _view(self, data: bytes) -> int:
@@ -204,8 +215,10 @@ class GltfWriter:
             entry = {"componentType": 5125, "type": "SCALAR"}
         else:
             values = np.ascontiguousarray(values, np.float32).reshape(len(values), -1)
-            entry = {"componentType": 5126, "type": ("SCALAR", "VEC2", "VEC3", "VEC4")[
-                values.shape[1] - 1]}  # fmt: skip
+            entry = {
+                "componentType": 5126,
+                "type": ("SCALAR", "VEC2", "VEC3", "VEC4")[values.shape[1] - 1],
+            }
             entry["min"] = values.min(axis=0).tolist()
             entry["max"] = values.max(axis=0).tolist()
         entry.update(bufferView=self._view(values.tobytes()), count=len(values))
@@ -216,8 +229,9 @@ class GltfWriter:
         """A texture of ``image`` (stored as PNG) read through ``sampler`` (glTF's JSON)."""
         stream = io.BytesIO()
         image.save(stream, format="PNG")
-        self.json["images"].append({"bufferView": self._view(stream.getvalue()),
-                                    "mimeType": "image/png"})  # fmt: skip
+        self.json["images"].append(
+            {"bufferView": self._view(stream.getvalue()), "mimeType": "image/png"}
+        )
         texture = {"source": len(self.json["images"]) - 1}
         if sampler is not None:
             self.json["samplers"].append(sampler)
@@ -229,28 +243,43 @@ class GltfWriter:
         self.json["materials"].append(material)
         return len(self.json["materials"]) - 1
 
-    def mesh(self, vertices: np.ndarray, faces: np.ndarray, material: int | None = None,
-             translation=(0.0, 0.0, 0.0), **attributes: np.ndarray) -> int:  # fmt: skip
+    def mesh(
+        self,
+        vertices: np.ndarray,
+        faces: np.ndarray,
+        material: int | None = None,
+        translation=(0.0, 0.0, 0.0),
+        **attributes: np.ndarray,
+    ) -> int:
         """A mesh of one triangle primitive placed by a node at ``translation``; ``attributes``
         by glTF name (NORMAL, TEXCOORD_0, TEXCOORD_1, TANGENT, COLOR_0), (n, k) float32."""
         primitive = {
-            "attributes": {"POSITION": self.accessor(vertices),
-                           **{name: self.accessor(a) for name, a in attributes.items()}},
+            "attributes": {
+                "POSITION": self.accessor(vertices),
+                **{name: self.accessor(a) for name, a in attributes.items()},
+            },
             "indices": self.accessor(np.asarray(faces, np.uint32)),
-        }  # fmt: skip
+        }
         if material is not None:
             primitive["material"] = material
         self.json["meshes"].append({"primitives": [primitive]})
-        self.json["nodes"].append({"mesh": len(self.json["meshes"]) - 1,
-                                   "translation": [float(t) for t in translation]})  # fmt: skip
+        self.json["nodes"].append(
+            {"mesh": len(self.json["meshes"]) - 1, "translation": [float(t) for t in translation]}
+        )
         self.json["scenes"][0]["nodes"].append(len(self.json["nodes"]) - 1)
         return len(self.json["meshes"]) - 1
 
     def glb(self) -> bytes:
         document = {key: value for key, value in self.json.items() if value != []}
-        used = sorted({name for m in self.json["materials"] for name in m.get("extensions", {})}
-                      | {name for m in self.json["materials"] for info in _texture_infos(m)
-                         for name in info.get("extensions", {})})  # fmt: skip
+        used = sorted(
+            {name for m in self.json["materials"] for name in m.get("extensions", {})}
+            | {
+                name
+                for m in self.json["materials"]
+                for info in _texture_infos(m)
+                for name in info.get("extensions", {})
+            }
+        )
         if used:
             document["extensionsUsed"] = used
         while len(self.blob) % 4:
@@ -258,17 +287,28 @@ class GltfWriter:
         document["buffers"] = [{"byteLength": len(self.blob)}]
         text = json.dumps(document, separators=(",", ":")).encode()
         text += b" " * (-len(text) % 4)
-        body = (struct.pack("<I4s", len(text), b"JSON") + text
-                + struct.pack("<I4s", len(self.blob), b"BIN\x00") + bytes(self.blob))  # fmt: skip
+        body = (
+            struct.pack("<I4s", len(text), b"JSON")
+            + text
+            + struct.pack("<I4s", len(self.blob), b"BIN\x00")
+            + bytes(self.blob)
+        )
         return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
 
 
 def _texture_infos(material: dict) -> list[dict]:
     """Every textureInfo a glTF material holds (its own, its pbr block's, its extensions')."""
-    blocks = [material, material.get("pbrMetallicRoughness", {}),
-              *material.get("extensions", {}).values()]  # fmt: skip
-    return [value for block in blocks for key, value in block.items()
-            if key.endswith("Texture") and isinstance(value, dict)]  # fmt: skip
+    blocks = [
+        material,
+        material.get("pbrMetallicRoughness", {}),
+        *material.get("extensions", {}).values(),
+    ]
+    return [
+        value
+        for block in blocks
+        for key, value in block.items()
+        if key.endswith("Texture") and isinstance(value, dict)
+    ]
 
 
 def quad(size: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -280,11 +320,13 @@ def quad(size: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return vertices, np.array([[0, 1, 2], [0, 2, 3]]), uv
 
 
-def _placed(vertices: np.ndarray, rotate_x: float = 0.0, rotate_y: float = 0.0,
-            translate=(0.0, 0.0, 0.0)) -> np.ndarray:  # fmt: skip
+def _placed(
+    vertices: np.ndarray, rotate_x: float = 0.0, rotate_y: float = 0.0, translate=(0.0, 0.0, 0.0)
+) -> np.ndarray:
     """``vertices`` (n, 3) turned about x, then y (degrees), then moved."""
-    matrix = trimesh.transformations.euler_matrix(np.radians(rotate_x), np.radians(rotate_y), 0,
-                                                  "sxyz")  # fmt: skip
+    matrix = trimesh.transformations.euler_matrix(
+        np.radians(rotate_x), np.radians(rotate_y), 0, "sxyz"
+    )
     return (vertices @ matrix[:3, :3].T + np.asarray(translate)).astype(np.float32)
 
 
@@ -306,8 +348,9 @@ def bump_normals(size: int = 64, cells: int = 6) -> Image.Image:
     radius2 = 0.4**2
     bump = r2 < radius2
     height = np.sqrt(np.maximum(radius2 - r2, 1e-6))  # a spherical cap: dh/dx = -x / h
-    normal = np.dstack([np.where(bump, x / height, 0), np.where(bump, y / height, 0),
-                        np.ones_like(x)])  # fmt: skip
+    normal = np.dstack(
+        [np.where(bump, x / height, 0), np.where(bump, y / height, 0), np.ones_like(x)]
+    )
     normal /= np.linalg.norm(normal, axis=2, keepdims=True)
     return Image.fromarray(np.round((normal + 1) / 2 * 255).astype(np.uint8), "RGB")
 
@@ -328,56 +371,91 @@ def gltf_materials_gallery() -> bytes:
     linear = {"magFilter": 9729, "minFilter": 9729}
     # The emissive panel, upright, facing the camera.
     vertices, faces, uv = quad(1.3)
-    glow = writer.material({
-        "pbrMetallicRoughness": {"baseColorFactor": [0.05, 0.05, 0.05, 1], "metallicFactor": 0},
-        "emissiveFactor": [1.0, 1.0, 1.0],
-        "emissiveTexture": {"index": writer.texture(glowing_rings(), linear)},
-        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 1.5}},
-    })  # fmt: skip
-    writer.mesh(_placed(vertices, rotate_y=25, translate=(-1.9, 0.75, -0.6)), faces, glow,
-                TEXCOORD_0=uv)  # fmt: skip
+    glow = writer.material(
+        {
+            "pbrMetallicRoughness": {"baseColorFactor": [0.05, 0.05, 0.05, 1], "metallicFactor": 0},
+            "emissiveFactor": [1.0, 1.0, 1.0],
+            "emissiveTexture": {"index": writer.texture(glowing_rings(), linear)},
+            "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 1.5}},
+        }
+    )
+    writer.mesh(
+        _placed(vertices, rotate_y=25, translate=(-1.9, 0.75, -0.6)), faces, glow, TEXCOORD_0=uv
+    )
     # The glass ball, absorbing toward blue-green.
     ball = trimesh.creation.icosphere(subdivisions=3, radius=0.65)
-    glass = writer.material({
-        "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0,
-                                 "roughnessFactor": 0.05},
-        "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
-                       "KHR_materials_ior": {"ior": 1.5},
-                       "KHR_materials_volume": {"thicknessFactor": 1.3,
-                                                "attenuationColor": [0.35, 0.8, 0.7],
-                                                "attenuationDistance": 0.6}},
-    })  # fmt: skip
-    writer.mesh(_placed(ball.vertices, translate=(0.0, 0.65, 0.2)), ball.faces, glass,
-                NORMAL=ball.vertex_normals)  # fmt: skip
+    glass = writer.material(
+        {
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [1, 1, 1, 1],
+                "metallicFactor": 0,
+                "roughnessFactor": 0.05,
+            },
+            "extensions": {
+                "KHR_materials_transmission": {"transmissionFactor": 1.0},
+                "KHR_materials_ior": {"ior": 1.5},
+                "KHR_materials_volume": {
+                    "thicknessFactor": 1.3,
+                    "attenuationColor": [0.35, 0.8, 0.7],
+                    "attenuationDistance": 0.6,
+                },
+            },
+        }
+    )
+    writer.mesh(
+        _placed(ball.vertices, translate=(0.0, 0.65, 0.2)),
+        ball.faces,
+        glass,
+        NORMAL=ball.vertex_normals,
+    )
     # Leaves, tilted over the floor: cut out by MASK, seen from both sides.
-    leaf = writer.material({
-        "pbrMetallicRoughness": {"baseColorFactor": [0.25, 0.6, 0.15, 1], "metallicFactor": 0,
-                                 "baseColorTexture": {"index": writer.texture(leaf_alpha(),
-                                                                              linear)}},
-        "alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True,
-    })  # fmt: skip
-    for tilt, turn, place in ((-60, 20, (1.0, 1.2, 1.3)), (-70, -35, (0.45, 1.35, 1.8)),
-                              (-50, 70, (1.6, 1.05, 1.0))):  # fmt: skip
+    leaf = writer.material(
+        {
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [0.25, 0.6, 0.15, 1],
+                "metallicFactor": 0,
+                "baseColorTexture": {"index": writer.texture(leaf_alpha(), linear)},
+            },
+            "alphaMode": "MASK",
+            "alphaCutoff": 0.5,
+            "doubleSided": True,
+        }
+    )
+    for tilt, turn, place in (
+        (-60, 20, (1.0, 1.2, 1.3)),
+        (-70, -35, (0.45, 1.35, 1.8)),
+        (-50, 70, (1.6, 1.05, 1.0)),
+    ):
         vertices, faces, uv = quad(0.8)
-        writer.mesh(_placed(vertices, rotate_x=tilt, rotate_y=turn, translate=place), faces, leaf,
-                    TEXCOORD_0=uv)  # fmt: skip
+        writer.mesh(
+            _placed(vertices, rotate_x=tilt, rotate_y=turn, translate=place),
+            faces,
+            leaf,
+            TEXCOORD_0=uv,
+        )
     # The panel of bumps: flat geometry, its normals from the map.
     vertices, faces, uv = quad(1.3)
-    bumps = writer.material({
-        "pbrMetallicRoughness": {"baseColorFactor": [0.85, 0.8, 0.75, 1], "metallicFactor": 0,
-                                 "roughnessFactor": 0.4},
-        "normalTexture": {"index": writer.texture(bump_normals(), linear)},
-    })  # fmt: skip
-    writer.mesh(_placed(vertices, rotate_y=-30, translate=(1.95, 0.75, -0.7)), faces, bumps,
-                TEXCOORD_0=uv)  # fmt: skip
+    bumps = writer.material(
+        {
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [0.85, 0.8, 0.75, 1],
+                "metallicFactor": 0,
+                "roughnessFactor": 0.4,
+            },
+            "normalTexture": {"index": writer.texture(bump_normals(), linear)},
+        }
+    )
+    writer.mesh(
+        _placed(vertices, rotate_y=-30, translate=(1.95, 0.75, -0.7)), faces, bumps, TEXCOORD_0=uv
+    )
     return writer.glb()
 
 
 def _pbr(mesh: trimesh.Trimesh, color, metallic: float, roughness: float) -> trimesh.Trimesh:
     """``mesh`` in a glTF metallic-roughness material of linear ``color`` (RGB)."""
-    material = trimesh.visual.material.PBRMaterial(baseColorFactor=[*color, 1.0],
-                                                   metallicFactor=metallic,
-                                                   roughnessFactor=roughness)  # fmt: skip
+    material = trimesh.visual.material.PBRMaterial(
+        baseColorFactor=[*color, 1.0], metallicFactor=metallic, roughnessFactor=roughness
+    )
     mesh.visual = trimesh.visual.TextureVisuals(material=material)
     return mesh
 
@@ -387,29 +465,42 @@ def still_life(texture: Image.Image) -> trimesh.Scene:
     scene = trimesh.Scene()
     top = _pbr(trimesh.creation.box(extents=(1.6, 0.06, 0.9)), (0.45, 0.25, 0.12), 0.0, 0.55)
     scene.add_geometry(top, node_name="top", transform=_moved(0.0, 0.72, 0.0))
-    leg = _pbr(trimesh.creation.cylinder(radius=0.035, height=0.69, sections=24),
-               (0.08, 0.08, 0.09), 0.0, 0.4)  # fmt: skip
+    leg = _pbr(
+        trimesh.creation.cylinder(radius=0.035, height=0.69, sections=24),
+        (0.08, 0.08, 0.09),
+        0.0,
+        0.4,
+    )
     upright = trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0])
-    scene.add_geometry(leg, geom_name="leg", node_name="leg0",
-                       transform=_moved(-0.72, 0.345, -0.37) @ upright)  # fmt: skip
+    scene.add_geometry(
+        leg, geom_name="leg", node_name="leg0", transform=_moved(-0.72, 0.345, -0.37) @ upright
+    )
     for i, (x, z) in enumerate([(0.72, -0.37), (-0.72, 0.37), (0.72, 0.37)], start=1):
         # the other three nodes name the same mesh: one glTF mesh placed four times
-        scene.graph.update(frame_to=f"leg{i}", geometry="leg",
-                           matrix=_moved(x, 0.345, z) @ upright)  # fmt: skip
-    metal = _pbr(trimesh.creation.icosphere(subdivisions=3, radius=0.16), (0.95, 0.8, 0.5), 1.0,
-                 0.05)  # fmt: skip
+        scene.graph.update(frame_to=f"leg{i}", geometry="leg", matrix=_moved(x, 0.345, z) @ upright)
+    metal = _pbr(
+        trimesh.creation.icosphere(subdivisions=3, radius=0.16), (0.95, 0.8, 0.5), 1.0, 0.05
+    )
     scene.add_geometry(metal, node_name="metal_ball", transform=_moved(-0.45, 0.91, 0.1))
     ring = _pbr(torus(), (0.7, 0.05, 0.05), 0.0, 0.2)
     ring.apply_scale(0.25)
-    scene.add_geometry(ring, node_name="torus", transform=_moved(0.0, 0.955, -0.22)
-                       @ trimesh.transformations.rotation_matrix(0.5, [0, 1, 0]))  # fmt: skip
+    scene.add_geometry(
+        ring,
+        node_name="torus",
+        transform=_moved(0.0, 0.955, -0.22)
+        @ trimesh.transformations.rotation_matrix(0.5, [0, 1, 0]),
+    )
     ball = painted_ball()
     ball.apply_scale(0.3)
     scene.add_geometry(ball, node_name="painted_ball", transform=_moved(0.5, 0.9, 0.2))
     cube = textured_gltf_cube(texture)
     cube.apply_scale(0.22)
-    scene.add_geometry(cube, node_name="cube", transform=_moved(0.45, 0.86, -0.25)
-                       @ trimesh.transformations.rotation_matrix(0.6, [0, 1, 0]))  # fmt: skip
+    scene.add_geometry(
+        cube,
+        node_name="cube",
+        transform=_moved(0.45, 0.86, -0.25)
+        @ trimesh.transformations.rotation_matrix(0.6, [0, 1, 0]),
+    )
     return scene
 
 

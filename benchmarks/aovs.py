@@ -46,8 +46,9 @@ def main() -> None:
     parser.add_argument("--turns", type=int, default=5)
     args = parser.parse_args()
     scene = random_field(args.count, seed=0)
-    image = dict(width=args.width, height=args.height, spp=args.spp, max_depth=args.max_depth,
-                 seed=0)  # fmt: skip
+    image = dict(
+        width=args.width, height=args.height, spp=args.spp, max_depth=args.max_depth, seed=0
+    )
     frame = camera_frame(scene.camera, args.width, args.height)
     with Renderer(scene, threads=args.threads) as renderer:
         # Compile and warm both paths on a small image, outside the timing.

@@ -109,17 +109,30 @@ def main() -> None:
     for quality in args.qualities:
         for compact in (False,) if args.no_compact else (False, True):
             command = [
-                sys.executable, __file__, "--count", str(args.count), "--kind", args.kind,
-                "--width", str(args.width), "--height", str(args.height),
-                "--one", quality, "1" if compact else "0",
-            ]  # fmt: skip
+                sys.executable,
+                __file__,
+                "--count",
+                str(args.count),
+                "--kind",
+                args.kind,
+                "--width",
+                str(args.width),
+                "--height",
+                str(args.height),
+                "--one",
+                quality,
+                "1" if compact else "0",
+            ]
             output = subprocess.run(command, check=True, capture_output=True, text=True).stdout
             rows.append(json.loads(output.splitlines()[-1]))
             print(json.dumps(rows[-1]), file=sys.stderr)
     config = {"count": args.count, "kind": args.kind, "width": args.width, "height": args.height}
     print(json.dumps({"config": config, "rows": rows}))
-    print("| quality | compact | build s | build peak GB | BVH B/sphere | primary Mrays/s | "
-          "shadow Mrays/s |", file=sys.stderr)  # fmt: skip
+    print(
+        "| quality | compact | build s | build peak GB | BVH B/sphere | primary Mrays/s | "
+        "shadow Mrays/s |",
+        file=sys.stderr,
+    )
     print("|---|---|---:|---:|---:|---:|---:|", file=sys.stderr)
     for row in rows:
         print(

@@ -69,11 +69,24 @@ def main() -> None:
         scene.write_text(MIRROR_ROOM)
         for depth in args.depths:
             command = [
-                sys.executable, "-m", "embree_rt", "render", str(scene), "--quiet",
-                "-o", str(Path(directory) / f"depth_{depth}.npy"), "--max-depth", str(depth),
-                "--width", str(args.width), "--height", str(args.height), "--spp", str(args.spp),
+                sys.executable,
+                "-m",
+                "embree_rt",
+                "render",
+                str(scene),
+                "--quiet",
+                "-o",
+                str(Path(directory) / f"depth_{depth}.npy"),
+                "--max-depth",
+                str(depth),
+                "--width",
+                str(args.width),
+                "--height",
+                str(args.height),
+                "--spp",
+                str(args.spp),
                 *(["--threads", str(args.threads)] if args.threads else []),
-            ]  # fmt: skip
+            ]
             rss, seconds = peak_rss(command)
             results[str(depth)] = {"peak_rss_mb": round(rss, 1), "seconds": round(seconds, 2)}
     image = {"width": args.width, "height": args.height, "spp": args.spp}

@@ -69,8 +69,14 @@ def local_renders(count: int, image: dict, rounds: int) -> dict:
             result = renderer.render(**image)
             times.append(result.stats.render_s)
         build_s = renderer.build_s
-    return {"field_s": made_s, "build_s": build_s, "render_s": times, "image": result.image,
-            "rays": result.stats.total_rays, "peak_rss": peak_rss_bytes()}  # fmt: skip
+    return {
+        "field_s": made_s,
+        "build_s": build_s,
+        "render_s": times,
+        "image": result.image,
+        "rays": result.stats.total_rays,
+        "peak_rss": peak_rss_bytes(),
+    }
 
 
 def data_parallel(args: argparse.Namespace) -> dict:

@@ -63,8 +63,12 @@ def build_array(child: BVH, matrices: np.ndarray) -> dict:
     done = time.perf_counter()
     grown = resident_bytes() - before
     top.close()
-    return {"add_s": added - start, "commit_s": done - added, "total_s": done - start,
-            "resident_bytes_per_instance": grown / len(matrices)}  # fmt: skip
+    return {
+        "add_s": added - start,
+        "commit_s": done - added,
+        "total_s": done - start,
+        "resident_bytes_per_instance": grown / len(matrices),
+    }
 
 
 def build_singles(child: BVH, matrices: np.ndarray) -> dict:
@@ -76,8 +80,12 @@ def build_singles(child: BVH, matrices: np.ndarray) -> dict:
     top.commit()
     done = time.perf_counter()
     top.close()
-    return {"add_s": added - start, "commit_s": done - added, "total_s": done - start,
-            "per_instance_us": 1e6 * (done - start) / len(matrices)}  # fmt: skip
+    return {
+        "add_s": added - start,
+        "commit_s": done - added,
+        "total_s": done - start,
+        "per_instance_us": 1e6 * (done - start) / len(matrices),
+    }
 
 
 def main() -> None:
@@ -102,22 +110,27 @@ def main() -> None:
     peak_growth = max(0, peak_bytes() - max(peak_before, resident_before))
     array_s = float(np.median([a["total_s"] for a in arrays]))
     single_us = float(np.median([s["per_instance_us"] for s in singles]))
-    print(json.dumps({
-        "instances": args.count,
-        "child_triangles": len(mesh.faces),
-        "array": {
-            "median_s": array_s,
-            "turns": arrays,
-            "peak_growth_bytes_per_instance": peak_growth / args.count,
-        },
-        "one_geometry_per_instance": {
-            "measured_count": args.single_count,
-            "median_us_per_instance": single_us,
-            "extrapolated_s": single_us * 1e-6 * args.count,
-            "turns": singles,
-        },
-        "speedup": single_us * 1e-6 * args.count / array_s,
-    }, indent=2))  # fmt: skip
+    print(
+        json.dumps(
+            {
+                "instances": args.count,
+                "child_triangles": len(mesh.faces),
+                "array": {
+                    "median_s": array_s,
+                    "turns": arrays,
+                    "peak_growth_bytes_per_instance": peak_growth / args.count,
+                },
+                "one_geometry_per_instance": {
+                    "measured_count": args.single_count,
+                    "median_us_per_instance": single_us,
+                    "extrapolated_s": single_us * 1e-6 * args.count,
+                    "turns": singles,
+                },
+                "speedup": single_us * 1e-6 * args.count / array_s,
+            },
+            indent=2,
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -147,6 +147,7 @@ class StageClock:
                 self.seconds[stage] += elapsed - inner
                 if self._inner:
                     self._inner[-1] += elapsed
+
         return timed
 
 
@@ -185,8 +186,11 @@ def stage_breakdown(renderer: Renderer, image: dict) -> dict:
     targets = [
         (integrator, "tiled_samples", wrap("camera", tiled_samples)),
         (integrator, "camera_rays", wrap("camera", camera_rays)),
-        (camera_query, "intersect_camera_serial",
-         wrap("traversal", camera_query.intersect_camera_serial)),
+        (
+            camera_query,
+            "intersect_camera_serial",
+            wrap("traversal", camera_query.intersect_camera_serial),
+        ),
         (kernels, "intersect_serial", wrap("traversal", kernels.intersect_serial)),
         (geometry, "intersect_camera", wrap("records", geometry.intersect_camera)),
         (geometry, "intersect_compact", wrap("records", geometry.intersect_compact)),
@@ -195,7 +199,7 @@ def stage_breakdown(renderer: Renderer, image: dict) -> dict:
         (film.FilmBlock, "add_weighted", wrap("film", film.FilmBlock.add_weighted)),
         (film.Film, "add_block", wrap("film", film.Film.add_block)),
         (film.Film, "image", wrap("film", film.Film.image)),
-    ]  # fmt: skip
+    ]
     workers, renderer.workers = renderer.workers, 1
     try:
         with patched(targets):
@@ -222,8 +226,9 @@ def stage_breakdown(renderer: Renderer, image: dict) -> dict:
 
 def run(count: int, args: argparse.Namespace) -> dict:
     scene = random_field(count, seed=args.seed)
-    image = dict(width=args.width, height=args.height, spp=args.spp, max_depth=args.max_depth,
-                 seed=args.seed)  # fmt: skip
+    image = dict(
+        width=args.width, height=args.height, spp=args.spp, max_depth=args.max_depth, seed=args.seed
+    )
     with Renderer(scene, threads=args.threads, batch_size=args.batch_size) as renderer:
         # Compile and warm the kernels on a tiny image so the timed render measures rendering.
         renderer.render(width=16, height=9, spp=1, max_depth=args.max_depth, seed=args.seed)

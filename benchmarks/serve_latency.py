@@ -31,12 +31,23 @@ MATERIALS = ("glass", "mirror", "matte")
 
 def layout(clicks: int, rays: int, request: int) -> dict:
     circles = [
-        {"x": 160.0 + 70.0 * k, "y": 120.0 + 40.0 * (k % 5), "r": 30.0 + 5 * (k % 4),
-         "material": MATERIALS[k % 3]}
+        {
+            "x": 160.0 + 70.0 * k,
+            "y": 120.0 + 40.0 * (k % 5),
+            "r": 30.0 + 5 * (k % 4),
+            "material": MATERIALS[k % 3],
+        }
         for k in range(clicks)
-    ]  # fmt: skip
-    return {"type": "trace", "id": request, "circles": circles, "light": [80.0, 300.0],
-            "rays": rays, "spread": 360, "aim": 0}  # fmt: skip
+    ]
+    return {
+        "type": "trace",
+        "id": request,
+        "circles": circles,
+        "light": [80.0, 300.0],
+        "rays": rays,
+        "spread": 360,
+        "aim": 0,
+    }
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -47,8 +58,10 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     server = subprocess.Popen(
         [sys.executable, "-m", "embree_rt", "serve", "--port", "0"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         line = server.stdout.readline()
         match = re.search(r"at (http://[^/ ]+)/ ", line)
@@ -67,19 +80,27 @@ def main(argv: list[str] | None = None) -> None:
                     trips.append(1e3 * (time.perf_counter() - started))
                     if reply.get("type") != "rays":
                         raise SystemExit(f"unexpected reply: {str(reply)[:200]}")
-                rounds.append({
-                    "median_ms": round(statistics.median(trips), 2),
-                    "max_ms": round(max(trips), 2),
-                })  # fmt: skip
+                rounds.append(
+                    {
+                        "median_ms": round(statistics.median(trips), 2),
+                        "max_ms": round(max(trips), 2),
+                    }
+                )
     finally:
         server.send_signal(signal.SIGINT)
         server.communicate(timeout=30)
     medians = [r["median_ms"] for r in rounds]
-    print(json.dumps({
-        "config": vars(args), "rounds": rounds,
-        "median_of_round_medians_ms": statistics.median(medians),
-        "target_ms": 50,
-    }, indent=2))  # fmt: skip
+    print(
+        json.dumps(
+            {
+                "config": vars(args),
+                "rounds": rounds,
+                "median_of_round_medians_ms": statistics.median(medians),
+                "target_ms": 50,
+            },
+            indent=2,
+        )
+    )
 
 
 if __name__ == "__main__":

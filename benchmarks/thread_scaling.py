@@ -39,8 +39,9 @@ def main() -> None:
     args = parser.parse_args()
 
     scene = random_field(args.count, seed=args.seed)
-    image = dict(width=args.width, height=args.height, spp=args.spp, max_depth=args.max_depth,
-                 seed=args.seed)  # fmt: skip
+    image = dict(
+        width=args.width, height=args.height, spp=args.spp, max_depth=args.max_depth, seed=args.seed
+    )
     with Renderer(scene, threads=1) as one, Renderer(scene, threads=args.threads) as many:
         for renderer in (one, many):  # compile, warm the heap and the kernels
             renderer.render(**image)

@@ -360,9 +360,15 @@ def bench_count(count: int, args: argparse.Namespace, rows: list[dict]) -> None:
 
     start = time.perf_counter()
     _, reference_prim = chunked_reference(
-        origins[sample].astype(np.float64), directions[sample].astype(np.float64),
-        np.zeros(len(sample)), np.full(len(sample), np.inf), grid, centers, radii, 2.0 * side,
-    )  # fmt: skip
+        origins[sample].astype(np.float64),
+        directions[sample].astype(np.float64),
+        np.zeros(len(sample)),
+        np.full(len(sample), np.inf),
+        grid,
+        centers,
+        radii,
+        2.0 * side,
+    )
     log(f"reference on {len(sample)} primary rays: {time.perf_counter() - start:.1f} s")
 
     count_rows = []
@@ -384,14 +390,18 @@ def bench_count(count: int, args: argparse.Namespace, rows: list[dict]) -> None:
             ids = builds[kind].pop("_ids")
             answers[kind, threads] = (object_ids(run["hits"], ids), run["blocked"])
             row = {
-                "count": count, "kind": kind, "threads": threads, "rays": len(origins),
-                "shadow_rays": len(rows_hit), **builds[kind],
+                "count": count,
+                "kind": kind,
+                "threads": threads,
+                "rays": len(origins),
+                "shadow_rays": len(rows_hit),
+                **builds[kind],
                 "primary_mrays_s": len(origins) / statistics.median(run["primary_s"]) / 1e6,
                 "shadow_mrays_s": len(rows_hit) / statistics.median(run["shadow_s"]) / 1e6,
                 "hit_fraction": float(np.isfinite(run["hits"].t).mean()),
                 "shadowed_fraction": float(run["blocked"].mean()),
                 **{key: run[key] for key in run if key.endswith("_s")},
-            }  # fmt: skip
+            }
             if kind == "user":
                 for key in ("primary_s", "shadow_s", "primary_cpu_s", "shadow_cpu_s"):
                     ratio = "vs_point_" + key.removesuffix("_s").replace("_cpu", "_cpu_time")
@@ -408,9 +418,15 @@ def bench_count(count: int, args: argparse.Namespace, rows: list[dict]) -> None:
     start = time.perf_counter()
     shadow_index = sampled_shadow_rays(rows_hit, sample)
     shadow_t, _ = chunked_reference(
-        shadow[0][shadow_index].astype(np.float64), shadow[1][shadow_index].astype(np.float64),
-        np.zeros(len(shadow_index)), np.ones(len(shadow_index)), grid, centers, radii, 2.0 * side,
-    )  # fmt: skip
+        shadow[0][shadow_index].astype(np.float64),
+        shadow[1][shadow_index].astype(np.float64),
+        np.zeros(len(shadow_index)),
+        np.ones(len(shadow_index)),
+        grid,
+        centers,
+        radii,
+        2.0 * side,
+    )
     reference_blocked = np.isfinite(shadow_t)
     log(f"reference on {len(shadow_index)} shadow rays: {time.perf_counter() - start:.1f} s")
     for row in count_rows:
@@ -424,10 +440,14 @@ def bench_count(count: int, args: argparse.Namespace, rows: list[dict]) -> None:
         row["shadow_sample"] = len(shadow_index)
         row["wrong_shadow"] = int(np.sum(blocked[shadow_index] != reference_blocked))
     rows.extend(count_rows)
-    log("wrong answers on the sample: " + ", ".join(
-        f"{r['kind']} {r['wrong_primary']}/{r['sample']} primary, "
-        f"{r['wrong_shadow']}/{r['shadow_sample']} shadow" for r in count_rows[-2:]
-    ))  # fmt: skip
+    log(
+        "wrong answers on the sample: "
+        + ", ".join(
+            f"{r['kind']} {r['wrong_primary']}/{r['sample']} primary, "
+            f"{r['wrong_shadow']}/{r['shadow_sample']} shadow"
+            for r in count_rows[-2:]
+        )
+    )
     if args.meshes:
         bench_meshes(
             count, centers, radii, ground_mesh, (origins, directions), light, args, rows, log

@@ -66,8 +66,12 @@ def scan_like(triangles: int, seed: int = 0) -> trimesh.Trimesh:
     vertices = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
     index = np.arange(side * side).reshape(side, side)
     a, b, c, d = index[:-1, :-1], index[1:, :-1], index[1:, 1:], index[:-1, 1:]
-    faces = np.vstack([np.column_stack([a.ravel(), b.ravel(), c.ravel()]),
-                       np.column_stack([a.ravel(), c.ravel(), d.ravel()])])  # fmt: skip
+    faces = np.vstack(
+        [
+            np.column_stack([a.ravel(), b.ravel(), c.ravel()]),
+            np.column_stack([a.ravel(), c.ravel(), d.ravel()]),
+        ]
+    )
     return trimesh.Trimesh(vertices, faces, process=False)
 
 
@@ -132,40 +136,65 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
             key = f"bare_{'robust' if robust else 'plain'}_{threads}t"
             runs[key] = lambda bvh=bvh: bvh.intersect(local_origins, local_directions)
             if robust:
-                runs[f"{key}_entry_ordered"] = lambda bvh=bvh: bvh.intersect(ordered_origins,
-                                                                             ordered_directions)
+                runs[f"{key}_entry_ordered"] = lambda bvh=bvh: bvh.intersect(
+                    ordered_origins, ordered_directions
+                )
     # all hits: the bare traversal with the recording filter, as RayMeshIntersector's scene
     # holds it (8 hits of room a ray, as its first trace), beside trimesh's embreex
     runs["all_hits_trimesh_embreex"] = lambda: theirs.intersects_location(origins, directions)
     runs["all_hits_embree_rt"] = lambda: ours.intersects_location(origins, directions)
-    runs["all_hits_bare_2t"] = lambda: scene.bvh.all_hits(local_origins, local_directions, 0.0,
-                                                          np.inf, 8)  # fmt: skip
+    runs["all_hits_bare_2t"] = lambda: scene.bvh.all_hits(
+        local_origins, local_directions, 0.0, np.inf, 8
+    )
     # and on the rays in the order intersects_location traces them in on big meshes (by the
     # middle of each ray's path through the box)
-    segment = ordered_local_rays(origins, trimesh.util.unitize(directions), scene.origin,
-                                 scene.scale, scene.extent, mesh.bounds, 2)[3:5]  # fmt: skip
-    runs["all_hits_bare_2t_segment_ordered"] = lambda: scene.bvh.all_hits(*segment, 0.0, np.inf,
-                                                                          8)  # fmt: skip
+    segment = ordered_local_rays(
+        origins,
+        trimesh.util.unitize(directions),
+        scene.origin,
+        scene.scale,
+        scene.extent,
+        mesh.bounds,
+        2,
+    )[3:5]
+    runs["all_hits_bare_2t_segment_ordered"] = lambda: scene.bvh.all_hits(*segment, 0.0, np.inf, 8)
     rates: dict[str, list[float]] = {key: [] for key in runs}
     for _ in range(turns):
         for key, run in runs.items():
             rates[key].append(n / timed(run))
     baseline = rates["trimesh_embreex"]
-    versus_all = {f"{key}_vs_trimesh_embreex": round(float(np.median(
-        [rate / base for rate, base in zip(rates[key], rates["all_hits_trimesh_embreex"],
-                                           strict=True)])), 2)
+    versus_all = {
+        f"{key}_vs_trimesh_embreex": round(
+            float(
+                np.median(
+                    [
+                        rate / base
+                        for rate, base in zip(
+                            rates[key], rates["all_hits_trimesh_embreex"], strict=True
+                        )
+                    ]
+                )
+            ),
+            2,
+        )
         for key in ("all_hits_embree_rt", "all_hits_bare_2t", "all_hits_bare_2t_segment_ordered")
-    }  # fmt: skip
+    }
     return {
-        "mesh": name, "triangles": len(mesh.faces), "rays": n, "turns": turns,
+        "mesh": name,
+        "triangles": len(mesh.faces),
+        "rays": n,
+        "turns": turns,
         "load_average": round(os.getloadavg()[0], 2),
         **{f"{key}_krays_s": round(float(np.median(v)) / 1e3, 1) for key, v in rates.items()},
-        **{f"{key}_vs_trimesh_embreex": round(float(np.median(
-            [rate / base for rate, base in zip(v, baseline, strict=True)])), 2)
-           for key, v in rates.items()
-           if key != "trimesh_embreex" and not key.startswith("all_hits")},
+        **{
+            f"{key}_vs_trimesh_embreex": round(
+                float(np.median([rate / base for rate, base in zip(v, baseline, strict=True)])), 2
+            )
+            for key, v in rates.items()
+            if key != "trimesh_embreex" and not key.startswith("all_hits")
+        },
         **versus_all,
-    }  # fmt: skip
+    }
 
 
 class Open3DScene:
@@ -177,8 +206,10 @@ class Open3DScene:
 
         self._core = open3d.core
         self.scene = open3d.t.geometry.RaycastingScene()
-        self.scene.add_triangles(open3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
-                                 open3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))  # fmt: skip
+        self.scene.add_triangles(
+            open3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+            open3d.core.Tensor(np.asarray(mesh.faces, np.uint32)),
+        )
         self.threads = threads
 
     def _rays(self, origins, directions):
@@ -193,13 +224,15 @@ class Open3DScene:
 
     def all_hits(self, origins, directions) -> np.ndarray:
         """(k,) ray index of every hit; the answer also holds the hit points' coordinates."""
-        answer = self.scene.list_intersections(self._rays(origins, directions),
-                                               nthreads=self.threads)  # fmt: skip
+        answer = self.scene.list_intersections(
+            self._rays(origins, directions), nthreads=self.threads
+        )
         return answer["ray_ids"].numpy()
 
     def hit_counts(self, origins, directions) -> np.ndarray:
-        return self.scene.count_intersections(self._rays(origins, directions),
-                                              nthreads=self.threads).numpy()  # fmt: skip
+        return self.scene.count_intersections(
+            self._rays(origins, directions), nthreads=self.threads
+        ).numpy()
 
     def occupancy(self, points) -> np.ndarray:
         return self.scene.compute_occupancy(self._points(points), nthreads=self.threads).numpy()
@@ -209,8 +242,9 @@ class Open3DScene:
         return answer["points"].numpy()
 
     def signed_distance(self, points) -> np.ndarray:
-        return self.scene.compute_signed_distance(self._points(points),
-                                                  nthreads=self.threads).numpy()  # fmt: skip
+        return self.scene.compute_signed_distance(
+            self._points(points), nthreads=self.threads
+        ).numpy()
 
 
 def open3d_available() -> bool:
@@ -236,8 +270,9 @@ def row(rates: dict[str, list[float]], ours: str) -> dict:
     out = {f"{key}_k_s": round(float(np.median(v)) / 1e3, 2) for key, v in rates.items()}
     for key, v in rates.items():
         if key != ours:
-            out[f"vs_{key}"] = round(float(np.median(
-                [a / b for a, b in zip(rates[ours], v, strict=True)])), 2)  # fmt: skip
+            out[f"vs_{key}"] = round(
+                float(np.median([a / b for a, b in zip(rates[ours], v, strict=True)])), 2
+            )
     return out
 
 
@@ -245,11 +280,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--rays", type=int, default=200_000)
     parser.add_argument("--reference-rays", type=int, default=2_000)
-    parser.add_argument("--reference-points", type=int, default=1_000,
-                        help="points for trimesh's own (slow) proximity queries")
+    parser.add_argument(
+        "--reference-points",
+        type=int,
+        default=1_000,
+        help="points for trimesh's own (slow) proximity queries",
+    )
     parser.add_argument("--turns", type=int, default=3)
-    parser.add_argument("--ceiling", action="store_true",
-                        help="bare nearest-hit rates instead (see the docstring)")
+    parser.add_argument(
+        "--ceiling", action="store_true", help="bare nearest-hit rates instead (see the docstring)"
+    )
     args = parser.parse_args()
     meshes = {
         "icosphere_1.3M": trimesh.creation.icosphere(subdivisions=8),
@@ -295,14 +335,15 @@ def mesh_rows(name: str, mesh: trimesh.Trimesh, args, with_open3d: bool):
         "first_hit": {
             "embree_rt": (lambda: ours.intersects_first(o, d), n),
             "embreex": (lambda: embreex.intersects_first(o, d), n),
-            "ray_triangle": (lambda: numpy_rays.intersects_first(o[few], d[few]),
-                             reference_rays),
+            "ray_triangle": (lambda: numpy_rays.intersects_first(o[few], d[few]), reference_rays),
         },
         "multi_hit": {
             "embree_rt": (lambda: ours.intersects_location(o, d), n),
             "embreex": (lambda: embreex.intersects_location(o, d), n),
-            "ray_triangle": (lambda: numpy_rays.intersects_location(o[few], d[few]),
-                             reference_rays),
+            "ray_triangle": (
+                lambda: numpy_rays.intersects_location(o[few], d[few]),
+                reference_rays,
+            ),
         },
         "contains_points": {
             "embree_rt": (lambda: ours.contains_points(p), n),
@@ -311,15 +352,13 @@ def mesh_rows(name: str, mesh: trimesh.Trimesh, args, with_open3d: bool):
         },
         "on_surface": {
             "embree_rt": (lambda: nearest.on_surface(p), n),
-            "trimesh": (lambda: their_nearest.on_surface(p[few_points]),
-                        len(p[few_points])),
+            "trimesh": (lambda: their_nearest.on_surface(p[few_points]), len(p[few_points])),
         },
     }
     if mesh.is_watertight:  # a sign needs an inside
         queries["signed_distance"] = {
             "embree_rt": (lambda: nearest.signed_distance(p), n),
-            "trimesh": (lambda: their_nearest.signed_distance(p[few_points]),
-                        len(p[few_points])),
+            "trimesh": (lambda: their_nearest.signed_distance(p[few_points]), len(p[few_points])),
         }
     extra = {}
     if with_open3d:
@@ -329,12 +368,10 @@ def mesh_rows(name: str, mesh: trimesh.Trimesh, args, with_open3d: bool):
         extra["build_s_open3d"] = round(time.perf_counter() - start, 3)
         queries["first_hit"]["open3d"] = (lambda: open3d_scene.first_hit(o, d), n)
         queries["multi_hit"]["open3d"] = (lambda: open3d_scene.all_hits(o, d), n)
-        queries["multi_hit"]["open3d_count_only"] = (lambda: open3d_scene.hit_counts(o, d),
-                                                     n)  # fmt: skip
+        queries["multi_hit"]["open3d_count_only"] = (lambda: open3d_scene.hit_counts(o, d), n)
         if mesh.is_watertight:
             queries["contains_points"]["open3d"] = (lambda: open3d_scene.occupancy(p), n)
-            queries["signed_distance"]["open3d"] = (
-                lambda: open3d_scene.signed_distance(p), n)  # fmt: skip
+            queries["signed_distance"]["open3d"] = (lambda: open3d_scene.signed_distance(p), n)
         queries["on_surface"]["open3d"] = (lambda: open3d_scene.closest_points(p), n)
     for query, runs in queries.items():
         answers = {}
@@ -345,22 +382,28 @@ def mesh_rows(name: str, mesh: trimesh.Trimesh, args, with_open3d: bool):
                 answers["hits_open3d"] = len(open3d_scene.all_hits(o, d))
                 counts = np.bincount(ours.intersects_location(o, d)[1], minlength=n)
                 answers["rays_whose_count_differs_open3d"] = int(
-                    (counts != open3d_scene.hit_counts(o, d)).sum())  # fmt: skip
+                    (counts != open3d_scene.hit_counts(o, d)).sum()
+                )
         if query == "on_surface" and with_open3d:
             # distances, not points: a point about equidistant from several triangles has
             # closest points far apart, each engine naming its own
             distance = nearest.on_surface(p)[1]
             theirs = np.linalg.norm(open3d_scene.closest_points(p) - p, axis=1)
-            answers["distance_gap_open3d_max"] = float(np.abs(distance - theirs).max()
-                                                       / mesh.scale)  # fmt: skip
+            answers["distance_gap_open3d_max"] = float(np.abs(distance - theirs).max() / mesh.scale)
         yield {
-            "mesh": name, "triangles": len(mesh.faces), "query": query, "rays": n,
-            "ray_triangle_rays": reference_rays, "trimesh_points": args.reference_points,
+            "mesh": name,
+            "triangles": len(mesh.faces),
+            "query": query,
+            "rays": n,
+            "ray_triangle_rays": reference_rays,
+            "trimesh_points": args.reference_points,
             "load_average": round(os.getloadavg()[0], 2),
             **row(take_turns(runs, args.turns), "embree_rt"),
             "build_s_embree_rt": round(build_ours, 3),
-            "build_s_embreex": round(build_embreex, 3), **extra, **answers,
-        }  # fmt: skip
+            "build_s_embreex": round(build_embreex, 3),
+            **extra,
+            **answers,
+        }
 
 
 if __name__ == "__main__":

@@ -598,10 +598,17 @@ def bench_count(count: int, args, mi, dr) -> dict:
             intersect_theirs()  # compiles the kernels
             their_blocked = np.array(occluded_theirs())
         agreement = check_agreement(
-            (centers, radii, GROUND_HALF_SIZE * side), bvh, sphere_geometry, mi, dr, theirs,
-            (origins, directions), (s_origins, s_directions, s_tfar),
-            blocked, their_blocked if mi is not None else None,
-        )  # fmt: skip
+            (centers, radii, GROUND_HALF_SIZE * side),
+            bvh,
+            sphere_geometry,
+            mi,
+            dr,
+            theirs,
+            (origins, directions),
+            (s_origins, s_directions, s_tfar),
+            blocked,
+            their_blocked if mi is not None else None,
+        )
         if theirs_image is not None:
             # Mitsuba's own render: pixels whose camera sample hit something (alpha)
             agreement["mitsuba_render_coverage"] = float(theirs_image[..., 3].mean())
@@ -691,11 +698,15 @@ def bench_instances(count: int, args, mi, dr, directory: Path) -> dict:
         def build_theirs():
             scene = {
                 "type": "scene",
-                "ground": {"type": "rectangle",
-                           "to_world": transform.rotate([1, 0, 0], -90).scale(h)},
-                "copies": {"type": "shapegroup",
-                           "mesh": {"type": "ply", "filename": str(mesh_path)}},
-            }  # fmt: skip
+                "ground": {
+                    "type": "rectangle",
+                    "to_world": transform.rotate([1, 0, 0], -90).scale(h),
+                },
+                "copies": {
+                    "type": "shapegroup",
+                    "mesh": {"type": "ply", "filename": str(mesh_path)},
+                },
+            }
             for i, matrix in enumerate(transforms):
                 scene[f"copy_{i}"] = {
                     "type": "instance",
@@ -776,7 +787,10 @@ def main(argv: list[str] | None = None) -> None:
         "--counts", type=lambda s: int(float(s)), nargs="*", default=[1_000, 100_000, 1_000_000]
     )
     parser.add_argument(
-        "--instances", type=lambda s: int(float(s)), nargs="*", default=[],
+        "--instances",
+        type=lambda s: int(float(s)),
+        nargs="*",
+        default=[],
         help="also compare instancing at these counts (a shapegroup and instances in Mitsuba)",
     )
     parser.add_argument("--repeat", type=int, default=5, help="timed pairs per measurement")

@@ -59,8 +59,16 @@ NOTHING_ID = -1
 FLOOR_ID = -2
 # Bytes a pixel of every AOV holds (float32 depths, positions, UVs, normals and albedo, int32 ids),
 # for the budget.
-AOV_BYTES = {"depth": 4, "z_depth": 4, "position": 12, "uv": 8, "normal": 12, "albedo": 12,
-             "object_id": 4, "material_id": 4}  # fmt: skip
+AOV_BYTES = {
+    "depth": 4,
+    "z_depth": 4,
+    "position": 12,
+    "uv": 8,
+    "normal": 12,
+    "albedo": 12,
+    "object_id": 4,
+    "material_id": 4,
+}
 # The EXR channels of each AOV, in the order of the array's last axis.
 EXR_CHANNELS = {
     "depth": ("depth.Z",),
@@ -121,7 +129,8 @@ def hit_object_ids(surfaces: SurfaceHits, geometry: SceneGeometry) -> np.ndarray
     inst = surfaces.inst_id[rest]
     copy = np.maximum(surfaces.inst_prim_id[rest], 0)
     ids[rest] = np.where(
-        inst >= 0, np.take(object_start, np.maximum(inst, 0)) + copy,
+        inst >= 0,
+        np.take(object_start, np.maximum(inst, 0)) + copy,
         geometry.scene_sphere(np.where(inst >= 0, 0, surfaces.prim_id[rest])),
     )
     return ids
@@ -247,8 +256,11 @@ def camera_json_path(path: str | os.PathLike) -> Path:
 def _camera_json(frame: CameraFrame) -> bytes:
     import json
 
-    record = {"width": frame.width, "height": frame.height,
-              **{name: matrix.tolist() for name, matrix in camera_data(frame).items()}}  # fmt: skip
+    record = {
+        "width": frame.width,
+        "height": frame.height,
+        **{name: matrix.tolist() for name, matrix in camera_data(frame).items()},
+    }
     return (json.dumps(record, indent=2) + "\n").encode()
 
 
@@ -265,20 +277,31 @@ def nerf_transforms(views: list[tuple[Path, CameraFrame]], folder: Path) -> dict
 
     def lens(frame: CameraFrame) -> dict:
         K = intrinsics(frame)
-        return {"camera_angle_x": 2.0 * math.atan(frame.half_width), "fl_x": K[0, 0],
-                "fl_y": K[1, 1]}  # fmt: skip
+        return {
+            "camera_angle_x": 2.0 * math.atan(frame.half_width),
+            "fl_x": K[0, 0],
+            "fl_y": K[1, 1],
+        }
 
     first = views[0][1]
     K = intrinsics(first)
     frames = []
     for path, frame in views:
-        entry = {"file_path": "./" + Path(os.path.relpath(path, folder)).as_posix(),
-                 "transform_matrix": camera_to_world_opengl(frame).tolist()}  # fmt: skip
+        entry = {
+            "file_path": "./" + Path(os.path.relpath(path, folder)).as_posix(),
+            "transform_matrix": camera_to_world_opengl(frame).tolist(),
+        }
         if lens(frame) != lens(first):  # a zoom: the frame's own (tools read these per frame)
             entry.update(lens(frame))
         frames.append(entry)
-    return {**lens(first), "cx": K[0, 2] + 0.5, "cy": K[1, 2] + 0.5, "w": first.width,
-            "h": first.height, "frames": frames}  # fmt: skip
+    return {
+        **lens(first),
+        "cx": K[0, 2] + 0.5,
+        "cy": K[1, 2] + 0.5,
+        "w": first.width,
+        "h": first.height,
+        "frames": frames,
+    }
 
 
 def save_with_aovs(
@@ -311,8 +334,9 @@ def save_with_aovs(
     if suffix == ".npz":
         files = [(target, lambda handle: np.savez(handle, beauty=beauty, **aovs, **arrays))]
     elif suffix == ".exr":
-        files = [(target, lambda handle: film.write_exr_channels(exr_channels(beauty, aovs),
-                                                                 handle))]  # fmt: skip
+        files = [
+            (target, lambda handle: film.write_exr_channels(exr_channels(beauty, aovs), handle))
+        ]
     else:
         writer = film.WRITERS[suffix]
         files = [(target, lambda handle: writer(image, handle, encoding))]

@@ -55,8 +55,9 @@ class RenderResult:
         """The picture as PNG bytes (``to_srgb8``): what Jupyter shows for a result."""
         return png_bytes(self.to_srgb8())
 
-    def save(self, path: str | os.PathLike, encoding: film.Encoding = film.DEFAULT_ENCODING
-             ) -> list[Path]:  # fmt: skip
+    def save(
+        self, path: str | os.PathLike, encoding: film.Encoding = film.DEFAULT_ENCODING
+    ) -> list[Path]:
         """Write the image to ``path`` by its extension (``film.IMAGE_SUFFIXES``; ``encoding``:
         8 or 16 bits, quality), with the AOVs in the same file (``.npz``, ``.exr``) or beside
         it, and with them the camera (``aovs.camera_data``: npz keys, a JSON sidecar); all or

@@ -109,15 +109,17 @@ def geometry_bytes(count: int, kind: str) -> int:
     return count * GEOMETRY_BYTES_PER_SPHERE[kind]
 
 
-def bvh_bytes(
-    sphere_count: int, kind: str, triangles: int, instances: int, arrayed: int
-) -> int:
+def bvh_bytes(sphere_count: int, kind: str, triangles: int, instances: int, arrayed: int) -> int:
     """An estimate of a BVH's memory: ``sphere_count`` spheres entered as ``kind``
     (``geometry_bytes``), ``triangles`` distinct triangles, ``instances`` instances of their
     own and ``arrayed`` instances in instance arrays (neither counting the spheres' own
     instances when ``kind`` is "mesh": ``GEOMETRY_BYTES_PER_SPHERE`` holds those)."""
-    return (geometry_bytes(sphere_count, kind) + triangles * BYTES_PER_TRIANGLE
-            + instances * BYTES_PER_INSTANCE + arrayed * BYTES_PER_ARRAYED_INSTANCE)  # fmt: skip
+    return (
+        geometry_bytes(sphere_count, kind)
+        + triangles * BYTES_PER_TRIANGLE
+        + instances * BYTES_PER_INSTANCE
+        + arrayed * BYTES_PER_ARRAYED_INSTANCE
+    )
 
 
 def image_bytes(width: int, height: int, spp: int, batch_size: int, workers: int) -> int:
@@ -144,9 +146,7 @@ def bvh_needs(sphere_count: int, spheres: str) -> dict[str, tuple[int, str]]:
     from embree_rt.geometry import sphere_kind
 
     kind = sphere_kind(sphere_count, spheres)
-    return {
-        "spheres": (geometry_bytes(sphere_count, kind), f"the BVH of {sphere_count:,} spheres")
-    }
+    return {"spheres": (geometry_bytes(sphere_count, kind), f"the BVH of {sphere_count:,} spheres")}
 
 
 def render_needs(

@@ -178,9 +178,7 @@ def _check_range(start: object, count: object, total: int, units: str, image: st
     if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 0:
         raise ValueError(f"count: must be a non-negative integer, got {count!r}")
     if start + count > total:
-        raise ValueError(
-            f"{units} {start}..{start + count} run past the image's {total} ({image})"
-        )
+        raise ValueError(f"{units} {start}..{start + count} run past the image's {total} ({image})")
 
 
 # Camera rays are traced in tiles of TILE_WIDTH x TILE_HEIGHT pixels: one 8-ray packet then
@@ -214,14 +212,25 @@ def camera_rays(frame: CameraFrame, spp: int, seed: int) -> CameraRays:
     """What the ray of each camera sample of a render at ``spp`` samples per pixel and ``seed``
     depends on besides its index, for the compiled code that makes the rays."""
     nx, ny, cells = strata(spp)
-    u, v, w, origin = (np.ascontiguousarray(axis, np.float32)
-                       for axis in (frame.u, frame.v, frame.w, frame.origin))  # fmt: skip
+    u, v, w, origin = (
+        np.ascontiguousarray(axis, np.float32) for axis in (frame.u, frame.v, frame.w, frame.origin)
+    )
     return CameraRays(
-        origin, u, v, w,
-        2.0 * frame.half_width / frame.width, float(frame.half_width),
-        2.0 * frame.half_height / frame.height, float(frame.half_height),
-        frame.width, spp, nx, ny, cells, hash_key(seed, 0),
-    )  # fmt: skip
+        origin,
+        u,
+        v,
+        w,
+        2.0 * frame.half_width / frame.width,
+        float(frame.half_width),
+        2.0 * frame.half_height / frame.height,
+        float(frame.half_height),
+        frame.width,
+        spp,
+        nx,
+        ny,
+        cells,
+        hash_key(seed, 0),
+    )
 
 
 def sample_rays(
@@ -297,9 +306,9 @@ def intrinsics(frame: CameraFrame) -> np.ndarray:
     put pixel centres at c + 1/2, as NeRF's and Blender's do, take ``cx + 1/2``, ``cy + 1/2``.)"""
     fx = frame.width / (2.0 * frame.half_width)
     fy = frame.height / (2.0 * frame.half_height)
-    return np.array([[fx, 0.0, frame.width / 2.0 - 0.5],
-                     [0.0, fy, frame.height / 2.0 - 0.5],
-                     [0.0, 0.0, 1.0]])  # fmt: skip
+    return np.array(
+        [[fx, 0.0, frame.width / 2.0 - 0.5], [0.0, fy, frame.height / 2.0 - 0.5], [0.0, 0.0, 1.0]]
+    )
 
 
 def world_to_camera_opengl(frame: CameraFrame) -> np.ndarray:

@@ -266,8 +266,9 @@ class _Frame:
     pending: int
 
 
-def single_frame(render_frames: Callable, settings: RenderSettings, camera: Camera,
-                 progress=None) -> np.ndarray:  # fmt: skip
+def single_frame(
+    render_frames: Callable, settings: RenderSettings, camera: Camera, progress=None
+) -> np.ndarray:
     """The (height, width, 3) float32 linear image of ``camera`` from a cluster renderer's
     ``render_frames(settings, cameras, on_frame, progress)``: one frame, asked as a sequence."""
     images = []
@@ -338,8 +339,10 @@ class ClusterRenderer:
     ) -> None:
         """Render each ``(label, camera)`` and call ``on_frame(label, image)`` as each finishes
         (in any order). On any exception, Ctrl-C included, the batches not done are cancelled."""
-        frames = [(label, camera_frame(camera, settings.width, settings.height))
-                  for label, camera in cameras]  # fmt: skip
+        frames = [
+            (label, camera_frame(camera, settings.width, settings.height))
+            for label, camera in cameras
+        ]
         total = settings.width * settings.height * settings.spp
         state = ClusterProgress(total=total * len(frames))
         workers = self._wait_for_workers(state)
@@ -366,11 +369,18 @@ class ClusterRenderer:
             n = len(batches)
             # One graph for the frame's batches; earlier frames first.
             futures = self.client.map(
-                render_batch, [self.key] * n, [self.source] * n, [frame] * n,
-                [settings.spp] * n, [settings.seed] * n, [settings.max_depth] * n,
-                [start for start, _ in batches], [count for _, count in batches],
-                pure=False, priority=-submitted,
-            )  # fmt: skip
+                render_batch,
+                [self.key] * n,
+                [self.source] * n,
+                [frame] * n,
+                [settings.spp] * n,
+                [settings.seed] * n,
+                [settings.max_depth] * n,
+                [start for start, _ in batches],
+                [count for _, count in batches],
+                pure=False,
+                priority=-submitted,
+            )
             in_flight.update(dict.fromkeys(futures, image))
 
         try:
@@ -543,9 +553,15 @@ def local_cluster(workers: int, **options) -> distributed.LocalCluster:
     scheduler_options = {"dashboard_address": "127.0.0.1:0", **options.pop("scheduler_kwargs", {})}
     with dask.config.set(WORKER_CONFIG):  # the nannies hand it to their worker processes
         return distributed.LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-            memory_limit=0, preload=[__name__], scheduler_kwargs=scheduler_options, **options,
-        )  # fmt: skip
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            memory_limit=0,
+            preload=[__name__],
+            scheduler_kwargs=scheduler_options,
+            **options,
+        )
 
 
 def dask_setup(worker: distributed.Worker) -> None:

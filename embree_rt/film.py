@@ -21,8 +21,14 @@ from embree_rt.compiled import film_sums
 
 GAMMA = 2.2
 # Display formats: Pillow's name for each extension.
-PILLOW_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF",
-                  ".tiff": "TIFF", ".webp": "WEBP"}  # fmt: skip
+PILLOW_FORMATS = {
+    ".png": "PNG",
+    ".jpg": "JPEG",
+    ".jpeg": "JPEG",
+    ".tif": "TIFF",
+    ".tiff": "TIFF",
+    ".webp": "WEBP",
+}
 IMAGE_SUFFIXES = (*PILLOW_FORMATS, ".npy", ".npz", ".exr")
 SIXTEEN_BIT_SUFFIXES = (".png", ".tif", ".tiff")
 QUALITY_SUFFIXES = (".jpg", ".jpeg", ".webp")
@@ -54,6 +60,8 @@ def encoding_problem(suffix: str, encoding: Encoding) -> str | None:
         if not 1 <= encoding.quality <= 100:
             return f"quality must be 1 to 100, got {encoding.quality}"
     return None
+
+
 TEMP_TOKEN_HEX = 16  # hex digits of the random part of a temporary file's name
 
 
@@ -102,9 +110,12 @@ class FilmBlock:
         self._check(film_sums.add_samples(self._sums, self.first, pixel, rgb), pixel, None)
 
     def add_weighted(
-        self, pixel: np.ndarray, weight: np.ndarray | None, rgb: np.ndarray,
+        self,
+        pixel: np.ndarray,
+        weight: np.ndarray | None,
+        rgb: np.ndarray,
         columns: np.ndarray | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """``add(pixel[columns], weight[:, columns] * rgb)`` with no temporaries: ``pixel``
         (n,) int64, ``weight`` (3, n) float32 ray weights (None: all ones), ``rgb`` (3, k)
         float32, ``columns`` (k,) int64 the rays ``rgb`` belongs to (None: all n, k = n)."""
@@ -157,8 +168,10 @@ def display_values(image: np.ndarray, look: Look = DEFAULT_LOOK) -> np.ndarray:
     upstream and raises ValueError.
     """
     if look.tonemap not in TONEMAPS or look.transfer not in TRANSFERS:
-        raise ValueError(f"look: tonemap must be one of {TONEMAPS} and transfer one of "
-                         f"{TRANSFERS}, got {look.tonemap!r} and {look.transfer!r}")  # fmt: skip
+        raise ValueError(
+            f"look: tonemap must be one of {TONEMAPS} and transfer one of "
+            f"{TRANSFERS}, got {look.tonemap!r} and {look.transfer!r}"
+        )
     image = np.asarray(image, np.float32)
     if np.isnan(image).any():
         raise ValueError("image contains NaN")
@@ -167,8 +180,9 @@ def display_values(image: np.ndarray, look: Look = DEFAULT_LOOK) -> np.ndarray:
         linear = linear * np.float32(2.0**look.exposure)
     with np.errstate(invalid="ignore", over="ignore"):
         if look.tonemap == "reinhard":
-            mapped = np.where(np.isinf(linear), np.float32(1.0),
-                              linear / (np.float32(1.0) + linear))  # fmt: skip
+            mapped = np.where(
+                np.isinf(linear), np.float32(1.0), linear / (np.float32(1.0) + linear)
+            )
         elif look.tonemap == "aces":
             mapped = np.where(np.isinf(linear), np.float32(1.0), aces(linear))
         else:
@@ -261,8 +275,9 @@ def _exr_module():
     return OpenEXR
 
 
-def write_pixels(pixels: np.ndarray, handle: BinaryIO, suffix: str, quality: int | None = None
-                 ) -> None:  # fmt: skip
+def write_pixels(
+    pixels: np.ndarray, handle: BinaryIO, suffix: str, quality: int | None = None
+) -> None:
     """Write (h, w, 3) uint8 or uint16 display ``pixels`` as the display format of ``suffix``
     (``PILLOW_FORMATS``) to ``handle``: uint8 through Pillow (``quality`` for JPEG and WebP),
     uint16 as 16-bit RGB PNG (pypng) or TIFF (tifffile)."""
@@ -285,8 +300,9 @@ def write_pixels(pixels: np.ndarray, handle: BinaryIO, suffix: str, quality: int
     Image.fromarray(pixels).save(handle, format=name, **options)
 
 
-def _write_display(suffix: str, image: np.ndarray, handle: BinaryIO,
-                   encoding: Encoding = DEFAULT_ENCODING) -> None:  # fmt: skip
+def _write_display(
+    suffix: str, image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING
+) -> None:
     pixels = quantize(display_values(image, encoding.look or DEFAULT_LOOK), encoding.bit_depth)
     write_pixels(pixels, handle, suffix, encoding.quality)
 
@@ -346,8 +362,9 @@ def check_image_shape(image: np.ndarray, path: str | os.PathLike) -> np.ndarray:
     return image
 
 
-def save_image(image: np.ndarray, path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCODING
-               ) -> None:  # fmt: skip
+def save_image(
+    image: np.ndarray, path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCODING
+) -> None:
     """Write the (h, w, 3) float32 linear ``image`` to ``path`` by its extension
     (case-insensitive): ``.png``, ``.jpg``/``.jpeg``, ``.tif``/``.tiff``, ``.webp`` tone-mapped
     (``encoding``: 8 or 16 bits, quality), ``.npy``, ``.npz`` (as ``beauty``) and ``.exr``

@@ -181,16 +181,26 @@ class SceneGeometry:
         self._instance_material.append(material)
         self._instance_smooth.append(smooth)
         low, high = self._mesh_bounds[child]
-        corners = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1])
-                            for z in (low[2], high[2])])  # fmt: skip
+        corners = np.array(
+            [
+                [x, y, z]
+                for x in (low[0], high[0])
+                for y in (low[1], high[1])
+                for z in (low[2], high[2])
+            ]
+        )
         world = corners @ transform[:3, :3].T + transform[:3, 3]
         self._instance_scale.append(float(np.abs(world).max()))
         self.triangle_count += len(self._mesh_faces[child])
         self.instance_count += 1
 
     def _place_array(
-        self, children: list[int], transforms: np.ndarray, child_index: np.ndarray | None,
-        materials: np.ndarray, smooth: bool,
+        self,
+        children: list[int],
+        transforms: np.ndarray,
+        child_index: np.ndarray | None,
+        materials: np.ndarray,
+        smooth: bool,
     ) -> int:
         """Place meshes ``children`` (indices into ``_children``) by (n, 4, 4) ``transforms``
         as one instance array, ``child_index`` (n,) picking each one's mesh (None: the only
@@ -198,8 +208,9 @@ class SceneGeometry:
         geom_id = self.bvh.add_instances(
             [self._children[c] for c in children], transforms, child_index
         )
-        self._arrays.append((geom_id, children, np.ascontiguousarray(materials, np.int32),
-                             bool(smooth)))  # fmt: skip
+        self._arrays.append(
+            (geom_id, children, np.ascontiguousarray(materials, np.int32), bool(smooth))
+        )
         faces = np.array([len(self._mesh_faces[c]) for c in children], np.int64)
         placed = faces[0] * len(transforms) if child_index is None else faces[child_index].sum()
         self.triangle_count += int(placed)
@@ -255,9 +266,11 @@ class SceneGeometry:
             key = id(entry.mesh)
             if key not in children:
                 children[key] = self._child(entry.mesh)
-            geom_ids.append(self._place_array(
-                [children[key]], entry.transforms, None, entry.materials, entry.smooth
-            ))  # fmt: skip
+            geom_ids.append(
+                self._place_array(
+                    [children[key]], entry.transforms, None, entry.materials, entry.smooth
+                )
+            )
             self._object_start[geom_ids[-1]] = int(first_id)
             # a one-mesh array's hits name its faces as the mesh's own: the same lookups
             looks.append(MeshObject(mesh=entry.mesh, mesh_colors=entry.mesh_colors))
@@ -367,8 +380,9 @@ class SceneGeometry:
         first. The Embree layer's compiled hit records do the bookkeeping; only smooth mesh
         normals are left to do here. ``coherent``: the rays come in runs of neighbouring
         camera rays (Embree's coherent query; the same answers, found faster)."""
-        records = self.bvh.intersect_records(origins, directions, self.labels, tnear, tfar,
-                                             coherent)  # fmt: skip
+        records = self.bvh.intersect_records(
+            origins, directions, self.labels, tnear, tfar, coherent
+        )
         return records.rays, self._surfaces(records)
 
     def intersect_camera(
@@ -389,9 +403,13 @@ class SceneGeometry:
         if self.smooth_meshes and meshes.stop > meshes.start:
             normal = face_normal.copy()
             normal[:, meshes] = self._smooth_normals(
-                records.inst_id[meshes], records.inst_prim_id[meshes], records.prim_id[meshes],
-                records.u[meshes], records.v[meshes], face_normal[:, meshes],
-            )  # fmt: skip
+                records.inst_id[meshes],
+                records.inst_prim_id[meshes],
+                records.prim_id[meshes],
+                records.u[meshes],
+                records.v[meshes],
+                face_normal[:, meshes],
+            )
         surfaces = SurfaceHits(
             t=records.t,
             position=records.position,
@@ -408,9 +426,12 @@ class SceneGeometry:
         )
         if self.mesh_colors and meshes.stop > meshes.start:  # mesh looks: textures, colours
             looks = self.mesh_colors.hit_looks(
-                records.inst_id[meshes], records.prim_id[meshes], records.u[meshes],
-                records.v[meshes], meshes.start,
-            )  # fmt: skip
+                records.inst_id[meshes],
+                records.prim_id[meshes],
+                records.u[meshes],
+                records.v[meshes],
+                meshes.start,
+            )
             if looks is not None:
                 surfaces.colored, surfaces.color, surfaces.looks = looks.rows, looks.color, looks
                 if looks.normal is not None:
@@ -442,9 +463,14 @@ class SceneGeometry:
         corners = self.mesh_faces[face]
         # Never zero: corners without a normal, and blends that cancel, take the face's.
         interpolated = blend_normals(
-            self.mesh_vertex_normals, self.mesh_missing_normals, corners, u, v,
-            self.mesh_face_normals, face,
-        )  # fmt: skip
+            self.mesh_vertex_normals,
+            self.mesh_missing_normals,
+            corners,
+            u,
+            v,
+            self.mesh_face_normals,
+            face,
+        )
         world = _unit(self.bvh.instance_normals(inst, inst_prim, interpolated))
         return np.where(smooth, world, face_normal)
 

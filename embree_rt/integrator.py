@@ -90,9 +90,11 @@ class RayBatch:
 
 
 NO_RAYS = RayBatch(
-    np.zeros((3, 0), np.float32), np.zeros((3, 0), np.float32), np.zeros(0, np.int64),
     np.zeros((3, 0), np.float32),
-)  # fmt: skip
+    np.zeros((3, 0), np.float32),
+    np.zeros(0, np.int64),
+    np.zeros((3, 0), np.float32),
+)
 
 
 def surface_offset(scale: np.ndarray) -> np.ndarray:
@@ -176,8 +178,9 @@ class Integrator:
             self.lit = ~table.unlit
             self.ambient_share = np.where(table.unlit, 1.0, self.ambient_share).astype(np.float32)
             for name in ("diffuse_share", "reflect_share", "specular", "transparency"):
-                setattr(self, name, np.where(table.unlit, 0.0, getattr(self, name)).astype(
-                    np.float32))  # fmt: skip
+                setattr(
+                    self, name, np.where(table.unlit, 0.0, getattr(self, name)).astype(np.float32)
+                )
         # (3, m) glow and Beer–Lambert absorption per unit length; None when no material has any.
         self.emission = np.ascontiguousarray(table.emission.T) if table.emission.any() else None
         absorbs = (table.absorption > 0).any()
@@ -251,9 +254,15 @@ class Integrator:
         return film.image(spp), stats
 
     def trace_pixels(
-        self, frame: CameraFrame, spp: int, seed: int, sample: int, first: int, count: int,
+        self,
+        frame: CameraFrame,
+        spp: int,
+        seed: int,
+        sample: int,
+        first: int,
+        count: int,
         max_depth: int,
-    ) -> FilmBlock:  # fmt: skip
+    ) -> FilmBlock:
         """The film block of sample ``sample`` (of ``spp``) of each of the ``count`` pixels from
         ``first``: the very rays ``render`` traces for those samples, for a preview that shows
         a render one sample per pixel at a time."""
@@ -285,9 +294,12 @@ class Integrator:
         return work
 
     def _trace(
-        self, rays: RayBatch, work: BatchWork, max_depth: int,
+        self,
+        rays: RayBatch,
+        work: BatchWork,
+        max_depth: int,
         camera: tuple[CameraRays, np.ndarray] | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """Trace ``rays`` and their children to ``max_depth``; with ``camera`` (its
         ``CameraRays`` and the (n,) sample indices of ``rays``), ``rays`` are those camera
         samples and their origins and directions (None) are made inside the first query."""
@@ -418,8 +430,12 @@ class Integrator:
         beyond = np.take(surfaces.position, through, axis=1)
         beyond -= np.take(face_normal, through, axis=1) * offset[through]
         work.rays["refraction"] += len(keep)
-        return RayBatch(beyond, np.take(rays.directions, through, axis=1), rays.pixel[through],
-                        np.take(weight, keep, axis=1))  # fmt: skip
+        return RayBatch(
+            beyond,
+            np.take(rays.directions, through, axis=1),
+            rays.pixel[through],
+            np.take(weight, keep, axis=1),
+        )
 
     @staticmethod
     def facing_the_ray(d: np.ndarray, surfaces: SurfaceHits):
@@ -540,9 +556,15 @@ class Integrator:
                 np.divide(seen, scale, out=scale)
                 direction = np.multiply(to_light, scale, out=to_light)
                 radiance += shading.blinn_phong(
-                    normal, to_viewer, direction, color, diffuse, specular, shininess,
+                    normal,
+                    to_viewer,
+                    direction,
+                    color,
+                    diffuse,
+                    specular,
+                    shininess,
                     self.light_rgb[light],
-                )  # fmt: skip
+                )
                 continue
             scatter_add(
                 radiance,

@@ -112,7 +112,11 @@ class HitLooks:
 
 
 def surface_looks(
-    surface: MeshSurface, faces: np.ndarray, face: np.ndarray, u: np.ndarray, v: np.ndarray,
+    surface: MeshSurface,
+    faces: np.ndarray,
+    face: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
     frame: TangentFrame | None = None,
 ) -> HitLooks:
     """The looks of k hits on a mesh with per-point looks (``rows`` left empty); ``frame``
@@ -162,7 +166,8 @@ def surface_looks(
         slot = looks.occlusion
         sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[0]
         result.occlusion = np.float32(1.0) + np.float32(looks.occlusion_strength) * (
-            np.clip(sample, np.float32(0.0), np.float32(1.0)) - np.float32(1.0))  # fmt: skip
+            np.clip(sample, np.float32(0.0), np.float32(1.0)) - np.float32(1.0)
+        )
     if (looks.metallic_roughness is not None or looks.transmission is not None) and not (
         looks.material.unlit
     ):
@@ -185,8 +190,9 @@ def textured_shading(looks, blend) -> dict[str, np.ndarray]:
     slot = looks.metallic_roughness
     if slot is not None:
         sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler).astype(np.float64)
-        values = metallic_roughness_parameters(looks.metallic_factor * sample[2],
-                                               looks.roughness_factor * sample[1])  # fmt: skip
+        values = metallic_roughness_parameters(
+            looks.metallic_factor * sample[2], looks.roughness_factor * sample[1]
+        )
     else:
         count = blend(looks.transmission.uv).shape[1]
         names = ("diffuse", "specular", "shininess", "reflectivity", "metallic")
@@ -196,15 +202,22 @@ def textured_shading(looks, blend) -> dict[str, np.ndarray]:
         slot = looks.transmission
         sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[0]
         transparency = np.clip(np.float32(looks.transmission_factor) * sample, 0.0, 1.0)
-    f32 = {name: np.asarray(values[name], np.float32) for name in
-           ("diffuse", "specular", "shininess", "reflectivity")}  # fmt: skip
-    ambient, diffuse, reflect = shading_shares(np.float32(material.ambient), f32["diffuse"],
-                                               f32["reflectivity"], transparency)  # fmt: skip
+    f32 = {
+        name: np.asarray(values[name], np.float32)
+        for name in ("diffuse", "specular", "shininess", "reflectivity")
+    }
+    ambient, diffuse, reflect = shading_shares(
+        np.float32(material.ambient), f32["diffuse"], f32["reflectivity"], transparency
+    )
     return {
-        "ambient_share": ambient, "diffuse_share": diffuse, "reflect_share": reflect,
-        "specular": f32["specular"], "shininess": f32["shininess"],
-        "transparency": transparency.astype(np.float32), "metallic": np.asarray(values["metallic"]),
-    }  # fmt: skip
+        "ambient_share": ambient,
+        "diffuse_share": diffuse,
+        "reflect_share": reflect,
+        "specular": f32["specular"],
+        "shininess": f32["shininess"],
+        "transparency": transparency.astype(np.float32),
+        "metallic": np.asarray(values["metallic"]),
+    }
 
 
 def mapped_normals(sample, scale: float, frame, face: np.ndarray, blend) -> np.ndarray:
@@ -224,8 +237,9 @@ def mapped_normals(sample, scale: float, frame, face: np.ndarray, blend) -> np.n
     else:
         tangent = np.take(frame.face_tangents, face, axis=1)
         bitangent = np.take(frame.face_bitangents, face, axis=1)
-        sign = np.where(_dot(np.cross(normal.T, tangent.T).T, bitangent) < 0,
-                        np.float32(-1.0), np.float32(1.0))  # fmt: skip
+        sign = np.where(
+            _dot(np.cross(normal.T, tangent.T).T, bitangent) < 0, np.float32(-1.0), np.float32(1.0)
+        )
     tangent = _unit_columns(tangent - _dot(tangent, normal) * normal)
     bitangent = sign * np.cross(normal.T, tangent.T).T
     return _unit_columns(mapped[0] * tangent + mapped[1] * bitangent + mapped[2] * normal)
@@ -281,8 +295,9 @@ def tangent_frame(
         helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
         tangent[flat] = np.cross(helper, normal)
         bitangent[flat] = np.cross(normal, tangent[flat])
-    return TangentFrame(normals, face_tangents=_columns(tangent),
-                        face_bitangents=_columns(bitangent))  # fmt: skip
+    return TangentFrame(
+        normals, face_tangents=_columns(tangent), face_bitangents=_columns(bitangent)
+    )
 
 
 def _columns(rows: np.ndarray) -> np.ndarray:
@@ -417,8 +432,10 @@ def _gather_looks(parts: list[HitLooks], count: int) -> HitLooks:
         looks.normal_at = np.concatenate([part.rows[part.normal_at] for part in normals])
     shaded = [part for part in parts if part.shading is not None]
     if shaded:
-        looks.shading = {name: np.concatenate([part.shading[name] for part in shaded])
-                         for name in shaded[0].shading}  # fmt: skip
+        looks.shading = {
+            name: np.concatenate([part.shading[name] for part in shaded])
+            for name in shaded[0].shading
+        }
         looks.shading_at = np.concatenate([part.rows[part.shading_at] for part in shaded])
     if any(part.occlusion is not None for part in parts):
         looks.occlusion = np.ones(count, np.float32)

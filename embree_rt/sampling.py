@@ -64,5 +64,7 @@ def uniform_pair(seed: int, index: np.ndarray, dimension: int) -> tuple[np.ndarr
     The pair's stream is ``uniform``'s own for the first value: do not also draw ``uniform``
     at ``dimension`` for something else."""
     bits = _hash_bits(seed, index, dimension)
-    return (_unit_float(bits >> np.uint64(40)),
-            _unit_float((bits >> np.uint64(16)) & np.uint64(0xFFFFFF)))  # fmt: skip
+    return (
+        _unit_float(bits >> np.uint64(40)),
+        _unit_float((bits >> np.uint64(16)) & np.uint64(0xFFFFFF)),
+    )

@@ -69,9 +69,7 @@ def srgb_to_linear(encoded: np.ndarray) -> np.ndarray:
     """Linear values of sRGB-encoded ``encoded`` in [0, 1] (any shape, float), by the exact
     piecewise sRGB transfer function (IEC 61966-2-1), in float64."""
     encoded = np.asarray(encoded, np.float64)
-    return np.where(
-        encoded <= 0.04045, encoded / 12.92, ((encoded + 0.055) / 1.055) ** 2.4
-    )  # fmt: skip
+    return np.where(encoded <= 0.04045, encoded / 12.92, ((encoded + 0.055) / 1.055) ** 2.4)
 
 
 # Linear value of each 8-bit sRGB code: images decode through one gather.
@@ -125,10 +123,8 @@ def sample_texture(
     else:  # the wrap modes are defined on glTF's top-down coordinate, t = 1 − v
         t = reduce_coordinate(np.float32(1.0) - v, sampler.wrap_t)
     if sampler.nearest:
-        column = wrap_texel(np.floor(s * np.float32(width)).astype(np.int64), width,
-                            sampler.wrap_s)  # fmt: skip
-        row = wrap_texel(np.floor(t * np.float32(height)).astype(np.int64), height,
-                         sampler.wrap_t)  # fmt: skip
+        column = wrap_texel(np.floor(s * np.float32(width)).astype(np.int64), width, sampler.wrap_s)
+        row = wrap_texel(np.floor(t * np.float32(height)).astype(np.int64), height, sampler.wrap_t)
         picked = np.take(words, row * width + column).view(np.float32).reshape(-1, 4)
         return np.ascontiguousarray(picked.T)
     x = s * np.float32(width) - np.float32(0.5)

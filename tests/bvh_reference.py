@@ -185,9 +185,11 @@ def sphere_hits(
 
     t_atol = np.zeros(n)
     t_atol[hit] = ray_t_atol(
-        o[hit], d[hit], np.abs(c[spheres[pairs]]).max(axis=1) + r[spheres[pairs]],
+        o[hit],
+        d[hit],
+        np.abs(c[spheres[pairs]]).max(axis=1) + r[spheres[pairs]],
         normals=normal[hit],
-    )  # fmt: skip
+    )
 
     ambiguous = np.zeros(n, bool)
     # two surfaces at nearly the same distance: either may be reported
@@ -283,9 +285,11 @@ def triangle_hits(
     best, t_first, t_second = _nearest_per_ray(rays[in_window], t_pair[in_window], n)
     # How well float32 knows each pair's t, and u, v (the point's tolerance over the height).
     pair_t_atol = ray_t_atol(
-        o[rays], d[rays], np.abs(triangles[tri]).max(axis=(1, 2)),
+        o[rays],
+        d[rays],
+        np.abs(triangles[tri]).max(axis=(1, 2)),
         normals=face_normals(vertices, faces[tri]),
-    )  # fmt: skip
+    )
     pair_uv_atol = (
         pair_t_atol * np.linalg.norm(d[rays], axis=1) / triangle_heights(vertices, faces[tri])
     )
@@ -489,9 +493,12 @@ def assert_hits_match(
         assert np.all(getattr(hits, name)[missed] == -1), f"{name} must be -1 on a miss"
 
     assert_close(
-        hits.t[both], ref.t[both], atol=ref.t_atol[both], rtol=t_rtol,
+        hits.t[both],
+        ref.t[both],
+        atol=ref.t_atol[both],
+        rtol=t_rtol,
         err_msg="t differs from the reference",
-    )  # fmt: skip
+    )
     bad_prim = both & (hits.prim_id != ref.prim_id)
     assert not bad_prim.any(), (
         f"{bad_prim.sum()} rays report another primitive, e.g. rays {_first_rays(bad_prim)}: "

@@ -23,8 +23,9 @@ def tiled_samples(frame: CameraFrame, spp: int, start: int, count: int) -> np.nd
     pairs = ((stop - 1) // width - top) // TILE_HEIGHT + 1
     tiles_across = -(-width // TILE_WIDTH)
     row = np.arange(top, top + pairs * TILE_HEIGHT, dtype=np.int64).reshape(-1, 1, TILE_HEIGHT, 1)
-    column = (np.arange(tiles_across, dtype=np.int64).reshape(1, -1, 1, 1) * TILE_WIDTH
-              + np.arange(TILE_WIDTH, dtype=np.int64).reshape(1, 1, 1, -1))  # fmt: skip
+    column = np.arange(tiles_across, dtype=np.int64).reshape(1, -1, 1, 1) * TILE_WIDTH + np.arange(
+        TILE_WIDTH, dtype=np.int64
+    ).reshape(1, 1, 1, -1)
     lines = (row * width + column).reshape(pairs, -1)
     if width % TILE_WIDTH:
         inside = np.broadcast_to(column < width, (1, tiles_across, TILE_HEIGHT, TILE_WIDTH))

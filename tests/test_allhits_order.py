@@ -35,10 +35,12 @@ def _spread(cell: int) -> int:
 def test_segment_keys_follow_the_middle_of_each_rays_path_through_the_box():
     lower, upper = np.zeros(3), np.array([2.0, 1.0, 1.0])
     cells = box_cells(lower, upper)
-    origins = np.array([[-1.0, 0.5, 0.5], [1.0, 0.5, 0.5], [1.0, -3.0, 0.25], [5.0, 5.0, 5.0],
-                        [0.5, 0.5, 0.5]])  # fmt: skip
-    directions = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0],
-                           [0.0, 0.0, 0.0]])  # fmt: skip
+    origins = np.array(
+        [[-1.0, 0.5, 0.5], [1.0, 0.5, 0.5], [1.0, -3.0, 0.25], [5.0, 5.0, 5.0], [0.5, 0.5, 0.5]]
+    )
+    directions = np.array(
+        [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+    )
     keys = _keys(origins, directions, lower, upper, cells).tolist()
 
     def key(x, y, z):
@@ -61,7 +63,8 @@ def test_ordered_local_rays_are_local_rays_moved_to_their_order():
     shift, scale, extent = np.array([1.0, -2.0, 3.0]), 0.37, 80.0
     bounds = np.array([[-20.0, -20, -20], [30.0, 30, 30]])
     order, ordered_origins, ordered_directions, *local, finite = ordered_local_rays(
-        origins, directions, shift, scale, extent, bounds, 2)  # fmt: skip
+        origins, directions, shift, scale, extent, bounds, 2
+    )
     assert finite
     assert sorted(order.tolist()) == list(range(5000))
     cells = box_cells(bounds[0], bounds[1])
@@ -69,16 +72,22 @@ def test_ordered_local_rays_are_local_rays_moved_to_their_order():
     np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))
     np.testing.assert_array_equal(ordered_origins, origins[order])
     np.testing.assert_array_equal(ordered_directions, directions[order])
-    for ordered, given in zip(local, local_rays(origins, directions, shift, scale, extent),
-                              strict=True):  # fmt: skip
+    for ordered, given in zip(
+        local, local_rays(origins, directions, shift, scale, extent), strict=True
+    ):
         np.testing.assert_array_equal(ordered, given[order])
 
 
 def _hard_rays(mesh: trimesh.Trimesh, scale: float, n_random: int, seed: int):
     """Rays at vertices and edge midpoints (decided in float64), and at random points."""
     rng = np.random.default_rng(seed)
-    targets = np.vstack([mesh.vertices[:300], mesh.vertices[mesh.edges_unique[:300]].mean(1),
-                         rng.uniform(-scale, scale, (n_random, 3))])  # fmt: skip
+    targets = np.vstack(
+        [
+            mesh.vertices[:300],
+            mesh.vertices[mesh.edges_unique[:300]].mean(1),
+            rng.uniform(-scale, scale, (n_random, 3)),
+        ]
+    )
     start = rng.normal(size=(len(targets), 3))
     origins = 3 * scale * start / np.linalg.norm(start, axis=1)[:, None]
     return origins, targets - origins
@@ -135,30 +144,48 @@ def test_settled_decided_and_finished_hits_are_the_same_on_one_thread_and_two():
     scene = ours._scene
     origins, directions = _hard_rays(mesh, 1.0, 6000, seed=3)
     directions = trimesh.util.unitize(directions)
-    local_origins, local_directions, magnitude = local_rays(origins, directions, scene.origin,
-                                                            scene.scale, scene.extent)
+    local_origins, local_directions, magnitude = local_rays(
+        origins, directions, scene.origin, scene.scale, scene.extent
+    )
     near = 16 * np.finfo(np.float32).eps * magnitude / scene.scale
-    result = scene.bvh.all_hits(local_origins, local_directions,
-                                (near * scene.scale * 0.5).astype(np.float32), np.inf, 4)
+    result = scene.bvh.all_hits(
+        local_origins, local_directions, (near * scene.scale * 0.5).astype(np.float32), np.inf, 4
+    )
     rays = world_rays(origins, directions, magnitude, near, False)
     rules = tolerances(8 * np.finfo(np.float32).eps, 1e-3, 1e-5, tol.zero)
-    answers = [settled_hits(result, True, rays, scene.tables, rules, threads)
-               for threads in (1, 2)]  # fmt: skip
+    answers = [settled_hits(result, True, rays, scene.tables, rules, threads) for threads in (1, 2)]
     assert answers[0][3].sum() > 100  # messy rays (left to the float64 pass) in the batch
     assert len(answers[0][0]) > len(origins)
     for x, y in zip(*answers, strict=True):
         np.testing.assert_array_equal(x, y)
     messy = np.flatnonzero(answers[0][3])
-    decided = [decided_hits(messy, messy, result, rays, scene.tables, rules, scene.fans(),
-                            threads) for threads in (1, 2)]  # fmt: skip
+    decided = [
+        decided_hits(messy, messy, result, rays, scene.tables, rules, scene.fans(), threads)
+        for threads in (1, 2)
+    ]
     assert len(decided[0][0]) > len(messy)
     for x, y in zip(*decided, strict=True):
         np.testing.assert_array_equal(x, y)
     parts = [np.concatenate(arrays) for arrays in zip(answers[0][:3], decided[0], strict=True)]
     order = np.random.default_rng(5).permutation(len(origins))  # as if traced in that order
-    finished = [finished_hits(*parts, order, len(origins), 3, scene.fans()[0], scene.planes, 1.0,
-                              1e-5, origins,
-                              directions, True, None, threads) for threads in (1, 2)]
+    finished = [
+        finished_hits(
+            *parts,
+            order,
+            len(origins),
+            3,
+            scene.fans()[0],
+            scene.planes,
+            1.0,
+            1e-5,
+            origins,
+            directions,
+            True,
+            None,
+            threads,
+        )
+        for threads in (1, 2)
+    ]
     assert len(finished[0][0]) > len(origins)
     for x, y in zip(*finished, strict=True):
         np.testing.assert_array_equal(x, y)

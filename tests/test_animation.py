@@ -121,9 +121,11 @@ def test_keyframes_follow_catmull_rom_through_every_key() -> None:
     p0, p1, p2, p3 = (np.array(p) for p in points)
     t = 0.3
     expected = 0.5 * (
-        2 * p1 + (p2 - p0) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t**2
+        2 * p1
+        + (p2 - p0) * t
+        + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t**2
         + (3 * p1 - p0 - 3 * p2 + p3) * t**3
-    )  # fmt: skip
+    )
     assert np.allclose(cameras[13].position, expected, rtol=0, atol=1e-12)
 
 
@@ -210,8 +212,11 @@ def test_frames_are_written_by_pattern_skipped_when_present_and_equal_local_fram
     result = run_cli("render", str(path), "-o", pattern, "--frames", "1:4")
     assert result.returncode == 0, result.stderr
     assert sorted(p.name for p in (tmp_path / "shots").iterdir()) == [
-        "f_001.npy", "f_002.npy", "f_003.npy", "transforms.json",  # poses for NeRF tools
-    ]  # fmt: skip
+        "f_001.npy",
+        "f_002.npy",
+        "f_003.npy",
+        "transforms.json",  # poses for NeRF tools
+    ]
     assert kept.read_bytes() == b"already here"  # on disk: skipped
     scene = rt.load_scene(path)
     for f in (1, 3):

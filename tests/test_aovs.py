@@ -51,8 +51,10 @@ def sample_scene() -> rt.Scene:
     scene.add_sphere((-0.8, 0.25, 2.3), 0.25, "teal")
     scene.add_sphere((3.5, 2.5, -9.0), 2.5, "matte")
     box = trimesh.creation.box(extents=(0.8, 0.6, 0.8))
-    for translate, angle, material in (((2.6, 0.3, -1.0), 25.0, "teal"),
-                                       ((-1.3, 1.6, -2.5), -40.0, "gold")):  # fmt: skip
+    for translate, angle, material in (
+        ((2.6, 0.3, -1.0), 25.0, "teal"),
+        ((-1.3, 1.6, -2.5), -40.0, "gold"),
+    ):
         transform = trimesh.transformations.rotation_matrix(np.radians(angle), (0, 1, 0))
         transform[:3, 3] = translate
         scene.add_mesh(box, material, transform=transform, smooth=False)
@@ -60,8 +62,9 @@ def sample_scene() -> rt.Scene:
 
 
 def render_with_aovs(scene: rt.Scene, **options) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    result = rt.render(scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=1, aovs=AOV_NAMES,
-                       **options)  # fmt: skip
+    result = rt.render(
+        scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=1, aovs=AOV_NAMES, **options
+    )
     return result.image, result.aovs
 
 
@@ -86,29 +89,49 @@ class Reference:
         hit = spheres.prim_id >= 0
         prim = np.maximum(spheres.prim_id, 0)
         material = scene.sphere_materials[prim]
-        candidates.append((
-            spheres.t, np.where(hit, prim, NOTHING_ID), material, spheres.normal,
-            np.array([colors[m] for m in material]), spheres.t_atol, spheres.ambiguous,
-        ))  # fmt: skip
+        candidates.append(
+            (
+                spheres.t,
+                np.where(hit, prim, NOTHING_ID),
+                material,
+                spheres.normal,
+                np.array([colors[m] for m in material]),
+                spheres.t_atol,
+                spheres.ambiguous,
+            )
+        )
         for index, placement in enumerate(scene.meshes):
             vertices = trimesh.transform_points(placement.mesh.vertices, placement.transform)
             tris = triangle_hits(o, d, vertices, placement.mesh.faces)
             material = scene.material_index(placement.material)
-            candidates.append((
-                tris.t, np.full(n, len(scene.sphere_radii) + index), np.full(n, material),
-                tris.normal, np.broadcast_to(colors[material], (n, 3)), tris.t_atol,
-                tris.ambiguous,
-            ))  # fmt: skip
+            candidates.append(
+                (
+                    tris.t,
+                    np.full(n, len(scene.sphere_radii) + index),
+                    np.full(n, material),
+                    tris.normal,
+                    np.broadcast_to(colors[material], (n, 3)),
+                    tris.t_atol,
+                    tris.ambiguous,
+                )
+            )
         _, instance_starts = scene.object_id_starts()
         for entry, first_id in zip(scene.instances, instance_starts, strict=True):
             for copy, transform in enumerate(entry.transforms):
                 vertices = trimesh.transform_points(entry.mesh.vertices, transform)
                 tris = triangle_hits(o, d, vertices, entry.mesh.faces)
                 material = int(entry.materials[copy])
-                candidates.append((
-                    tris.t, np.full(n, first_id + copy), np.full(n, material), tris.normal,
-                    np.broadcast_to(colors[material], (n, 3)), tris.t_atol, tris.ambiguous,
-                ))  # fmt: skip
+                candidates.append(
+                    (
+                        tris.t,
+                        np.full(n, first_id + copy),
+                        np.full(n, material),
+                        tris.normal,
+                        np.broadcast_to(colors[material], (n, 3)),
+                        tris.t_atol,
+                        tris.ambiguous,
+                    )
+                )
         height = scene.floor.height
         with np.errstate(divide="ignore", invalid="ignore"):
             floor_t = (height - o[:, 1]) / d[:, 1]
@@ -118,18 +141,25 @@ class Reference:
         checker = scene.floor.checker
         floor_albedo = np.where(
             (squares.astype(np.int64) % 2 == 0)[:, None],
-            np.float32(checker.color_a), np.float32(checker.color_b),
-        )  # fmt: skip
+            np.float32(checker.color_a),
+            np.float32(checker.color_b),
+        )
         # On a checker line the square is decided by rounding of the float32 hit point.
         xz = point[:, [0, 2]]
         to_line = np.abs(xz / CHECKER - np.rint(xz / CHECKER)) * CHECKER
         on_line = (to_line < 1e-5 * (1.0 + np.abs(xz))).any(axis=1)
         floor_atol = ray_t_atol(o, d, np.abs(point).max(axis=1), normals=np.tile([0, 1, 0], (n, 1)))
-        candidates.append((
-            floor_t, np.full(n, FLOOR_ID), np.full(n, len(scene.materials)),
-            np.tile([0.0, 1.0, 0.0], (n, 1)), floor_albedo, floor_atol,
-            on_line & np.isfinite(floor_t),
-        ))  # fmt: skip
+        candidates.append(
+            (
+                floor_t,
+                np.full(n, FLOOR_ID),
+                np.full(n, len(scene.materials)),
+                np.tile([0.0, 1.0, 0.0], (n, 1)),
+                floor_albedo,
+                floor_atol,
+                on_line & np.isfinite(floor_t),
+            )
+        )
 
         t_all = np.stack([c[0] for c in candidates])  # (sources, n)
         order = np.argsort(t_all, axis=0)
@@ -180,11 +210,13 @@ def test_the_aovs_have_the_documented_shapes_and_types(rendered) -> None:
     assert beauty.shape == (HEIGHT, WIDTH, 3) and beauty.dtype == np.float32
     assert list(layers) == list(AOV_NAMES)
     for name, shape, dtype in (
-        ("depth", (HEIGHT, WIDTH), np.float32), ("normal", (HEIGHT, WIDTH, 3), np.float32),
+        ("depth", (HEIGHT, WIDTH), np.float32),
+        ("normal", (HEIGHT, WIDTH, 3), np.float32),
         ("uv", (HEIGHT, WIDTH, 2), np.float32),
-        ("albedo", (HEIGHT, WIDTH, 3), np.float32), ("object_id", (HEIGHT, WIDTH), np.int32),
+        ("albedo", (HEIGHT, WIDTH, 3), np.float32),
+        ("object_id", (HEIGHT, WIDTH), np.int32),
         ("material_id", (HEIGHT, WIDTH), np.int32),
-    ):  # fmt: skip
+    ):
         assert layers[name].shape == shape, name
         assert layers[name].dtype == dtype, name
 
@@ -247,8 +279,10 @@ def test_normals_are_unit_world_normals_facing_the_camera(rendered, reference, s
     on_sphere = hit & decided & (reference.object_id >= 0)
     on_sphere &= reference.object_id < len(scene.sphere_radii)
     ids = reference.object_id[on_sphere]
-    point = reference.origins[on_sphere] + reference.t[on_sphere, None] * reference.directions[
-        on_sphere]  # fmt: skip
+    point = (
+        reference.origins[on_sphere]
+        + reference.t[on_sphere, None] * reference.directions[on_sphere]
+    )
     expected = (point - reference.sphere_centers[ids]) / reference.sphere_radii[ids, None]
     assert on_sphere.sum() > 300
     turn = reference.t_atol[on_sphere] / reference.sphere_radii[ids]
@@ -329,9 +363,7 @@ def test_tessellated_spheres_keep_their_sphere_ids(scene, rendered, reference) -
     ratio = closest / reference.sphere_radii[None]
     clear = ((ratio < 0.9) | (ratio > 1.05)).all(axis=1) & ~reference.ambiguous
     assert clear.mean() > 0.85
-    np.testing.assert_array_equal(
-        flat(mesh_layers["object_id"])[clear], reference.object_id[clear]
-    )
+    np.testing.assert_array_equal(flat(mesh_layers["object_id"])[clear], reference.object_id[clear])
     np.testing.assert_array_equal(
         flat(mesh_layers["material_id"])[clear], reference.material_id[clear]
     )
@@ -399,8 +431,12 @@ def test_a_textured_meshs_albedo_is_its_texture() -> None:
     fx, fy = (x - x0)[:, None], (y - y0)[:, None]
     c0, r0 = x0.astype(int) % w, y0.astype(int) % h
     c1, r1 = (c0 + 1) % w, (r0 + 1) % h
-    expected = ((1 - fx) * (1 - fy) * texels[r0, c0] + fx * (1 - fy) * texels[r0, c1]
-                + (1 - fx) * fy * texels[r1, c0] + fx * fy * texels[r1, c1])  # fmt: skip
+    expected = (
+        (1 - fx) * (1 - fy) * texels[r0, c0]
+        + fx * (1 - fy) * texels[r0, c1]
+        + (1 - fx) * fy * texels[r1, c0]
+        + fx * fy * texels[r1, c1]
+    )
     albedo = flat(layers["albedo"])[decided]
     # The UV is known to uv_atol; the texture changes by at most 1 per texel.
     slope = max(w, h) * (hits.uv_atol[decided] + 1e-6)
@@ -433,10 +469,12 @@ def test_uv_is_the_textured_quads_own_coordinates_and_inf_elsewhere(tmp_path: Pa
     scene.add_mesh(quad, transform=transform)
     scene.add_sphere((1.6, 1.0, 0.5), 0.6, "matte")
     box = trimesh.creation.box(extents=(0.5, 0.5, 0.5))
-    scene.add_mesh(box, "matte", transform=trimesh.transformations.translation_matrix(
-        (1.2, 0.25, 1.5)))  # fmt: skip
-    result = rt.render(scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=1,
-                       aovs=["uv", "position", "object_id"])  # fmt: skip
+    scene.add_mesh(
+        box, "matte", transform=trimesh.transformations.translation_matrix((1.2, 0.25, 1.5))
+    )
+    result = rt.render(
+        scene, width=WIDTH, height=HEIGHT, spp=1, max_depth=1, aovs=["uv", "position", "object_id"]
+    )
     layers = result.aovs
     assert layers["uv"].shape == (HEIGHT, WIDTH, 2) and layers["uv"].dtype == np.float32
     got, object_id = flat(layers["uv"]), flat(layers["object_id"])
@@ -528,11 +566,25 @@ def test_exr_layers_read_back_by_openexr(tmp_path: Path, rendered) -> None:
     with OpenEXR.File(str(path), separate_channels=True) as exr:
         channels = {name: channel.pixels for name, channel in exr.channels().items()}
     assert set(channels) == {
-        "R", "G", "B", "depth.Z", "z_depth.Z", "position.X", "position.Y", "position.Z", "uv.U",
+        "R",
+        "G",
+        "B",
+        "depth.Z",
+        "z_depth.Z",
+        "position.X",
+        "position.Y",
+        "position.Z",
+        "uv.U",
         "uv.V",
-        "normal.X", "normal.Y", "normal.Z", "albedo.R", "albedo.G", "albedo.B", "object_id.id",
+        "normal.X",
+        "normal.Y",
+        "normal.Z",
+        "albedo.R",
+        "albedo.G",
+        "albedo.B",
+        "object_id.id",
         "material_id.id",
-    }  # fmt: skip
+    }
     for axis, name in enumerate("RGB"):
         np.testing.assert_array_equal(channels[name], beauty[..., axis])
     np.testing.assert_array_equal(channels["depth.Z"], layers["depth"])
@@ -575,8 +627,10 @@ def test_png_writes_one_picture_per_aov_beside_the_image(tmp_path: Path, rendere
     depth = layers["depth"].ravel()
     grey = pictures["depth"][..., 0].ravel().astype(int)
     assert (grey[np.isinf(depth)] == 0).all()
-    near, far = np.nanargmin(np.where(np.isinf(depth), np.nan, depth)), np.argmax(
-        np.where(np.isinf(depth), -1, depth))  # fmt: skip
+    near, far = (
+        np.nanargmin(np.where(np.isinf(depth), np.nan, depth)),
+        np.argmax(np.where(np.isinf(depth), -1, depth)),
+    )
     assert grey[near] == 255 and grey[far] < grey[near]
 
 
@@ -639,8 +693,13 @@ material = "metal"
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "embree_rt", *args], capture_output=True,
-                          text=True, timeout=120, cwd=ROOT)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "embree_rt", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
 
 
 CAMERA_KEYS = ("K", "world_to_camera_opencv", "world_to_camera_opengl")
@@ -653,8 +712,11 @@ def test_the_command_writes_aovs_and_names_the_files(tmp_path: Path) -> None:
     png = tmp_path / "out.png"
     result = run_cli("render", str(scene), "-o", str(png), "--aov", "object_id,depth", *size)
     assert result.returncode == 0, result.stderr
-    sides = [tmp_path / "out.object_id.png", tmp_path / "out.depth.png",
-             tmp_path / "out.camera.json"]  # fmt: skip
+    sides = [
+        tmp_path / "out.object_id.png",
+        tmp_path / "out.depth.png",
+        tmp_path / "out.camera.json",
+    ]
     assert result.stdout.splitlines() == [str(side) for side in sides]
     assert all(side.is_file() for side in sides) and png.is_file()
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
@@ -691,8 +753,9 @@ def test_info_lists_objects_and_materials_with_their_ids(capsys) -> None:
     lines = capsys.readouterr().out.splitlines()
     scene = rt.load_scene(scene_file)
     spheres = len(scene.sphere_radii)
-    objects = {int(line.split()[1].rstrip(":")): line for line in lines
-               if line.startswith("  object ")}  # fmt: skip
+    objects = {
+        int(line.split()[1].rstrip(":")): line for line in lines if line.startswith("  object ")
+    }
     assert sorted(objects) == list(range(spheres + len(scene.meshes)))
     for index in range(spheres):
         name = scene.material_names[scene.sphere_materials[index]]
@@ -701,8 +764,7 @@ def test_info_lists_objects_and_materials_with_their_ids(capsys) -> None:
         line = objects[spheres + index]
         assert f"{len(placement.mesh.faces):,} triangles" in line
         assert f"({placement.material})" in line
-    materials = [line.split(":", 1)[1].strip() for line in lines
-                 if line.startswith("  material ")]  # fmt: skip
+    materials = [line.split(":", 1)[1].strip() for line in lines if line.startswith("  material ")]
     assert materials == [*scene.material_names, "floor"]
 
 
@@ -717,8 +779,7 @@ def test_the_saved_camera_projects_each_hit_onto_its_pixels_centre(tmp_path: Pat
     1e-3 pixel is a tolerance with room and still far below a pixel."""
     import json
 
-    scene = rt.Scene(camera=rt.Camera(position=(1.0, 2.5, 6.0), look_at=(0.0, 0.5, 0.0),
-                                      fov=50.0))  # fmt: skip
+    scene = rt.Scene(camera=rt.Camera(position=(1.0, 2.5, 6.0), look_at=(0.0, 0.5, 0.0), fov=50.0))
     scene.lights.append(rt.PointLight(position=(3.0, 6.0, 4.0)))
     scene.add_sphere((0.0, 1.0, 0.0), 1.0, "matte")
     scene.add_sphere((-1.8, 0.5, 0.6), 0.5, "mirror")
@@ -762,14 +823,29 @@ def test_an_animation_writes_the_transforms_json_nerf_tools_read(tmp_path: Path)
 
     flight = Path(__file__).resolve().parent.parent / "scenes" / "animations"
     pattern = tmp_path / "shots" / "f_{frame:03d}.png"
-    result = run_cli("render", str(flight / "three_spheres_flight.toml"), "-o", str(pattern),
-                     "--width", "32", "--height", "18", "--spp", "1", "--frames", "10:13",
-                     "--quiet")  # fmt: skip
+    result = run_cli(
+        "render",
+        str(flight / "three_spheres_flight.toml"),
+        "-o",
+        str(pattern),
+        "--width",
+        "32",
+        "--height",
+        "18",
+        "--spp",
+        "1",
+        "--frames",
+        "10:13",
+        "--quiet",
+    )
     assert result.returncode == 0, result.stderr
     transforms = json.loads((tmp_path / "shots" / "transforms.json").read_text())
     scene = rt.load_scene(flight / "three_spheres_flight.toml")
     assert [f["file_path"] for f in transforms["frames"]] == [
-        "./f_010.png", "./f_011.png", "./f_012.png"]  # fmt: skip
+        "./f_010.png",
+        "./f_011.png",
+        "./f_012.png",
+    ]
     assert (transforms["w"], transforms["h"]) == (32, 18)
     for number, frame in zip(range(10, 13), transforms["frames"], strict=True):
         camera = camera_at(scene.camera, scene.animation, number)

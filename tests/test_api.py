@@ -66,13 +66,22 @@ def test_a_result_tone_maps_and_saves_itself(tmp_path: Path) -> None:
     assert result.to_srgb8().dtype == np.uint8
     assert result.save(tmp_path / "both.npz") == [tmp_path / "both.camera.json"]
     with np.load(tmp_path / "both.npz") as saved:
-        assert sorted(saved.files) == ["K", "beauty", "depth", "object_id",
-                                       "world_to_camera_opencv", "world_to_camera_opengl"]
+        assert sorted(saved.files) == [
+            "K",
+            "beauty",
+            "depth",
+            "object_id",
+            "world_to_camera_opencv",
+            "world_to_camera_opengl",
+        ]
         np.testing.assert_array_equal(saved["beauty"], result.image)
         np.testing.assert_array_equal(saved["object_id"], result.aovs["object_id"])
     beside = result.save(tmp_path / "image.npy")
-    assert sorted(path.name for path in beside) == ["image.camera.json", "image.depth.npy",
-                                                    "image.object_id.npy"]  # fmt: skip
+    assert sorted(path.name for path in beside) == [
+        "image.camera.json",
+        "image.depth.npy",
+        "image.object_id.npy",
+    ]
     plain = rt.render(scene, **SIZE)
     assert plain.save(tmp_path / "plain.png") == []
     assert sorted(path.name for path in tmp_path.iterdir() if path.name.startswith("plain")) == [
@@ -105,8 +114,9 @@ def test_a_renderer_builds_its_bvh_once_whatever_the_camera_and_settings(monkeyp
     with rt.Renderer(scene) as renderer:
         first = renderer.render(**SIZE)
         other = replace(scene.camera, position=(3.0, 2.0, 5.0), fov=30.0)
-        second = renderer.render(camera=other, width=20, height=12, spp=1, max_depth=1,
-                                 aovs=["depth"])  # fmt: skip
+        second = renderer.render(
+            camera=other, width=20, height=12, spp=1, max_depth=1, aovs=["depth"]
+        )
     assert len(builds) == 1
     assert first.image.shape == (24, 40, 3) and second.image.shape == (12, 20, 3)
     assert second.aovs["depth"].shape == (12, 20)  # the AOVs seen by the other camera too

@@ -158,19 +158,33 @@ def surfaces_of(t, material) -> SurfaceHits:
     k = len(t)
     columns = np.arange(3 * k, dtype=np.float32).reshape(3, k)
     return SurfaceHits(
-        t=np.asarray(t, np.float32), position=columns, normal=columns, face_normal=columns,
-        flat=True, material=np.asarray(material, np.int64), floor_count=0,
-        scale=np.ones(k, np.float32), incoming=columns,
-    )  # fmt: skip
+        t=np.asarray(t, np.float32),
+        position=columns,
+        normal=columns,
+        face_normal=columns,
+        flat=True,
+        material=np.asarray(material, np.int64),
+        floor_count=0,
+        scale=np.ones(k, np.float32),
+        incoming=columns,
+    )
 
 
 def test_nearest_over_bricks_takes_the_nearest_then_the_lower_id_then_the_floor() -> None:
     # Brick A's hits (object 7, a mesh) on rays 0, 1, 2, 4; brick B's (object 3, a sphere) on
     # rays 1, 2, 3, 4; the floor on rays 2, 3, 4.
-    a = BrickHits(np.arange(4), np.full(4, 7), np.full(4, OTHER_GROUP, np.int8),
-                  surfaces_of([1.0, 2.0, 5.0, 9.0], [70] * 4))  # fmt: skip
-    b = BrickHits(np.arange(4), np.full(4, 3), np.full(4, SPHERE_GROUP, np.int8),
-                  surfaces_of([2.0, 4.0, 6.0, 9.0], [30] * 4))  # fmt: skip
+    a = BrickHits(
+        np.arange(4),
+        np.full(4, 7),
+        np.full(4, OTHER_GROUP, np.int8),
+        surfaces_of([1.0, 2.0, 5.0, 9.0], [70] * 4),
+    )
+    b = BrickHits(
+        np.arange(4),
+        np.full(4, 3),
+        np.full(4, SPHERE_GROUP, np.int8),
+        surfaces_of([2.0, 4.0, 6.0, 9.0], [30] * 4),
+    )
     floor = surfaces_of([4.5, 5.0, 9.5], [99] * 3)
     floor.floor_count = 3
     answers = [(np.array([0, 1, 2, 4]), a), (np.array([1, 2, 3, 4]), b)]

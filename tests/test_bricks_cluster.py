@@ -64,8 +64,13 @@ def test_data_parallel_image_is_bitwise_the_local_image(cluster, name, as_path, 
     path = SCENES / f"{name}.toml"
     scene = rt.load_scene(path)
     settings = scene.render.with_overrides(**SMALL)
-    renderer = bounded(bc.PartitionedRenderer, path if as_path else scene, client,
-                       partition=bricks, batch_size=4096)  # fmt: skip
+    renderer = bounded(
+        bc.PartitionedRenderer,
+        path if as_path else scene,
+        client,
+        partition=bricks,
+        batch_size=4096,
+    )
     try:
         image = bounded(renderer.render, settings, scene.camera)
         assert sorted(renderer.bricks_held().values()) == ([1, 1] if bricks == 2 else [1, 2])
@@ -132,10 +137,12 @@ def test_bricks_too_big_for_the_workers_memory_limits_are_refused_up_front() -> 
 
 def test_a_partition_too_big_for_a_workers_limit_is_refused_before_anything_is_built() -> None:
     # An in-process worker limited to 300 MB and a field of 2e7 spheres in 1 brick (~1.4 GB).
-    with distributed.LocalCluster(n_workers=1, processes=False, memory_limit="300MB",
-                                  dashboard_address=None) as local, distributed.Client(
-        local
-    ) as client:  # fmt: skip
+    with (
+        distributed.LocalCluster(
+            n_workers=1, processes=False, memory_limit="300MB", dashboard_address=None
+        ) as local,
+        distributed.Client(local) as client,
+    ):
         with pytest.raises(InputError, match=r"--partition 1: worker .* needing ~1\.\d+ GB"):
             bc.PartitionedRenderer(rd.FieldRecipe(plan_field(20_000_000)), client, partition=1)
         assert not any(client.run(bc.bricks_held).values())
@@ -146,15 +153,24 @@ def test_command_renders_data_parallel_and_refuses_partition_without_a_cluster(t
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     run = [sys.executable, "-m", "embree_rt"]
     bricks, local = tmp_path / "bricks.npy", tmp_path / "local.npy"
-    done = subprocess.run([*run, *common, "--cluster", "local:2", "--partition", "2", "-o",
-                           str(bricks)], env=env, capture_output=True, text=True,
-                          timeout=TIMEOUT_S)  # fmt: skip
+    done = subprocess.run(
+        [*run, *common, "--cluster", "local:2", "--partition", "2", "-o", str(bricks)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
     assert done.returncode == 0, done.stderr
     subprocess.run([*run, *common, "-o", str(local)], env=env, check=True, timeout=TIMEOUT_S)
     assert np.array_equal(np.load(bricks), np.load(local))
     alone = tmp_path / "alone.npy"
-    done = subprocess.run([*run, *common, "--partition", "2", "-o", str(alone)], env=env,
-                          capture_output=True, text=True, timeout=TIMEOUT_S)  # fmt: skip
+    done = subprocess.run(
+        [*run, *common, "--partition", "2", "-o", str(alone)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
     assert done.returncode == 2 and not alone.exists()
     assert done.stderr.strip().splitlines() == [
         "embree-rt: error: --partition: bricks are held by Dask workers: add --cluster local:N "

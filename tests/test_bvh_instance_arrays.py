@@ -36,8 +36,12 @@ def placements(rng: np.random.Generator, count: int, *, uniform: bool = False) -
             if uniform:
                 scale = -scale  # a point reflection: det < 0, still a similarity
         axis = rng.normal(size=3)
-        matrix = affine(axis, rng.uniform(-np.pi, np.pi), scale,
-                        [5.0 * (k % side), rng.uniform(-1, 1), 5.0 * (k // side)])  # fmt: skip
+        matrix = affine(
+            axis,
+            rng.uniform(-np.pi, np.pi),
+            scale,
+            [5.0 * (k % side), rng.uniform(-1, 1), 5.0 * (k // side)],
+        )
         matrices.append(matrix)
     return np.asarray(matrices)
 
@@ -57,8 +61,12 @@ def bake(vertices, faces, matrices, child=None, children=None):
         instance.append(np.full(len(f), k))
         local.append(np.arange(len(f)))
         offset += len(v)
-    return (np.concatenate(all_vertices), np.concatenate(all_faces), np.concatenate(instance),
-            np.concatenate(local))  # fmt: skip
+    return (
+        np.concatenate(all_vertices),
+        np.concatenate(all_faces),
+        np.concatenate(instance),
+        np.concatenate(local),
+    )
 
 
 def world_rays(rng, vertices, count):
@@ -100,8 +108,9 @@ def test_instance_array_equals_the_baked_mesh_with_mirrors_and_non_uniform_scale
         assert array_gid != 0 and top.instance_count == 21
         hits = top.intersect(origins, directions)
     ref, copy = reference_for(origins, directions, baked, baked_faces, instance, local, matrices)
-    sure = assert_hits_match(hits, ref, mesh_gid, array_gid, triangles=True, normal_cos=0.9995,
-                             min_hit_fraction=0.15)  # fmt: skip
+    sure = assert_hits_match(
+        hits, ref, mesh_gid, array_gid, triangles=True, normal_cos=0.9995, min_hit_fraction=0.15
+    )
     both = sure & ref.hit
     np.testing.assert_array_equal(hits.inst_prim_id[both], copy[both])
     assert np.all(hits.inst_prim_id[~np.isfinite(hits.t)] == -1)
@@ -131,13 +140,16 @@ def test_hit_records_of_an_instance_array():
             geometry_scale=np.zeros(top.geometry_count, np.float32),
             instance_labels={array_gid: labels},
         )
-        records = top.intersect_records(origins.T.astype(np.float32),
-                                        directions.T.astype(np.float32), table)  # fmt: skip
+        records = top.intersect_records(
+            origins.T.astype(np.float32), directions.T.astype(np.float32), table
+        )
         unlabelled = top.intersect_records(
-            origins.T.astype(np.float32), directions.T.astype(np.float32),
-            HitLabels(np.full(top.geometry_count, -7, np.int64),
-                      np.zeros(top.geometry_count, np.float32)),
-        )  # fmt: skip
+            origins.T.astype(np.float32),
+            directions.T.astype(np.float32),
+            HitLabels(
+                np.full(top.geometry_count, -7, np.int64), np.zeros(top.geometry_count, np.float32)
+            ),
+        )
     rays = records.rays
     assert len(rays) == np.isfinite(hits.t).sum() > 500
     np.testing.assert_array_equal(records.inst_prim_id, hits.inst_prim_id[rays])
@@ -172,8 +184,9 @@ def test_two_children_in_one_array():
         hits = top.intersect(origins, directions)
         child_of_hit = top.instance_children(hits.inst_id, hits.inst_prim_id)
     ref, copy = reference_for(origins, directions, baked, baked_faces, instance, local, matrices)
-    sure = assert_hits_match(hits, ref, 0, array_gid, triangles=True, normal_cos=0.9995,
-                             min_hit_fraction=0.15)  # fmt: skip
+    sure = assert_hits_match(
+        hits, ref, 0, array_gid, triangles=True, normal_cos=0.9995, min_hit_fraction=0.15
+    )
     both = sure & ref.hit
     np.testing.assert_array_equal(hits.inst_prim_id[both], copy[both])
     np.testing.assert_array_equal(child_of_hit[both], which[copy[both]])
@@ -202,8 +215,9 @@ def test_a_child_of_analytic_spheres(kind):
     ref = sphere_hits(origins, directions, world_centers, world_radii)
     copy = np.where(ref.hit, ref.prim_id // len(radii), -1)
     ref.prim_id = np.where(ref.hit, ref.prim_id % len(radii), -1)
-    sure = assert_hits_match(hits, ref, spheres_gid, array_gid, normal_cos=0.9995,
-                             min_hit_fraction=0.1)  # fmt: skip
+    sure = assert_hits_match(
+        hits, ref, spheres_gid, array_gid, normal_cos=0.9995, min_hit_fraction=0.1
+    )
     both = sure & ref.hit
     np.testing.assert_array_equal(hits.inst_prim_id[both], copy[both])
     assert mirrored(matrices)[copy[both]].any()
@@ -238,14 +252,17 @@ def test_arrays_beside_single_instances_and_top_level_geometry():
         (np.stack([np.eye(4), np.diag([1.0, 1.0, 1.0, 2.0])]), None, "row 1: must be affine"),
         (np.stack([np.eye(4)] * 2), [0, 2], "child_index: row 1 is 2"),
     ],
-)  # fmt: skip
+)
 def test_bad_arrays_are_refused_with_the_row(transforms, child_index, message):
     with BVH() as child, BVH() as top:
         child.add_spheres([[0.0, 0.0, 0.0]], [1.0])
         child.commit()
         with pytest.raises(ValueError) as error:
-            top.add_instances([child, child], transforms,
-                              child_index if child_index is not None else [0] * len(transforms))
+            top.add_instances(
+                [child, child],
+                transforms,
+                child_index if child_index is not None else [0] * len(transforms),
+            )
         assert message in str(error.value)
 
 

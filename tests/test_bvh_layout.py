@@ -48,13 +48,20 @@ def test_word_constants_match_the_header_transcription():
     ray = {name: getattr(_Ray, name).offset // 4 for name, _ in _Ray._fields_}
     hit = {name: 12 + getattr(_Hit, name).offset // 4 for name, _ in _Hit._fields_}
     assert (ray["org_x"], ray["tnear"], ray["dir_x"], ray["time"], ray["tfar"]) == (
-        K.RAY_ORG, K.RAY_TNEAR, K.RAY_DIR, K.RAY_TIME, K.RAY_TFAR
-    )  # fmt: skip
+        K.RAY_ORG,
+        K.RAY_TNEAR,
+        K.RAY_DIR,
+        K.RAY_TIME,
+        K.RAY_TFAR,
+    )
     assert (ray["mask"], ray["id"], ray["flags"]) == (K.RAY_MASK, K.RAY_ID, K.RAY_FLAGS)
     assert (hit["Ng_x"], hit["u"], hit["v"]) == (K.HIT_NG, K.HIT_U, K.HIT_V)
     assert (hit["primID"], hit["geomID"], hit["instID"], hit["instPrimID"]) == (
-        K.HIT_PRIM_ID, K.HIT_GEOM_ID, K.HIT_INST_ID, K.HIT_INST_PRIM_ID
-    )  # fmt: skip
+        K.HIT_PRIM_ID,
+        K.HIT_GEOM_ID,
+        K.HIT_INST_ID,
+        K.HIT_INST_PRIM_ID,
+    )
     # RTCRay is 48 bytes; RTCHit (36 bytes) is padded to 48 by its 16-byte alignment, so one
     # RTCRayHit (96 bytes) must fit in a chunk's scratch row after aligning it; a packet holds
     # 21 fields of one word a lane.

@@ -50,8 +50,9 @@ def _rays(pattern: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize("kind", SPHERE_KINDS)
 @pytest.mark.parametrize("lanes", [4, 8, 16])
-@pytest.mark.parametrize(("pattern", "coherent"), [("random", False), ("random", True),
-                                                   ("camera", True)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("pattern", "coherent"), [("random", False), ("random", True), ("camera", True)]
+)
 def test_packet_and_single_ray_queries_agree(
     lanes: int, kind: str, pattern: str, coherent: bool
 ) -> None:

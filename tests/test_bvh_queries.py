@@ -166,9 +166,15 @@ def test_nearest_hit_matches_reference(parts, kinds):
     ref, geom, inst, winner = parts.reference(kinds, ids, origins, directions)
     ref.ambiguous |= our_triangle_edge_hits(hits, ids)
     sure = assert_hits_match(
-        hits, ref, geom, inst, triangles=kinds != ("spheres",) and len(kinds) == 1,
-        normal_cos=0.9995, min_hit_fraction=0.05, min_miss_fraction=0.02,
-    )  # fmt: skip
+        hits,
+        ref,
+        geom,
+        inst,
+        triangles=kinds != ("spheres",) and len(kinds) == 1,
+        normal_cos=0.9995,
+        min_hit_fraction=0.05,
+        min_miss_fraction=0.02,
+    )
     if len(kinds) > 1:
         # the mixed scene is a real test only if every kind wins somewhere
         won = winner[sure & ref.hit]
@@ -213,8 +219,7 @@ def test_occluded_agrees_with_reference_and_intersect(parts, kinds):
 
 @pytest.mark.parametrize("lanes", [1, 8])
 @pytest.mark.parametrize("threads", [1, 2])
-def test_occluded_toward_answers_what_occluded_answers_on_the_same_segments(parts, lanes,
-                                                                           threads):  # fmt: skip
+def test_occluded_toward_answers_what_occluded_answers_on_the_same_segments(parts, lanes, threads):
     """Segments from points (picked by index, with repeats) to one target, the ground plane
     y = -4 included, against ``occluded`` on the rays spelled out (origin p, direction
     target - p, t in [0, 1]) and against the float64 reference. One ray a query: bitwise the
@@ -335,14 +340,18 @@ def test_batch_equals_one_ray_at_a_time(parts):
                 # the hit point's uncertainty over the size of the sphere or triangle it is on
                 turn = atol * np.linalg.norm(directions[i]) / parts.feature_size(ids, one)
                 assert_vectors_close(
-                    unit(one.normal), unit(batch.normal[i : i + 1]), atol=turn,
+                    unit(one.normal),
+                    unit(batch.normal[i : i + 1]),
+                    atol=turn,
                     err_msg=f"normal of ray {i}",
-                )  # fmt: skip
+                )
                 if one.geom_id[0] != ids["spheres"][0]:
                     assert_close(
-                        [one.u[0], one.v[0]], [batch.u[i], batch.v[i]], atol=turn[0],
+                        [one.u[0], one.v[0]],
+                        [batch.u[i], batch.v[i]],
+                        atol=turn[0],
                         err_msg=f"u, v of ray {i}",
-                    )  # fmt: skip
+                    )
             else:
                 assert np.isinf(batch.t[i]), i
 
@@ -541,10 +550,15 @@ def matrix_with(row: int, column: int, value: float) -> np.ndarray:
 
 @pytest.mark.parametrize(
     "transform",
-    [np.eye(4)[:3], np.eye(3), matrix_with(1, 2, np.nan), matrix_with(0, 3, np.inf),
-     matrix_with(3, 0, 0.5)],
+    [
+        np.eye(4)[:3],
+        np.eye(3),
+        matrix_with(1, 2, np.nan),
+        matrix_with(0, 3, np.inf),
+        matrix_with(3, 0, 0.5),
+    ],
     ids=["3x4", "3x3", "nan", "inf", "projective"],
-)  # fmt: skip
+)
 def test_transform_validation(transform):
     expect_error(instance_call(transform), "transform", None)
 

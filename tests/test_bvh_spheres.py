@@ -103,9 +103,10 @@ def test_nested_spheres_from_inside_hit_the_far_side_outward(kind):
         assert np.all(hits.geom_id == gid)
         # float32 rounding of coordinates up to the outer radius 3 (the rays leave radially)
         assert_close(
-            hits.t, 1.0 / np.linalg.norm(directions, axis=1),
+            hits.t,
+            1.0 / np.linalg.norm(directions, axis=1),
             atol=ray_t_atol(origins, directions, 3.0),
-        )  # fmt: skip
+        )
         cosine = np.einsum("ij,ij->i", unit(hits.normal), unit(directions))
         assert cosine.min() > 0.9999, "an exit hit must report the outward normal"
 

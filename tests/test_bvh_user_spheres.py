@@ -88,9 +88,14 @@ def test_distant_small_spheres_match_the_float64_quadratic(layout, kind):
     # float32 rounding; native ones lose a few ulps of the distance to cancellation
     t_rtol = 4 * ULP if kind == "user" else 1e-4
     assert_hits_match(
-        hits, ref, gid, t_rtol=t_rtol, max_ambiguous=0.03, min_hit_fraction=0.3,
+        hits,
+        ref,
+        gid,
+        t_rtol=t_rtol,
+        max_ambiguous=0.03,
+        min_hit_fraction=0.3,
         min_miss_fraction=0.1,
-    )  # fmt: skip
+    )
 
 
 def test_user_spheres_are_no_less_robust_than_native_far_away():
@@ -287,9 +292,13 @@ class Field:
         for matrix, inst in zip(self.transforms, self.inst_gids, strict=True):
             inverse = np.linalg.inv(matrix)
             local = sphere_hits(
-                transform_points(inverse, o), d @ inverse[:3, :3].T, self.inner_centers,
-                self.inner_radii, tnear, tfar,
-            )  # fmt: skip
+                transform_points(inverse, o),
+                d @ inverse[:3, :3].T,
+                self.inner_centers,
+                self.inner_radii,
+                tnear,
+                tfar,
+            )
             parts.append((local, self.inner_gid, inst))
         t = np.stack([p.t for p, _, _ in parts])
         winner = t.argmin(axis=0)
@@ -355,10 +364,12 @@ def test_every_batch_size_answers_like_single_rays(packet_field, lanes, threads)
             o, d, tfar = field.origins[rows], field.directions[rows], field.tfar[rows]
             hits = bvh.intersect(o, d, 0.0, tfar)
             blocked = bvh.occluded(o, d, 0.0, tfar)
-            expected = SimpleNamespace(**{
-                name: getattr(baseline, name)[rows]
-                for name in ("t", "prim_id", "geom_id", "inst_id", "normal")
-            })  # fmt: skip
+            expected = SimpleNamespace(
+                **{
+                    name: getattr(baseline, name)[rows]
+                    for name in ("t", "prim_id", "geom_id", "inst_id", "normal")
+                }
+            )
             # only rays float32 cannot decide may differ between traversal kernels
             differ = (hits.prim_id != expected.prim_id) | (hits.geom_id != expected.geom_id)
             differ |= (hits.inst_id != expected.inst_id) | (blocked != baseline_blocked[rows])
@@ -416,9 +427,9 @@ def test_instanced_user_spheres_report_instance_prim_and_world_normal(lanes):
         top.commit()
         top.lanes = lanes
         assert gid == 1 and 0 not in inst_gids
-        boxes = np.concatenate([
-            transform_points(m, np.r_[centers - 0.5, centers + 0.5]) for m in TRANSFORMS
-        ])  # fmt: skip
+        boxes = np.concatenate(
+            [transform_points(m, np.r_[centers - 0.5, centers + 0.5]) for m in TRANSFORMS]
+        )
         origins, directions = rays_toward_box(rng, 3000, boxes.min(0), boxes.max(0), 25.0)
         origins, directions = float32_exact(origins), float32_exact(directions)
         hits = top.intersect(origins, directions)

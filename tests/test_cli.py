@@ -326,9 +326,19 @@ def test_info_counts_what_the_file_holds() -> None:
 def test_a_million_sphere_field_renders(tmp_path: Path) -> None:
     output = tmp_path / "out.png"
     result = run_cli(
-        "random", "--count", "1000000", "-o", str(output),
-        "--width", "64", "--height", "36", "--spp", "1", "--quiet",
-    )  # fmt: skip
+        "random",
+        "--count",
+        "1000000",
+        "-o",
+        str(output),
+        "--width",
+        "64",
+        "--height",
+        "36",
+        "--spp",
+        "1",
+        "--quiet",
+    )
     assert result.returncode == 0, result.stderr
     assert result.stderr == ""
     with Image.open(output) as image:
@@ -358,9 +368,16 @@ def test_save_scene_writes_the_generated_field(tmp_path: Path) -> None:
 def test_bad_save_scene_target_writes_nothing(tmp_path: Path) -> None:
     output = tmp_path / "out.png"
     result = run_cli(
-        "random", "--count", "10", "--save-scene", str(tmp_path / "s.yaml"), "-o", str(output),
-        *TINY, "--quiet",
-    )  # fmt: skip
+        "random",
+        "--count",
+        "10",
+        "--save-scene",
+        str(tmp_path / "s.yaml"),
+        "-o",
+        str(output),
+        *TINY,
+        "--quiet",
+    )
     assert_one_line_error(result, ["--save-scene", "s.yaml"])
     assert list(tmp_path.iterdir()) == []
 
@@ -393,13 +410,26 @@ def test_ctrl_c_exits_130_and_keeps_the_old_image(tmp_path: Path) -> None:
     before = output.read_bytes()
     process = subprocess.Popen(
         [
-            sys.executable, "-m", "embree_rt", "random", "--count", "200000", "-o", str(output),
-            "--width", "1920", "--height", "1080", "--spp", "16", "--quiet",
+            sys.executable,
+            "-m",
+            "embree_rt",
+            "random",
+            "--count",
+            "200000",
+            "-o",
+            str(output),
+            "--width",
+            "1920",
+            "--height",
+            "1080",
+            "--spp",
+            "16",
+            "--quiet",
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-    )  # fmt: skip
+    )
     try:
         wait_until_busy(process.pid, cpu_seconds=3.0)
         assert process.poll() is None, "the render ended before it could be interrupted"
@@ -545,10 +575,13 @@ def test_the_summary_line_splits_the_time(tmp_path: Path) -> None:
     runs = {
         "generate": run_cli("random", "--count", "20000", "-o", str(tmp_path / "a.png"), *TINY),
         "load": run_cli(
-            "render", str(ROOT / "scenes" / "three_spheres.toml"), "-o", str(tmp_path / "b.png"),
+            "render",
+            str(ROOT / "scenes" / "three_spheres.toml"),
+            "-o",
+            str(tmp_path / "b.png"),
             *TINY,
         ),
-    }  # fmt: skip
+    }
     for made, result in runs.items():
         assert result.returncode == 0, result.stderr
         line = result.stderr.strip()
@@ -579,13 +612,26 @@ def test_sigterm_mid_render_exits_143_in_one_line_and_keeps_the_old_image(tmp_pa
     before = output.read_bytes()
     process = subprocess.Popen(
         [
-            sys.executable, "-m", "embree_rt", "random", "--count", "200000", "-o", str(output),
-            "--width", "1920", "--height", "1080", "--spp", "16", "--quiet",
+            sys.executable,
+            "-m",
+            "embree_rt",
+            "random",
+            "--count",
+            "200000",
+            "-o",
+            str(output),
+            "--width",
+            "1920",
+            "--height",
+            "1080",
+            "--spp",
+            "16",
+            "--quiet",
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-    )  # fmt: skip
+    )
     try:
         wait_until_busy(process.pid, cpu_seconds=3.0)
         assert process.poll() is None, "the render ended before it could be stopped"
@@ -626,10 +672,22 @@ def test_sigterm_while_the_image_is_written_leaves_no_temp_file(tmp_path: Path) 
     np.save(output, np.zeros((2, 2, 3), np.float32))
     before = output.read_bytes()
     result = subprocess.run(
-        [sys.executable, "-c", TERMINATED_WHILE_WRITING, "render", str(scene), "-o", str(output),
-         *TINY, "--quiet"],
-        capture_output=True, text=True, timeout=120, cwd=ROOT,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-c",
+            TERMINATED_WHILE_WRITING,
+            "render",
+            str(scene),
+            "-o",
+            str(output),
+            *TINY,
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
     assert result.returncode == 143, result.stderr
     assert result.stderr == "embree-rt: terminated\n"
     assert output.read_bytes() == before
@@ -681,10 +739,28 @@ def test_a_file_size_limit_is_said_with_its_errno(tmp_path: Path) -> None:
 
     output = tmp_path / "out.npy"
     result = subprocess.run(
-        [sys.executable, "-m", "embree_rt", "render", str(_one_sphere_scene(tmp_path)), "-o",
-         str(output), "--width", "128", "--height", "128", "--spp", "1", "--quiet"],
-        capture_output=True, text=True, timeout=120, cwd=ROOT, preexec_fn=limit_file_size,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "embree_rt",
+            "render",
+            str(_one_sphere_scene(tmp_path)),
+            "-o",
+            str(output),
+            "--width",
+            "128",
+            "--height",
+            "128",
+            "--spp",
+            "1",
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+        preexec_fn=limit_file_size,
+    )
     assert result.returncode == 2, result.stderr
     reason = os.strerror(errno.EFBIG)
     assert result.stderr == f"embree-rt: error: {output}: cannot write: {reason}\n"
@@ -705,8 +781,11 @@ HUGE_FLAGS = {
     ),
     "samples beyond int64 with the file's size": (
         ["render", THREE_SPHERES, "--spp", str(2**62)],
-        ["--spp 4611686018427387904: render.spp: a 1280x720 image at 4611686018427387904 spp",
-         "more than", "int64"],
+        [
+            "--spp 4611686018427387904: render.spp: a 1280x720 image at 4611686018427387904 spp",
+            "more than",
+            "int64",
+        ],
     ),
     "samples beyond int64, the width a flag": (
         ["random", "--count", "5", "--width", str(2**62), "--height", "4"],
@@ -714,13 +793,14 @@ HUGE_FLAGS = {
     ),
     "one pixel of 2**62 samples": (
         ["render", THREE_SPHERES, "--spp", str(2**62), "--width", "1", "--height", "1"],
-        ["--spp 4611686018427387904: the samples in flight at 4611686018427387904 spp would",
-         "available"],
+        [
+            "--spp 4611686018427387904: the samples in flight at 4611686018427387904 spp would",
+            "available",
+        ],
     ),
     "one pixel of 1e11 samples, random": (
         ["random", "--count", "5", "--spp", str(10**11), "--width", "1", "--height", "1"],
-        ["--spp 100000000000: the samples in flight at 100000000000 spp would need",
-         "available"],
+        ["--spp 100000000000: the samples in flight at 100000000000 spp would need", "available"],
     ),
 }
 

@@ -35,8 +35,13 @@ def run_cli(*args: str, timeout: float = 120, cwd: Path = ROOT) -> subprocess.Co
 def box_obj_with_missing_texture(folder: Path) -> Path:
     """A box OBJ whose material library names a texture that is not there: one warning."""
     box = trimesh.creation.box()
-    lines = ["mtllib box.mtl", *(f"v {x} {y} {z}" for x, y, z in box.vertices), "vt 0 0",
-             "usemtl skin", *(f"f {a + 1}/1 {b + 1}/1 {c + 1}/1" for a, b, c in box.faces)]
+    lines = [
+        "mtllib box.mtl",
+        *(f"v {x} {y} {z}" for x, y, z in box.vertices),
+        "vt 0 0",
+        "usemtl skin",
+        *(f"f {a + 1}/1 {b + 1}/1 {c + 1}/1" for a, b, c in box.faces),
+    ]
     (folder / "box.obj").write_text("\n".join(lines) + "\n")
     (folder / "box.mtl").write_text("newmtl skin\nKd 0.5 0.5 0.5\nmap_Kd skin.jpg\n")
     return folder / "box.obj"
@@ -72,10 +77,16 @@ def test_info_of_a_mesh_file_says_what_was_chosen(tmp_path: Path) -> None:
     mesh.export(tmp_path / "ball.stl")
     result = run_cli("info", str(tmp_path / "ball.stl"), "--no-floor")
     assert result.returncode == 0, result.stderr
-    notes = [line.split(":", 1)[1].strip() for line in result.stdout.splitlines()
-             if line.startswith("note:")]  # fmt: skip
-    assert notes == ["camera: framed from the bounds", "lights: the default rig of two",
-                     "floor: none"]  # fmt: skip
+    notes = [
+        line.split(":", 1)[1].strip()
+        for line in result.stdout.splitlines()
+        if line.startswith("note:")
+    ]
+    assert notes == [
+        "camera: framed from the bounds",
+        "lights: the default rig of two",
+        "floor: none",
+    ]
     assert f"triangles:  {len(mesh.faces):,} stored" in result.stdout
     assert "floor:      none" in result.stdout
 
@@ -111,15 +122,32 @@ def test_set_changes_any_key_as_the_file_would(tmp_path: Path) -> None:
     document.setdefault("materials", {}).setdefault("gold", {})["shininess"] = 200
     document["render"]["max_depth"] = 1
     edited.write_text(tomli_w.dumps(document))
-    flags = ["-D", "camera.fov=35", "--set", "lights[0].intensity=2",
-             "-D", "materials.gold.shininess=200", "-D", "render.max_depth=3",
-             "--max-depth", "1"]  # fmt: skip  (the last of render.max_depth wins)
-    assert run_cli("render", str(scene), "-o", str(tmp_path / "a.npy"), *TINY, *flags,
-                   "--quiet").returncode == 0  # fmt: skip
-    assert run_cli("render", str(edited), "-o", str(tmp_path / "b.npy"), *TINY,
-                   "--quiet").returncode == 0  # fmt: skip
-    assert run_cli("render", str(scene), "-o", str(tmp_path / "c.npy"), *TINY,
-                   "--quiet").returncode == 0  # fmt: skip
+    flags = [
+        "-D",
+        "camera.fov=35",
+        "--set",
+        "lights[0].intensity=2",
+        "-D",
+        "materials.gold.shininess=200",
+        "-D",
+        "render.max_depth=3",
+        "--max-depth",
+        "1",
+    ]  # the last of render.max_depth wins
+    assert (
+        run_cli(
+            "render", str(scene), "-o", str(tmp_path / "a.npy"), *TINY, *flags, "--quiet"
+        ).returncode
+        == 0
+    )
+    assert (
+        run_cli("render", str(edited), "-o", str(tmp_path / "b.npy"), *TINY, "--quiet").returncode
+        == 0
+    )
+    assert (
+        run_cli("render", str(scene), "-o", str(tmp_path / "c.npy"), *TINY, "--quiet").returncode
+        == 0
+    )
     changed, written, plain = (np.load(tmp_path / f"{n}.npy") for n in "abc")
     np.testing.assert_array_equal(changed, written)
     assert not np.array_equal(changed, plain)
@@ -162,8 +190,9 @@ def test_set_reaches_a_mesh_files_scene_and_a_random_field(tmp_path: Path) -> No
             assert result.returncode == 0, result.stderr
             runs[name] = np.load(out)
         assert runs["lit"].mean() < runs["plain"].mean()  # unlit: sky and reflections only
-    line = one_line_error(run_cli("render", str(mesh), "-o", str(tmp_path / "x.png"),
-                                  "-D", "spheres[0].radius=2"))  # fmt: skip
+    line = one_line_error(
+        run_cli("render", str(mesh), "-o", str(tmp_path / "x.png"), "-D", "spheres[0].radius=2")
+    )
     assert line.startswith("--set spheres[0].radius=2: spheres: not settable on ")
 
 
@@ -230,18 +259,25 @@ def test_render_writes_jpeg_and_16_bit_tiff_and_refuses_what_a_format_cannot_tak
 ) -> None:
     scene = str(ROOT / "scenes" / "three_spheres.toml")
     jpeg, tiff = tmp_path / "a.jpg", tmp_path / "a.tif"
-    assert run_cli("render", scene, "-o", str(jpeg), *TINY, "--quality", "80",
-                   "--quiet", "--aov", "depth").returncode == 0  # fmt: skip
+    assert (
+        run_cli(
+            "render", scene, "-o", str(jpeg), *TINY, "--quality", "80", "--quiet", "--aov", "depth"
+        ).returncode
+        == 0
+    )
     with Image.open(jpeg) as image, Image.open(tmp_path / "a.depth.jpg") as depth:
         assert (image.format, image.mode, image.size) == ("JPEG", "RGB", (16, 9))
         assert (depth.format, depth.size) == ("JPEG", (16, 9))  # beside it, in its format
-    assert run_cli("render", scene, "-o", str(tiff), *TINY, "--bit-depth", "16",
-                   "--quiet").returncode == 0  # fmt: skip
+    assert (
+        run_cli("render", scene, "-o", str(tiff), *TINY, "--bit-depth", "16", "--quiet").returncode
+        == 0
+    )
     import tifffile
 
     assert tifffile.imread(tiff).dtype == np.uint16
-    line = one_line_error(run_cli("render", scene, "-o", str(tmp_path / "b.webp"),
-                                  "--bit-depth", "16"))  # fmt: skip
+    line = one_line_error(
+        run_cli("render", scene, "-o", str(tmp_path / "b.webp"), "--bit-depth", "16")
+    )
     assert "b.webp" in line and "16-bit" in line
     assert not (tmp_path / "b.webp").exists()
 
@@ -277,15 +313,18 @@ def test_the_look_is_a_scene_key_and_a_flag_and_no_lights_is_one_warning(tmp_pat
     np.testing.assert_array_equal(
         pictures["flags"], tonemap(pictures["linear"], Look(1.5, "aces", "srgb"))
     )
-    line = one_line_error(run_cli("render", str(scene), "-o", str(tmp_path / "x.png"),
-                                  "-D", "render.tonemap=filmic"))  # fmt: skip
+    line = one_line_error(
+        run_cli("render", str(scene), "-o", str(tmp_path / "x.png"), "-D", "render.tonemap=filmic")
+    )
     assert line.startswith("--set render.tonemap=filmic: render.tonemap: expected one of ")
     dark = tmp_path / "dark.toml"
     dark.write_text(SPHERE_ONLY)
     result = run_cli("render", str(dark), "-o", str(tmp_path / "dark.png"), *TINY, "--quiet")
     assert result.returncode == 0
-    assert result.stderr == f"embree-rt: warning: {dark}: lights: none: only the sky and " \
-        "ambient light show it\n"  # fmt: skip
+    assert (
+        result.stderr == f"embree-rt: warning: {dark}: lights: none: only the sky and "
+        "ambient light show it\n"
+    )
 
 
 SPHERE_ONLY = "[[spheres]]\ncenter = [0.0, 1.0, 0.0]\nradius = 1.0\n"
@@ -299,8 +338,10 @@ def test_info_into_a_closed_pipe_exits_quietly() -> None:
     written (head gone after its line is the same to the writer)."""
     process = subprocess.Popen(
         [sys.executable, "-m", "embree_rt", "info", str(ROOT / "scenes" / "mesh_and_spheres.toml")],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
-    )  # fmt: skip
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=ROOT,
+    )
     process.stdout.close()
     stderr = process.stderr.read()
     process.wait(timeout=120)
@@ -313,12 +354,17 @@ def test_info_prints_round_bounds_no_negative_memory_and_plurals_that_agree(
 ) -> None:
     scene = tmp_path / "scene.toml"
     # float32 radii and centres that print as noise when widened to float64
-    np.savez(tmp_path / "s.npz", centers=np.array([[0.1, 3.1, -0.7]], np.float32),
-             radii=np.array([0.3], np.float32))  # fmt: skip
+    np.savez(
+        tmp_path / "s.npz",
+        centers=np.array([[0.1, 3.1, -0.7]], np.float32),
+        radii=np.array([0.3], np.float32),
+    )
     mesh = trimesh.creation.box()
     mesh.export(tmp_path / "box.ply")
-    scene.write_text('[[sphere_arrays]]\nfile = "s.npz"\n[[meshes]]\nfile = "box.ply"\n'
-                     "translate = [5.0, 0.5, 0.0]\n")  # fmt: skip
+    scene.write_text(
+        '[[sphere_arrays]]\nfile = "s.npz"\n[[meshes]]\nfile = "box.ply"\n'
+        "translate = [5.0, 0.5, 0.0]\n"
+    )
     result = run_cli("info", str(scene))
     assert result.returncode == 0, result.stderr
     info = dict(line.split(":", 1) for line in result.stdout.splitlines() if ":" in line)
@@ -331,8 +377,19 @@ def test_info_prints_round_bounds_no_negative_memory_and_plurals_that_agree(
 
 def test_a_frame_pattern_makes_its_directories(tmp_path: Path) -> None:
     pattern = tmp_path / "shots" / "take1" / "f_{frame:04d}.png"
-    result = run_cli("render", str(ROOT / "scenes" / "animations" / "three_spheres_flight.toml"),
-                     "-o", str(pattern), *TINY, "--frames", "0:2", "--quiet")  # fmt: skip
+    result = run_cli(
+        "render",
+        str(ROOT / "scenes" / "animations" / "three_spheres_flight.toml"),
+        "-o",
+        str(pattern),
+        *TINY,
+        "--frames",
+        "0:2",
+        "--quiet",
+    )
     assert result.returncode == 0, result.stderr
     assert sorted(p.name for p in (tmp_path / "shots" / "take1").iterdir()) == [
-        "f_0000.png", "f_0001.png", "transforms.json"]  # fmt: skip
+        "f_0000.png",
+        "f_0001.png",
+        "transforms.json",
+    ]

@@ -153,12 +153,14 @@ def test_compiled_camera_and_film_code_has_no_fused_multiply_add() -> None:
     index, pixel = tiled_samples(frame, 4, 0, 64 * 48 * 4)
     rgb = np.ones((3, len(index)), np.float32)
     calls = [
-        (camera_module.write_directions,
-         (camera_rays(frame, 4, 1), index, 0, len(index), np.empty((3, len(index)), np.float32))),
+        (
+            camera_module.write_directions,
+            (camera_rays(frame, 4, 1), index, 0, len(index), np.empty((3, len(index)), np.float32)),
+        ),
         (film_sums.add_weighted, (np.zeros((3, 64 * 48)), 0, pixel, rgb, rgb, None)),
         (film_sums.add_weighted, (np.zeros((3, 64 * 48)), 0, pixel, None, rgb, index)),
         (film_sums.mean_image, (np.zeros((3, 64 * 48)), 4)),
-    ]  # fmt: skip
+    ]
     fused = re.compile(r"\bv?f(n?)m(add|sub)\d", re.IGNORECASE)
     if "fma" in llvm.get_host_cpu_features().flatten():  # the pattern does see a contraction
         contracted = numba.njit(fastmath=True)(lambda a, b, c: a * b + c)

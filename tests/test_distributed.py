@@ -121,8 +121,9 @@ def test_scene_is_scattered_once_and_built_once_per_worker(cluster) -> None:
     assert sorted(images) == [0, 1, 2]
     # Three frames of a dozen batches each, spread over both workers: one build on each.
     assert renderer.builds() == dict.fromkeys(client.nthreads(), 1)
-    assert renderer.key != rd.ClusterRenderer(rt.load_scene(SCENES / "three_spheres.toml"),
-                                              client).key  # fmt: skip
+    assert (
+        renderer.key != rd.ClusterRenderer(rt.load_scene(SCENES / "three_spheres.toml"), client).key
+    )
 
 
 def test_animation_frames_equal_frames_rendered_one_by_one_locally(cluster) -> None:
@@ -133,8 +134,12 @@ def test_animation_frames_equal_frames_rendered_one_by_one_locally(cluster) -> N
     cameras = [(f, camera_at(scene.camera, animation, f)) for f in frames]
     renderer = rd.ClusterRenderer(SCENES / "showcase.toml", client, batch_size=SMALL_BATCH)
     images = {}
-    bounded(renderer.render_frames, RenderSettings(max_depth=6, seed=0, **SMALL), cameras,
-            images.__setitem__)  # fmt: skip
+    bounded(
+        renderer.render_frames,
+        RenderSettings(max_depth=6, seed=0, **SMALL),
+        cameras,
+        images.__setitem__,
+    )
     assert sorted(images) == sorted(frames)
     for f, camera in cameras:
         assert np.array_equal(images[f], local_image(scene, camera)), f"frame {f}"
@@ -274,9 +279,13 @@ def free_port() -> int:
 
 def run_cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "embree_rt", *args], capture_output=True, text=True,
-        timeout=TIMEOUT_S, cwd=ROOT, env={**os.environ, **(env or {})},
-    )  # fmt: skip
+        [sys.executable, "-m", "embree_rt", *args],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+        cwd=ROOT,
+        env={**os.environ, **(env or {})},
+    )
 
 
 def stop(process: subprocess.Popen) -> None:
@@ -298,16 +307,43 @@ def test_command_on_dask_scheduler_and_worker_processes(tmp_path: Path) -> None:
     bin_dir = Path(sys.executable).parent
     started = []
     try:
-        started.append(subprocess.Popen(
-            [bin_dir / "dask", "scheduler", "--host", "127.0.0.1", "--port",
-             address.rsplit(":", 1)[1], "--no-dashboard"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-        ))  # fmt: skip
-        started.append(subprocess.Popen(
-            [bin_dir / "dask", "worker", address, "--nthreads", "1", "--nworkers", "1",
-             "--memory-limit", "0", "--no-dashboard", "--host", "127.0.0.1"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-        ))  # fmt: skip
+        started.append(
+            subprocess.Popen(
+                [
+                    bin_dir / "dask",
+                    "scheduler",
+                    "--host",
+                    "127.0.0.1",
+                    "--port",
+                    address.rsplit(":", 1)[1],
+                    "--no-dashboard",
+                ],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,
+            )
+        )
+        started.append(
+            subprocess.Popen(
+                [
+                    bin_dir / "dask",
+                    "worker",
+                    address,
+                    "--nthreads",
+                    "1",
+                    "--nworkers",
+                    "1",
+                    "--memory-limit",
+                    "0",
+                    "--no-dashboard",
+                    "--host",
+                    "127.0.0.1",
+                ],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,
+            )
+        )
         with distributed.Client(address, timeout=TIMEOUT_S) as client:
             client.wait_for_workers(1, timeout=TIMEOUT_S)
         # An animated scene: the command's frame files, rendered on the cluster.
@@ -336,10 +372,30 @@ def test_ctrl_c_on_a_local_cluster_exits_130_and_writes_nothing(tmp_path: Path) 
 
     output = tmp_path / "out.png"
     process = subprocess.Popen(
-        [sys.executable, "-m", "embree_rt", "random", "--count", "1000", "-o", str(output),
-         "--width", "1920", "--height", "1080", "--spp", "64", "--quiet", "--cluster", "local:2"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "embree_rt",
+            "random",
+            "--count",
+            "1000",
+            "-o",
+            str(output),
+            "--width",
+            "1920",
+            "--height",
+            "1080",
+            "--spp",
+            "64",
+            "--quiet",
+            "--cluster",
+            "local:2",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         # Until both workers have started (they take SIGINT as ignored then) and worked a
         # while: the render is under way.
@@ -395,9 +451,20 @@ def test_command_with_an_unreachable_scheduler_fails_in_one_line(tmp_path: Path)
     address = f"tcp://127.0.0.1:{free_port()}"  # nothing listens there
     started = time.monotonic()
     # --scheduler-timeout bounds the attempt (default 10 s).
-    result = run_cli("render", "scenes/three_spheres.toml", "-o", str(output), "--width", "8",
-                     "--height", "8", "--scheduler", address,
-                     "--scheduler-timeout", "2")  # fmt: skip
+    result = run_cli(
+        "render",
+        "scenes/three_spheres.toml",
+        "-o",
+        str(output),
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--scheduler",
+        address,
+        "--scheduler-timeout",
+        "2",
+    )
     assert result.returncode == 2, result.stderr
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("embree-rt: error: --scheduler: "), lines
@@ -457,8 +524,17 @@ def test_a_scheduler_that_accepts_and_never_answers_is_refused_within_the_timeou
     output = tmp_path / "out.npy"
     with listening(None) as address:
         started = time.monotonic()
-        result = run_cli("render", "scenes/three_spheres.toml", "-o", str(output), *SMALL_FLAGS,
-                         "--scheduler", address, "--scheduler-timeout", "2")  # fmt: skip
+        result = run_cli(
+            "render",
+            "scenes/three_spheres.toml",
+            "-o",
+            str(output),
+            *SMALL_FLAGS,
+            "--scheduler",
+            address,
+            "--scheduler-timeout",
+            "2",
+        )
         elapsed = time.monotonic() - started
     line = one_line_refusal(result, f"--scheduler: {address}: no answer within 2 s")
     assert "--scheduler-timeout" in line
@@ -470,8 +546,15 @@ def test_a_port_speaking_http_is_not_a_scheduler(tmp_path):
     # Dask would read "HTTP/1.1" as a frame length of 3.5e18 bytes and try to allocate it.
     output = tmp_path / "out.npy"
     with listening(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n") as address:
-        result = run_cli("render", "scenes/three_spheres.toml", "-o", str(output), *SMALL_FLAGS,
-                         "--scheduler", address)  # fmt: skip
+        result = run_cli(
+            "render",
+            "scenes/three_spheres.toml",
+            "-o",
+            str(output),
+            *SMALL_FLAGS,
+            "--scheduler",
+            address,
+        )
     one_line_refusal(result, f"--scheduler: {address}: does not speak Dask's protocol")
     assert list(tmp_path.iterdir()) == []
 
@@ -483,8 +566,7 @@ def test_a_port_speaking_http_is_not_a_scheduler(tmp_path):
         (("--scheduler", " "), "--scheduler: expected a value"),
         (("--cluster", ""), "--cluster: expected a value"),
         (("--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "0"), "--scheduler-timeout"),
-        (("--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "nan"),
-         "--scheduler-timeout"),
+        (("--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "nan"), "--scheduler-timeout"),
         (("--cluster", f"local:{4 * (os.cpu_count() or 1) + 1}"), "--cluster: local:"),
         (("--cluster", "local:10000"), "--cluster: local:10000 would start 10,000 worker"),
     ],

@@ -389,9 +389,15 @@ def test_images_of_the_wrong_shape_are_refused(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     "suffix, name, lossless",
-    [(".png", "PNG", True), (".tif", "TIFF", True), (".TIFF", "TIFF", True),
-     (".jpg", "JPEG", False), (".jpeg", "JPEG", False), (".webp", "WEBP", False)],
-)  # fmt: skip
+    [
+        (".png", "PNG", True),
+        (".tif", "TIFF", True),
+        (".TIFF", "TIFF", True),
+        (".jpg", "JPEG", False),
+        (".jpeg", "JPEG", False),
+        (".webp", "WEBP", False),
+    ],
+)
 def test_display_formats_round_trip_through_pillow(
     tmp_path: Path, suffix: str, name: str, lossless: bool
 ) -> None:
@@ -442,18 +448,21 @@ def test_sixteen_bit_images_hold_the_tone_map_to_16_bits(tmp_path: Path, suffix:
     assert pixels.dtype == np.uint16 and pixels.shape == (HEIGHT, WIDTH, 3)
     # the same curve as 8 bits, in plain Python, to 65535 steps
     expected = np.vectorize(lambda c: 65535 * (max(c, 0) / (1 + max(c, 0))) ** (1 / 2.2))(
-        image.astype(np.float64))  # fmt: skip
+        image.astype(np.float64)
+    )
     assert np.abs(pixels - expected).max() <= 1
     assert np.abs(pixels / 257.0 - tonemap(image)).max() <= 0.5 + 1e-9  # 8 bits: rounded
 
 
 @pytest.mark.parametrize(
     "name, encoding, message",
-    [("render.jpg", film.Encoding(bit_depth=16), "16-bit"),
-     ("render.npy", film.Encoding(bit_depth=16), "16-bit"),
-     ("render.png", film.Encoding(quality=80), "quality applies"),
-     ("render.webp", film.Encoding(quality=101), "1 to 100")],
-)  # fmt: skip
+    [
+        ("render.jpg", film.Encoding(bit_depth=16), "16-bit"),
+        ("render.npy", film.Encoding(bit_depth=16), "16-bit"),
+        ("render.png", film.Encoding(quality=80), "quality applies"),
+        ("render.webp", film.Encoding(quality=101), "1 to 100"),
+    ],
+)
 def test_encodings_a_format_cannot_take_are_refused_before_writing(
     tmp_path: Path, name: str, encoding: film.Encoding, message: str
 ) -> None:

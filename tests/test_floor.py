@@ -41,8 +41,9 @@ def crossing(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
 
 def occluded(geometry: SceneGeometry, origins, directions, tnear, tfar) -> np.ndarray:
     """The scene's BVH with its floor, on rays given as (3, n) columns."""
-    return occluded_or_below_plane(geometry.bvh, origins.T, directions.T, tnear, tfar,
-                                   geometry.labels.plane_y)  # fmt: skip
+    return occluded_or_below_plane(
+        geometry.bvh, origins.T, directions.T, tnear, tfar, geometry.labels.plane_y
+    )
 
 
 @pytest.fixture(scope="module")

@@ -98,11 +98,14 @@ def test_an_emissive_patch_shows_its_emission_on_a_black_world(tmp_path: Path) -
     codes = [[[200, 40, 90], [30, 160, 250]]]  # one row, two texels: left, right
     texture = writer.texture(rgb_image(codes), {"magFilter": 9728, "minFilter": 9728})
     vertices, faces, uv = MAKE.quad(2.0)
-    material = writer.material({
-        "pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0},
-        "emissiveFactor": [0.5, 1.0, 0.25], "emissiveTexture": {"index": texture},
-        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 3.0}},
-    })  # fmt: skip
+    material = writer.material(
+        {
+            "pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0},
+            "emissiveFactor": [0.5, 1.0, 0.25],
+            "emissiveTexture": {"index": texture},
+            "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 3.0}},
+        }
+    )
     writer.mesh(vertices, faces, material, TEXCOORD_0=uv)
     glb = write_glb(tmp_path / "glow.glb", writer)
     image = render_text(tmp_path, scene_text([glb]))
@@ -118,8 +121,12 @@ def test_an_unlit_surface_shows_its_base_colour_whatever_the_light(tmp_path: Pat
     writer = MAKE.GltfWriter()
     vertices, faces, _ = MAKE.quad(2.0)
     color = [0.8, 0.3, 0.05]
-    material = writer.material({"pbrMetallicRoughness": {"baseColorFactor": [*color, 1]},
-                                "extensions": {"KHR_materials_unlit": {}}})  # fmt: skip
+    material = writer.material(
+        {
+            "pbrMetallicRoughness": {"baseColorFactor": [*color, 1]},
+            "extensions": {"KHR_materials_unlit": {}},
+        }
+    )
     writer.mesh(vertices, faces, material)
     glb = write_glb(tmp_path / "unlit.glb", writer)
     lights = "\n[[lights]]\nposition = [1.0, 2.0, 5.0]\nintensity = 3.0\n"
@@ -129,7 +136,9 @@ def test_an_unlit_surface_shows_its_base_colour_whatever_the_light(tmp_path: Pat
 
 
 def test_the_scene_file_emission_key_glows(tmp_path: Path) -> None:
-    text = scene_text([]) + """
+    text = (
+        scene_text([])
+        + """
 [materials.lamp]
 color = [0.0, 0.0, 0.0]
 emission = [2.0, 0.5, 0.125]
@@ -139,6 +148,7 @@ center = [0.0, 0.0, 0.0]
 radius = 0.8
 material = "lamp"
 """
+    )
     image = render_text(tmp_path, text)
     np.testing.assert_allclose(image[SIZE // 2, SIZE // 2], [2.0, 0.5, 0.125], rtol=1e-6)
 
@@ -155,7 +165,7 @@ material = "lamp"
 )
 def test_bad_material_keys_name_file_key_and_problem(tmp_path, key, value, problem) -> None:
     path = tmp_path / "bad.toml"
-    path.write_text(f"[materials.odd]\npreset = \"glass\"\n{key} = {value}\n", encoding="utf-8")
+    path.write_text(f'[materials.odd]\npreset = "glass"\n{key} = {value}\n', encoding="utf-8")
     with pytest.raises(rt.SceneError) as caught:
         rt.load_scene(path)
     message = str(caught.value)
@@ -195,22 +205,33 @@ def test_light_through_a_glass_slab_is_absorbed_by_beer_lambert(tmp_path: Path) 
     (attenuationColor c, attenuationDistance d). max_depth 2 stops after one pass through."""
     thickness, color, distance = 0.4, np.array([0.5, 0.8, 0.95]), 0.5
     images = {}
-    for name, volume in (("absorbing", {"thicknessFactor": thickness,
-                                        "attenuationColor": color.tolist(),
-                                        "attenuationDistance": distance}),
-                         ("thin", {"attenuationColor": color.tolist(),
-                                   "attenuationDistance": distance})):  # fmt: skip
+    for name, volume in (
+        (
+            "absorbing",
+            {
+                "thicknessFactor": thickness,
+                "attenuationColor": color.tolist(),
+                "attenuationDistance": distance,
+            },
+        ),
+        ("thin", {"attenuationColor": color.tolist(), "attenuationDistance": distance}),
+    ):
         writer = MAKE.GltfWriter()
-        material = writer.material({
-            "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0},
-            "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
-                           "KHR_materials_volume": volume},
-        })  # fmt: skip
+        material = writer.material(
+            {
+                "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0},
+                "extensions": {
+                    "KHR_materials_transmission": {"transmissionFactor": 1.0},
+                    "KHR_materials_volume": volume,
+                },
+            }
+        )
         slab(writer, thickness, material)
         glb = write_glb(tmp_path / f"{name}.glb", writer)
         white = "\n[background]\nhorizon = [1.0, 1.0, 1.0]\nzenith = [1.0, 1.0, 1.0]\n"
         text = scene_text([glb], depth=2).replace(
-            "[background]\nhorizon = [0.0, 0.0, 0.0]\nzenith = [0.0, 0.0, 0.0]\n", white)
+            "[background]\nhorizon = [0.0, 0.0, 0.0]\nzenith = [0.0, 0.0, 0.0]\n", white
+        )
         images[name] = render_text(tmp_path, text, f"{name}.toml")[SIZE // 2, SIZE // 2]
     transmitted = (1 - SCHLICK_R0) ** 2
     np.testing.assert_allclose(
@@ -225,8 +246,10 @@ def test_scene_file_glass_absorbs_along_the_path_inside(tmp_path: Path) -> None:
     field of view keeps the centre pixel's ray within 0.007 of the axis, where the chord is
     shorter by less than 1e-5 of itself)."""
     radius, color, distance = 0.7, np.array([0.3, 0.6, 0.9]), 0.8
-    text = scene_text([], depth=2).replace("horizon = [0.0, 0.0, 0.0]\nzenith = [0.0, 0.0, 0.0]",
-                                           "horizon = [1.0, 1.0, 1.0]\nzenith = [1.0, 1.0, 1.0]")
+    text = scene_text([], depth=2).replace(
+        "horizon = [0.0, 0.0, 0.0]\nzenith = [0.0, 0.0, 0.0]",
+        "horizon = [1.0, 1.0, 1.0]\nzenith = [1.0, 1.0, 1.0]",
+    )
     text = text.replace("fov = 30.0", "fov = 2.0")
     text += f"""
 [materials.tinted]
@@ -251,15 +274,20 @@ material = "tinted"
 def test_transmission_makes_a_gltf_material_glass_with_its_ior_and_tint() -> None:
     from embree_rt.scene.gltf_materials import material_from_gltf
 
-    glass = material_from_gltf({
-        "pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.9, 0.4, 1.0]},
-        "extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.8},
-                       "KHR_materials_ior": {"ior": 1.33}},
-    })  # fmt: skip
+    glass = material_from_gltf(
+        {
+            "pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.9, 0.4, 1.0]},
+            "extensions": {
+                "KHR_materials_transmission": {"transmissionFactor": 0.8},
+                "KHR_materials_ior": {"ior": 1.33},
+            },
+        }
+    )
     assert glass.is_glass and glass.transparency == 0.8 and glass.ior == 1.33
     assert glass.color == pytest.approx((0.2, 0.9, 0.4))
-    default = material_from_gltf({"extensions": {"KHR_materials_transmission": {
-        "transmissionFactor": 1.0}}})  # fmt: skip
+    default = material_from_gltf(
+        {"extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}}}
+    )
     assert default.ior == 1.5 and default.attenuation_distance == math.inf
 
 
@@ -268,7 +296,9 @@ def test_transmission_makes_a_gltf_material_glass_with_its_ior_and_tint() -> Non
 
 def lamp_world(tmp_path: Path, meshes: list[Path], name: str) -> np.ndarray:
     """An emissive ball behind where the meshes go, on the black world, and a light."""
-    text = scene_text(meshes) + """
+    text = (
+        scene_text(meshes)
+        + """
 [[lights]]
 position = [4.0, 0.5, -1.0]
 
@@ -281,6 +311,7 @@ center = [0.0, 0.0, -2.0]
 radius = 1.0
 material = "lamp"
 """
+    )
     return render_text(tmp_path, text, name)
 
 
@@ -290,8 +321,9 @@ def facing_quad(tmp_path: Path, name: str, facing: float, **material) -> Path:
     vertices, faces, uv = MAKE.quad(1.2)
     if facing < 0:
         faces = faces[:, ::-1]
-    index = writer.material({"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.5, 0.1, 1]},
-                             **material})  # fmt: skip
+    index = writer.material(
+        {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.5, 0.1, 1]}, **material}
+    )
     writer.mesh(vertices, faces, index, TEXCOORD_0=uv)
     return write_glb(tmp_path / f"{name}.glb", writer)
 
@@ -305,8 +337,9 @@ def test_a_one_sided_plane_seen_from_behind_is_not_there(tmp_path: Path) -> None
     back = lamp_world(tmp_path, [facing_quad(tmp_path, "back", -1.0)], "back.toml")
     np.testing.assert_array_equal(back, without)
     front = lamp_world(tmp_path, [facing_quad(tmp_path, "front", 1.0)], "front.toml")
-    both = lamp_world(tmp_path, [facing_quad(tmp_path, "both", -1.0, doubleSided=True)],
-                      "both.toml")  # fmt: skip
+    both = lamp_world(
+        tmp_path, [facing_quad(tmp_path, "both", -1.0, doubleSided=True)], "both.toml"
+    )
     centre = (SIZE // 2, SIZE // 2)
     assert not np.array_equal(front[centre], without[centre])
     assert not np.array_equal(both[centre], without[centre])
@@ -322,9 +355,17 @@ def alpha_quad(tmp_path: Path, name: str, alpha_codes: np.ndarray, **material) -
     h, w = alpha_codes.shape
     rgba = np.concatenate([np.full((h, w, 3), 255, np.uint8), alpha_codes[..., None]], axis=2)
     texture = writer.texture(Image.fromarray(rgba, "RGBA"), {"magFilter": 9728})
-    index = writer.material({"pbrMetallicRoughness": {
-        "baseColorFactor": [0.9, 0.5, 0.1, 1], "baseColorTexture": {"index": texture},
-        "metallicFactor": 0.0}, "doubleSided": True, **material})  # fmt: skip
+    index = writer.material(
+        {
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [0.9, 0.5, 0.1, 1],
+                "baseColorTexture": {"index": texture},
+                "metallicFactor": 0.0,
+            },
+            "doubleSided": True,
+            **material,
+        }
+    )
     vertices, faces, uv = MAKE.quad(1.2)
     writer.mesh(vertices, faces, index, TEXCOORD_0=uv)
     return write_glb(tmp_path / f"{name}.glb", writer)
@@ -339,8 +380,9 @@ def test_a_cutout_shows_what_is_behind_it_where_alpha_is_below_the_cutoff(tmp_pa
     (bitwise: the filter rejects those hits, so the rays find what they find without it);
     pixels over the solid thirds show the quad."""
     without = lamp_world(tmp_path, [], "without.toml")
-    masked = lamp_world(tmp_path, [alpha_quad(tmp_path, "mask", SLOT, alphaMode="MASK")],
-                        "mask.toml")  # fmt: skip
+    masked = lamp_world(
+        tmp_path, [alpha_quad(tmp_path, "mask", SLOT, alphaMode="MASK")], "mask.toml"
+    )
     opaque = lamp_world(tmp_path, [alpha_quad(tmp_path, "opaque", SLOT)], "opaque.toml")
     # The quad spans x in [-0.6, 0.6] at z = 0; its middle third |x| < 0.2 is cut out. In the
     # image (fov 30 at distance 6), 0.2 is 0.2 / (6 tan 15°) of the half width: 2 pixels.
@@ -407,8 +449,9 @@ def test_blend_lets_one_minus_alpha_through(tmp_path: Path) -> None:
     a × the quad's own colour (unlit: its base colour) + (1 − a) × the ball behind."""
     alpha_code = 102  # 0.4
     codes = np.full((1, 1), alpha_code, np.uint8)
-    glb = alpha_quad(tmp_path, "veil", codes, alphaMode="BLEND",
-                     extensions={"KHR_materials_unlit": {}})  # fmt: skip
+    glb = alpha_quad(
+        tmp_path, "veil", codes, alphaMode="BLEND", extensions={"KHR_materials_unlit": {}}
+    )
     without = lamp_world(tmp_path, [], "without.toml")
     veiled = lamp_world(tmp_path, [glb], "veiled.toml")
     a = alpha_code / 255.0
@@ -458,7 +501,8 @@ def test_wrap_modes_sample_the_texels_the_spec_names(mode: int, nearest: bool) -
             i0 = math.floor(x)
             f = x - i0
             expected = (1 - f) * (spec_texel(i0, width, mode) + 1) + f * (
-                spec_texel(i0 + 1, width, mode) + 1)  # fmt: skip
+                spec_texel(i0 + 1, width, mode) + 1
+            )
         assert value == pytest.approx(expected, abs=2e-4), (coordinate, mode)
 
 
@@ -472,8 +516,12 @@ def test_wrap_modes_reach_the_renderer(tmp_path: Path) -> None:
     for mode in (REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT):
         writer = MAKE.GltfWriter()
         texture = writer.texture(rgb_image(codes), {"magFilter": 9728, "wrapS": mode})
-        index = writer.material({"pbrMetallicRoughness": {"baseColorTexture": {"index": texture}},
-                                 "extensions": {"KHR_materials_unlit": {}}})  # fmt: skip
+        index = writer.material(
+            {
+                "pbrMetallicRoughness": {"baseColorTexture": {"index": texture}},
+                "extensions": {"KHR_materials_unlit": {}},
+            }
+        )
         writer.mesh(vertices, faces, index, TEXCOORD_0=uv)
         glb = write_glb(tmp_path / f"wrap{mode}.glb", writer)
         image = render_text(tmp_path, scene_text([glb]), f"wrap{mode}.toml")
@@ -482,8 +530,12 @@ def test_wrap_modes_reach_the_renderer(tmp_path: Path) -> None:
             x = -0.6 + 0.2 * (sixth + 0.5)  # the middle of the sixth, in the scene
             column = int(SIZE / 2 + x * scale)
             texel = spec_texel(sixth, 2, mode)  # u·w = sixth + ½: integer part `sixth`
-            np.testing.assert_allclose(image[SIZE // 2, column], palette[texel], rtol=1e-6,
-                                       err_msg=f"mode {mode}, sixth {sixth}")  # fmt: skip
+            np.testing.assert_allclose(
+                image[SIZE // 2, column],
+                palette[texel],
+                rtol=1e-6,
+                err_msg=f"mode {mode}, sixth {sixth}",
+            )
 
 
 def test_texture_transform_and_texcoord_1_choose_what_is_sampled(tmp_path: Path) -> None:
@@ -506,8 +558,12 @@ def test_texture_transform_and_texcoord_1_choose_what_is_sampled(tmp_path: Path)
     for name, (info, (want_left, want_right)) in cases.items():
         writer = MAKE.GltfWriter()
         texture = writer.texture(rgb_image(codes), {"magFilter": 9728})
-        index = writer.material({"pbrMetallicRoughness": {"baseColorTexture": {
-            "index": texture, **info}}, "extensions": {"KHR_materials_unlit": {}}})  # fmt: skip
+        index = writer.material(
+            {
+                "pbrMetallicRoughness": {"baseColorTexture": {"index": texture, **info}},
+                "extensions": {"KHR_materials_unlit": {}},
+            }
+        )
         reversed_u = uv * np.array([-1.0, 1.0], np.float32) + np.array([1.0, 0.0], np.float32)
         writer.mesh(vertices, faces, index, TEXCOORD_0=uv, TEXCOORD_1=reversed_u)
         glb = write_glb(tmp_path / f"{name}.glb", writer)
@@ -519,8 +575,9 @@ def test_texture_transform_and_texcoord_1_choose_what_is_sampled(tmp_path: Path)
 def test_texture_transform_matrix_follows_the_extension() -> None:
     """The extension's example: rotation by θ, then scale, then offset, applied to (u, v)."""
     theta = 0.3
-    matrix = texture_transform_matrix({"offset": [0.1, -0.2], "rotation": theta,
-                                       "scale": [2.0, 0.5]})  # fmt: skip
+    matrix = texture_transform_matrix(
+        {"offset": [0.1, -0.2], "rotation": theta, "scale": [2.0, 0.5]}
+    )
     u, v = 0.25, 0.75
     su, sv = 2.0 * u, 0.5 * v
     # KHR_texture_transform's rotation matrix: [[cos, sin], [-sin, cos]] on (u, v).
@@ -541,9 +598,15 @@ def test_texels_keep_their_alpha_and_data_textures_stay_linear() -> None:
 def test_ignored_extensions_are_named_in_one_warning_line(tmp_path: Path) -> None:
     writer = MAKE.GltfWriter()
     vertices, faces, _ = MAKE.quad(1.0)
-    index = writer.material({"extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 1},
-                                            "KHR_materials_sheen": {},
-                                            "KHR_materials_unlit": {}}})  # fmt: skip
+    index = writer.material(
+        {
+            "extensions": {
+                "KHR_materials_clearcoat": {"clearcoatFactor": 1},
+                "KHR_materials_sheen": {},
+                "KHR_materials_unlit": {},
+            }
+        }
+    )
     writer.mesh(vertices, faces, index)
     glb = write_glb(tmp_path / "coated.glb", writer)
     path = tmp_path / "coated.toml"
@@ -629,8 +692,9 @@ def test_occlusion_scales_the_ambient_term(tmp_path: Path) -> None:
         images[name] = render_text(tmp_path, scene_text([glb]), f"{name}.toml")
     centre = (SIZE // 2, SIZE // 2)
     assert images["open"][centre].min() > 0
-    np.testing.assert_allclose(images["occluded"][centre],
-                               images["open"][centre] * (1 + 0.8 * (0.4 - 1)), rtol=1e-6)
+    np.testing.assert_allclose(
+        images["occluded"][centre], images["open"][centre] * (1 + 0.8 * (0.4 - 1)), rtol=1e-6
+    )
 
 
 def test_the_gallery_file_holds_every_feature_it_shows() -> None:
@@ -643,8 +707,9 @@ def test_the_gallery_file_holds_every_feature_it_shows() -> None:
     parts = load_mesh_parts(ROOT / "assets" / "gltf_materials.glb", "gallery.toml", "file")
     looks = [mesh.metadata[LOOKS_KEY] for mesh, _ in parts]
     assert any(item.emissive is not None and item.material.emission != (0, 0, 0) for item in looks)
-    assert any(item.material.is_glass and item.material.attenuation_distance < math.inf
-               for item in looks)  # fmt: skip
+    assert any(
+        item.material.is_glass and item.material.attenuation_distance < math.inf for item in looks
+    )
     assert sum(item.alpha_mode == "MASK" for item in looks) == 3
     assert any(item.normal is not None for item in looks)
 
@@ -656,8 +721,9 @@ def split_quad(tmp_path: Path, name: str, material: dict, textures: dict) -> Pat
     """A 2-wide quad facing the camera; ``textures`` maps a material path ("pbr.<key>" or an
     extension's key) to 2 x 1 RGB codes (left texel, right texel), read nearest."""
     writer = MAKE.GltfWriter()
-    material = {key: (dict(value) if isinstance(value, dict) else value)
-                for key, value in material.items()}  # fmt: skip
+    material = {
+        key: (dict(value) if isinstance(value, dict) else value) for key, value in material.items()
+    }
     for where, codes in textures.items():
         index = writer.texture(rgb_image(codes), {"magFilter": 9728})
         block, key = where.split(".")
@@ -666,8 +732,13 @@ def split_quad(tmp_path: Path, name: str, material: dict, textures: dict) -> Pat
         else:
             material["extensions"][block][key] = {"index": index}
     vertices, faces, uv = MAKE.quad(2.0)
-    writer.mesh(vertices, faces, writer.material(material), TEXCOORD_0=uv,
-                NORMAL=np.tile([0.0, 0.0, 1.0], (4, 1)))  # fmt: skip
+    writer.mesh(
+        vertices,
+        faces,
+        writer.material(material),
+        TEXCOORD_0=uv,
+        NORMAL=np.tile([0.0, 0.0, 1.0], (4, 1)),
+    )
     return write_glb(tmp_path / f"{name}.glb", writer)
 
 
@@ -689,20 +760,28 @@ radius = 0.5
 material = "lamp"
 """
     base = {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.6, 0.3, 1]}}
-    textured = split_quad(tmp_path, "mr", base, {"pbr.metallicRoughnessTexture":
-                                                 [[[0, 255, 0], [0, 51, 255]]]})  # fmt: skip
+    textured = split_quad(
+        tmp_path, "mr", base, {"pbr.metallicRoughnessTexture": [[[0, 255, 0], [0, 51, 255]]]}
+    )
     image = render_text(tmp_path, scene_text([textured], extra=extra), "mr.toml")
     scale = SIZE / (2 * 6.0 * math.tan(math.radians(15)))
-    for column, (metallic, roughness) in ((int(SIZE / 2 - 0.3 * scale), (0.0, 1.0)),
-                                          (int(SIZE / 2 + 0.3 * scale), (1.0, 0.2))):  # fmt: skip
-        constant = {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.6, 0.3, 1],
-                                             "metallicFactor": metallic,
-                                             "roughnessFactor": roughness}}  # fmt: skip
+    for column, (metallic, roughness) in (
+        (int(SIZE / 2 - 0.3 * scale), (0.0, 1.0)),
+        (int(SIZE / 2 + 0.3 * scale), (1.0, 0.2)),
+    ):
+        constant = {
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [0.9, 0.6, 0.3, 1],
+                "metallicFactor": metallic,
+                "roughnessFactor": roughness,
+            }
+        }
         glb = split_quad(tmp_path, f"constant{metallic}", constant, {})
         reference = render_text(tmp_path, scene_text([glb], extra=extra), f"c{metallic}.toml")
         np.testing.assert_allclose(image[:, column], reference[:, column], rtol=2e-5, atol=1e-6)
-    assert not np.allclose(image[:, int(SIZE / 2 - 0.3 * scale)],
-                           image[:, int(SIZE / 2 + 0.3 * scale)])  # fmt: skip
+    assert not np.allclose(
+        image[:, int(SIZE / 2 - 0.3 * scale)], image[:, int(SIZE / 2 + 0.3 * scale)]
+    )
 
 
 def test_a_transmission_texture_makes_glass_where_it_is_white(tmp_path: Path) -> None:
@@ -721,20 +800,27 @@ material = "lamp"
 
     def material(factor: float) -> dict:
         transmission = {"KHR_materials_transmission": {"transmissionFactor": factor}}
-        return {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.9, 0.9, 1],
-                                         "metallicFactor": 0.0},
-                "doubleSided": True, "extensions": transmission}  # fmt: skip
+        return {
+            "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.9, 0.9, 1], "metallicFactor": 0.0},
+            "doubleSided": True,
+            "extensions": transmission,
+        }
 
-    textured = split_quad(tmp_path, "tx", material(1.0), {
-        "KHR_materials_transmission.transmissionTexture": [[[255, 0, 0], [0, 0, 0]]]})  # fmt: skip
+    textured = split_quad(
+        tmp_path,
+        "tx",
+        material(1.0),
+        {"KHR_materials_transmission.transmissionTexture": [[[255, 0, 0], [0, 0, 0]]]},
+    )
     image = render_text(tmp_path, scene_text([textured], extra=extra), "tx.toml")
     scale = SIZE / (2 * 6.0 * math.tan(math.radians(15)))
     left, right = int(SIZE / 2 - 0.3 * scale), int(SIZE / 2 + 0.3 * scale)
     for column, factor in ((left, 1.0), (right, 0.0)):
         glb = split_quad(tmp_path, f"plain{factor}", material(factor), {})
         reference = render_text(tmp_path, scene_text([glb], extra=extra), f"p{factor}.toml")
-        np.testing.assert_allclose(image[SIZE // 2, column], reference[SIZE // 2, column],
-                                   rtol=2e-5, atol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(
+            image[SIZE // 2, column], reference[SIZE // 2, column], rtol=2e-5, atol=1e-6
+        )
     assert not np.allclose(image[SIZE // 2, left], image[SIZE // 2, right])
 
 

@@ -125,8 +125,13 @@ def test_a_newline_in_a_key_or_a_file_name_stays_on_one_line(tmp_path: Path) -> 
 
 
 def _run(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "embree_rt", *args], capture_output=True,
-                          text=True, timeout=300, cwd=cwd)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "embree_rt", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=cwd,
+    )
 
 
 def test_the_command_says_one_line_and_exits_2_for_a_parser_limit(tmp_path: Path) -> None:

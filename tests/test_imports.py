@@ -108,9 +108,12 @@ def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path
         "print(sorted(m for m in sys.modules if m.split('.')[0] == 'trimesh'))\n"
     )
     done = subprocess.run(
-        [sys.executable, "-c", script], cwd=PACKAGE.parent, capture_output=True, text=True,
+        [sys.executable, "-c", script],
+        cwd=PACKAGE.parent,
+        capture_output=True,
+        text=True,
         check=False,
-    )  # fmt: skip
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
     assert (tmp_path / "out.png").is_file() and (tmp_path / "three.png").is_file()

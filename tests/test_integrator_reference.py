@@ -189,8 +189,9 @@ class ReferenceTracer:
 def primary(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """The integrator's own camera rays for the image (seed 5, one sample a pixel), as (n, 3)
     float64 origins and unit directions."""
-    origins, directions, _ = primary_rays(camera_frame(scene.camera, WIDTH, HEIGHT), 1, 5, 0,
-                                          WIDTH * HEIGHT)  # fmt: skip
+    origins, directions, _ = primary_rays(
+        camera_frame(scene.camera, WIDTH, HEIGHT), 1, 5, 0, WIDTH * HEIGHT
+    )
     directions = directions.T.astype(float)
     return origins.T.astype(float), directions / np.linalg.norm(directions, axis=1)[:, None]
 

@@ -83,8 +83,9 @@ def test_a_missing_texture_is_listed_where_it_would_be_read(tmp_path: Path) -> N
     obj = _textured_obj(tmp_path)
     (tmp_path / "quadrants.png").unlink()
     assert companion_files(obj) == [
-        (tmp_path / "cube.mtl").resolve(), (tmp_path / "quadrants.png").resolve()
-    ]  # fmt: skip
+        (tmp_path / "cube.mtl").resolve(),
+        (tmp_path / "quadrants.png").resolve(),
+    ]
 
 
 def test_a_gltf_names_its_external_buffers_and_images_not_its_data_uris(tmp_path: Path) -> None:
@@ -98,8 +99,10 @@ def test_a_gltf_names_its_external_buffers_and_images_not_its_data_uris(tmp_path
     inline = "data:image/png;base64," + base64.b64encode(png).decode()
     tree["images"] = [{"uri": "look.png"}, {"uri": inline}]
     tree["textures"] = [{"source": 0}, {"source": 1}]
-    tree["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}},
-                         {"emissiveTexture": {"index": 1}}]  # fmt: skip
+    tree["materials"] = [
+        {"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}},
+        {"emissiveTexture": {"index": 1}},
+    ]
     tree["meshes"][0]["primitives"][0]["material"] = 0
     gltf = tmp_path / "box.gltf"
     gltf.write_text(json.dumps(tree))
@@ -110,8 +113,9 @@ def test_a_gltf_names_its_external_buffers_and_images_not_its_data_uris(tmp_path
     assert companion_files(gltf) == expected
 
 
-@pytest.mark.parametrize("name", ["quadrant_cube.glb", "painted_ball.ply", "capsule.stl",
-                                  "cone.off", "torus.obj"])  # fmt: skip
+@pytest.mark.parametrize(
+    "name", ["quadrant_cube.glb", "painted_ball.ply", "capsule.stl", "cone.off", "torus.obj"]
+)
 def test_self_contained_meshes_name_nothing(name: str) -> None:
     assert files_trimesh_reads(ASSETS / name) == []
     assert companion_files(ASSETS / name) == []

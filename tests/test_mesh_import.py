@@ -385,14 +385,17 @@ def test_a_tiny_uniform_scale_on_a_node_scaled_gltf_loads_and_traces(
     "entry, node_scale, key",
     [
         ("scale = [1.0, 1.0, 1e-9]", 1.0, "meshes[0].scale"),
-        ("transform = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1e-9, 0], [0, 0, 0, 1]]", 1.0,
-         "meshes[0].transform"),
+        (
+            "transform = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1e-9, 0], [0, 0, 0, 1]]",
+            1.0,
+            "meshes[0].transform",
+        ),
         # each flattens by 1e-4, well conditioned on its own; together by 1e-8
         ("scale = [1.0, 1.0, 1e-4]", [1.0, 1.0, 1e-4], "meshes[0].scale"),
         ("scale = 2.0", [1.0, 1.0, 1e-9], "meshes[0].file"),  # the file's own node
     ],
     ids=["scale", "transform", "scale with the node", "node"],
-)  # fmt: skip
+)
 def test_a_singular_placement_names_the_key_that_makes_it(
     tmp_path: Path, entry: str, node_scale, key: str
 ) -> None:

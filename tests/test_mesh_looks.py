@@ -108,8 +108,9 @@ def lit_quadrant_colors(factor=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
 
 def assert_quadrants(image: np.ndarray, expected: list[np.ndarray]) -> None:
     for pixels, want in zip(quadrant_pixels(image), expected, strict=True):
-        np.testing.assert_allclose(pixels, np.broadcast_to(want, pixels.shape), rtol=1e-5,
-                                   atol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(
+            pixels, np.broadcast_to(want, pixels.shape), rtol=1e-5, atol=1e-6
+        )
 
 
 # -- base-colour textures ------------------------------------------------------------------------
@@ -191,9 +192,11 @@ def test_a_smooth_metal_mirrors_the_sky_tinted_by_its_texture(tmp_path: Path) ->
     )
     path = tmp_path / "chrome.glb"
     trimesh.Trimesh(
-        vertices, faces, visual=trimesh.visual.TextureVisuals(uv=uv, material=material),
+        vertices,
+        faces,
+        visual=trimesh.visual.TextureVisuals(uv=uv, material=material),
         process=False,
-    ).export(path)  # fmt: skip
+    ).export(path)
     sky = np.array([0.3, 0.5, 0.9])
     image = render_file(
         write_scene(tmp_path / "s.toml", f'[[meshes]]\nfile = "{path}"\n', lights=False, sky=sky)

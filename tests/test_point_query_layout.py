@@ -71,10 +71,17 @@ def _scene():
 def _run(bvh, point, radius, stack=False):
     scratch = np.zeros(point_query.SCRATCH_WORDS, np.uint32)
     log = np.zeros(1 + _RECORD * _CALLS, np.float64)
-    b = _query(bvh.scene_address(), scratch, *np.float32(point), np.float32(radius),
-               _record.address, log, stack)  # fmt: skip
+    b = _query(
+        bvh.scene_address(),
+        scratch,
+        *np.float32(point),
+        np.float32(radius),
+        _record.address,
+        log,
+        stack,
+    )
     calls = int(log[0])
-    records = log[1:1 + _RECORD * min(calls, _CALLS)].reshape(-1, _RECORD)
+    records = log[1 : 1 + _RECORD * min(calls, _CALLS)].reshape(-1, _RECORD)
     return calls, records, records.view(np.uint64), scratch.ctypes.data + 4 * b, log
 
 

@@ -29,8 +29,10 @@ def _brute_force(mesh: trimesh.Trimesh, points: np.ndarray):
 
 def _tetrahedron() -> trimesh.Trimesh:
     """trimesh's test_acute_edge_case: a tetrahedron with a sharp edge (vertices 0-1)."""
-    return trimesh.Trimesh([[-1, 0.5, 0], [1, 0.5, 0], [0, -1, -0.5], [0, -1, 0.5]],
-                           [[0, 1, 2], [0, 2, 3], [0, 3, 1], [3, 2, 1]])  # fmt: skip
+    return trimesh.Trimesh(
+        [[-1, 0.5, 0], [1, 0.5, 0], [0, -1, -0.5], [0, -1, 0.5]],
+        [[0, 1, 2], [0, 2, 3], [0, 3, 1], [3, 2, 1]],
+    )
 
 
 def _meshes(scale: float, offset=(1000.0, -700.0, 300.0)):
@@ -38,8 +40,7 @@ def _meshes(scale: float, offset=(1000.0, -700.0, 300.0)):
     by ``offset`` times their size (1000: a frame at the origin would lose precision)."""
     shapes = (trimesh.creation.icosphere(2), trimesh.creation.box([1.0, 2.0, 0.5]), _tetrahedron())
     # process=False: trimesh's vertex merging hashes coordinates to int64, which overflows at 1e11
-    return [trimesh.Trimesh((m.vertices + offset) * scale, m.faces, process=False)
-            for m in shapes]  # fmt: skip
+    return [trimesh.Trimesh((m.vertices + offset) * scale, m.faces, process=False) for m in shapes]
 
 
 def _query_points(mesh: trimesh.Trimesh, seed: int) -> np.ndarray:
@@ -67,8 +68,9 @@ def test_on_surface_matches_brute_force(scale):
         np.testing.assert_allclose(distance, distances.min(axis=1), rtol=0, atol=tolerance)
         np.testing.assert_allclose(distances[rows, triangle], distance, rtol=0, atol=tolerance)
         np.testing.assert_allclose(closest, candidates[rows, triangle], rtol=0, atol=tolerance)
-        np.testing.assert_allclose(np.linalg.norm(points - closest, axis=1), distance, rtol=0,
-                                   atol=tolerance)  # fmt: skip
+        np.testing.assert_allclose(
+            np.linalg.norm(points - closest, axis=1), distance, rtol=0, atol=tolerance
+        )
         # and far tighter than asked: float64 relative to the mesh, not to the origin
         assert np.abs(distance - distances.min(axis=1)).max() <= 1e-12 * mesh.scale * 100
 
@@ -111,8 +113,11 @@ def test_on_surface_matches_trimesh(scale, offset):
 def _ambiguous(scale: float) -> tuple[trimesh.Trimesh, np.ndarray]:
     """trimesh's test_returns_correct_point_in_ambiguous_cases, at ``scale``: the point is
     nearer face 0 by 1e-9 sizes, but lies along face 1's normal."""
-    mesh = trimesh.Trimesh(np.array([[0.0, 0, 0], [0, 1, 0], [-1, 0, 0], [0, 0, -1]]) * scale,
-                           [[0, 1, 2], [0, 1, 3]], process=False)  # fmt: skip
+    mesh = trimesh.Trimesh(
+        np.array([[0.0, 0, 0], [0, 1, 0], [-1, 0, 0], [0, 0, -1]]) * scale,
+        [[0, 1, 2], [0, 1, 3]],
+        process=False,
+    )
     return mesh, np.array([[-0.25 - 1e-9, 0.0, -0.25]]) * scale
 
 
@@ -189,7 +194,9 @@ def test_answers_do_not_depend_on_batching():
     points = _query_points(mesh, 3)
     points = np.vstack([points] * 8)
     whole = ProximityQuery(mesh).on_surface(points)
-    parts = [ProximityQuery(mesh).on_surface(points[i:i + 100]) for i in range(0, len(points), 100)]
+    parts = [
+        ProximityQuery(mesh).on_surface(points[i : i + 100]) for i in range(0, len(points), 100)
+    ]
     for k in range(3):
         np.testing.assert_array_equal(whole[k], np.concatenate([p[k] for p in parts]))
 

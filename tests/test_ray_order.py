@@ -36,10 +36,12 @@ def test_entry_keys_follow_where_rays_enter_the_box():
     lower, upper = np.zeros(3), np.array([2.0, 1.0, 0.0])  # flat along z
     cells = box_cells(lower, upper)
     assert cells.tolist() == [1023 / 2, 1023.0, 0.0]
-    origins = np.array([[-1.0, 0.0, 0.0], [-1.0, 1.0, 0.0], [1.0, 0.5, 0.0], [5.0, 5.0, 5.0],
-                        [np.nan, 0.0, 0.0]])  # fmt: skip
-    directions = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0],
-                           [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])  # fmt: skip
+    origins = np.array(
+        [[-1.0, 0.0, 0.0], [-1.0, 1.0, 0.0], [1.0, 0.5, 0.0], [5.0, 5.0, 5.0], [np.nan, 0.0, 0.0]]
+    )
+    directions = np.array(
+        [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+    )
     keys = _keys(origins, directions, lower, upper, cells)
     # entering at (0, 0, 0) and (0, 1, 0): y's top cell spread to every third bit from bit 1;
     # starting inside at (1, 0.5): its own cell; missing: its origin clamped to (2, 1, 0)
@@ -47,8 +49,9 @@ def test_entry_keys_follow_where_rays_enter_the_box():
     assert keys[0] == 0
     assert keys[1] == spread << 1
     x, y = int(1.0 * 1023 / 2), int(0.5 * 1023)
-    assert keys[2] == sum(((x >> b) & 1) << (3 * b) | ((y >> b) & 1) << (3 * b + 1)
-                          for b in range(10))  # fmt: skip
+    assert keys[2] == sum(
+        ((x >> b) & 1) << (3 * b) | ((y >> b) & 1) << (3 * b + 1) for b in range(10)
+    )
     assert keys[3] == spread | spread << 1
     assert keys[4] <= 0x3FFF_FFFF  # a non-finite ray gets some key, and the caller refuses it
 
@@ -63,8 +66,13 @@ def test_first_hits_in_the_traced_order_equal_those_in_the_given_order(scale, mo
     rng = np.random.default_rng(11)
     # half the rays aimed at vertices and edge midpoints (suspect hits, decided in float64),
     # half at random points
-    targets = np.vstack([mesh.vertices[:300], mesh.vertices[mesh.edges_unique[:300]].mean(1),
-                         rng.uniform(-scale, scale, (600, 3))])  # fmt: skip
+    targets = np.vstack(
+        [
+            mesh.vertices[:300],
+            mesh.vertices[mesh.edges_unique[:300]].mean(1),
+            rng.uniform(-scale, scale, (600, 3)),
+        ]
+    )
     start = rng.normal(size=(len(targets), 3))
     origins = 3 * scale * start / np.linalg.norm(start, axis=1)[:, None]
     directions = targets - origins
@@ -74,16 +82,28 @@ def test_first_hits_in_the_traced_order_equal_those_in_the_given_order(scale, mo
     monkeypatch.setattr(local_scene, "REORDER_FACES", 1 << 40)
     given_first = RayMeshIntersector(mesh)
     assert scene.bounds is not None and given_first._scene.bounds is None
-    screen = dict(shift=scene.origin, scale=scene.scale, extent=scene.extent, near=None,
-                  near_ulps=16.0, altitude=scene.min_altitude,
-                  floor_altitude=scene.floor_altitude, band_ulps=8.0, graze=1e-3,
-                  near_factor=4.0)  # fmt: skip
-    prim_sorted, suspect_sorted = screened_nearest(scene.bvh, origins, directions,
-                                                   bounds=scene.bounds, **screen)
-    prim_given, suspect_given = screened_nearest(scene.bvh, origins, directions, bounds=None,
-                                                 **screen)  # fmt: skip
+    screen = dict(
+        shift=scene.origin,
+        scale=scene.scale,
+        extent=scene.extent,
+        near=None,
+        near_ulps=16.0,
+        altitude=scene.min_altitude,
+        floor_altitude=scene.floor_altitude,
+        band_ulps=8.0,
+        graze=1e-3,
+        near_factor=4.0,
+    )
+    prim_sorted, suspect_sorted = screened_nearest(
+        scene.bvh, origins, directions, bounds=scene.bounds, **screen
+    )
+    prim_given, suspect_given = screened_nearest(
+        scene.bvh, origins, directions, bounds=None, **screen
+    )
     assert suspect_given.sum() > 50  # the float64 path is exercised
     np.testing.assert_array_equal(prim_sorted, prim_given)
     np.testing.assert_array_equal(suspect_sorted, suspect_given)
-    np.testing.assert_array_equal(sorted_first.intersects_first(origins, directions),
-                                  given_first.intersects_first(origins, directions))
+    np.testing.assert_array_equal(
+        sorted_first.intersects_first(origins, directions),
+        given_first.intersects_first(origins, directions),
+    )

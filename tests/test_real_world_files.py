@@ -39,8 +39,17 @@ WIDTH, HEIGHT = 64, 48
 
 # -- writing files by hand -----------------------------------------------------------------------
 
-_COMPONENT = {np.dtype(t): code for t, code in [(np.float32, 5126), (np.uint32, 5125),
-              (np.uint16, 5123), (np.int16, 5122), (np.uint8, 5121), (np.int8, 5120)]}
+_COMPONENT = {
+    np.dtype(t): code
+    for t, code in [
+        (np.float32, 5126),
+        (np.uint32, 5125),
+        (np.uint16, 5123),
+        (np.int16, 5122),
+        (np.uint8, 5121),
+        (np.int8, 5120),
+    ]
+}
 _TYPE = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
 
 
@@ -49,8 +58,15 @@ class Gltf:
 
     def __init__(self) -> None:
         self.blob = bytearray()
-        self.tree: dict = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": []}],
-                           "nodes": [], "meshes": [], "accessors": [], "bufferViews": []}
+        self.tree: dict = {
+            "asset": {"version": "2.0"},
+            "scene": 0,
+            "scenes": [{"nodes": []}],
+            "nodes": [],
+            "meshes": [],
+            "accessors": [],
+            "bufferViews": [],
+        }
 
     def view(self, data: bytes) -> int:
         self.blob += b"\0" * (-len(self.blob) % 4)
@@ -60,15 +76,22 @@ class Gltf:
         self.blob += data
         return len(self.tree["bufferViews"]) - 1
 
-    def accessor(self, values: np.ndarray | None, count: int | None = None,
-                 dtype=np.float32, width: int | None = None, **fields) -> int:  # fmt: skip
+    def accessor(
+        self,
+        values: np.ndarray | None,
+        count: int | None = None,
+        dtype=np.float32,
+        width: int | None = None,
+        **fields,
+    ) -> int:
         """An accessor of ``values`` ((n,) or (n, k)) in a view of their own; None: no view."""
         accessor: dict = dict(fields)
         if values is not None:
             values = np.ascontiguousarray(values, dtype)
             count, width = len(values), (1 if values.ndim == 1 else values.shape[1])
-            accessor["bufferView"] = self.view(values.astype(values.dtype.newbyteorder("<"))
-                                               .tobytes())  # fmt: skip
+            accessor["bufferView"] = self.view(
+                values.astype(values.dtype.newbyteorder("<")).tobytes()
+            )
         accessor.update(componentType=_COMPONENT[np.dtype(dtype)], count=count, type=_TYPE[width])
         self.tree["accessors"].append(accessor)
         return len(self.tree["accessors"]) - 1
@@ -79,8 +102,9 @@ class Gltf:
 
     def triangles(self, vertices: np.ndarray, faces: np.ndarray) -> int:
         """A mesh of one indexed triangle primitive."""
-        position = self.accessor(vertices, min=vertices.min(axis=0).tolist(),
-                                 max=vertices.max(axis=0).tolist())  # fmt: skip
+        position = self.accessor(
+            vertices, min=vertices.min(axis=0).tolist(), max=vertices.max(axis=0).tolist()
+        )
         indices = self.accessor(np.asarray(faces).ravel(), dtype=np.uint32)
         return self.mesh({"attributes": {"POSITION": position}, "indices": indices})
 
@@ -109,15 +133,18 @@ class Gltf:
         return path
 
 
-def scene_file(tmp_path: Path, mesh: str, camera: tuple[np.ndarray, np.ndarray] | None = None,
-               extra: str = "") -> Path:  # fmt: skip
+def scene_file(
+    tmp_path: Path, mesh: str, camera: tuple[np.ndarray, np.ndarray] | None = None, extra: str = ""
+) -> Path:
     """A scene file placing ``mesh`` as it is, with no floor, seen from ``camera``
     (position, look_at)."""
     lines = ["floor = false", f"[render]\nwidth = {WIDTH}\nheight = {HEIGHT}"]
     if camera is not None:
         position, look_at = camera
-        lines.append(f"[camera]\nposition = {np.round(position, 6).tolist()}\n"
-                     f"look_at = {np.round(look_at, 6).tolist()}\nfov = 40.0")  # fmt: skip
+        lines.append(
+            f"[camera]\nposition = {np.round(position, 6).tolist()}\n"
+            f"look_at = {np.round(look_at, 6).tolist()}\nfov = 40.0"
+        )
     lines.append(f'[[meshes]]\nfile = "{mesh}"\n{extra}')
     path = tmp_path / "scene.toml"
     path.write_text("\n".join(lines) + "\n")
@@ -161,21 +188,39 @@ def test_a_draco_compressed_gltf_renders_its_decoded_triangles(tmp_path: Path) -
 
     original = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
     original.apply_scale([1.0, 0.6, 0.8])
-    encoded = DracoPy.encode(original.vertices.astype(np.float32),
-                             original.faces.astype(np.uint32), quantization_bits=14)  # fmt: skip
+    encoded = DracoPy.encode(
+        original.vertices.astype(np.float32), original.faces.astype(np.uint32), quantization_bits=14
+    )
     decoded = DracoPy.decode(encoded)  # what the file defines: the quantized points
     vertices = np.asarray(decoded.points, np.float64)
     faces = np.asarray(decoded.faces, np.int64)
-    position_id = next(a["unique_id"] for a in decoded.attributes
-                       if a["attribute_type"] == DracoPy.AttributeType.POSITION)  # fmt: skip
+    position_id = next(
+        a["unique_id"]
+        for a in decoded.attributes
+        if a["attribute_type"] == DracoPy.AttributeType.POSITION
+    )
     gltf = Gltf()
     draco_view = gltf.view(encoded)
-    position = gltf.accessor(None, count=len(vertices), width=3,
-                             min=vertices.min(axis=0).tolist(), max=vertices.max(axis=0).tolist())
+    position = gltf.accessor(
+        None,
+        count=len(vertices),
+        width=3,
+        min=vertices.min(axis=0).tolist(),
+        max=vertices.max(axis=0).tolist(),
+    )
     indices = gltf.accessor(None, count=faces.size, dtype=np.uint32, width=1)
-    gltf.mesh({"attributes": {"POSITION": position}, "indices": indices, "extensions": {
-        "KHR_draco_mesh_compression": {"bufferView": draco_view,
-                                       "attributes": {"POSITION": position_id}}}})  # fmt: skip
+    gltf.mesh(
+        {
+            "attributes": {"POSITION": position},
+            "indices": indices,
+            "extensions": {
+                "KHR_draco_mesh_compression": {
+                    "bufferView": draco_view,
+                    "attributes": {"POSITION": position_id},
+                }
+            },
+        }
+    )
     gltf.node(mesh=0, translation=[0.5, 1.0, -0.5])
     gltf.tree["extensionsUsed"] = gltf.tree["extensionsRequired"] = ["KHR_draco_mesh_compression"]
     gltf.write_glb(tmp_path / "draco.glb")
@@ -187,8 +232,9 @@ def test_a_draco_compressed_gltf_renders_its_decoded_triangles(tmp_path: Path) -
     covered = assert_pixels_match(scene, world, faces)
     assert covered > 0.1 * WIDTH * HEIGHT
     # and the decoded shape is the original to the quantization step (2 / 2^14 of the range)
-    np.testing.assert_allclose(np.sort(vertices, axis=0), np.sort(original.vertices, axis=0),
-                               atol=2.0 / 2**14 * 2)  # fmt: skip
+    np.testing.assert_allclose(
+        np.sort(vertices, axis=0), np.sort(original.vertices, axis=0), atol=2.0 / 2**14 * 2
+    )
 
 
 # -- 2. sparse accessors ---------------------------------------------------------------------------
@@ -197,8 +243,12 @@ def test_a_draco_compressed_gltf_renders_its_decoded_triangles(tmp_path: Path) -
 def strip_grid(columns: int) -> tuple[np.ndarray, np.ndarray]:
     """A flat strip of 2 x ``columns`` vertices in the y = 0 plane and its triangles."""
     x = np.linspace(-2.0, 2.0, columns)
-    vertices = np.concatenate([np.stack([x, np.zeros(columns), np.zeros(columns)], axis=1),
-                               np.stack([x, np.zeros(columns), np.ones(columns)], axis=1)])
+    vertices = np.concatenate(
+        [
+            np.stack([x, np.zeros(columns), np.zeros(columns)], axis=1),
+            np.stack([x, np.zeros(columns), np.ones(columns)], axis=1),
+        ]
+    )
     faces = [[i, i + 1, columns + i] for i in range(columns - 1)]
     faces += [[i + 1, columns + i + 1, columns + i] for i in range(columns - 1)]
     return vertices.astype(np.float32), np.array(faces, np.uint32)
@@ -213,16 +263,23 @@ def test_sparse_accessor_positions_are_applied(tmp_path: Path, base: str) -> Non
     raised = vertices[rows].copy()
     raised[:, 1] = [1.5, 1.0, 1.5, 1.0]
     gltf = Gltf()
-    sparse = {"count": len(rows),
-              "indices": {"bufferView": gltf.view(rows.tobytes()), "componentType": 5123},
-              "values": {"bufferView": gltf.view(raised.tobytes())}}  # fmt: skip
+    sparse = {
+        "count": len(rows),
+        "indices": {"bufferView": gltf.view(rows.tobytes()), "componentType": 5123},
+        "values": {"bufferView": gltf.view(raised.tobytes())},
+    }
     expected = vertices.astype(np.float64)
     if base == "zeros":
         expected[:] = 0.0
     expected[rows] = raised
-    position = gltf.accessor(vertices if base == "a buffer view" else None, count=len(vertices),
-                             width=3, sparse=sparse, min=expected.min(axis=0).tolist(),
-                             max=expected.max(axis=0).tolist())  # fmt: skip
+    position = gltf.accessor(
+        vertices if base == "a buffer view" else None,
+        count=len(vertices),
+        width=3,
+        sparse=sparse,
+        min=expected.min(axis=0).tolist(),
+        max=expected.max(axis=0).tolist(),
+    )
     indices = gltf.accessor(faces.ravel(), dtype=np.uint32)
     gltf.mesh({"attributes": {"POSITION": position}, "indices": indices})
     gltf.node(mesh=0)
@@ -239,8 +296,9 @@ def test_sparse_accessor_positions_are_applied(tmp_path: Path, base: str) -> Non
 
 
 @pytest.mark.parametrize("rotation_type", [np.float32, np.int16])
-def test_gpu_instancing_places_every_copy_as_an_instance_array(tmp_path: Path,
-                                                                rotation_type) -> None:  # fmt: skip
+def test_gpu_instancing_places_every_copy_as_an_instance_array(
+    tmp_path: Path, rotation_type
+) -> None:
     """Five copies of a box by TRANSLATION / ROTATION (x, y, z, w; float or normalized short) /
     SCALE, under a node that is itself moved and turned: world = node · T · R · S."""
     box = trimesh.creation.box(extents=(0.6, 0.3, 0.4))
@@ -258,14 +316,21 @@ def test_gpu_instancing_places_every_copy_as_an_instance_array(tmp_path: Path,
     gltf.triangles(box.vertices.astype(np.float32), box.faces)
     attributes = {
         "TRANSLATION": gltf.accessor(translation),
-        "ROTATION": gltf.accessor(stored, dtype=rotation_type,
-                                  **({"normalized": True} if rotation_type is np.int16 else {})),
+        "ROTATION": gltf.accessor(
+            stored,
+            dtype=rotation_type,
+            **({"normalized": True} if rotation_type is np.int16 else {}),
+        ),
         "SCALE": gltf.accessor(scale),
-    }  # fmt: skip
+    }
     node_rotation = Rotation.from_euler("y", 30, degrees=True)
     parent = gltf.node(children=[1], translation=[0.0, 1.0, 0.0])
-    gltf.node(root=False, mesh=0, rotation=node_rotation.as_quat().tolist(),
-              extensions={"EXT_mesh_gpu_instancing": {"attributes": attributes}})  # fmt: skip
+    gltf.node(
+        root=False,
+        mesh=0,
+        rotation=node_rotation.as_quat().tolist(),
+        extensions={"EXT_mesh_gpu_instancing": {"attributes": attributes}},
+    )
     assert parent == 0
     gltf.tree["extensionsUsed"] = ["EXT_mesh_gpu_instancing"]
     gltf.write_glb(tmp_path / "copies.glb")
@@ -315,9 +380,13 @@ def test_a_required_extension_we_cannot_honour_refuses_the_file(tmp_path: Path) 
 
 def test_an_optional_extension_we_ignore_is_one_warning_line(tmp_path: Path) -> None:
     gltf = box_gltf()
-    gltf.tree["extensionsUsed"] = ["KHR_materials_sheen", "GOOGLE_texture_basis",
-                                   "KHR_texture_transform", "EXT_mesh_gpu_instancing",
-                                   "KHR_materials_clearcoat"]  # fmt: skip
+    gltf.tree["extensionsUsed"] = [
+        "KHR_materials_sheen",
+        "GOOGLE_texture_basis",
+        "KHR_texture_transform",
+        "EXT_mesh_gpu_instancing",
+        "KHR_materials_clearcoat",
+    ]
     gltf.write_glb(tmp_path / "optional.glb")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -354,10 +423,17 @@ def reference_strip_faces(strips: list[list[int]]) -> np.ndarray:
 
 
 def strip_ply(path: Path, vertices: np.ndarray, strips: list[list[int]], binary: bool) -> Path:
-    header = ["ply", f"format {'binary_little_endian' if binary else 'ascii'} 1.0",
-              f"element vertex {len(vertices)}", "property float x", "property float y",
-              "property float z", f"element tristrips {len(strips)}",
-              "property list int int vertex_indices", "end_header"]  # fmt: skip
+    header = [
+        "ply",
+        f"format {'binary_little_endian' if binary else 'ascii'} 1.0",
+        f"element vertex {len(vertices)}",
+        "property float x",
+        "property float y",
+        "property float z",
+        f"element tristrips {len(strips)}",
+        "property list int int vertex_indices",
+        "end_header",
+    ]
     if binary:
         body = np.asarray(vertices, "<f4").tobytes()
         for strip in strips:
@@ -384,8 +460,9 @@ def test_ply_triangle_strips_are_decoded(tmp_path: Path, binary: bool) -> None:
     path = strip_ply(tmp_path / "strips.ply", vertices, strips, binary)
     faces = reference_strip_faces(strips)
     assert len(faces) == 4 * 2 * (n - 1)
-    normals = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
-                       vertices[faces[:, 2]] - vertices[faces[:, 0]])  # fmt: skip
+    normals = np.cross(
+        vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]
+    )
     assert (np.sign(normals[:, 1]) == np.sign(normals[0, 1])).all()  # one winding throughout
 
     scene = load_scene(scene_file(tmp_path, path.name, camera_on(vertices)))
@@ -395,14 +472,20 @@ def test_ply_triangle_strips_are_decoded(tmp_path: Path, binary: bool) -> None:
     assert assert_pixels_match(scene, vertices.astype(np.float64), faces) > 0.1 * WIDTH * HEIGHT
 
 
-@pytest.mark.parametrize("element, needle", [
-    ("element edge 1\nproperty int vertex1\nproperty int vertex2\n", "element 'edge'"),
-    ("", "only vertices (a point cloud)"),
-])  # fmt: skip
-def test_a_ply_without_triangles_says_which_element(tmp_path: Path, element: str,
-                                                    needle: str) -> None:  # fmt: skip
-    text = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-            f"property float z\n{element}end_header\n0 0 0\n1 0 0\n0 1 0\n")  # fmt: skip
+@pytest.mark.parametrize(
+    "element, needle",
+    [
+        ("element edge 1\nproperty int vertex1\nproperty int vertex2\n", "element 'edge'"),
+        ("", "only vertices (a point cloud)"),
+    ],
+)
+def test_a_ply_without_triangles_says_which_element(
+    tmp_path: Path, element: str, needle: str
+) -> None:
+    text = (
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        f"property float z\n{element}end_header\n0 0 0\n1 0 0\n0 1 0\n"
+    )
     text += "0 1\n" if element else ""
     (tmp_path / "odd.ply").write_text(text)
     with pytest.raises(SceneError) as caught:
@@ -417,10 +500,13 @@ def test_an_obj_with_uvs_and_no_material_keeps_the_default_look(tmp_path: Path) 
     box = trimesh.creation.box()
     plain = "".join(f"v {x} {y} {z}\n" for x, y, z in box.vertices)
     uv = plain + "".join(f"vt {u} {v}\n" for u, v in np.random.default_rng(1).random((8, 2)))
-    (tmp_path / "plain.obj").write_text(plain + "".join(
-        f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in box.faces))  # fmt: skip
-    (tmp_path / "uv.obj").write_text(uv + "".join(
-        f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}\n" for a, b, c in box.faces))
+    (tmp_path / "plain.obj").write_text(
+        plain + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in box.faces)
+    )
+    (tmp_path / "uv.obj").write_text(
+        uv
+        + "".join(f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}\n" for a, b, c in box.faces)
+    )
     with_uv = load_scene(scene_file(tmp_path, "uv.obj"))
     (placed,) = with_uv.meshes
     assert mesh_material(placed.mesh) is None and mesh_surface(placed.mesh) is None
@@ -441,9 +527,13 @@ def test_mtl_texture_names_with_backslashes_are_found(tmp_path: Path, written: s
     image = Image.fromarray(np.random.default_rng(2).integers(0, 256, (8, 8, 3), np.uint8))
     image.save(folder / "Tex.png")
     box = trimesh.creation.box()
-    lines = ["mtllib box.mtl", *(f"v {x} {y} {z}" for x, y, z in box.vertices),
-             *(f"vt {u} {v}" for u, v in np.random.default_rng(1).random((8, 2))), "usemtl skin",
-             *(f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in box.faces)]
+    lines = [
+        "mtllib box.mtl",
+        *(f"v {x} {y} {z}" for x, y, z in box.vertices),
+        *(f"vt {u} {v}" for u, v in np.random.default_rng(1).random((8, 2))),
+        "usemtl skin",
+        *(f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in box.faces),
+    ]
     (tmp_path / "box.obj").write_text("\n".join(lines) + "\n")
     (tmp_path / "box.mtl").write_text(f"newmtl skin\nKd 1 1 1\nmap_Kd {written}\n")
     with warnings.catch_warnings(record=True) as caught:
@@ -475,16 +565,22 @@ def test_a_missing_gltf_image_is_one_warning_naming_its_key(tmp_path: Path) -> N
 
 def test_a_missing_mtl_texture_is_one_warning_naming_map_kd(tmp_path: Path) -> None:
     box = trimesh.creation.box()
-    lines = ["mtllib box.mtl", *(f"v {x} {y} {z}" for x, y, z in box.vertices), "vt 0 0",
-             "usemtl skin", *(f"f {a + 1}/1 {b + 1}/1 {c + 1}/1" for a, b, c in box.faces)]
+    lines = [
+        "mtllib box.mtl",
+        *(f"v {x} {y} {z}" for x, y, z in box.vertices),
+        "vt 0 0",
+        "usemtl skin",
+        *(f"f {a + 1}/1 {b + 1}/1 {c + 1}/1" for a, b, c in box.faces),
+    ]
     (tmp_path / "box.obj").write_text("\n".join(lines) + "\n")
     (tmp_path / "box.mtl").write_text("newmtl skin\nKd 0.5 0.5 0.5\nmap_Kd skin.jpg\n")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         load_scene(scene_file(tmp_path, "box.obj"))
     (line,) = warning_lines(caught)
-    assert line.startswith(f"{tmp_path / 'box.mtl'}: map_Kd (material 'skin'): no such file "
-                           "'skin.jpg'")  # fmt: skip
+    assert line.startswith(
+        f"{tmp_path / 'box.mtl'}: map_Kd (material 'skin'): no such file 'skin.jpg'"
+    )
 
 
 def test_a_missing_buffer_names_the_file_and_the_key(tmp_path: Path) -> None:
@@ -493,8 +589,9 @@ def test_a_missing_buffer_names_the_file_and_the_key(tmp_path: Path) -> None:
     with pytest.raises(SceneError) as caught:
         load_scene(scene)
     message = str(caught.value)
-    assert message.startswith(f"{scene}: meshes[0].file: {path}: buffers[0].uri: no such file "
-                              "'split.bin'")  # fmt: skip
+    assert message.startswith(
+        f"{scene}: meshes[0].file: {path}: buffers[0].uri: no such file 'split.bin'"
+    )
     from embree_rt.cli import main
 
     output = tmp_path / "out.png"
@@ -517,8 +614,11 @@ def in_view(camera, width: int, height: int, points: np.ndarray) -> np.ndarray:
     d = points - position
     depth = d @ forward
     half = np.tan(np.radians(camera.fov) / 2)
-    return (depth > 0) & (np.abs(d @ up) < half * depth) & (
-        np.abs(d @ right) < half * width / height * depth)  # fmt: skip
+    return (
+        (depth > 0)
+        & (np.abs(d @ up) < half * depth)
+        & (np.abs(d @ right) < half * width / height * depth)
+    )
 
 
 def test_a_gltf_renders_from_its_own_camera_under_its_own_lights(tmp_path: Path) -> None:
@@ -529,17 +629,26 @@ def test_a_gltf_renders_from_its_own_camera_under_its_own_lights(tmp_path: Path)
     gltf.node(children=[2], translation=[0.5, 0.0, 0.0], rotation=turn.as_quat().tolist())
     tilt = Rotation.from_euler("x", -15, degrees=True)
     gltf.node(root=False, camera=0, translation=[0.0, 1.2, 4.0], rotation=tilt.as_quat().tolist())
-    gltf.tree["cameras"] = [{"type": "perspective",
-                             "perspective": {"yfov": 0.6, "aspectRatio": 2.0, "znear": 0.1}}]
+    gltf.tree["cameras"] = [
+        {"type": "perspective", "perspective": {"yfov": 0.6, "aspectRatio": 2.0, "znear": 0.1}}
+    ]
     down = Rotation.from_euler("x", -90, degrees=True)  # -z turned to point down
     gltf.node(translation=[0.0, 3.0, 0.0], extensions={"KHR_lights_punctual": {"light": 0}})
-    gltf.node(translation=[2.0, 2.0, 0.0], rotation=down.as_quat().tolist(),
-              extensions={"KHR_lights_punctual": {"light": 1}})
+    gltf.node(
+        translation=[2.0, 2.0, 0.0],
+        rotation=down.as_quat().tolist(),
+        extensions={"KHR_lights_punctual": {"light": 1}},
+    )
     gltf.node(rotation=down.as_quat().tolist(), extensions={"KHR_lights_punctual": {"light": 2}})
-    gltf.tree["extensions"] = {"KHR_lights_punctual": {"lights": [
-        {"type": "point", "intensity": 90.0, "color": [1.0, 0.5, 0.25]},
-        {"type": "spot", "intensity": 80.0, "spot": {"outerConeAngle": 0.5}},
-        {"type": "directional", "intensity": 5.0}]}}  # fmt: skip
+    gltf.tree["extensions"] = {
+        "KHR_lights_punctual": {
+            "lights": [
+                {"type": "point", "intensity": 90.0, "color": [1.0, 0.5, 0.25]},
+                {"type": "spot", "intensity": 80.0, "spot": {"outerConeAngle": 0.5}},
+                {"type": "directional", "intensity": 5.0},
+            ]
+        }
+    }
     gltf.tree["extensionsUsed"] = ["KHR_lights_punctual"]
     box_vertices = np.asarray(gltf_box_vertices(gltf))
     path = gltf.write_glb(tmp_path / "staged.glb")

@@ -186,9 +186,15 @@ def test_analytic_and_tessellated_spheres_render_nearly_the_same_image() -> None
 
 @pytest.mark.parametrize(
     "total, batch_size, spp, workers",
-    [(2073600, 262144, 1, 2), (2073600 * 8, 262144, 8, 2), (100 * 4, 30, 4, 3), (10, 262144, 1, 2),
-     (2073600, 262144, 1, 1), (7 * 9, 1, 9, 4)],
-)  # fmt: skip
+    [
+        (2073600, 262144, 1, 2),
+        (2073600 * 8, 262144, 8, 2),
+        (100 * 4, 30, 4, 3),
+        (10, 262144, 1, 2),
+        (2073600, 262144, 1, 1),
+        (7 * 9, 1, 9, 4),
+    ],
+)
 def test_batches_tile_the_samples_in_whole_pixels(total, batch_size, spp, workers) -> None:
     batches = batch_ranges(total, batch_size, spp, workers)
     starts = [start for start, _ in batches]

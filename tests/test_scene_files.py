@@ -204,10 +204,15 @@ def test_scene_file_equals_the_scene_built_in_python(tmp_path: Path) -> None:
     built.add_material(
         "plain",
         Material(
-            diffuse=0.5, ambient=0.2, shininess=12.0, specular=0.25, reflectivity=0.125,
-            metallic=True, color=PRESETS["matte"].color,
+            diffuse=0.5,
+            ambient=0.2,
+            shininess=12.0,
+            specular=0.25,
+            reflectivity=0.125,
+            metallic=True,
+            color=PRESETS["matte"].color,
         ),
-    )  # fmt: skip
+    )
     built.add_sphere((0, 1, 0), 1.0, "dense_glass")
     built.add_sphere((-2, 0.5, 1), 0.5, "red_metal")
     built.add_sphere((2, 0.25, 1), 0.25)
@@ -380,9 +385,14 @@ def _objects(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
 
 def test_the_shipped_scenes_are_the_five_of_the_issue_textured_meshes_and_gltf_materials() -> None:
     assert [p.name for p in SCENES] == [
-        "gltf_materials.toml", "material_spectrum.toml", "mesh_and_spheres.toml",
-        "random_field.toml", "showcase.toml", "textured_meshes.toml", "three_spheres.toml",
-    ]  # fmt: skip
+        "gltf_materials.toml",
+        "material_spectrum.toml",
+        "mesh_and_spheres.toml",
+        "random_field.toml",
+        "showcase.toml",
+        "textured_meshes.toml",
+        "three_spheres.toml",
+    ]
 
 
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
@@ -898,10 +908,17 @@ def test_a_bad_file_never_escapes_as_another_exception(tmp_path: Path) -> None:
     rng = np.random.default_rng(0)
     values = [None, True, -1, 0, 1.5, float("nan"), "x", [], [1], [1, 2, "a"], {}, {"a": 1}]
     slots = [
-        ("render", "width"), ("camera", "position"), ("camera", "fov"), ("background", "zenith"),
-        ("floor", "size"), ("floor", "color_a"), ("random_field", "count"),
-        ("random_field", "radius"), ("random_field", "mix"), ("materials", "red"),
-    ]  # fmt: skip
+        ("render", "width"),
+        ("camera", "position"),
+        ("camera", "fov"),
+        ("background", "zenith"),
+        ("floor", "size"),
+        ("floor", "color_a"),
+        ("random_field", "count"),
+        ("random_field", "radius"),
+        ("random_field", "mix"),
+        ("materials", "red"),
+    ]
     for section, key in slots:
         for value in values:
             document = {section: {key: value}}
@@ -1021,9 +1038,17 @@ def test_assets_are_what_make_assets_makes_one_per_format(tmp_path: Path) -> Non
     # and the meshes with looks of their own, which tests/test_mesh_looks.py checks, the glTF
     # material gallery (tests/test_gltf_materials.py) and still_life.glb
     # (tests/test_real_world_files.py)
-    looks = ["gltf_materials.glb", "node_scaled.glb", "painted_ball.ply", "quadrant_cube.glb",
-             "quadrant_cube.mtl", "quadrant_cube.obj", "quadrants.png", "still_life.glb",
-             "zero_normals.obj"]  # fmt: skip
+    looks = [
+        "gltf_materials.glb",
+        "node_scaled.glb",
+        "painted_ball.ply",
+        "quadrant_cube.glb",
+        "quadrant_cube.mtl",
+        "quadrant_cube.obj",
+        "quadrants.png",
+        "still_life.glb",
+        "zero_normals.obj",
+    ]
     assert on_disk == sorted([*expected, *looks])
     document = {"floor": False, "meshes": [{"file": str(ROOT / "assets" / n)} for n in expected]}
     (tmp_path / "assets.json").write_text(json.dumps(document))

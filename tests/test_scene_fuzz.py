@@ -22,11 +22,43 @@ from hypothesis import strategies as st
 from embree_rt import load_scene, render
 from embree_rt.scene import SceneError
 
-NAMES = ["box.obj", "far.obj", "spheres.npz", "huge.npz", "placements.npz", "missing.obj",
-         "a\nb.obj", "a\x00b.npz", "../spheres.npz", "", "box.fbx"]  # fmt: skip
+NAMES = [
+    "box.obj",
+    "far.obj",
+    "spheres.npz",
+    "huge.npz",
+    "placements.npz",
+    "missing.obj",
+    "a\nb.obj",
+    "a\x00b.npz",
+    "../spheres.npz",
+    "",
+    "box.fbx",
+]
 MATERIALS = ["matte", "glass", "mirror", "metal", "red", "nope", ""]
-HOSTILE = [0, -1, 1, 0.5, 180, 1e-7, 1e-18, 1e-320, 1e6, 2e6, 1e10, 1e39, -1e39, 1e308,
-           math.nan, math.inf, -math.inf, 2**63, 2**64, 10**400, -(10**400)]  # fmt: skip
+HOSTILE = [
+    0,
+    -1,
+    1,
+    0.5,
+    180,
+    1e-7,
+    1e-18,
+    1e-320,
+    1e6,
+    2e6,
+    1e10,
+    1e39,
+    -1e39,
+    1e308,
+    math.nan,
+    math.inf,
+    -math.inf,
+    2**63,
+    2**64,
+    10**400,
+    -(10**400),
+]
 
 numbers = st.one_of(
     st.sampled_from(HOSTILE),
@@ -57,17 +89,25 @@ def mostly(plausible: st.SearchStrategy, hostile: st.SearchStrategy) -> st.Searc
 
 PLAUSIBLE = {
     **dict.fromkeys(["position", "look_at", "up", "center", "translate", "rotate"], vectors),
-    **dict.fromkeys(["color", "horizon", "zenith", "color_a", "color_b"],
-                    mostly(st.lists(st.floats(0, 2), min_size=3, max_size=3), vectors)),
-    **dict.fromkeys(["radius", "intensity", "size", "height", "extent", "orbit"],
-                    mostly(st.floats(0.05, 4), numbers)),
-    **dict.fromkeys(["ambient", "diffuse", "specular", "reflectivity", "transparency"],
-                    mostly(st.floats(0, 1), numbers)),
+    **dict.fromkeys(
+        ["color", "horizon", "zenith", "color_a", "color_b"],
+        mostly(st.lists(st.floats(0, 2), min_size=3, max_size=3), vectors),
+    ),
+    **dict.fromkeys(
+        ["radius", "intensity", "size", "height", "extent", "orbit"],
+        mostly(st.floats(0.05, 4), numbers),
+    ),
+    **dict.fromkeys(
+        ["ambient", "diffuse", "specular", "reflectivity", "transparency"],
+        mostly(st.floats(0, 1), numbers),
+    ),
     "fov": mostly(st.floats(10, 120), numbers),
     "shininess": mostly(st.floats(1, 200), numbers),
     "ior": mostly(st.floats(1, 2.5), numbers),
-    **dict.fromkeys(["width", "height", "spp", "max_depth", "seed", "frames", "frame"],
-                    mostly(st.integers(1, 12), counts)),
+    **dict.fromkeys(
+        ["width", "height", "spp", "max_depth", "seed", "frames", "frame"],
+        mostly(st.integers(1, 12), counts),
+    ),
     "count": mostly(st.integers(1, 40), counts),
     **dict.fromkeys(["file", "mesh", "transforms"], st.sampled_from(NAMES)),
     **dict.fromkeys(["material", "preset"], st.sampled_from(MATERIALS)),
@@ -75,18 +115,17 @@ PLAUSIBLE = {
     "scale": st.floats(0.1, 3) | vectors | numbers,
     "transform": st.just([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
     | st.lists(st.lists(numbers, min_size=4, max_size=4), min_size=4, max_size=4),
-    "mix": st.dictionaries(st.sampled_from(["matte", "glass", "metal", "mtal"]), numbers,
-                           max_size=2),
-}  # fmt: skip
+    "mix": st.dictionaries(
+        st.sampled_from(["matte", "glass", "metal", "mtal"]), numbers, max_size=2
+    ),
+}
 
 
 def table(*keys: str, required: tuple[str, ...] = ()) -> st.SearchStrategy[dict]:
     """A table of some of ``keys`` (always the ``required`` ones) with plausible or hostile
     values, now and then a stranger."""
     values = {key: mostly(PLAUSIBLE.get(key, numbers), anything) for key in keys}
-    known = st.fixed_dictionaries(
-        {key: values.pop(key) for key in required}, optional=values
-    )  # fmt: skip
+    known = st.fixed_dictionaries({key: values.pop(key) for key in required}, optional=values)
     return mostly(
         known,
         st.builds(
@@ -97,36 +136,68 @@ def table(*keys: str, required: tuple[str, ...] = ()) -> st.SearchStrategy[dict]
     )
 
 
-MATERIAL_KEYS = ["preset", "color", "ambient", "diffuse", "specular", "reflectivity",
-                 "transparency", "shininess", "ior", "metallic"]  # fmt: skip
+MATERIAL_KEYS = [
+    "preset",
+    "color",
+    "ambient",
+    "diffuse",
+    "specular",
+    "reflectivity",
+    "transparency",
+    "shininess",
+    "ior",
+    "metallic",
+]
 documents = st.fixed_dictionaries(
     {},
     optional={
         "render": table("width", "height", "spp", "max_depth", "seed"),
         "camera": table("position", "look_at", "up", "fov"),
         "background": table("horizon", "zenith"),
-        "lights": st.lists(table("position", "color", "intensity", required=("position",)),
-                           max_size=3),
-        "materials": st.dictionaries(st.sampled_from(["red", "hot"]), table(*MATERIAL_KEYS),
-                                     max_size=2),
-        "floor": st.booleans() | table("height", "color_a", "color_b", "size", "preset",
-                                       "diffuse", "reflectivity"),
-        "spheres": st.lists(table("center", "radius", "material",
-                                  required=("center", "radius")), max_size=4),
+        "lights": st.lists(
+            table("position", "color", "intensity", required=("position",)), max_size=3
+        ),
+        "materials": st.dictionaries(
+            st.sampled_from(["red", "hot"]), table(*MATERIAL_KEYS), max_size=2
+        ),
+        "floor": st.booleans()
+        | table("height", "color_a", "color_b", "size", "preset", "diffuse", "reflectivity"),
+        "spheres": st.lists(
+            table("center", "radius", "material", required=("center", "radius")), max_size=4
+        ),
         "sphere_arrays": st.lists(table("file", "material", required=("file",)), max_size=2),
-        "meshes": st.lists(table("file", "material", "smooth", "scale", "translate", "rotate",
-                                 "transform", required=("file",)), max_size=2),
-        "instances": st.lists(table("mesh", "transforms", "material", "smooth",
-                                    required=("mesh", "transforms")), max_size=1),
-        "random_field": st.fixed_dictionaries({"count": PLAUSIBLE["count"]}, optional={
-            key: PLAUSIBLE[key] for key in ("seed", "extent", "radius", "mix", "heroes")}),
+        "meshes": st.lists(
+            table(
+                "file",
+                "material",
+                "smooth",
+                "scale",
+                "translate",
+                "rotate",
+                "transform",
+                required=("file",),
+            ),
+            max_size=2,
+        ),
+        "instances": st.lists(
+            table("mesh", "transforms", "material", "smooth", required=("mesh", "transforms")),
+            max_size=1,
+        ),
+        "random_field": st.fixed_dictionaries(
+            {"count": PLAUSIBLE["count"]},
+            optional={key: PLAUSIBLE[key] for key in ("seed", "extent", "radius", "mix", "heroes")},
+        ),
         "animation": st.fixed_dictionaries(
             {"frames": PLAUSIBLE["frames"]},
-            optional={"orbit": numbers,
-                      "keyframes": st.lists(table("frame", "position", "look_at", "fov",
-                                                  required=("frame",)), max_size=3)}),
+            optional={
+                "orbit": numbers,
+                "keyframes": st.lists(
+                    table("frame", "position", "look_at", "fov", required=("frame",)), max_size=3
+                ),
+            },
+        ),
     },
-)  # fmt: skip
+)
 
 
 def toml_text(document: dict) -> str:
@@ -170,8 +241,12 @@ def folder(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("fuzz")
     trimesh.creation.box().export(folder / "box.obj")
     (folder / "far.obj").write_text("v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n")
-    np.savez(folder / "spheres.npz", centers=[[0, 1, 0], [2, 1, 0]], radii=[1.0, 0.5],
-             materials=np.array(["glass", "mirror"]))  # fmt: skip
+    np.savez(
+        folder / "spheres.npz",
+        centers=[[0, 1, 0], [2, 1, 0]],
+        radii=[1.0, 0.5],
+        materials=np.array(["glass", "mirror"]),
+    )
     np.savez(folder / "huge.npz", centers=[[0, 1, 0], [1e308, 1, 0]], radii=[1.0, 1e-320])
     np.savez(folder / "placements.npz", positions=[[0, 0, 0], [3, 0, 0]])
     return folder
@@ -210,10 +285,13 @@ WORST = [
     ("scene.toml", '[[sphere_arrays]]\nfile = "huge.npz"'),
     ("scene.toml", '[[meshes]]\nfile = "far.obj"'),
     ("scene.toml", "[render]\nspp = 100000000000000000000000000000"),
-    ("scene.toml", "[animation]\nframes = 10\nkeyframes = [{frame = 0}, "
-                   "{frame = 9, position = [1e308, 1, 0]}]"),
+    (
+        "scene.toml",
+        "[animation]\nframes = 10\nkeyframes = [{frame = 0}, "
+        "{frame = 9, position = [1e308, 1, 0]}]",
+    ),
     ("scene.toml", "[animation]\nframes = 1000000000000\norbit = 360"),
-]  # fmt: skip
+]
 
 
 def _pin(cases):
@@ -230,9 +308,12 @@ def _pin(cases):
     deadline=None,
     derandomize=True,
     database=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
-                           HealthCheck.function_scoped_fixture],
-)  # fmt: skip
+    suppress_health_check=[
+        HealthCheck.too_slow,
+        HealthCheck.data_too_large,
+        HealthCheck.function_scoped_fixture,
+    ],
+)
 @_pin(WORST)
 @given(case=scene_texts, render_it=st.integers(0, 9).map(lambda n: n == 0))
 def test_any_document_loads_or_is_one_scene_error(folder: Path, case, render_it: bool) -> None:

@@ -65,8 +65,14 @@ def scattered(count: int, seed: int = 5) -> tuple[np.ndarray, np.ndarray, np.nda
     and squashed copies, some mirrored in the transforms form."""
     rng = np.random.default_rng(seed)
     side = int(np.ceil(np.sqrt(count)))
-    positions = np.stack([1.3 * (np.arange(count) % side) - 2.6, rng.uniform(0.3, 0.6, count),
-                          1.3 * (np.arange(count) // side) - 2.6], axis=1)  # fmt: skip
+    positions = np.stack(
+        [
+            1.3 * (np.arange(count) % side) - 2.6,
+            rng.uniform(0.3, 0.6, count),
+            1.3 * (np.arange(count) // side) - 2.6,
+        ],
+        axis=1,
+    )
     rotations = rng.uniform(-180, 180, size=(count, 3))
     scales = rng.uniform(0.5, 0.9, size=(count, 3))
     return positions, rotations, scales
@@ -75,21 +81,32 @@ def scattered(count: int, seed: int = 5) -> tuple[np.ndarray, np.ndarray, np.nda
 def write_instances_scene(folder: Path, arrays: dict, entry: str = "", mesh: Path = GEM) -> Path:
     np.savez(folder / "placements.npz", **arrays)
     scene = folder / "scene.toml"
-    scene.write_text(SCENE_HEAD + f"""
+    scene.write_text(
+        SCENE_HEAD
+        + f"""
 [[instances]]
 mesh = "{mesh}"
 transforms = "placements.npz"
 {entry}
-""")
+"""
+    )
     return scene
 
 
 def test_positions_rotations_scales_are_the_meshes_rotate_convention(tmp_path: Path):
     positions, rotations, scales = scattered(5)
     materials = np.array(["red", "matte", "red", "metal", "matte"])
-    scene = load_scene(write_instances_scene(
-        tmp_path, {"positions": positions, "rotations": rotations, "scales": scales,
-                   "materials": materials}))  # fmt: skip
+    scene = load_scene(
+        write_instances_scene(
+            tmp_path,
+            {
+                "positions": positions,
+                "rotations": rotations,
+                "scales": scales,
+                "materials": materials,
+            },
+        )
+    )
     (entry,) = scene.instances
     assert len(entry) == 5
     names = np.asarray(scene.material_names)[entry.materials]
@@ -97,8 +114,10 @@ def test_positions_rotations_scales_are_the_meshes_rotate_convention(tmp_path: P
     # the same placement written as a [[meshes]] entry
     lines = [SCENE_HEAD]
     for p, r, s in zip(positions, rotations, scales, strict=True):
-        lines.append(f'[[meshes]]\nfile = "{GEM}"\ntranslate = {p.tolist()}\n'
-                     f"rotate = {r.tolist()}\nscale = {s.tolist()}\n")  # fmt: skip
+        lines.append(
+            f'[[meshes]]\nfile = "{GEM}"\ntranslate = {p.tolist()}\n'
+            f"rotate = {r.tolist()}\nscale = {s.tolist()}\n"
+        )
     (tmp_path / "meshes.toml").write_text("\n".join(lines))
     meshes = load_scene(tmp_path / "meshes.toml")
     expected = np.stack([m.transform for m in meshes.meshes])
@@ -107,8 +126,9 @@ def test_positions_rotations_scales_are_the_meshes_rotate_convention(tmp_path: P
 
 def test_one_material_or_the_files_look(tmp_path: Path):
     positions, _, _ = scattered(4)
-    scene = load_scene(write_instances_scene(tmp_path, {"positions": positions},
-                                             'material = "red"'))  # fmt: skip
+    scene = load_scene(
+        write_instances_scene(tmp_path, {"positions": positions}, 'material = "red"')
+    )
     assert scene.instances[0].materials.tolist() == [scene.material_index("red")] * 4
     assert not scene.instances[0].mesh_colors
     looks = load_scene(write_instances_scene(tmp_path, {"positions": positions}))
@@ -119,8 +139,11 @@ def test_scene_save_writes_the_placements_back(tmp_path: Path):
     positions, rotations, scales = scattered(7)
     transforms = placement_matrices(positions, rotations, scales)
     transforms[2, :3, 0] *= -1  # a mirrored copy
-    scene = load_scene(write_instances_scene(tmp_path, {"transforms": transforms},
-                                             'material = "red"\nsmooth = false'))  # fmt: skip
+    scene = load_scene(
+        write_instances_scene(
+            tmp_path, {"transforms": transforms}, 'material = "red"\nsmooth = false'
+        )
+    )
     save_scene(scene, tmp_path / "saved.toml")
     assert (tmp_path / "saved.instances0.npz").is_file()
     again = load_scene(tmp_path / "saved.toml")
@@ -139,25 +162,39 @@ def _pickled() -> dict:
 BAD_PLACEMENTS = {
     "wrong shape": ({"transforms": np.zeros((3, 3, 4))}, "transforms must be (n, 4, 4) numbers"),
     "positions shape": ({"positions": np.zeros((3, 2))}, "positions must be (n, 3) numbers"),
-    "NaN": ({"transforms": np.stack([np.eye(4), np.diag([1.0, np.nan, 1.0, 1.0])])},
-            "transforms row 1: expected a 4x4 matrix of finite numbers"),
-    "NaN position": ({"positions": np.array([[0, 0, 0], [np.inf, 0, 0.0]])},
-                     "positions row 1 is not finite"),
-    "singular": ({"transforms": np.stack([np.eye(4), np.eye(4), np.diag([1.0, 0.0, 1.0, 1.0])])},
-                 "transforms row 2: must be invertible"),
-    "zero scale": ({"positions": np.zeros((2, 3)), "scales": np.array([1.0, 0.0])},
-                   "scales row 1 must be finite and > 0"),
-    "rotations shape": ({"positions": np.zeros((2, 3)), "rotations": np.zeros((3, 3))},
-                        "rotations must be (2, 3) degrees"),
+    "NaN": (
+        {"transforms": np.stack([np.eye(4), np.diag([1.0, np.nan, 1.0, 1.0])])},
+        "transforms row 1: expected a 4x4 matrix of finite numbers",
+    ),
+    "NaN position": (
+        {"positions": np.array([[0, 0, 0], [np.inf, 0, 0.0]])},
+        "positions row 1 is not finite",
+    ),
+    "singular": (
+        {"transforms": np.stack([np.eye(4), np.eye(4), np.diag([1.0, 0.0, 1.0, 1.0])])},
+        "transforms row 2: must be invertible",
+    ),
+    "zero scale": (
+        {"positions": np.zeros((2, 3)), "scales": np.array([1.0, 0.0])},
+        "scales row 1 must be finite and > 0",
+    ),
+    "rotations shape": (
+        {"positions": np.zeros((2, 3)), "rotations": np.zeros((3, 3))},
+        "rotations must be (2, 3) degrees",
+    ),
     "pickled": (None, "cannot read .npz"),
     "neither": ({"centers": np.zeros((2, 3))}, "unknown array 'centers'"),
     "both": ({"transforms": np.eye(4)[None], "positions": np.zeros((1, 3))}, "give either"),
     "empty": ({"transforms": np.zeros((0, 4, 4))}, "transforms: no placements"),
-    "materials": ({"positions": np.zeros((2, 3)), "materials": np.array(["red", "plaid"])},
-                  "undefined material 'plaid'"),
-    "material ids": ({"positions": np.zeros((2, 3)), "materials": np.array([0, 99])},
-                     "materials: id out of range"),
-}  # fmt: skip
+    "materials": (
+        {"positions": np.zeros((2, 3)), "materials": np.array(["red", "plaid"])},
+        "undefined material 'plaid'",
+    ),
+    "material ids": (
+        {"positions": np.zeros((2, 3)), "materials": np.array([0, 99])},
+        "materials: id out of range",
+    ),
+}
 
 
 @pytest.mark.parametrize("name", list(BAD_PLACEMENTS))
@@ -181,10 +218,14 @@ def test_a_bad_placements_file_is_one_line_before_any_mesh_loads(name, tmp_path,
 
 def test_the_command_reports_a_bad_placements_file_in_one_line(tmp_path: Path):
     path = write_instances_scene(
-        tmp_path, {"transforms": np.stack([np.eye(4), np.diag([1.0, 1.0, 0.0, 1.0])])})
-    result = subprocess.run([sys.executable, "-m", "embree_rt", "render", str(path), "-o",
-                             str(tmp_path / "out.png")], capture_output=True, text=True,
-                            timeout=120)  # fmt: skip
+        tmp_path, {"transforms": np.stack([np.eye(4), np.diag([1.0, 1.0, 0.0, 1.0])])}
+    )
+    result = subprocess.run(
+        [sys.executable, "-m", "embree_rt", "render", str(path), "-o", str(tmp_path / "out.png")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 2
     assert result.stderr.splitlines() == [
         f"embree-rt: error: {path}: instances[0].transforms: {tmp_path / 'placements.npz'}: "
@@ -199,20 +240,29 @@ def test_instances_render_as_the_same_meshes_placed_one_by_one(tmp_path: Path):
     transforms = placement_matrices(positions, rotations, scales)
     transforms[::4, :3, 0] *= -1  # mirrored copies too
     materials = np.array(["red", "metal", "glass", "matte"] * 4)
-    instances = load_scene(write_instances_scene(
-        tmp_path, {"transforms": transforms, "materials": materials}))  # fmt: skip
+    instances = load_scene(
+        write_instances_scene(tmp_path, {"transforms": transforms, "materials": materials})
+    )
     lines = [SCENE_HEAD]
     for matrix, material in zip(transforms, materials, strict=True):
-        lines.append(f'[[meshes]]\nfile = "{GEM}"\nmaterial = "{material}"\n'
-                     f"transform = {matrix.tolist()}\n")  # fmt: skip
+        lines.append(
+            f'[[meshes]]\nfile = "{GEM}"\nmaterial = "{material}"\ntransform = {matrix.tolist()}\n'
+        )
     (tmp_path / "meshes.toml").write_text("\n".join(lines))
     one_by_one = load_scene(tmp_path / "meshes.toml")
     with SceneGeometry(instances) as geometry:
         assert geometry.bvh.geometry_count == 1 and geometry.instance_count == 16
     image = render(instances).image
     reference = render(one_by_one).image
-    covered = np.abs(image - render(Scene(camera=instances.camera, lights=instances.lights,
-                                          render=instances.render)).image).max(axis=2) > 0.05
+    covered = (
+        np.abs(
+            image
+            - render(
+                Scene(camera=instances.camera, lights=instances.lights, render=instances.render)
+            ).image
+        ).max(axis=2)
+        > 0.05
+    )
     assert covered.mean() > 0.1  # the copies fill a good part of the picture
     # The two paths trace the same float32 transforms through Embree; they differ only in how
     # the world normal is rounded (cofactors in float64 against an inverse kept in float32) and
@@ -228,17 +278,41 @@ def test_instances_render_as_the_same_meshes_placed_one_by_one(tmp_path: Path):
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "embree_rt", *args], capture_output=True,
-                          text=True, timeout=180, cwd=ROOT)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "embree_rt", *args],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        cwd=ROOT,
+    )
 
 
 def test_random_instance_replaces_small_spheres_and_renders_as_meshes_placed_one_by_one(
     tmp_path: Path,
 ):
     image_path, saved = tmp_path / "field.npy", tmp_path / "field.toml"
-    result = run_cli("random", "--count", "40", "--instance", str(GEM), "--seed", "3",
-                     "--width", "64", "--height", "40", "--spp", "2", "--max-depth", "3",
-                     "--save-scene", str(saved), "-o", str(image_path), "--quiet")  # fmt: skip
+    result = run_cli(
+        "random",
+        "--count",
+        "40",
+        "--instance",
+        str(GEM),
+        "--seed",
+        "3",
+        "--width",
+        "64",
+        "--height",
+        "40",
+        "--spp",
+        "2",
+        "--max-depth",
+        "3",
+        "--save-scene",
+        str(saved),
+        "-o",
+        str(image_path),
+        "--quiet",
+    )
     assert result.returncode == 0, result.stderr
     scene = load_scene(saved)
     field = random_field(40, seed=3)
@@ -251,8 +325,9 @@ def test_random_instance_replaces_small_spheres_and_renders_as_meshes_placed_one
     scale = linear[:, 1, 1]
     # only a turn about y and a uniform scale: rows (s cos, 0, s sin), (0, s, 0), (-s sin, 0, s cos)
     np.testing.assert_allclose(linear[:, 1], np.stack([0 * scale, scale, 0 * scale], 1), atol=1e-12)
-    np.testing.assert_allclose(np.einsum("nij,nkj->nik", linear, linear),
-                               scale[:, None, None] ** 2 * np.eye(3), atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        np.einsum("nij,nkj->nik", linear, linear), scale[:, None, None] ** 2 * np.eye(3), atol=1e-12
+    )
     assert len(np.unique(np.round(np.arctan2(linear[:, 0, 2], linear[:, 0, 0]), 6))) == 40 - heroes
     # scaled to fit the sphere's ball, then lowered onto the sphere's bottom: inside the
     # sphere's footprint and height, and touching its bottom
@@ -279,12 +354,16 @@ def test_random_instance_replaces_small_spheres_and_renders_as_meshes_placed_one
 
 def test_info_reports_instances_meshes_triangles_and_memory(tmp_path: Path):
     positions, rotations, scales = scattered(9)
-    path = write_instances_scene(tmp_path, {"positions": positions, "rotations": rotations,
-                                            "scales": scales}, 'material = "red"')  # fmt: skip
+    path = write_instances_scene(
+        tmp_path,
+        {"positions": positions, "rotations": rotations, "scales": scales},
+        'material = "red"',
+    )
     result = run_cli("info", str(path))
     assert result.returncode == 0, result.stderr
-    info = {k.strip(): v.strip() for k, v in (line.split(":", 1) for line in
-                                              result.stdout.splitlines())}  # fmt: skip
+    info = {
+        k.strip(): v.strip() for k, v in (line.split(":", 1) for line in result.stdout.splitlines())
+    }
     assert info["instances"] == "9"
     assert info["arrays"] == "1 instance array holding 9 instances"
     assert info["meshes"] == "9 placements of 1 distinct mesh"
@@ -294,8 +373,9 @@ def test_info_reports_instances_meshes_triangles_and_memory(tmp_path: Path):
 
 def test_a_bad_instance_mesh_is_one_line_and_writes_nothing(tmp_path: Path):
     missing = tmp_path / "nothing.ply"
-    result = run_cli("random", "--count", "10", "--instance", str(missing),
-                     "-o", str(tmp_path / "out.png"))  # fmt: skip
+    result = run_cli(
+        "random", "--count", "10", "--instance", str(missing), "-o", str(tmp_path / "out.png")
+    )
     assert result.returncode == 2
     assert result.stderr.splitlines() == [f"embree-rt: error: --instance: {missing}: no such file"]
     assert list(tmp_path.iterdir()) == []
@@ -310,8 +390,9 @@ def test_a_meshs_own_look_and_nodes_carry_over_to_its_instances(asset: str, tmp_
     positions, rotations, _ = scattered(9, seed=8)
     transforms = placement_matrices(positions, rotations, np.full(9, 0.6))
     instances = load_scene(write_instances_scene(tmp_path, {"transforms": transforms}, mesh=path))
-    lines = [SCENE_HEAD] + [f'[[meshes]]\nfile = "{path}"\ntransform = {m.tolist()}\n'
-                            for m in transforms]  # fmt: skip
+    lines = [SCENE_HEAD] + [
+        f'[[meshes]]\nfile = "{path}"\ntransform = {m.tolist()}\n' for m in transforms
+    ]
     (tmp_path / "meshes.toml").write_text("\n".join(lines))
     one_by_one = load_scene(tmp_path / "meshes.toml")
     (entry,) = instances.instances

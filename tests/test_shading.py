@@ -740,12 +740,14 @@ def test_everything_stays_finite_across_the_onset_of_total_internal_reflection()
 
 def test_odd_integers_is_fmod_by_two_bit_for_bit() -> None:
     rng = np.random.default_rng(6)
-    values = np.concatenate([
-        np.floor(rng.normal(size=20_000) * 10.0 ** rng.integers(0, 20, 20_000)),
-        np.arange(-5.0, 6.0),
-        [2.0**53 - 1, 2.0**53, 2.0**53 + 2, -(2.0**53) + 1, 1e308, -1e308, -0.0],
-        [np.inf, -np.inf, np.nan],
-    ])  # fmt: skip
+    values = np.concatenate(
+        [
+            np.floor(rng.normal(size=20_000) * 10.0 ** rng.integers(0, 20, 20_000)),
+            np.arange(-5.0, 6.0),
+            [2.0**53 - 1, 2.0**53, 2.0**53 + 2, -(2.0**53) + 1, 1e308, -1e308, -0.0],
+            [np.inf, -np.inf, np.nan],
+        ]
+    )
     with np.errstate(invalid="ignore"):
         expected = np.fmod(values, 2.0) != 0.0
     assert np.array_equal(shading.odd_integers(values), expected)

@@ -76,8 +76,12 @@ def test_the_batched_rule_is_the_single_matrix_rule() -> None:
         matrix = np.eye(4)
         matrix[:3, :3] = rotation @ np.diag([1.0, 0.5, flat / MAX_CONDITION])
         matrices.append(matrix)
-    matrices += [np.diag([1.0, 1.0, 1.0, 2.0]), np.diag([1.0, np.nan, 1.0, 1.0]),
-                 np.diag([1e39, 1.0, 1.0, 1.0]), np.diag([0.0, 0.0, 0.0, 1.0])]  # fmt: skip
+    matrices += [
+        np.diag([1.0, 1.0, 1.0, 2.0]),
+        np.diag([1.0, np.nan, 1.0, 1.0]),
+        np.diag([1e39, 1.0, 1.0, 1.0]),
+        np.diag([0.0, 0.0, 0.0, 1.0]),
+    ]
     for _ in range(20):  # mirrors, shears, tiny and huge uniform scales
         matrix = np.eye(4)
         matrix[:3, :3] = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-6, 6)

@@ -58,9 +58,12 @@ def _narrow_phase(mesh: trimesh.Trimesh, origins, directions):
     ray, tri = np.meshgrid(np.arange(len(origins)), np.arange(len(mesh.faces)), indexing="ij")
     ray, tri = ray.ravel(), tri.ravel()
     location, valid, distance = trimesh.intersections.planes_lines(
-        mesh.triangles[tri, 0], mesh.face_normals[tri], origins[ray], directions[ray],
+        mesh.triangles[tri, 0],
+        mesh.face_normals[tri],
+        origins[ray],
+        directions[ray],
         return_distance=True,
-    )  # fmt: skip
+    )
     ray, tri = ray[valid], tri[valid]
     barycentric = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], location)
     hit = ((barycentric > -tol.zero) & (barycentric < 1 + tol.zero)).all(axis=1) & (distance > 0)
@@ -113,8 +116,10 @@ def test_every_hit_matches_ray_triangle(name, scale, offset):
     if scale == 1.0 and offset == 0.0:  # where ray_triangle's absolute tolerances fit
         reference = ray_triangle.RayMeshIntersector(mesh)
         assert _pairs(tri, ray) == _pairs(*reference.intersects_id(origins, directions))
-        np.testing.assert_array_equal(ours.intersects_first(origins, directions),
-                                      reference.intersects_first(origins, directions))
+        np.testing.assert_array_equal(
+            ours.intersects_first(origins, directions),
+            reference.intersects_first(origins, directions),
+        )
     # first hits: the nearest, the lowest triangle index among equals
     expected_first = np.full(len(origins), -1)
     for r in np.unique(ref_ray):
@@ -134,8 +139,9 @@ def test_every_hit_matches_ray_triangle(name, scale, offset):
     locations, loc_ray, loc_tri = ours.intersects_location(origins, directions)
     assert set(loc_ray.tolist()) == set(ref_ray.tolist())
     # float64 locations on the triangle's own plane, as trimesh computes them
-    on_plane = np.einsum("ij,ij->i", locations - mesh.triangles[loc_tri, 0],
-                         mesh.face_normals[loc_tri])  # fmt: skip
+    on_plane = np.einsum(
+        "ij,ij->i", locations - mesh.triangles[loc_tri, 0], mesh.face_normals[loc_tri]
+    )
     assert np.abs(on_plane).max(initial=0) <= 1e-9 * (mesh.scale + abs(offset))
 
 
@@ -154,8 +160,9 @@ def test_lines_through_a_convex_solid_hit_it_twice(name, scale):
     _, index_ray, _ = ours.intersects_location(origins, directions)
     assert np.bincount(index_ray, minlength=500).tolist() == [2] * 500
     # and from inside, looking either way: exactly one
-    _, index_ray, _ = ours.intersects_location(np.vstack([inside, inside]),
-                                               np.vstack([directions, -directions]))  # fmt: skip
+    _, index_ray, _ = ours.intersects_location(
+        np.vstack([inside, inside]), np.vstack([directions, -directions])
+    )
     assert np.bincount(index_ray, minlength=1000).tolist() == [1] * 1000
 
 
@@ -187,8 +194,10 @@ def test_edge_and_vertex_hits_count_once_per_crossing(scale):
         ref_tri, ref_ray, ref_distance = _narrow_phase(mesh, origins, directions)
         # every targeted vertex or edge has more than one triangle there
         assert (np.bincount(ref_ray, minlength=len(origins)) >= 3).all()
-        found, expected = _pairs(tri, ray), _pairs(*_crossings(mesh, ref_tri, ref_ray,
-                                                               ref_distance))  # fmt: skip
+        found, expected = (
+            _pairs(tri, ray),
+            _pairs(*_crossings(mesh, ref_tri, ref_ray, ref_distance)),
+        )
         assert found <= expected
         missed_rays = {r for r, _ in expected - found}
         assert len(missed_rays) <= 0.02 * len(origins)
@@ -290,8 +299,7 @@ def test_max_hits_keeps_the_nearest_hits_in_trimesh_order():
     origins = np.array([[0.1, 0.2, -1.0], [0.3, -0.4, -1.0], [0.5, 0.3, 20.0]])
     directions = np.array([[0, 0, 1.0], [0.01, 0, 1.0], [0, 0, -1.0]])
     ours = RayMeshIntersector(mesh)
-    tri, ray, locations = ours.intersects_id(origins, directions, max_hits=4,
-                                             return_locations=True)  # fmt: skip
+    tri, ray, locations = ours.intersects_id(origins, directions, max_hits=4, return_locations=True)
     assert ray.tolist() == [0, 1, 2] * 4
     z = locations[:, 2].reshape(4, 3)
     assert (np.diff(z[:, :2], axis=0) > 0).all() and (np.diff(z[:, 2]) < 0).all()
@@ -312,8 +320,9 @@ def test_max_hits_counts_crossings_through_crowded_vertices():
     directions[2] = [0.0, 0.0, -1.0]
     ours = RayMeshIntersector(mesh)
     for max_hits in (1, 2, 3, 100):
-        tri, ray, locations = ours.intersects_id(origins, directions, max_hits=max_hits,
-                                                 return_locations=True)  # fmt: skip
+        tri, ray, locations = ours.intersects_id(
+            origins, directions, max_hits=max_hits, return_locations=True
+        )
         expected = [min(max_hits, 2)] * 3 + [1]
         assert np.bincount(ray, minlength=4).tolist() == expected
         z = {r: locations[ray == r, 2].tolist() for r in range(4)}
@@ -450,8 +459,13 @@ def test_close_and_coincident_sheets_each_hit_once(scale, gap):
     5.2's embree backend steps past each hit by 1e-6 of the mesh's size and finds 2 here
     whenever the gap is below that: measured at every scale.)"""
     corners = np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
-    vertices = np.vstack([corners + np.array([0, 0, k * gap]) for k in range(3)]
-                         + [corners + np.array([0, 0, 1.0])]) * scale  # fmt: skip
+    vertices = (
+        np.vstack(
+            [corners + np.array([0, 0, k * gap]) for k in range(3)]
+            + [corners + np.array([0, 0, 1.0])]
+        )
+        * scale
+    )
     faces = np.vstack([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * k for k in range(4)])
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     rng = np.random.default_rng(0)
@@ -481,8 +495,9 @@ def test_first_hits_with_slivers_and_degenerate_faces_match_ray_triangle(scale):
     step. Rays through edge midpoints and random rays must still name ray_triangle's nearest
     triangle (the lowest index on an edge)."""
     sphere = trimesh.creation.icosphere(subdivisions=2)
-    far = np.array([[5.0, 0, 0], [6.0, 0, 0], [5.5, 1e-5, 0], [5.0, 2, 0], [5.5, 2, 0],
-                    [6.0, 2, 0]])  # fmt: skip
+    far = np.array(
+        [[5.0, 0, 0], [6.0, 0, 0], [5.5, 1e-5, 0], [5.0, 2, 0], [5.5, 2, 0], [6.0, 2, 0]]
+    )
     faces = np.vstack([sphere.faces, len(sphere.vertices) + np.array([[0, 1, 2], [3, 4, 5]])])
     mesh = trimesh.Trimesh(np.vstack([sphere.vertices, far]) * scale, faces, process=False)
     edges = mesh.vertices[sphere.edges_unique].mean(axis=1)
@@ -532,19 +547,26 @@ def test_settled_overflowing_and_edge_rays_in_one_batch_match_the_brute_force():
     (ray, triangle) pair must be ray_triangle's, one per crossing, each ray's hits nearest
     first, depth-major."""
     corners = np.array([[-2.0, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]])
-    sheets = trimesh.Trimesh(np.vstack([corners + np.array([0, 0, z]) for z in range(10)]),
-                             np.vstack([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * z
-                                        for z in range(10)]))  # fmt: skip
+    sheets = trimesh.Trimesh(
+        np.vstack([corners + np.array([0, 0, z]) for z in range(10)]),
+        np.vstack([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * z for z in range(10)]),
+    )
     ball = trimesh.creation.icosphere(subdivisions=2)
     ball.apply_translation([6.0, 0.0, 4.0])
     mesh = trimesh.util.concatenate([sheets, ball])
     midpoints = ball.vertices[ball.edges_unique[:60]].mean(axis=1)
     toward_edges = midpoints - ball.centroid + [0.013, -0.007, 0.011]  # not through the centre
     random_origins, random_directions = _outside_rays(ball, 200, seed=9)
-    origins = np.vstack([[[0.1, 0.2, -1.0], [0.3, -0.4, -1.0], [0.5, 0.3, 20.0]],
-                         midpoints - 3 * toward_edges, random_origins])  # fmt: skip
-    directions = np.vstack([[[0, 0, 1.0], [0.01, 0, 1.0], [0, 0, -1.0]], toward_edges,
-                            random_directions])  # fmt: skip
+    origins = np.vstack(
+        [
+            [[0.1, 0.2, -1.0], [0.3, -0.4, -1.0], [0.5, 0.3, 20.0]],
+            midpoints - 3 * toward_edges,
+            random_origins,
+        ]
+    )
+    directions = np.vstack(
+        [[[0, 0, 1.0], [0.01, 0, 1.0], [0, 0, -1.0]], toward_edges, random_directions]
+    )
     ours = RayMeshIntersector(mesh)
     _, ray, locations = ours.intersects_id(origins, directions, return_locations=True)
     ref_tri, ref_ray, ref_distance = _narrow_phase(mesh, origins, directions)
@@ -560,7 +582,10 @@ def test_settled_overflowing_and_edge_rays_in_one_batch_match_the_brute_force():
     assert (np.diff(ranks) >= 0).all()
     same_rank = np.diff(ranks) == 0
     assert (np.diff(ray)[same_rank] > 0).all()
-    distance = np.einsum("ij,ij->i", locations - origins[ray],
-                         directions[ray] / np.linalg.norm(directions[ray], axis=1)[:, None])
+    distance = np.einsum(
+        "ij,ij->i",
+        locations - origins[ray],
+        directions[ray] / np.linalg.norm(directions[ray], axis=1)[:, None],
+    )
     for r in range(len(origins)):
         assert (np.diff(distance[ray == r]) > 0).all()

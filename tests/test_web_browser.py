@@ -100,8 +100,9 @@ def _answered(page, sent: list[dict]) -> bool:
 
 def _click_canvas(page, x: float, y: float, button: str = "left") -> None:
     box = page.locator("#demo").bounding_box()
-    page.mouse.click(box["x"] + x * box["width"] / 960, box["y"] + y * box["height"] / 600,
-                     button=button)  # fmt: skip
+    page.mouse.click(
+        box["x"] + x * box["width"] / 960, box["y"] + y * box["height"] / 600, button=button
+    )
 
 
 def _set_slider(page, name: str, value: float) -> None:
@@ -119,8 +120,12 @@ def test_2d_clicks_place_circles_and_draw_the_tracers_segments(server, page):
     page.click("#clear")
     # A glass circle around the light, which sits 75 of 90 from its centre: rays from it meet
     # the glass at up to asin(75/90) = 56 degrees, past the critical angle of 41 degrees.
-    clicks = [(225.0, 330.0, 90, "glass"), (560.0, 200.0, 70, "mirror"),
-              (700.0, 460.0, 60, "matte"), (480.0, 430.0, 50, "glass")]  # fmt: skip
+    clicks = [
+        (225.0, 330.0, 90, "glass"),
+        (560.0, 200.0, 70, "mirror"),
+        (700.0, 460.0, 60, "matte"),
+        (480.0, 430.0, 50, "glass"),
+    ]
     for x, y, radius, material in clicks:
         page.click(f"#materials button[data-material={material}]")
         _set_slider(page, "radius", radius)
@@ -158,8 +163,11 @@ def test_every_2d_click_is_answered_and_the_page_reports_its_round_trip(server, 
     round_trips = []
     for k in range(6):
         _click_canvas(page, 80 + 80 * k, 80 + 60 * k)
-        wait_until(lambda placed=k + 1: _answered(page, sent) and len(sent[-1]["circles"])
-                   == placed, 10, "the click's rays")  # fmt: skip
+        wait_until(
+            lambda placed=k + 1: _answered(page, sent) and len(sent[-1]["circles"]) == placed,
+            10,
+            "the click's rays",
+        )
         text = page.inner_text("#status")
         round_trips.append(float(text.split("answered in ")[1].split(" ms")[0]))
     print(f"2D click round trips (ms): {sorted(round_trips)}")
@@ -179,8 +187,9 @@ def _canvas_image(page) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"), np.float64)
 
 
-def _converged_after(page, frames: list, seen: int, kind: str, sent: bool = False,
-                     converge: bool = True) -> dict:  # fmt: skip
+def _converged_after(
+    page, frames: list, seen: int, kind: str, sent: bool = False, converge: bool = True
+) -> dict:
     """Wait for the first message of ``kind`` after ``frames[seen]`` (sent by the page, or
     received), then for the passes after it to converge (or, ``converge=False``, for one pass
     after it); returns that message."""
@@ -192,9 +201,15 @@ def _converged_after(page, frames: list, seen: int, kind: str, sent: bool = Fals
         return None
 
     index = wait_until(find, 20, f"a {kind} message", page)
-    wait_until(lambda: any(not out and m["type"] == "pass" and (m["pass"] == m["of"] or not
-                           converge) for out, m in frames[index:]), 60, f"passes after {kind}",
-               page)  # fmt: skip
+    wait_until(
+        lambda: any(
+            not out and m["type"] == "pass" and (m["pass"] == m["of"] or not converge)
+            for out, m in frames[index:]
+        ),
+        60,
+        f"passes after {kind}",
+        page,
+    )
     return frames[index - 1][1]
 
 
@@ -203,14 +218,15 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
     return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
 
 
-def test_preview_converges_to_the_render_then_edits_restart_it(server, scene_file, page,
-                                                               tmp_path):  # fmt: skip
+def test_preview_converges_to_the_render_then_edits_restart_it(server, scene_file, page, tmp_path):
     received: list = []  # (sent?, message) in order, images left out
 
     def watch(socket):
         socket.on("framesent", lambda m: received.append((True, json.loads(m))))
-        socket.on("framereceived",
-                  lambda m: isinstance(m, str) and received.append((False, json.loads(m))))
+        socket.on(
+            "framereceived",
+            lambda m: isinstance(m, str) and received.append((False, json.loads(m))),
+        )
 
     page.on("websocket", watch)
     page.goto(server)
@@ -219,10 +235,23 @@ def test_preview_converges_to_the_render_then_edits_restart_it(server, scene_fil
     shown = _canvas_image(page)
     out = tmp_path / "render.png"
     subprocess.run(
-        [sys.executable, "-m", "embree_rt", "render", str(scene_file), "-o", str(out),
-         "--width", str(width), "--height", str(height), "--quiet"],
-        check=True, timeout=120,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "embree_rt",
+            "render",
+            str(scene_file),
+            "-o",
+            str(out),
+            "--width",
+            str(width),
+            "--height",
+            str(height),
+            "--quiet",
+        ],
+        check=True,
+        timeout=120,
+    )
     rendered = np.asarray(Image.open(out).convert("RGB"), np.float64)
     assert shown.shape == rendered.shape == (height, width, 3)
     quality = psnr(shown, rendered)
@@ -266,8 +295,11 @@ def test_preview_converges_to_the_render_then_edits_restart_it(server, scene_fil
     assert Image.open(full).size == RENDER_SIZE
     # The edited scene file renders to the very image the page rendered.
     again = tmp_path / "again.png"
-    subprocess.run([sys.executable, "-m", "embree_rt", "render", str(toml), "-o", str(again),
-                    "--quiet"], check=True, timeout=120)  # fmt: skip
+    subprocess.run(
+        [sys.executable, "-m", "embree_rt", "render", str(toml), "-o", str(again), "--quiet"],
+        check=True,
+        timeout=120,
+    )
     assert np.array_equal(np.asarray(Image.open(full)), np.asarray(Image.open(again)))
 
 
@@ -354,8 +386,15 @@ MALFORMED = [
 
 
 def test_malformed_2d_messages_get_an_error_and_the_server_keeps_serving(server):
-    good = {"type": "trace", "id": 1, "circles": [{"x": 400, "y": 300, "r": 50,
-            "material": "glass"}], "light": [100, 300], "rays": 16, "spread": 360, "aim": 0}
+    good = {
+        "type": "trace",
+        "id": 1,
+        "circles": [{"x": 400, "y": 300, "r": 50, "material": "glass"}],
+        "light": [100, 300],
+        "rays": 16,
+        "spread": 360,
+        "aim": 0,
+    }
     with _socket(server, "/ws/2d", max_size=None) as socket:
         for text in [*MALFORMED, b"\x00\x01binary"]:
             socket.send(text)
@@ -391,12 +430,15 @@ def test_malformed_preview_messages_and_separate_sessions(server):
             first.send(json.dumps(message))
             assert _reply(first)["type"] == "error", message
         first.send(json.dumps({"type": "size", "width": 64, "height": 36}))
-        for message in ({"type": "drop", "x": 32, "y": 35, "radius": 0.3, "material": "nope"},
-                        {"type": "drop", "x": 320, "y": 35, "radius": 0.3, "material": "gold"}):
+        for message in (
+            {"type": "drop", "x": 32, "y": 35, "radius": 0.3, "material": "nope"},
+            {"type": "drop", "x": 320, "y": 35, "radius": 0.3, "material": "gold"},
+        ):
             first.send(json.dumps(message))
             assert _next(first, "error")["type"] == "error"
-        first.send(json.dumps({"type": "drop", "x": 32, "y": 35, "radius": 0.3,
-                               "material": "gold"}))  # fmt: skip
+        first.send(
+            json.dumps({"type": "drop", "x": 32, "y": 35, "radius": 0.3, "material": "gold"})
+        )
         assert _next(first, "dropped") == {"type": "dropped", "placed": True, "spheres": 7}
         for socket, spheres in ((first, 7), (second, 6)):
             socket.send(json.dumps({"type": "scene_toml"}))

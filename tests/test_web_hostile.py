@@ -25,11 +25,18 @@ class Client:
         self.incoming: asyncio.Queue = asyncio.Queue()
         self.outgoing: asyncio.Queue = asyncio.Queue()
         scope = {
-            "type": "websocket", "asgi": {"version": "3.0"}, "scheme": "ws", "path": path,
-            "raw_path": path.encode(), "root_path": "", "query_string": b"",
-            "headers": [(b"host", b"127.0.0.1:8000")], "client": ("127.0.0.1", 50000),
-            "server": ("127.0.0.1", 8000), "subprotocols": [],
-        }  # fmt: skip
+            "type": "websocket",
+            "asgi": {"version": "3.0"},
+            "scheme": "ws",
+            "path": path,
+            "raw_path": path.encode(),
+            "root_path": "",
+            "query_string": b"",
+            "headers": [(b"host", b"127.0.0.1:8000")],
+            "client": ("127.0.0.1", 50000),
+            "server": ("127.0.0.1", 8000),
+            "subprotocols": [],
+        }
         self.incoming.put_nowait({"type": "websocket.connect"})
         self.task = asyncio.create_task(app(scope, self.incoming.get, self.outgoing.put))
 
@@ -37,8 +44,9 @@ class Client:
         """The next event the app sent (accept, send, close); the app's exception if it ended
         in one (what the ASGI server would print as a traceback, dropping the connection)."""
         getter = asyncio.ensure_future(self.outgoing.get())
-        done, _ = await asyncio.wait({getter, self.task}, timeout=timeout,
-                                     return_when=asyncio.FIRST_COMPLETED)  # fmt: skip
+        done, _ = await asyncio.wait(
+            {getter, self.task}, timeout=timeout, return_when=asyncio.FIRST_COMPLETED
+        )
         if getter in done:
             return getter.result()
         getter.cancel()

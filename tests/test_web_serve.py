@@ -15,8 +15,13 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def serve(*args: str, prelude: str = "") -> subprocess.CompletedProcess:
     code = f"{prelude}import sys; from embree_rt.cli import main; sys.exit(main(sys.argv[1:]))"
-    return subprocess.run([sys.executable, "-c", code, "serve", *args], capture_output=True,
-                          text=True, timeout=60, cwd=ROOT)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-c", code, "serve", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
+    )
 
 
 def assert_one_line(result: subprocess.CompletedProcess, *needles: str) -> None:

@@ -51,8 +51,15 @@ def traced(layout: Layout) -> list[Path]:
 
 
 def layout(circles, materials, light, rays=1, spread=0.0, aim=0.0) -> Layout:
-    return Layout(np.asarray(circles, float).reshape(-1, 3), np.asarray(materials), light, rays,
-                  spread, aim, *BOX)  # fmt: skip
+    return Layout(
+        np.asarray(circles, float).reshape(-1, 3),
+        np.asarray(materials),
+        light,
+        rays,
+        spread,
+        aim,
+        *BOX,
+    )
 
 
 def unit(v):
@@ -163,8 +170,9 @@ def test_total_internal_reflection_past_the_critical_angle(distance):
 
 def test_paths_are_continuous_and_stop_at_the_depth_limit():
     circles = [[300, 200, 60], [600, 350, 90], [450, 450, 50], [700, 150, 40]]
-    lines = traced(layout(circles, [GLASS, MIRROR, GLASS, MIRROR], (100.0, 300.0),
-                                rays=90, spread=360.0))  # fmt: skip
+    lines = traced(
+        layout(circles, [GLASS, MIRROR, GLASS, MIRROR], (100.0, 300.0), rays=90, spread=360.0)
+    )
     for line in lines:
         assert len(line.points) == len(line.weights) + 1
         assert len(line.weights) <= 7  # the light's segment and 6 bounces

@@ -37,8 +37,10 @@ def running_server(*args: str):
     Its stderr is then ``process.stderr_text``."""
     process = subprocess.Popen(
         [sys.executable, "-m", "embree_rt", "serve", "--port", "0", *args],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         line = _read_line(process.stdout, START_TIMEOUT_S)
         match = re.search(r"at (http://[^/ ]+)/ ", line)

@@ -97,9 +97,15 @@ class BrickSet:
         reach = np.full(n, np.inf)
         reach[floor[0]] = floor[1].t
         routes = rows_by_brick(boxes_reached(origins, directions, reach, self.boxes))
-        requests = [(brick, np.ascontiguousarray(origins[:, rows]),
-                     np.ascontiguousarray(directions[:, rows]), coherent)
-                    for brick, rows in routes]  # fmt: skip
+        requests = [
+            (
+                brick,
+                np.ascontiguousarray(origins[:, rows]),
+                np.ascontiguousarray(directions[:, rows]),
+                coherent,
+            )
+            for brick, rows in routes
+        ]
         answers = self.queries.intersect(requests) if requests else []
         answered = [(rows, hits) for (_, rows), hits in zip(routes, answers, strict=True)]
         rays, surfaces, ties = nearest_over_bricks(n, floor, answered)
@@ -118,15 +124,12 @@ class BrickSet:
         target = np.asarray(target, np.float32).reshape(3)
         starts = np.ascontiguousarray(np.take(points, rows[open_rows], axis=1), np.float32)
         toward = target[:, None] - starts
-        routes = rows_by_brick(boxes_reached(starts, toward, np.ones(len(open_rows)),
-                                             self.boxes))  # fmt: skip
-        requests = [(brick, np.ascontiguousarray(starts[:, sub]), target)
-                    for brick, sub in routes]  # fmt: skip
+        routes = rows_by_brick(boxes_reached(starts, toward, np.ones(len(open_rows)), self.boxes))
+        requests = [(brick, np.ascontiguousarray(starts[:, sub]), target) for brick, sub in routes]
         answers = self.queries.occluded(requests) if requests else []
         for (_, sub), answer in zip(routes, answers, strict=True):
             blocked[open_rows[sub[answer]]] = True
-        self.traffic.add(segments=len(open_rows),
-                         segment_sends=sum(len(sub) for _, sub in routes))  # fmt: skip
+        self.traffic.add(segments=len(open_rows), segment_sends=sum(len(sub) for _, sub in routes))
         return blocked
 
 

@@ -110,7 +110,7 @@ def require_bricks_fit(
     what they would need and what would fit."""
     load: dict[str, int] = {}
     for index, worker in assignment.items():
-        (need, _), = brick_needs(plan, index, source_kind).values()  # fmt: skip
+        ((need, _),) = brick_needs(plan, index, source_kind).values()
         load[worker] = load.get(worker, 0) + need
     total = sum(load.values())
     for worker, need in sorted(load.items()):
@@ -212,9 +212,15 @@ class DaskBricks:
 
     def _place(self, index: int, worker: str) -> PlacedBrick:
         future = self.client.submit(
-            BrickActor, self.source, self.plan, index, actor=True, workers=[worker],
-            allow_other_workers=False, pure=False,
-        )  # fmt: skip
+            BrickActor,
+            self.source,
+            self.plan,
+            index,
+            actor=True,
+            workers=[worker],
+            allow_other_workers=False,
+            pure=False,
+        )
         return PlacedBrick(index, worker, future)
 
     def build(self) -> np.ndarray:
@@ -372,8 +378,9 @@ class PartitionedRenderer:
         workers = live_workers(client, no_workers_timeout_s)
         assignment = assign_bricks(partition, list(workers))
         info = client.scheduler_info(n_workers=-1)["workers"]
-        limits = {address: int(info.get(address, {}).get("memory_limit") or 0)
-                  for address in workers}  # fmt: skip
+        limits = {
+            address: int(info.get(address, {}).get("memory_limit") or 0) for address in workers
+        }
         require_bricks_fit(plan, kind, assignment, limits)
         source = client.scatter(scene, broadcast=True, hash=False) if kind == "held" else scene
         try:
@@ -431,9 +438,12 @@ class PartitionedRenderer:
                     progress(state)
 
             image, stats = self.integrator.render_image(
-                frame, spp=settings.spp, max_depth=settings.max_depth, seed=settings.seed,
+                frame,
+                spp=settings.spp,
+                max_depth=settings.max_depth,
+                seed=settings.seed,
                 progress=show,
-            )  # fmt: skip
+            )
             for kind, count in stats.rays.items():
                 self.stats.rays[kind] += count
             self.stats.render_s += stats.render_s
@@ -485,8 +495,9 @@ def render(
     the workers: the same image, bit for bit (see ``nearest`` for exact ties between bricks);
     ``overrides`` are the settings (width, height, spp, max_depth, seed). The bricks are freed
     afterwards."""
-    renderer = PartitionedRenderer(scene, client, partition=partition, spheres=spheres,
-                                   batch_size=batch_size, threads=threads)  # fmt: skip
+    renderer = PartitionedRenderer(
+        scene, client, partition=partition, spheres=spheres, batch_size=batch_size, threads=threads
+    )
     try:
         settings = renderer.scene.render.with_overrides(**overrides)
         view = renderer.scene.camera if camera is None else camera
@@ -494,6 +505,9 @@ def render(
             image = renderer.render(settings, view, show)
     finally:
         renderer.release()
-    stats = RenderStats(rays=dict(renderer.stats.rays), build_s=renderer.stats.build_s,
-                        render_s=renderer.stats.render_s)  # fmt: skip
+    stats = RenderStats(
+        rays=dict(renderer.stats.rays),
+        build_s=renderer.stats.build_s,
+        render_s=renderer.stats.render_s,
+    )
     return RenderResult(image, {}, stats)

@@ -47,9 +47,16 @@ def without_objects(scene: Scene, floor: bool = False) -> Scene:
     when ``floor`` (a brick's scene before its objects go in: no floor)."""
     empty = np.zeros((0, 3), np.float32), np.zeros(0, np.float32), np.zeros(0, np.int32)
     return replace(
-        scene, floor=scene.floor if floor else None, sphere_centers=empty[0], sphere_radii=empty[1],
-        sphere_materials=empty[2], meshes=[], instances=[], animation=None, notes=[],
-    )  # fmt: skip
+        scene,
+        floor=scene.floor if floor else None,
+        sphere_centers=empty[0],
+        sphere_radii=empty[1],
+        sphere_materials=empty[2],
+        meshes=[],
+        instances=[],
+        animation=None,
+        notes=[],
+    )
 
 
 def scene_brick(scene: Scene, partition: Partition, index: int) -> BrickContents:
@@ -60,8 +67,12 @@ def scene_brick(scene: Scene, partition: Partition, index: int) -> BrickContents
     ids.append(mine.astype(np.int64))
     part = without_objects(scene)
     if len(mine):
-        part.add_spheres(scene.sphere_centers[mine], scene.sphere_radii[mine],
-                         scene.sphere_materials[mine], copy=False)  # fmt: skip
+        part.add_spheres(
+            scene.sphere_centers[mine],
+            scene.sphere_radii[mine],
+            scene.sphere_materials[mine],
+            copy=False,
+        )
     mesh_ids, instance_starts = scene.object_id_starts()
     for placement, object_id in zip(scene.meshes, mesh_ids, strict=True):
         low, high = placed_bounds(placement.mesh.bounds, placement.transform[None])
@@ -72,9 +83,11 @@ def scene_brick(scene: Scene, partition: Partition, index: int) -> BrickContents
         low, high = placed_bounds(entry.mesh.bounds, entry.transforms)
         copies = np.flatnonzero(partition.brick_of((low + high) / 2) == index)
         if len(copies):
-            part.instances.append(replace(
-                entry, transforms=entry.transforms[copies], materials=entry.materials[copies]
-            ))  # fmt: skip
+            part.instances.append(
+                replace(
+                    entry, transforms=entry.transforms[copies], materials=entry.materials[copies]
+                )
+            )
             ids.append(first_id + copies.astype(np.int64))
     return BrickContents(index, part, np.concatenate(ids))
 
@@ -88,7 +101,9 @@ def field_brick(plan, partition: Partition, index: int) -> BrickContents:
     part = without_objects(field_scene(plan))
     low, high = partition.region(index)
     ids = add_field_spheres_where(
-        part, plan, lambda centers: partition.brick_of(centers) == index,
+        part,
+        plan,
+        lambda centers: partition.brick_of(centers) == index,
         within=((low[0], low[2]), (high[0], high[2])),
-    )  # fmt: skip
+    )
     return BrickContents(index, part, ids)

@@ -67,8 +67,9 @@ def nearest_over_bricks(
     column[won] = nearer
     group[won] = 0
     hit = source >= 0
-    rays = np.concatenate([np.flatnonzero(hit & (group == g))
-                           for g in (0, SPHERE_GROUP, OTHER_GROUP)])  # fmt: skip
+    rays = np.concatenate(
+        [np.flatnonzero(hit & (group == g)) for g in (0, SPHERE_GROUP, OTHER_GROUP)]
+    )
     parts = [hits.surfaces for _, hits in answers] + [floor_hits]
     surfaces = gather_surfaces(parts, source[rays], column[rays], len(won))
     return rays, surfaces, ties

@@ -183,8 +183,9 @@ def placed_bounds(bounds: np.ndarray, transforms: np.ndarray) -> tuple[np.ndarra
     """(n, 3) float64 low and high corners of the world box around a mesh of (2, 3) ``bounds``
     placed by each of (n, 4, 4) ``transforms`` (its eight corners moved)."""
     low, high = np.asarray(bounds, np.float64)
-    corners = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1])
-                        for z in (low[2], high[2])])  # fmt: skip
+    corners = np.array(
+        [[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])]
+    )
     transforms = np.asarray(transforms, np.float64)
     world = np.einsum("cj,nij->nci", corners, transforms[:, :3, :3]) + transforms[:, None, :3, 3]
     return world.min(axis=1), world.max(axis=1)

@@ -80,7 +80,6 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-
 @contextmanager
 def one_line_warnings():
     """Print each ``InputWarning`` (what a file asks for that is rendered differently or left

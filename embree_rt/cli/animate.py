@@ -98,8 +98,10 @@ def render_frames_command(
             try:
                 directory.mkdir(parents=True, exist_ok=True)
             except OSError as error:
-                raise InputError(f"-o: {args.output}: cannot make the directory {directory}: "
-                                 f"{error.strerror or error}") from None  # fmt: skip
+                raise InputError(
+                    f"-o: {args.output}: cannot make the directory {directory}: "
+                    f"{error.strerror or error}"
+                ) from None
     for path in paths.values():
         try:
             check_output_path(path, encoding)
@@ -107,8 +109,9 @@ def render_frames_command(
             raise InputError(str(error)) from None
     redo = args.overwrite or frames is None
     todo = [f for f, path in paths.items() if redo or not Path(path).exists()]
-    cameras = [(f, scene.camera if f is None else camera_at(scene.camera, animation, f))
-               for f in todo]  # fmt: skip
+    cameras = [
+        (f, scene.camera if f is None else camera_at(scene.camera, animation, f)) for f in todo
+    ]
     settings = scene.render
 
     def write(frame: int | None, image: np.ndarray) -> None:
@@ -120,8 +123,11 @@ def render_frames_command(
 
     if not cameras:  # nothing to do: nothing is written, transforms.json included
         if not args.quiet:
-            print(f"embree-rt: all {len(paths)} frames are on disk (--overwrite renders them "
-                  f"again) -> {args.output}", file=sys.stderr)  # fmt: skip
+            print(
+                f"embree-rt: all {len(paths)} frames are on disk (--overwrite renders them "
+                f"again) -> {args.output}",
+                file=sys.stderr,
+            )
         return
     started = time.perf_counter()
     if args.cluster is None and args.scheduler is None:
@@ -155,9 +161,15 @@ def write_transforms(paths: dict, scene: Scene, settings) -> Path:
     from embree_rt.film import write_atomically
 
     folder = Path(os.path.commonpath([Path(path).resolve().parent for path in paths.values()]))
-    views = [(Path(path).resolve(), camera_frame(camera_at(scene.camera, scene.animation, f),
-                                                 settings.width, settings.height))
-             for f, path in paths.items()]  # fmt: skip
+    views = [
+        (
+            Path(path).resolve(),
+            camera_frame(
+                camera_at(scene.camera, scene.animation, f), settings.width, settings.height
+            ),
+        )
+        for f, path in paths.items()
+    ]
     text = (json.dumps(nerf_transforms(views, folder), indent=2) + "\n").encode()
     target = folder / "transforms.json"
     if target.is_file() and target.read_bytes() == text:

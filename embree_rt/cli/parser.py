@@ -49,21 +49,30 @@ class Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_BAD_INPUT)
 
     def suggestion(self, message: str) -> str:
-        """" (did you mean ...?)" for the first unrecognized flag close to one the command
+        """ " (did you mean ...?)" for the first unrecognized flag close to one the command
         takes, or an invalid command close to one; "" otherwise."""
         import difflib
         import re
 
-        commands = next((action.choices for action in self._actions
-                         if isinstance(action, argparse._SubParsersAction)), {})  # fmt: skip
+        commands = next(
+            (
+                action.choices
+                for action in self._actions
+                if isinstance(action, argparse._SubParsersAction)
+            ),
+            {},
+        )
         if message.startswith("command: invalid choice:"):
             known = list(commands)
             words = re.findall(r"invalid choice: '([^']*)'", message)
         elif message.startswith("unrecognized arguments:"):
             command = next((commands[word] for word in self.argv if word in commands), self)
             known = [flag for action in command._actions for flag in action.option_strings]
-            words = [word.split("=")[0] for word in message.split(":", 1)[1].split()
-                     if word.startswith("-")]  # fmt: skip
+            words = [
+                word.split("=")[0]
+                for word in message.split(":", 1)[1].split()
+                if word.startswith("-")
+            ]
         else:
             return ""
         for word in words:
@@ -147,37 +156,60 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
     """``--set`` and the flags that stand for one scene key each."""
     parser.set_defaults(settings=())  # (before the flags: theirs is SUPPRESS, not shown)
     parser.add_argument(
-        "-D", "--set", action=SetKey, metavar="KEY=VALUE",
+        "-D",
+        "--set",
+        action=SetKey,
+        metavar="KEY=VALUE",
         help="set any scene key, named as in the scene file: camera.fov=35, "
         "lights[0].intensity=2, materials.gold.shininess=200, render.max_depth=3 (the value is "
         "read as TOML, else as a string; repeatable, the last wins)",
-    )  # fmt: skip
+    )
     shortcuts = {
         "--width": ("render.width", "image width in pixels (render.width)"),
         "--height": ("render.height", "image height in pixels (render.height)"),
         "--spp": ("render.spp", "samples per pixel (render.spp)"),
-        "--max-depth": ("render.max_depth", "bounces of reflection and refraction "
-                        "(render.max_depth)"),
+        "--max-depth": (
+            "render.max_depth",
+            "bounces of reflection and refraction (render.max_depth)",
+        ),
         "--seed": ("render.seed", "the sampler's seed (render.seed); random: the field's too"),
         "--fov": ("camera.fov", "vertical field of view in degrees (camera.fov)"),
-        "--exposure": ("render.exposure", "stops of exposure before the tone map, e.g. 1 "
-                       "doubles the light (render.exposure)"),
-    }  # fmt: skip
+        "--exposure": (
+            "render.exposure",
+            "stops of exposure before the tone map, e.g. 1 doubles the light (render.exposure)",
+        ),
+    }
     for flag, (key, text) in shortcuts.items():
         metavar = "EV" if flag == "--exposure" else "N"
-        parser.add_argument(flag, action=SetKey, key=key, metavar=metavar,
-                            help=text + SCENE_DEFAULT)  # fmt: skip
+        parser.add_argument(
+            flag, action=SetKey, key=key, metavar=metavar, help=text + SCENE_DEFAULT
+        )
     from embree_rt.film import TONEMAPS, TRANSFERS
 
-    parser.add_argument("--tonemap", action=SetKey, key="render.tonemap", choices=TONEMAPS,
-                        help="the tone map (render.tonemap)" + SCENE_DEFAULT + ", else "
-                        "reinhard")  # fmt: skip
-    parser.add_argument("--transfer", action=SetKey, key="render.transfer", choices=TRANSFERS,
-                        help="the display curve: a 2.2 power, or sRGB's piecewise curve "
-                        "(render.transfer)" + SCENE_DEFAULT + ", else gamma2.2")  # fmt: skip
+    parser.add_argument(
+        "--tonemap",
+        action=SetKey,
+        key="render.tonemap",
+        choices=TONEMAPS,
+        help="the tone map (render.tonemap)" + SCENE_DEFAULT + ", else reinhard",
+    )
+    parser.add_argument(
+        "--transfer",
+        action=SetKey,
+        key="render.transfer",
+        choices=TRANSFERS,
+        help="the display curve: a 2.2 power, or sRGB's piecewise curve "
+        "(render.transfer)" + SCENE_DEFAULT + ", else gamma2.2",
+    )
     for flag, key in (("--camera-position", "camera.position"), ("--look-at", "camera.look_at")):
-        parser.add_argument(flag, action=SetKey, key=key, nargs=3, metavar=("X", "Y", "Z"),
-                            help=f"the camera's {key.split('.')[1]} ({key})" + SCENE_DEFAULT)
+        parser.add_argument(
+            flag,
+            action=SetKey,
+            key=key,
+            nargs=3,
+            metavar=("X", "Y", "Z"),
+            help=f"the camera's {key.split('.')[1]} ({key})" + SCENE_DEFAULT,
+        )
 
 
 def add_render_flags(parser: argparse.ArgumentParser) -> None:
@@ -185,14 +217,26 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
 
     positive = int_at_least(1)
     parser.add_argument(
-        "-o", "--output", required=True, metavar="IMAGE",
+        "-o",
+        "--output",
+        required=True,
+        metavar="IMAGE",
         help="image to write: .png, .jpg, .tif, .webp (tone-mapped), .npy, .npz or .exr "
         "(linear float32)",
-    )  # fmt: skip
-    parser.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
-                        help="bits per channel of a .png or .tif")  # fmt: skip
-    parser.add_argument("--quality", type=int_at_least(1), metavar="Q",
-                        help="1 to 100, of a .jpg or .webp (default: 90)")  # fmt: skip
+    )
+    parser.add_argument(
+        "--bit-depth",
+        type=int,
+        choices=(8, 16),
+        default=8,
+        help="bits per channel of a .png or .tif",
+    )
+    parser.add_argument(
+        "--quality",
+        type=int_at_least(1),
+        metavar="Q",
+        help="1 to 100, of a .jpg or .webp (default: 90)",
+    )
     parser.add_argument(
         "--aov",
         type=aov_list,
@@ -201,8 +245,14 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         "file each beside a .png or .npy",
     )
     add_setting_flags(parser)
-    parser.add_argument("-t", "--threads", "--nthreads", type=positive, metavar="N",
-                        help="worker threads (default: all cores)")  # fmt: skip
+    parser.add_argument(
+        "-t",
+        "--threads",
+        "--nthreads",
+        type=positive,
+        metavar="N",
+        help="worker threads (default: all cores)",
+    )
     parser.add_argument(
         "--spheres",
         choices=SPHERE_CHOICES,
@@ -219,9 +269,12 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         "--scheduler", type=non_empty, metavar="tcp://HOST:PORT", help="render on a Dask cluster"
     )
     parser.add_argument(
-        "--scheduler-timeout", type=positive_seconds, default=10.0, metavar="SECONDS",
+        "--scheduler-timeout",
+        type=positive_seconds,
+        default=10.0,
+        metavar="SECONDS",
         help="how long --scheduler may take to answer (default: 10)",
-    )  # fmt: skip
+    )
     parser.add_argument(
         "--partition",
         type=positive,
@@ -252,8 +305,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_render_flags(render)
     add_animation_flags(render)
     random = commands.add_parser("random", help="render a random sphere field of N spheres")
-    random.add_argument("--count", type=int_at_least(1), required=True, metavar="N",
-                        help="spheres in the field")  # fmt: skip
+    random.add_argument(
+        "--count", type=int_at_least(1), required=True, metavar="N", help="spheres in the field"
+    )
     random.add_argument("--save-scene", help="also write the generated scene to this file")
     random.add_argument(
         "--instance",
@@ -266,8 +320,12 @@ def build_parser() -> argparse.ArgumentParser:
     info = commands.add_parser("info", help="describe a scene: objects, bounds, build time")
     info.add_argument("scene", help=SCENE_HELP)
     info.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
-    info.add_argument("--spheres", choices=SPHERE_CHOICES, default="analytic",
-                      help="how spheres enter the BVH, as render's --spheres")  # fmt: skip
+    info.add_argument(
+        "--spheres",
+        choices=SPHERE_CHOICES,
+        default="analytic",
+        help="how spheres enter the BVH, as render's --spheres",
+    )
     add_setting_flags(info)
     serve = commands.add_parser("serve", help="the 2D ray demo and a live preview in a browser")
     serve.add_argument("scene", nargs="?", help="scene file (default: the showcase)")

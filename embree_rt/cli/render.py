@@ -90,13 +90,17 @@ def render_and_save(
     from embree_rt.budget import MemoryBudgetError
 
     if args.partition is not None and not (args.cluster or args.scheduler):
-        raise UsageError("--partition: bricks are held by Dask workers: add --cluster local:N or "
-                         "--scheduler ADDRESS")  # fmt: skip
+        raise UsageError(
+            "--partition: bricks are held by Dask workers: add --cluster local:N or "
+            "--scheduler ADDRESS"
+        )
     if not scene.lights:
         from embree_rt.scene.errors import warn_input
 
-        warn_input(f"{args.scene if getattr(args, 'scene', None) else 'the scene'}: lights: "
-                   "none: only the sky and ambient light show it")  # fmt: skip
+        warn_input(
+            f"{args.scene if getattr(args, 'scene', None) else 'the scene'}: lights: "
+            "none: only the sky and ambient light show it"
+        )
     check_library()
     framed = args.frames or "{frame" in args.output  # an animation's pattern, or a mistake
     if scene.animation is not None or args.cluster or args.scheduler or framed:

@@ -23,8 +23,12 @@ def is_mesh_file(path: str | Path) -> bool:
         return True
     from embree_rt.scene.errors import SceneError
 
-    raise SceneError(path, "(file)", f"expected a scene file ({', '.join(SCENE_SUFFIXES)}) or "
-                     f"a mesh file ({', '.join(MESH_SUFFIXES)})")  # fmt: skip
+    raise SceneError(
+        path,
+        "(file)",
+        f"expected a scene file ({', '.join(SCENE_SUFFIXES)}) or "
+        f"a mesh file ({', '.join(MESH_SUFFIXES)})",
+    )
 
 
 def read_scene(args: argparse.Namespace) -> tuple[Scene, Path | Scene]:

@@ -590,10 +590,18 @@ class BVH:
         rays = camera_query.camera_query_rays(camera.origin, directions)
         hits = self._empty_hits(n)
         if n:
-            arguments = (self._query(True), camera, index, directions, rays, self._nearest(hits),
-                         self._copy_numbers(hits))  # fmt: skip
-            self._run_query(camera_query.intersect_camera_serial, camera_query.intersect_camera,
-                            arguments)  # fmt: skip
+            arguments = (
+                self._query(True),
+                camera,
+                index,
+                directions,
+                rays,
+                self._nearest(hits),
+                self._copy_numbers(hits),
+            )
+            self._run_query(
+                camera_query.intersect_camera_serial, camera_query.intersect_camera, arguments
+            )
         origins = np.broadcast_to(camera.origin[:, None], (3, n))
         return self._records(origins, directions, rays.tnear, rays.tfar, hits, labels), directions
 

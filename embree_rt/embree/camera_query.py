@@ -48,12 +48,23 @@ def intersect_camera(query, camera, index, directions, rays, hits, inst_prim):
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _camera_chunk(query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), camera, index,
-                      directions, rays, hits, inst_prim)  # fmt: skip
+        _camera_chunk(
+            query,
+            scratch[c],
+            c * CHUNK,
+            min(n, (c + 1) * CHUNK),
+            camera,
+            index,
+            directions,
+            rays,
+            hits,
+            inst_prim,
+        )
 
 
 @njit(nogil=True, cache=True)
 def intersect_camera_serial(query, camera, index, directions, rays, hits, inst_prim):
     scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _camera_chunk(query, scratch, 0, index.shape[0], camera, index, directions, rays, hits,
-                  inst_prim)  # fmt: skip
+    _camera_chunk(
+        query, scratch, 0, index.shape[0], camera, index, directions, rays, hits, inst_prim
+    )

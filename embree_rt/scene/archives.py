@@ -33,9 +33,11 @@ def array_headers(path: Path) -> Headers | None:
             with archive.open(info) as member:
                 version = np.lib.format.read_magic(member)
                 # Versions 2 and 3 differ only in the header's text encoding.
-                read = np.lib.format.read_array_header_1_0 if version == (1, 0) else (
-                    np.lib.format.read_array_header_2_0
-                )  # fmt: skip
+                read = (
+                    np.lib.format.read_array_header_1_0
+                    if version == (1, 0)
+                    else (np.lib.format.read_array_header_2_0)
+                )
                 shape, _, dtype = read(member)
             headers[info.filename[: -len(".npy")]] = (tuple(shape), dtype)
     return headers

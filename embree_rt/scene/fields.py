@@ -76,9 +76,13 @@ class Table:
         return check_number(self, name, value, low, high, low_open, high_open)
 
     def integer(
-        self, name: str, default: int | None = None, *, low: int | None = None,
+        self,
+        name: str,
+        default: int | None = None,
+        *,
+        low: int | None = None,
         high: int = INTEGER_LIMIT,
-    ) -> int:  # fmt: skip
+    ) -> int:
         """An integer in [low, high] (``high`` by default what int64 holds)."""
         value = self._value(name, required=False)
         if value is _ABSENT:
@@ -114,8 +118,15 @@ class Table:
             raise self.error(name, f"a file name cannot hold a NUL character, got {_show(value)}")
         return value
 
-    def vector(self, name: str, default=None, *, required: bool = False, non_negative=False,
-               high: float | None = None):  # fmt: skip
+    def vector(
+        self,
+        name: str,
+        default=None,
+        *,
+        required: bool = False,
+        non_negative=False,
+        high: float | None = None,
+    ):
         """Three finite numbers as a tuple of floats, each at most ``high`` if given."""
         value = self._value(name, required)
         if value is _ABSENT:

@@ -30,8 +30,14 @@ from embree_rt.scene.mesh_companions import candidate_paths
 _GLB_MAGIC = b"glTF"
 _CHUNK_JSON = 0x4E4F534A
 _CHUNK_BIN = 0x004E4942
-_COMPONENT_TYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16,
-                    5125: np.uint32, 5126: np.float32}  # fmt: skip
+_COMPONENT_TYPES = {
+    5120: np.int8,
+    5121: np.uint8,
+    5122: np.int16,
+    5123: np.uint16,
+    5125: np.uint32,
+    5126: np.float32,
+}
 _TYPE_SIZES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 # Tags the rewritten JSON puts on a mesh's ``extras``, so that the loaded geometries of an
 # instanced node's mesh can be found (trimesh copies a mesh's extras into each primitive's
@@ -192,8 +198,15 @@ def accessor_array(tree: dict, buffers, index: int, normalized: bool = False) ->
     width = _TYPE_SIZES[accessor["type"]]
     count = int(accessor["count"])
     if "bufferView" in accessor:
-        values = _view_rows(tree, buffers, accessor["bufferView"], accessor.get("byteOffset", 0),
-                            dtype, width, count)  # fmt: skip
+        values = _view_rows(
+            tree,
+            buffers,
+            accessor["bufferView"],
+            accessor.get("byteOffset", 0),
+            dtype,
+            width,
+            count,
+        )
     else:
         values = np.zeros((count, width), dtype)
     if "sparse" in accessor:
@@ -201,14 +214,18 @@ def accessor_array(tree: dict, buffers, index: int, normalized: bool = False) ->
         n = int(sparse["count"])
         where = sparse["indices"]
         index_type = np.dtype(_COMPONENT_TYPES[where["componentType"]]).newbyteorder("<")
-        rows = _view_rows(tree, buffers, where["bufferView"], where.get("byteOffset", 0),
-                          index_type, 1, n)[:, 0]  # fmt: skip
+        rows = _view_rows(
+            tree, buffers, where["bufferView"], where.get("byteOffset", 0), index_type, 1, n
+        )[:, 0]
         what = sparse["values"]
-        substitutes = _view_rows(tree, buffers, what["bufferView"], what.get("byteOffset", 0),
-                                 dtype, width, n)  # fmt: skip
+        substitutes = _view_rows(
+            tree, buffers, what["bufferView"], what.get("byteOffset", 0), dtype, width, n
+        )
         if n and rows.max() >= count:
-            raise MeshFileError(f"accessors[{index}].sparse.indices",
-                                f"index {int(rows.max())} outside the accessor's {count} rows")
+            raise MeshFileError(
+                f"accessors[{index}].sparse.indices",
+                f"index {int(rows.max())} outside the accessor's {count} rows",
+            )
         values = values.copy()
         values[rows.astype(np.int64)] = substitutes
     if normalized and accessor.get("normalized") and dtype.kind in "iu":
@@ -217,8 +234,9 @@ def accessor_array(tree: dict, buffers, index: int, normalized: bool = False) ->
     return values
 
 
-def _view_rows(tree: dict, buffers, view_index: int, offset: int, dtype: np.dtype, width: int,
-               count: int) -> np.ndarray:  # fmt: skip
+def _view_rows(
+    tree: dict, buffers, view_index: int, offset: int, dtype: np.dtype, width: int, count: int
+) -> np.ndarray:
     """(count, width) ``dtype`` rows of buffer view ``view_index`` from byte ``offset``,
     honouring the view's ``byteStride``."""
     view = tree["bufferViews"][view_index]
@@ -230,7 +248,8 @@ def _view_rows(tree: dict, buffers, view_index: int, offset: int, dtype: np.dtyp
         return np.zeros((0, width), dtype)
     rows = np.lib.stride_tricks.as_strided(
         np.frombuffer(data, np.uint8, count=(count - 1) * stride + row_bytes, offset=start),
-        (count, row_bytes), (stride, 1),
+        (count, row_bytes),
+        (stride, 1),
     )
     return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
 
@@ -255,11 +274,14 @@ def quaternion_matrices(xyzw: np.ndarray) -> np.ndarray:
     q = np.asarray(xyzw, np.float64)
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
     x, y, z, w = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1),
-    ], axis=1)  # fmt: skip
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1),
+        ],
+        axis=1,
+    )
 
 
 def scene_nodes(tree: dict) -> list[tuple[int, np.ndarray]]:
@@ -327,15 +349,17 @@ def prepare_gltf(path: Path) -> PreparedGltf:
 def _check_extensions(path: Path, tree: dict) -> None:
     for index, name in enumerate(tree.get("extensionsRequired") or []):
         if (problem := extension_problem(name)) is not None:
-            raise MeshFileError(f"extensionsRequired[{index}]",
-                                f"the file requires {name}, {problem}")  # fmt: skip
+            raise MeshFileError(
+                f"extensionsRequired[{index}]", f"the file requires {name}, {problem}"
+            )
     by_problem: dict[str, list[str]] = {}
     for name in tree.get("extensionsUsed") or []:
         if (problem := extension_problem(name)) is not None:
             by_problem.setdefault(problem, []).append(name)
     if by_problem:
-        ignored = "; ".join(f"{', '.join(names)} ignored ({problem})"
-                            for problem, names in by_problem.items())  # fmt: skip
+        ignored = "; ".join(
+            f"{', '.join(names)} ignored ({problem})" for problem, names in by_problem.items()
+        )
         warn_input(f"{path}: extensionsUsed: {ignored}; the file renders without them")
 
 
@@ -349,10 +373,13 @@ def _check_files(path: Path, tree: dict) -> None:
             if uri_path(path.parent, uri) is not None:
                 continue
             if group == "buffers":
-                raise MeshFileError(f"buffers[{index}].uri", f"no such file {uri!r} "
-                                    f"(looked in {path.parent})")  # fmt: skip
-            warn_input(f"{path}: images[{index}].uri: no such file {uri!r} (looked in "
-                       f"{path.parent}); the materials using it render without it")  # fmt: skip
+                raise MeshFileError(
+                    f"buffers[{index}].uri", f"no such file {uri!r} (looked in {path.parent})"
+                )
+            warn_input(
+                f"{path}: images[{index}].uri: no such file {uri!r} (looked in "
+                f"{path.parent}); the materials using it render without it"
+            )
 
 
 def _densify_sparse(tree: dict, buffers: GltfBuffers) -> None:
@@ -383,12 +410,15 @@ def _instance_matrices(tree: dict, buffers: GltfBuffers, instancing: dict, key: 
     columns = {}
     for name in ("TRANSLATION", "ROTATION", "SCALE"):
         if name in attributes:
-            columns[name] = np.asarray(accessor_array(tree, buffers, attributes[name], True),
-                                       np.float64)  # fmt: skip
+            columns[name] = np.asarray(
+                accessor_array(tree, buffers, attributes[name], True), np.float64
+            )
     counts = {len(values) for values in columns.values()}
     if len(counts) != 1:
-        raise MeshFileError(f"{key}.extensions.EXT_mesh_gpu_instancing.attributes",
-                            "needs TRANSLATION, ROTATION or SCALE, all of one count")  # fmt: skip
+        raise MeshFileError(
+            f"{key}.extensions.EXT_mesh_gpu_instancing.attributes",
+            "needs TRANSLATION, ROTATION or SCALE, all of one count",
+        )
     (n,) = counts
     matrices = np.zeros((n, 4, 4))
     matrices[:, 3, 3] = 1.0
@@ -412,27 +442,38 @@ def _camera(path: Path, tree: dict, index: int, world: np.ndarray) -> FileCamera
     key = f"cameras[{index}]"
     camera = tree["cameras"][index]
     if camera.get("type") != "perspective" or "perspective" not in camera:
-        warn_input(f"{path}: {key}: a {camera.get('type')} camera is not supported (embree_rt's "
-                   "camera is a pinhole); the view is framed from the bounds instead")  # fmt: skip
+        warn_input(
+            f"{path}: {key}: a {camera.get('type')} camera is not supported (embree_rt's "
+            "camera is a pinhole); the view is framed from the bounds instead"
+        )
         return None
     perspective = camera["perspective"]
     forward = -world[:3, 2] / np.linalg.norm(world[:3, 2])
     up = world[:3, 1] / np.linalg.norm(world[:3, 1])
-    return FileCamera(key=key, position=world[:3, 3].copy(), forward=forward, up=up,
-                      yfov_degrees=float(np.degrees(perspective["yfov"])),
-                      aspect_ratio=perspective.get("aspectRatio"))  # fmt: skip
+    return FileCamera(
+        key=key,
+        position=world[:3, 3].copy(),
+        forward=forward,
+        up=up,
+        yfov_degrees=float(np.degrees(perspective["yfov"])),
+        aspect_ratio=perspective.get("aspectRatio"),
+    )
 
 
 def _light(tree: dict, index: object, world: np.ndarray, key: str) -> FileLight:
     lights = (tree.get("extensions") or {}).get("KHR_lights_punctual", {}).get("lights", [])
     if not isinstance(index, int) or not 0 <= index < len(lights):
-        raise MeshFileError(f"{key}.extensions.KHR_lights_punctual.light",
-                            f"no light {index!r} in the file's {len(lights)}")  # fmt: skip
+        raise MeshFileError(
+            f"{key}.extensions.KHR_lights_punctual.light",
+            f"no light {index!r} in the file's {len(lights)}",
+        )
     light = lights[index]
     kind = light.get("type")
     if kind not in ("point", "spot", "directional"):
-        raise MeshFileError(f"extensions.KHR_lights_punctual.lights[{index}].type",
-                            f"expected point, spot or directional, got {kind!r}")  # fmt: skip
+        raise MeshFileError(
+            f"extensions.KHR_lights_punctual.lights[{index}].type",
+            f"expected point, spot or directional, got {kind!r}",
+        )
     spot = light.get("spot") or {}
     return FileLight(
         key=f"extensions.KHR_lights_punctual.lights[{index}]",
@@ -442,8 +483,9 @@ def _light(tree: dict, index: object, world: np.ndarray, key: str) -> FileLight:
         color=tuple(float(c) for c in light.get("color", (1.0, 1.0, 1.0))),
         intensity=float(light.get("intensity", 1.0)),
         outer_cone_degrees=float(np.degrees(spot.get("outerConeAngle", np.pi / 4)))
-        if kind == "spot" else None,
-    )  # fmt: skip
+        if kind == "spot"
+        else None,
+    )
 
 
 def _write(path: Path, tree: dict, binary: bytes | None) -> bytes:

@@ -92,9 +92,14 @@ class GltfLooks:
     @property
     def per_point(self) -> bool:
         """Whether shading needs anything from it per hit besides the base colour."""
-        return (self.alpha_mode == "BLEND" or self.emissive is not None
-                or self.transmission is not None or self.metallic_roughness is not None
-                or self.normal is not None or self.occlusion is not None)  # fmt: skip
+        return (
+            self.alpha_mode == "BLEND"
+            or self.emissive is not None
+            or self.transmission is not None
+            or self.metallic_roughness is not None
+            or self.normal is not None
+            or self.occlusion is not None
+        )
 
     @property
     def has_alpha(self) -> bool:
@@ -136,9 +141,9 @@ class GltfDocument:
                 blob = base64.b64decode(image["uri"].split(",", 1)[1])
             elif (found := uri_path(self.path.parent, image["uri"])) is not None:
                 blob = found.read_bytes()
-            self._texels[key] = None if blob is None else texels_from_image(
-                Image.open(io.BytesIO(blob)), srgb
-            )  # fmt: skip
+            self._texels[key] = (
+                None if blob is None else texels_from_image(Image.open(io.BytesIO(blob)), srgb)
+            )
         return self._texels[key]
 
 
@@ -273,8 +278,9 @@ def material_from_gltf(material: dict) -> Material:
     base = metallic_roughness_material(
         color, float(pbr.get("metallicFactor", 1.0)), float(pbr.get("roughnessFactor", 1.0))
     )
-    strength = float(extensions.get("KHR_materials_emissive_strength", {}).get(
-        "emissiveStrength", 1.0))  # fmt: skip
+    strength = float(
+        extensions.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    )
     emission = tuple(float(c) * strength for c in material.get("emissiveFactor", (0, 0, 0)))
     fields: dict = {"emission": emission}
     if "KHR_materials_unlit" in extensions:
@@ -282,8 +288,9 @@ def material_from_gltf(material: dict) -> Material:
     transmission = extensions.get("KHR_materials_transmission")
     if transmission is not None and transmission.get("transmissionFactor", 0.0) > 0.0:
         fields["transparency"] = float(np.clip(transmission["transmissionFactor"], 0.0, 1.0))
-        fields["ior"] = max(1.0, float(extensions.get("KHR_materials_ior", {}).get(
-            "ior", DEFAULT_IOR)))  # fmt: skip
+        fields["ior"] = max(
+            1.0, float(extensions.get("KHR_materials_ior", {}).get("ior", DEFAULT_IOR))
+        )
         volume = extensions.get("KHR_materials_volume", {})
         if volume.get("thicknessFactor", 0.0) > 0.0:
             fields["attenuation_color"] = tuple(
@@ -293,9 +300,7 @@ def material_from_gltf(material: dict) -> Material:
     return Material(**{**base.__dict__, **fields})
 
 
-def primitive_looks(
-    document: GltfDocument, primitive: dict, vertex_count: int
-) -> GltfLooks | None:
+def primitive_looks(document: GltfDocument, primitive: dict, vertex_count: int) -> GltfLooks | None:
     """The ``GltfLooks`` of a triangle primitive with a material, or None without one."""
     if "material" not in primitive:
         return None
@@ -313,12 +318,14 @@ def primitive_looks(
     normal_info = material.get("normalTexture")
     normal = reader.slot(normal_info, srgb=False)
     if normal is not None and "TANGENT" in reader.attributes:
-        tangents = np.ascontiguousarray(document.accessor(reader.attributes["TANGENT"]).T,
-                                        np.float32)  # fmt: skip
+        tangents = np.ascontiguousarray(
+            document.accessor(reader.attributes["TANGENT"]).T, np.float32
+        )
     occlusion_info = material.get("occlusionTexture") or {}
     transmission = extensions.get("KHR_materials_transmission", {})
-    strength = float(extensions.get("KHR_materials_emissive_strength", {}).get(
-        "emissiveStrength", 1.0))  # fmt: skip
+    strength = float(
+        extensions.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    )
     looks = GltfLooks(
         material=material_from_gltf(material),
         base_color=reader.slot(pbr.get("baseColorTexture"), srgb=True),
@@ -341,8 +348,14 @@ def primitive_looks(
         occlusion_strength=float(occlusion_info.get("strength", 1.0)),
         tangents=tangents,
     )
-    for slot in (looks.base_color, looks.emissive, looks.transmission, looks.metallic_roughness,
-                 looks.normal, looks.occlusion):  # fmt: skip
+    for slot in (
+        looks.base_color,
+        looks.emissive,
+        looks.transmission,
+        looks.metallic_roughness,
+        looks.normal,
+        looks.occlusion,
+    ):
         if slot is not None and slot.uv.shape[1] != vertex_count:
             return None
     return looks
@@ -365,9 +378,11 @@ def attach_gltf_looks(path: Path, meshes: list) -> None:
         if primitive.get("mode", 4) in LOADED_MODES
     ]
     if len(primitives) != len(meshes):
-        warn_input(f"{path}: {len(primitives)} glTF primitives for {len(meshes)} loaded "
-                   "meshes; emission, transmission, alpha, samplers, texture transforms not "
-                   "read")  # fmt: skip
+        warn_input(
+            f"{path}: {len(primitives)} glTF primitives for {len(meshes)} loaded "
+            "meshes; emission, transmission, alpha, samplers, texture transforms not "
+            "read"
+        )
         return
     for primitive, mesh in zip(primitives, meshes, strict=True):
         if primitive.get("mode", 4) not in TRIANGLE_MODES:

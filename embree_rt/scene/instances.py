@@ -64,9 +64,11 @@ def placement_matrices(
     positions = np.asarray(positions, np.float64)
     n = len(positions)
     matrices = np.zeros((n, 4, 4))
-    linear = np.broadcast_to(np.eye(3), (n, 3, 3)) if rotations is None else (
-        euler_xyz_matrices(rotations)
-    )  # fmt: skip
+    linear = (
+        np.broadcast_to(np.eye(3), (n, 3, 3))
+        if rotations is None
+        else (euler_xyz_matrices(rotations))
+    )
     if scales is not None:
         scales = np.asarray(scales, np.float64)
         linear = linear * (scales[:, None, None] if scales.ndim == 1 else scales[:, None, :])
@@ -89,19 +91,22 @@ def read_placements(
         raise fail(f"unknown array {unknown[0]!r} (known: {', '.join(sorted(known))})")
     if "transforms" in arrays:
         if given := sorted({"positions", "rotations", "scales"} & set(arrays)):
-            raise fail(f"give either transforms or positions/rotations/scales, not {given[0]!r} "
-                       "too")  # fmt: skip
+            raise fail(
+                f"give either transforms or positions/rotations/scales, not {given[0]!r} too"
+            )
         matrices = arrays["transforms"]
         if matrices.ndim != 3 or matrices.shape[1:] != (4, 4) or matrices.dtype.kind not in "fiu":
-            raise fail(f"transforms must be (n, 4, 4) numbers, got {matrices.shape} "
-                       f"{matrices.dtype}")  # fmt: skip
+            raise fail(
+                f"transforms must be (n, 4, 4) numbers, got {matrices.shape} {matrices.dtype}"
+            )
         name = "transforms"
     elif "positions" in arrays:
         matrices = _matrices_from_parts(arrays, fail)
         name = "positions/rotations/scales"
     else:
-        raise fail(f"expected an array 'transforms' or 'positions' (has: "
-                   f"{', '.join(arrays) or 'none'})")  # fmt: skip
+        raise fail(
+            f"expected an array 'transforms' or 'positions' (has: {', '.join(arrays) or 'none'})"
+        )
     if len(matrices) == 0:
         raise fail(f"{name}: no placements")
     if (problem := affine_array_problem(matrices)) is not None:
@@ -127,15 +132,17 @@ def _matrices_from_parts(arrays: dict, fail: Callable[[str], Exception]) -> np.n
     rotations = arrays.get("rotations")
     if rotations is not None:
         if rotations.shape != (n, 3) or rotations.dtype.kind not in "fiu":
-            raise fail(f"rotations must be ({n}, 3) degrees, got {rotations.shape} "
-                       f"{rotations.dtype}")  # fmt: skip
+            raise fail(
+                f"rotations must be ({n}, 3) degrees, got {rotations.shape} {rotations.dtype}"
+            )
         if not np.isfinite(rotations).all():
             raise fail(f"rotations row {_first(~np.isfinite(rotations).all(axis=1))} is not finite")
     scales = arrays.get("scales")
     if scales is not None:
         if scales.shape not in ((n,), (n, 3)) or scales.dtype.kind not in "fiu":
-            raise fail(f"scales must be ({n},) or ({n}, 3) numbers, got {scales.shape} "
-                       f"{scales.dtype}")  # fmt: skip
+            raise fail(
+                f"scales must be ({n},) or ({n}, 3) numbers, got {scales.shape} {scales.dtype}"
+            )
         bad = ~(np.isfinite(scales) & (scales > 0))
         if bad.any():
             row = _first(bad if bad.ndim == 1 else bad.any(axis=1))

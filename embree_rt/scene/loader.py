@@ -256,8 +256,11 @@ class SceneReader:
             for mesh, node_transform in models[entry.path].every_placement():
                 if problem := placed_mesh_problem(mesh.vertices, transforms @ node_transform):
                     row, text = problem
-                    raise SceneError(self.path, entry.placements_key,
-                                     f"{entry.placements_path}: row {row} {text}")  # fmt: skip
+                    raise SceneError(
+                        self.path,
+                        entry.placements_key,
+                        f"{entry.placements_path}: row {row} {text}",
+                    )
         for entry in self.meshes:
             model = models[entry.path]
             for _, node_transform in model.parts:
@@ -281,8 +284,11 @@ class SceneReader:
                         f"with the file's EXT_mesh_gpu_instancing copy {problem[0]}: {problem[1]}",
                     )
                 if problem := placed_mesh_problem(mesh.vertices, entry.placement @ transforms):
-                    raise SceneError(self.path, entry.key, f"{entry.path}: instancing copy "
-                                     f"{problem[0]} {problem[1]}")  # fmt: skip
+                    raise SceneError(
+                        self.path,
+                        entry.key,
+                        f"{entry.path}: instancing copy {problem[0]} {problem[1]}",
+                    )
         # Step 3: build.
         if self.field is not None:
             add_field_spheres(scene, self.field)
@@ -297,8 +303,9 @@ class SceneReader:
                 # The node's own transform first, then the user's placement of the whole file.
                 scene.add_mesh(mesh, entry.material, entry.placement @ node_transform, entry.smooth)
             for mesh, transforms in model.instanced:
-                scene.add_instances(mesh, entry.placement @ transforms, entry.material,
-                                    entry.smooth)  # fmt: skip
+                scene.add_instances(
+                    mesh, entry.placement @ transforms, entry.material, entry.smooth
+                )
         if self.instances:
             from embree_rt.scene.instances import mesh_from_parts
 
@@ -306,9 +313,12 @@ class SceneReader:
             for entry, (transforms, materials) in zip(self.instances, placements, strict=True):
                 if entry.path not in baked:
                     baked[entry.path] = mesh_from_parts(models[entry.path].every_placement())
-                scene.add_instances(baked[entry.path], transforms,
-                                    entry.material if materials is None else materials,
-                                    entry.smooth)  # fmt: skip
+                scene.add_instances(
+                    baked[entry.path],
+                    transforms,
+                    entry.material if materials is None else materials,
+                    entry.smooth,
+                )
         return scene
 
     # -- sections -----------------------------------------------------------------------------
@@ -404,11 +414,14 @@ class SceneReader:
         if table.has("attenuation_color"):
             fields["attenuation_color"] = table.color("attenuation_color")
             if max(fields["attenuation_color"]) > 1.0:
-                raise table.error("attenuation_color", "each must lie in [0, 1], got "
-                                  f"{list(fields['attenuation_color'])}")  # fmt: skip
+                raise table.error(
+                    "attenuation_color",
+                    f"each must lie in [0, 1], got {list(fields['attenuation_color'])}",
+                )
         if table.has("attenuation_distance"):
-            fields["attenuation_distance"] = table.number("attenuation_distance", low=0,
-                                                          low_open=True)  # fmt: skip
+            fields["attenuation_distance"] = table.number(
+                "attenuation_distance", low=0, low_open=True
+            )
         if table.has("unlit"):
             fields["unlit"] = table.boolean("unlit", False)
         return Material(**{**base.__dict__, **fields})

@@ -91,8 +91,9 @@ def read_model(path: Path) -> LoadedModel:
     what it renders differently or leaves out is an ``InputWarning`` line."""
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
-        raise MeshFileError("(file)", f"unsupported mesh format; use one of "
-                            f"{', '.join(MESH_SUFFIXES)}")  # fmt: skip
+        raise MeshFileError(
+            "(file)", f"unsupported mesh format; use one of {', '.join(MESH_SUFFIXES)}"
+        )
     if not path.is_file():
         raise MeshFileError("(file)", "no such file")
     prepared = prepare_gltf(path) if suffix in (".glb", ".gltf") else PreparedGltf()
@@ -101,8 +102,9 @@ def read_model(path: Path) -> LoadedModel:
     resolver = _NamesAsWritten(str(path), allow_anywhere=True)
     try:
         if prepared.data is not None:
-            loaded = trimesh.load(io.BytesIO(prepared.data), file_type=suffix[1:],
-                                  resolver=resolver, process=False)  # fmt: skip
+            loaded = trimesh.load(
+                io.BytesIO(prepared.data), file_type=suffix[1:], resolver=resolver, process=False
+            )
         else:
             loaded = trimesh.load(str(path), resolver=resolver, process=False)
     except Exception as error:  # trimesh raises many kinds for a file it cannot parse
@@ -115,8 +117,11 @@ def read_model(path: Path) -> LoadedModel:
     instanced = []
     for mesh_index, transforms, _ in prepared.instanced:
         for geometry in loaded.geometry.values():
-            if (isinstance(geometry, trimesh.Trimesh) and len(geometry.faces)
-                    and geometry.metadata.get(MESH_INDEX_TAG) == mesh_index):  # fmt: skip
+            if (
+                isinstance(geometry, trimesh.Trimesh)
+                and len(geometry.faces)
+                and geometry.metadata.get(MESH_INDEX_TAG) == mesh_index
+            ):
                 instanced.append((geometry, transforms))
     model = LoadedModel(parts, instanced, prepared.camera, prepared.lights)
     if not model.meshes():
@@ -128,8 +133,9 @@ def read_model(path: Path) -> LoadedModel:
         # where the message can name the file, not later in the BVH build.
         faces = np.asarray(mesh.faces)
         if faces.min() < 0 or faces.max() >= len(mesh.vertices):
-            raise MeshFileError("(file)", f"a face indexes a vertex outside "
-                                f"[0, {len(mesh.vertices)})")  # fmt: skip
+            raise MeshFileError(
+                "(file)", f"a face indexes a vertex outside [0, {len(mesh.vertices)})"
+            )
     return model
 
 
@@ -160,8 +166,10 @@ def read_gltf_looks(path: Path, loaded: trimesh.Trimesh | trimesh.Scene) -> None
     try:
         attach_gltf_looks(path, meshes)
     except (OSError, ValueError, KeyError, IndexError, TypeError) as error:
-        warn_input(f"{path}: glTF materials read as trimesh reads them only "
-                   f"({type(error).__name__}: {error})")  # fmt: skip
+        warn_input(
+            f"{path}: glTF materials read as trimesh reads them only "
+            f"({type(error).__name__}: {error})"
+        )
 
 
 # -- what a mesh looks like ----------------------------------------------------------------------
@@ -302,8 +310,9 @@ def mesh_surface(mesh: trimesh.Trimesh) -> MeshSurface | None:
                 and len(coordinates) == len(mesh.vertices)
             ):
                 texels = texels_from_image(image)
-                uv = np.nan_to_num(np.asarray(coordinates, np.float64)[:, :2], nan=0.0,
-                                   posinf=0.0, neginf=0.0)  # fmt: skip
+                uv = np.nan_to_num(
+                    np.asarray(coordinates, np.float64)[:, :2], nan=0.0, posinf=0.0, neginf=0.0
+                )
                 uv = np.ascontiguousarray(uv.T, np.float32)
         colors = visual.vertex_attributes.get("color")
         if colors is not None and len(colors) == len(mesh.vertices):

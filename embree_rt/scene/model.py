@@ -170,18 +170,21 @@ class Scene:
         from embree_rt.scene.errors import warn_input
 
         for view in staging.views:
-            camera = Camera(position=view.position, look_at=view.look_at, up=view.up,
-                            fov=view.fov)  # fmt: skip
+            camera = Camera(position=view.position, look_at=view.look_at, up=view.up, fov=view.fov)
             if (problem := camera_problem(camera)) is None:
                 break
-            warn_input(f"{view.note}: cannot be used ({problem[0]}: {problem[1]}); the next "
-                       "choice is taken")  # fmt: skip
+            warn_input(
+                f"{view.note}: cannot be used ({problem[0]}: {problem[1]}); the next "
+                "choice is taken"
+            )
         self.camera = camera
         self.notes.append(view.note)
         if view is not staging.views[-1] and staging.aspect_ratio:  # the file's own camera
             self.render.height = max(1, round(self.render.width / staging.aspect_ratio))
-        self.lights = [PointLight(position=light.position, color=light.color,
-                                  intensity=light.intensity) for light in staging.lights]
+        self.lights = [
+            PointLight(position=light.position, color=light.color, intensity=light.intensity)
+            for light in staging.lights
+        ]
         self.notes += staging.notes
         if floor:
             height, size = staging.floor
@@ -194,6 +197,7 @@ class Scene:
     def __repr__(self) -> str:
         """One short line: what the scene holds and how it renders (a dataclass's own repr
         would print every sphere and matrix)."""
+
         def count(number: int, noun: str) -> str:
             return f"{number:,} {noun}{'' if number == 1 else 's'}"
 
@@ -278,8 +282,9 @@ class Scene:
         self.sphere_radii = np.concatenate([self.sphere_radii, radii])
         self.sphere_materials = np.concatenate([self.sphere_materials, ids])
 
-    def material_ids(self, materials: str | np.ndarray | list[str], count: int,
-                     what: str = "objects") -> np.ndarray:  # fmt: skip
+    def material_ids(
+        self, materials: str | np.ndarray | list[str], count: int, what: str = "objects"
+    ) -> np.ndarray:
         """(count,) int32 indices into ``material_names`` of one material name for all, (count,)
         names, or (count,) int indices (checked against the table); ValueError otherwise."""
         if isinstance(materials, str):
@@ -336,8 +341,13 @@ class Scene:
             ids = self.material_ids(self._mesh_material(child), len(transforms), "transforms")
         else:
             ids = self.material_ids(materials, len(transforms), "transforms")
-        added = MeshInstances(mesh=child, transforms=transforms, materials=ids,
-                              smooth=bool(smooth), mesh_colors=materials is None)  # fmt: skip
+        added = MeshInstances(
+            mesh=child,
+            transforms=transforms,
+            materials=ids,
+            smooth=bool(smooth),
+            mesh_colors=materials is None,
+        )
         self.instances.append(added)
         return added
 

@@ -98,19 +98,31 @@ def framed_view(low: np.ndarray, high: np.ndarray, fov: float = FRAMED_FOV) -> V
     center = (low + high) / 2.0
     radius = max(float(np.linalg.norm(high - low)) / 2.0, 1e-12)
     azimuth, elevation = math.radians(FRAMED_AZIMUTH), math.radians(FRAMED_ELEVATION)
-    direction = np.array([math.sin(azimuth) * math.cos(elevation), math.sin(elevation),
-                          math.cos(azimuth) * math.cos(elevation)])  # fmt: skip
+    direction = np.array(
+        [
+            math.sin(azimuth) * math.cos(elevation),
+            math.sin(elevation),
+            math.cos(azimuth) * math.cos(elevation),
+        ]
+    )
     distance = 1.05 * radius / math.sin(math.radians(fov) / 2.0)
-    return View(_vec(center + distance * direction), _vec(center), (0.0, 1.0, 0.0), fov,
-                "camera: framed from the bounds")  # fmt: skip
+    return View(
+        _vec(center + distance * direction),
+        _vec(center),
+        (0.0, 1.0, 0.0),
+        fov,
+        "camera: framed from the bounds",
+    )
 
 
 def default_lights(low: np.ndarray, high: np.ndarray) -> list[Light]:
     """``DEFAULT_RIG`` placed around the box ``low``..``high``."""
     center = (low + high) / 2.0
     radius = max(float(np.linalg.norm(high - low)) / 2.0, 1e-12)
-    return [Light(_vec(center + radius * np.array(offset)), (1.0, 1.0, 1.0), intensity)
-            for offset, intensity in DEFAULT_RIG]  # fmt: skip
+    return [
+        Light(_vec(center + radius * np.array(offset)), (1.0, 1.0, 1.0), intensity)
+        for offset, intensity in DEFAULT_RIG
+    ]
 
 
 def floor_under(low: np.ndarray, high: np.ndarray) -> tuple[float, float]:
@@ -122,20 +134,28 @@ def floor_under(low: np.ndarray, high: np.ndarray) -> tuple[float, float]:
     if extent > 0:
         wanted = math.log10(extent / 4.0)
         decade = math.floor(wanted)
-        size = min((step * 10.0**power for power in (decade, decade + 1) for step in (1, 2.5, 5)),
-                   key=lambda candidate: abs(math.log10(candidate) - wanted))  # fmt: skip
+        size = min(
+            (step * 10.0**power for power in (decade, decade + 1) for step in (1, 2.5, 5)),
+            key=lambda candidate: abs(math.log10(candidate) - wanted),
+        )
     return float(low[1]) - FLOOR_GAP * max(extent, 1e-12), size
 
 
 def file_view(camera: FileCamera, center: np.ndarray, radius: float, note: str) -> View:
     """A file's camera as a pinhole's placement, aimed along its view."""
     reach = max(float(np.dot(center - camera.position, camera.forward)), radius, 1e-12)
-    return View(_vec(camera.position), _vec(camera.position + reach * camera.forward),
-                _vec(camera.up), camera.yfov_degrees, note)  # fmt: skip
+    return View(
+        _vec(camera.position),
+        _vec(camera.position + reach * camera.forward),
+        _vec(camera.up),
+        camera.yfov_degrees,
+        note,
+    )
 
 
-def file_lights(path: Path, lights: list[FileLight], center: np.ndarray,
-                radius: float) -> list[Light]:  # fmt: skip
+def file_lights(
+    path: Path, lights: list[FileLight], center: np.ndarray, radius: float
+) -> list[Light]:
     """A file's lights as point lights (module docstring), warning once per spot light."""
     strengths = []
     positions = []
@@ -145,16 +165,20 @@ def file_lights(path: Path, lights: list[FileLight], center: np.ndarray,
             strengths.append(light.intensity)
             continue
         if light.kind == "spot":
-            warn_input(f"{path}: {light.key}: a spot light, rendered as a point light (embree_rt's "
-                       f"lights have no cone; its outer cone is {light.outer_cone_degrees:g} "
-                       "degrees)")  # fmt: skip
+            warn_input(
+                f"{path}: {light.key}: a spot light, rendered as a point light (embree_rt's "
+                f"lights have no cone; its outer cone is {light.outer_cone_degrees:g} "
+                "degrees)"
+            )
         positions.append(light.position)
         squared = max(float(np.sum((light.position - center) ** 2)), (1e-3 * radius) ** 2)
         strengths.append(light.intensity / squared)
     total = sum(strengths)
     scale = FILE_LIGHTS_TOTAL / total if total > 0 else 0.0
-    return [Light(_vec(p), light.color, s * scale)
-            for p, s, light in zip(positions, strengths, lights, strict=True)]  # fmt: skip
+    return [
+        Light(_vec(p), light.color, s * scale)
+        for p, s, light in zip(positions, strengths, lights, strict=True)
+    ]
 
 
 def stage_model(path: Path, model: LoadedModel) -> Staging:
@@ -164,8 +188,9 @@ def stage_model(path: Path, model: LoadedModel) -> Staging:
     views = [framed_view(low, high)]
     aspect = None
     if model.camera is not None:
-        views.insert(0, file_view(model.camera, center, radius,
-                                  f"camera: {model.camera.key} of {path}"))  # fmt: skip
+        views.insert(
+            0, file_view(model.camera, center, radius, f"camera: {model.camera.key} of {path}")
+        )
         aspect = model.camera.aspect_ratio
     if model.lights:
         lights = file_lights(path, model.lights, center, radius)
@@ -183,14 +208,23 @@ def stage_trimesh(loaded: trimesh.Trimesh | trimesh.Scene) -> Staging:
     views = [framed_view(low, high)]
     if isinstance(loaded, trimesh.Scene) and loaded.has_camera:
         pose = np.asarray(loaded.camera_transform, np.float64)
-        camera = FileCamera(key="camera", position=pose[:3, 3],
-                            forward=-pose[:3, 2] / np.linalg.norm(pose[:3, 2]),
-                            up=pose[:3, 1] / np.linalg.norm(pose[:3, 1]),
-                            yfov_degrees=float(loaded.camera.fov[1]), aspect_ratio=None)
+        camera = FileCamera(
+            key="camera",
+            position=pose[:3, 3],
+            forward=-pose[:3, 2] / np.linalg.norm(pose[:3, 2]),
+            up=pose[:3, 1] / np.linalg.norm(pose[:3, 1]),
+            yfov_degrees=float(loaded.camera.fov[1]),
+            aspect_ratio=None,
+        )
         center, radius = (low + high) / 2.0, float(np.linalg.norm(high - low)) / 2.0
         views.insert(0, file_view(camera, center, radius, "camera: the trimesh.Scene's"))
-    return Staging(views, default_lights(low, high), floor_under(low, high), None,
-                   ["lights: the default rig of two"])  # fmt: skip
+    return Staging(
+        views,
+        default_lights(low, high),
+        floor_under(low, high),
+        None,
+        ["lights: the default rig of two"],
+    )
 
 
 def _vec(values: np.ndarray) -> Point:

@@ -23,8 +23,10 @@ def check_obj_files(path: Path) -> None:
         return
     library = _found(path.parent, name)
     if library is None:
-        warn_input(f"{path}: mtllib: no such file {name!r} (looked in {path.parent}); its "
-                   "materials render as the default")  # fmt: skip
+        warn_input(
+            f"{path}: mtllib: no such file {name!r} (looked in {path.parent}); its "
+            "materials render as the default"
+        )
         return
     material = None
     for line in library.read_text(encoding="utf-8", errors="replace").splitlines():
@@ -34,6 +36,8 @@ def check_obj_files(path: Path) -> None:
         elif len(words) > 1 and words[0].lower() == "map_kd":
             texture = line[line.lower().index("map_kd") + len("map_kd") :].strip()
             if _found(path.parent, texture) is None:
-                warn_input(f"{library}: map_Kd (material {material!r}): no such file "
-                           f"{texture!r} (looked in {path.parent}); the material renders "
-                           "without its texture")  # fmt: skip
+                warn_input(
+                    f"{library}: map_Kd (material {material!r}): no such file "
+                    f"{texture!r} (looked in {path.parent}); the material renders "
+                    "without its texture"
+                )

@@ -19,8 +19,9 @@ def strip_triangles(strips: list[np.ndarray]) -> np.ndarray:
     """(t, 3) int64 triangles of triangle strips, each a 1-D array of vertex indices in which
     -1 restarts the strip; degenerate triangles (a repeated index, which strips use to turn or
     to join runs) are left out."""
-    flat = np.concatenate([np.append(np.asarray(s, np.int64).ravel(), -1) for s in strips]
-                          or [np.zeros(0, np.int64)])  # fmt: skip
+    flat = np.concatenate(
+        [np.append(np.asarray(s, np.int64).ravel(), -1) for s in strips] or [np.zeros(0, np.int64)]
+    )
     k = np.arange(len(flat) - 2)
     valid = (flat[:-2] >= 0) & (flat[1:-1] >= 0) & (flat[2:] >= 0)
     # the position of each index in its run: distance from the last restart before it
@@ -61,8 +62,13 @@ def with_strips(loaded: object) -> object:
         else:
             colors = getattr(loaded, "colors", None)
             colors = colors if colors is not None and len(colors) else None
-        return trimesh.Trimesh(np.asarray(loaded.vertices), faces, vertex_colors=colors,
-                               process=False, metadata=metadata)  # fmt: skip
+        return trimesh.Trimesh(
+            np.asarray(loaded.vertices),
+            faces,
+            vertex_colors=colors,
+            process=False,
+            metadata=metadata,
+        )
     if isinstance(loaded, trimesh.Trimesh) and len(loaded.faces):
         return loaded
     others = [name for name in elements if name != "vertex"]
@@ -74,6 +80,5 @@ def with_strips(loaded: object) -> object:
             f"{', '.join(TRIANGLE_ELEMENTS)}; the file has {', '.join(elements)})",
         )
     if not others:
-        raise MeshFileError("(file)", "only vertices (a point cloud): no face or tristrips "
-                            "element")  # fmt: skip
+        raise MeshFileError("(file)", "only vertices (a point cloud): no face or tristrips element")
     return loaded

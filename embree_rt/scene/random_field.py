@@ -230,8 +230,11 @@ def add_field_spheres_where(
     ring per thread. ``within``: ((x0, z0), (x1, z1)), a box (bounds may be infinite) holding
     every centre ``keep`` accepts: the rings that cannot reach it are not generated. Returns
     (m,) int64 the kept spheres' rows in the whole field (their object ids)."""
-    heroes = (np.empty((plan.heroes, 3), np.float32), np.empty(plan.heroes, np.float32),
-              np.empty(plan.heroes, np.int32))  # fmt: skip
+    heroes = (
+        np.empty((plan.heroes, 3), np.float32),
+        np.empty(plan.heroes, np.float32),
+        np.empty(plan.heroes, np.int32),
+    )
     _hero_spheres(scene, plan, *heroes)
     kept = keep(heroes[0])
     pieces = [(np.flatnonzero(kept).astype(np.int64), *(part[kept] for part in heroes))]
@@ -246,8 +249,7 @@ def add_field_spheres_where(
             materials = np.empty(ring.count, np.int32)
             make(ring, centers, radii, materials)
             rows = np.flatnonzero(keep(centers))
-            return (rows + (plan.heroes + ring.first), centers[rows], radii[rows],
-                    materials[rows])  # fmt: skip
+            return (rows + (plan.heroes + ring.first), centers[rows], radii[rows], materials[rows])
 
         with ThreadPoolExecutor(max_workers=worker_count(threads)) as pool:
             pieces.extend(pool.map(fill, rings))
@@ -362,8 +364,9 @@ class _SphereDraws:
         radius = np.random.Generator(self._stream(first)).uniform(*plan.radius, size=k)[rank]
         reach = plan.spacing / 2 - radius  # the sphere stays inside its cell, so none overlap
         # (np.take, not jitter[rank]: NumPy's fancy indexing of a 2-wide row is 25x slower)
-        jitter = np.take(np.random.Generator(self._stream(n + 2 * first)).random((k, 2)), rank,
-                         axis=0)  # fmt: skip
+        jitter = np.take(
+            np.random.Generator(self._stream(n + 2 * first)).random((k, 2)), rank, axis=0
+        )
         jitter *= 2
         jitter -= 1
         jitter *= reach[:, None]

@@ -82,8 +82,11 @@ def apply_setting(document: dict, setting: Setting) -> None:
     here: object = document
     walked = ""
     for step, following in zip(steps, [*steps[1:], None], strict=True):
-        name = f"{walked}[{step}]" if isinstance(step, int) else (f"{walked}.{step}" if walked
-                                                                  else step)  # fmt: skip
+        name = (
+            f"{walked}[{step}]"
+            if isinstance(step, int)
+            else (f"{walked}.{step}" if walked else step)
+        )
         if isinstance(step, int):
             if not isinstance(here, list):
                 raise SceneError(setting.origin, walked, "is not a list: no index to take")
@@ -108,8 +111,11 @@ def blamed(error: SceneError, settings: list[Setting]) -> SceneError:
     itself, a table holding it, or a key inside it), or as it was when no setting did."""
     for setting in reversed(settings):
         key = setting.key
-        if key == error.key or key.startswith((f"{error.key}.", f"{error.key}[")) or \
-                error.key.startswith((f"{key}.", f"{key}[")):  # fmt: skip
+        if (
+            key == error.key
+            or key.startswith((f"{error.key}.", f"{error.key}["))
+            or error.key.startswith((f"{key}.", f"{key}["))
+        ):
             return SceneError(setting.origin, error.key, error.problem)
     return error
 
@@ -139,12 +145,20 @@ def apply_to_scene(scene: Scene, settings: list[Setting], made_from: str) -> Non
     for setting in settings:
         top = key_steps(setting.key)[0]
         if top not in SETTABLE_TABLES:
-            raise SceneError(setting.origin, str(top), f"not settable on {made_from}: "
-                             + unknown_key_message(str(top), SETTABLE_TABLES))  # fmt: skip
+            raise SceneError(
+                setting.origin,
+                str(top),
+                f"not settable on {made_from}: " + unknown_key_message(str(top), SETTABLE_TABLES),
+            )
         tables.append(top)
-    bare = replace(scene, sphere_centers=np.zeros((0, 3), np.float32),
-                   sphere_radii=np.zeros(0, np.float32), sphere_materials=np.zeros(0, np.int32),
-                   meshes=[], instances=[])  # fmt: skip
+    bare = replace(
+        scene,
+        sphere_centers=np.zeros((0, 3), np.float32),
+        sphere_radii=np.zeros(0, np.float32),
+        sphere_materials=np.zeros(0, np.int32),
+        meshes=[],
+        instances=[],
+    )
     written = scene_document(bare, Path(made_from))
     # the camera always: an animation is read against it
     document = {name: written[name] for name in {"render", "camera", *tables} if name in written}

@@ -60,13 +60,18 @@ def scene_document(scene: Scene, path: Path) -> dict:
         entries = []
         for number, instances in enumerate(scene.instances):
             placements_path = path.with_name(f"{path.stem}.instances{number}.npz")
-            np.savez_compressed(placements_path, transforms=instances.transforms,
-                                materials=names[instances.materials])  # fmt: skip
-            entries.append({
-                "mesh": mesh_file(instances.mesh),
-                "transforms": placements_path.name,
-                "smooth": instances.smooth,
-            })  # fmt: skip
+            np.savez_compressed(
+                placements_path,
+                transforms=instances.transforms,
+                materials=names[instances.materials],
+            )
+            entries.append(
+                {
+                    "mesh": mesh_file(instances.mesh),
+                    "transforms": placements_path.name,
+                    "smooth": instances.smooth,
+                }
+            )
         document["instances"] = entries
     return document
 

@@ -109,8 +109,9 @@ def create_app(new_session: Callable[[], PreviewSession], *, loopback: bool = Tr
         Route("/{rest:path}", not_found),
     ]
     hosts = LOOPBACK_HOSTS if loopback else ["*"]
-    return Starlette(routes=routes, middleware=[Middleware(TrustedHostMiddleware,
-                                                           allowed_hosts=hosts)])  # fmt: skip
+    return Starlette(
+        routes=routes, middleware=[Middleware(TrustedHostMiddleware, allowed_hosts=hosts)]
+    )
 
 
 _CLOSED = object()
@@ -223,15 +224,21 @@ class PreviewConnection:
         camera = scene.camera
         return {
             "type": "scene",
-            "camera": {"position": list(map(float, camera.position)),
-                       "look_at": list(map(float, camera.look_at)),
-                       "up": list(map(float, camera.up)), "fov": float(camera.fov)},
+            "camera": {
+                "position": list(map(float, camera.position)),
+                "look_at": list(map(float, camera.look_at)),
+                "up": list(map(float, camera.up)),
+                "fov": float(camera.fov),
+            },
             "materials": scene.material_names,
-            "render": {"width": scene.render.width, "height": scene.render.height,
-                       "spp": scene.render.spp},
+            "render": {
+                "width": scene.render.width,
+                "height": scene.render.height,
+                "spp": scene.render.spp,
+            },
             "spheres": len(scene.sphere_radii),
             "floor": scene.floor is not None,
-        }  # fmt: skip
+        }
 
     async def _handle(self, message: dict) -> dict | None:
         session = self.session
@@ -300,8 +307,14 @@ class PreviewConnection:
                 png = await asyncio.to_thread(png_bytes, image)
                 if generation != session.generation:
                     break
-                header = {"type": "pass", "pass": sample + 1, "of": spp, "width": width,
-                          "height": height, "ms": round(1000 * (time.perf_counter() - started))}
+                header = {
+                    "type": "pass",
+                    "pass": sample + 1,
+                    "of": spp,
+                    "width": width,
+                    "height": height,
+                    "ms": round(1000 * (time.perf_counter() - started)),
+                }
                 if not await self.send(header, png):
                     return
 
@@ -332,7 +345,12 @@ class PreviewConnection:
             return
         settings = session.scene.render
         await self.send(
-            {"type": "rendered", "width": settings.width, "height": settings.height,
-             "spp": settings.spp, "seconds": round(time.perf_counter() - started, 2)},
+            {
+                "type": "rendered",
+                "width": settings.width,
+                "height": settings.height,
+                "spp": settings.spp,
+                "seconds": round(time.perf_counter() - started, 2),
+            },
             png,
-        )  # fmt: skip
+        )

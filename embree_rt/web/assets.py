@@ -29,8 +29,10 @@ class Asset:
 def load_assets() -> tuple[dict[str, Asset], dict[str, Asset]]:
     """(static files by name, pages by route path), read from ``embree_rt/web/static``."""
     folder = resources.files("embree_rt.web") / "static"
-    static = {name: Asset(folder.joinpath(name).read_bytes(), kind)
-              for name, kind in STATIC_FILES.items()}  # fmt: skip
-    pages = {route: Asset(folder.joinpath(name).read_bytes(), HTML)
-             for route, name in PAGES.items()}  # fmt: skip
+    static = {
+        name: Asset(folder.joinpath(name).read_bytes(), kind) for name, kind in STATIC_FILES.items()
+    }
+    pages = {
+        route: Asset(folder.joinpath(name).read_bytes(), HTML) for route, name in PAGES.items()
+    }
     return static, pages

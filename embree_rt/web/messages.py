@@ -99,11 +99,13 @@ def layout_2d(message: dict) -> Layout:
     for circle in circles:
         if not isinstance(circle, dict):
             raise MessageError("circles: each circle is an object {x, y, r, material}")
-        rows.append((
-            number(circle, "x", -width, 2 * width),
-            number(circle, "y", -height, 2 * height),
-            number(circle, "r", *RADIUS_2D),
-        ))  # fmt: skip
+        rows.append(
+            (
+                number(circle, "x", -width, 2 * width),
+                number(circle, "y", -height, 2 * height),
+                number(circle, "r", *RADIUS_2D),
+            )
+        )
         materials.append(MATERIALS_2D.index(choice(circle, "material", MATERIALS_2D)))
     light = vector(message, "light", 2)
     if not (0.0 <= light[0] <= width and 0.0 <= light[1] <= height):

@@ -205,4 +205,3 @@ def session_factory(scene: Scene, scene_path: Path):
         return PreviewSession(scene, document, folder)
 
     return new_session
-

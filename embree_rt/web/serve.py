@@ -67,11 +67,17 @@ def serve(scene_path: str | None, host: str, port: int) -> None:
         _warm_up(new_session())
         bound_host, bound_port = listener.getsockname()[:2]
         if not loopback:
-            print(f"embree-rt: warning: listening on {bound_host}, not a loopback address: anyone "
-                  "who can reach this port can drive the server", file=sys.stderr)  # fmt: skip
+            print(
+                f"embree-rt: warning: listening on {bound_host}, not a loopback address: anyone "
+                "who can reach this port can drive the server",
+                file=sys.stderr,
+            )
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
-        print(f"embree-rt: serving {path.name} at http://{shown}:{bound_port}/ (the 2D demo at "
-              f"http://{shown}:{bound_port}/2d); Ctrl-C stops", flush=True)  # fmt: skip
+        print(
+            f"embree-rt: serving {path.name} at http://{shown}:{bound_port}/ (the 2D demo at "
+            f"http://{shown}:{bound_port}/2d); Ctrl-C stops",
+            flush=True,
+        )
         config = uvicorn.Config(
             create_app(new_session, loopback=loopback),
             log_level="warning",

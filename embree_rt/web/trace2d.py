@@ -84,10 +84,16 @@ def fan_directions(layout: Layout) -> np.ndarray:
 def _box_exit(origin: np.ndarray, direction: np.ndarray, width: float, height: float):
     """(n,) float64 distance along each ray (2, n) from inside the box to where it leaves."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        tx = np.where(direction[0] > 0, (width - origin[0]) / direction[0],
-                      np.where(direction[0] < 0, -origin[0] / direction[0], np.inf))
-        ty = np.where(direction[1] > 0, (height - origin[1]) / direction[1],
-                      np.where(direction[1] < 0, -origin[1] / direction[1], np.inf))
+        tx = np.where(
+            direction[0] > 0,
+            (width - origin[0]) / direction[0],
+            np.where(direction[0] < 0, -origin[0] / direction[0], np.inf),
+        )
+        ty = np.where(
+            direction[1] > 0,
+            (height - origin[1]) / direction[1],
+            np.where(direction[1] < 0, -origin[1] / direction[1], np.inf),
+        )
     return np.maximum(np.minimum(tx, ty), 0.0)
 
 
@@ -133,13 +139,16 @@ def _trace(bvh: BVH, layout: Layout) -> dict[str, np.ndarray]:
         if len(path) == 0:
             break
         hits = bvh.intersect(_in_plane(origin[:2]).T, _in_plane(direction[:2]).T)
-        leave = _box_exit(origin[:2].astype(np.float64), direction[:2].astype(np.float64),
-                          layout.width, layout.height)  # fmt: skip
+        leave = _box_exit(
+            origin[:2].astype(np.float64),
+            direction[:2].astype(np.float64),
+            layout.width,
+            layout.height,
+        )
         hit = hits.hit & (hits.t < leave)
         t = np.where(hit, hits.t, leave)
         end = origin[:2] + direction[:2] * t.astype(np.float32)
-        found.append((path, np.full(len(path), depth), start, end.astype(np.float64), weight,
-                      kind))  # fmt: skip
+        found.append((path, np.full(len(path), depth), start, end.astype(np.float64), weight, kind))
         if depth == layout.max_depth:
             break
         rows = np.flatnonzero(hit)
@@ -152,14 +161,16 @@ def _trace(bvh: BVH, layout: Layout) -> dict[str, np.ndarray]:
         entering = shading.dot(d, normal) < 0
         normal *= np.where(entering, np.float32(1.0), np.float32(-1.0))  # towards the ray
         center = layout.circles[hits.prim_id[rows]]
-        scale = np.maximum(np.abs(point[:2]).max(axis=0),
-                           np.hypot(center[:, 0], center[:, 1]) + center[:, 2])  # fmt: skip
+        scale = np.maximum(
+            np.abs(point[:2]).max(axis=0), np.hypot(center[:, 0], center[:, 1]) + center[:, 2]
+        )
         offset = surface_offset(scale.astype(np.float32))
         glass = material == GLASS
         refracted, total_internal, fresnel = shading.dielectric_split(d, normal, entering, ior)
         w = weight[rows]
-        reflect_weight = np.where(glass, w * (glass_reflect + transparency * fresnel),
-                                  w * mirror_reflect)  # fmt: skip
+        reflect_weight = np.where(
+            glass, w * (glass_reflect + transparency * fresnel), w * mirror_reflect
+        )
         refract_weight = np.where(glass, w * transparency * (1.0 - fresnel), 0.0)
         reflect_kind = np.where(glass & total_internal, INTERNAL, REFLECTION)
         # The brighter child continues its parent's path; the other starts a new one.
