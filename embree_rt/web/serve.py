@@ -9,6 +9,7 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
+import uvicorn
 
 from embree_rt.errors import InputError
 from embree_rt.web.messages import MAX_MESSAGE_BYTES
@@ -53,8 +54,6 @@ def _warm_up(session) -> None:
 
 def serve(scene_path: str | None, host: str, port: int) -> None:
     """Serve the pages for the scene file ``scene_path`` (None: the showcase) until Ctrl-C."""
-    import uvicorn
-
     from embree_rt.scene import load_scene
     from embree_rt.web.app import create_app
     from embree_rt.web.preview import session_factory
@@ -73,10 +72,9 @@ def serve(scene_path: str | None, host: str, port: int) -> None:
                 file=sys.stderr,
             )
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
-        print(
+        announcement = (
             f"embree-rt: serving {path.name} at http://{shown}:{bound_port}/ (the 2D demo at "
-            f"http://{shown}:{bound_port}/2d); Ctrl-C stops",
-            flush=True,
+            f"http://{shown}:{bound_port}/2d); Ctrl-C stops"
         )
         config = uvicorn.Config(
             create_app(new_session, loopback=loopback),
@@ -88,7 +86,21 @@ def serve(scene_path: str | None, host: str, port: int) -> None:
             ws_max_size=16 * MAX_MESSAGE_BYTES,
             timeout_graceful_shutdown=2,
         )
-        uvicorn.Server(config).run(sockets=[listener])
+        AnnouncingServer(config, announcement).run(sockets=[listener])
+
+
+class AnnouncingServer(uvicorn.Server):
+    """A uvicorn server that prints its address once it is serving: by then its signal
+    handlers are installed, so a Ctrl-C right after the line stops it cleanly (a Ctrl-C before
+    the event loop existed left asyncio's half-made loop to fail in its finaliser)."""
+
+    def __init__(self, config: uvicorn.Config, announcement: str) -> None:
+        super().__init__(config)
+        self.announcement = announcement
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        await super().startup(sockets=sockets)
+        print(self.announcement, flush=True)
 
 
 def _default_scene() -> Path:
