@@ -188,10 +188,10 @@ def stage_breakdown(renderer: Renderer, image: dict) -> dict:
         (integrator, "camera_rays", wrap("camera", camera_rays)),
         (
             camera_query,
-            "intersect_camera_serial",
-            wrap("traversal", camera_query.intersect_camera_serial),
+            "intersect_camera_chunk",
+            wrap("traversal", camera_query.intersect_camera_chunk),
         ),
-        (kernels, "intersect_serial", wrap("traversal", kernels.intersect_serial)),
+        (kernels, "intersect_chunk", wrap("traversal", kernels.intersect_chunk)),
         (geometry, "intersect_camera", wrap("records", geometry.intersect_camera)),
         (geometry, "intersect_compact", wrap("records", geometry.intersect_compact)),
         (geometry, "occluded_toward", wrap("shadow", geometry.occluded_toward)),
