@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.embree import BVH, HitLabels, HitRecords, spheres_in_spatial_order
 from embree_rt.mesh_attributes import (
@@ -107,7 +108,7 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
     return (vectors / np.maximum(length, np.float32(1e-30))).astype(np.float32, copy=False)
 
 
-class SceneGeometry:
+class SceneGeometry(Closing):
     """The BVH of a scene plus the tables that turn Embree's ids into shading inputs."""
 
     def __init__(self, scene: Scene, spheres: str = "analytic", threads: int | None = None):
@@ -327,12 +328,6 @@ class SceneGeometry:
         self.bvh.close()
         for child in self._children:
             child.close()
-
-    def __enter__(self) -> SceneGeometry:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     # -- queries ------------------------------------------------------------------------------
 

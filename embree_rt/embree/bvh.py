@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.compiled.work_split import parallel_region
 from embree_rt.embree import (
@@ -113,7 +114,7 @@ def _release_handles(lib: ctypes.CDLL, scene: int, dev: device_module.Device) ->
     device_module.release(dev)
 
 
-class BVH:
+class BVH(Closing):
     """One Embree scene: add geometry, ``commit()``, then ``intersect`` / ``occluded`` batches.
 
     ``threads`` is the number of threads the queries run on (default: all cores); ``lanes`` how
@@ -197,12 +198,6 @@ class BVH:
         """Release the Embree scene (and the device, when no other BVH uses it)."""
         self._finalizer()
         self._scene = None
-
-    def __enter__(self) -> BVH:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     def _live_scene(self) -> int:
         if not self._scene:
