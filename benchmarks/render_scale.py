@@ -57,10 +57,10 @@ class RecordingGeometry:
     def __getattr__(self, name: str):
         return getattr(self.geometry, name)
 
-    def intersect_compact(self, origins, directions, tnear=0.0, tfar=np.inf, coherent=False):
+    def intersect_compact(self, origins, directions, coherent=False):
         with self._lock:
-            self.log.append(("intersect", origins, directions, tfar, coherent))
-        return self.geometry.intersect_compact(origins, directions, tnear, tfar, coherent)
+            self.log.append(("intersect", origins, directions, np.inf, coherent))
+        return self.geometry.intersect_compact(origins, directions, coherent)
 
     def intersect_camera(self, camera, index):
         rows, surfaces, directions = self.geometry.intersect_camera(camera, index)

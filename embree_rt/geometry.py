@@ -331,17 +331,11 @@ class SceneGeometry(Closing):
 
     # -- queries ------------------------------------------------------------------------------
 
-    def intersect(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-    ) -> RaySurfaces:
+    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> RaySurfaces:
         """Nearest surface on each of n rays; ``origins``, ``directions`` (3, n) float32, unit
         directions. Returns a ``RaySurfaces``: every field has one column per ray (zeros where
         ``hit`` is False)."""
-        rows, compact = self.intersect_compact(origins, directions, tnear, tfar)
+        rows, compact = self.intersect_compact(origins, directions)
         n = np.shape(origins)[1]
         full = RaySurfaces(
             hit=np.zeros(n, bool),
@@ -363,21 +357,14 @@ class SceneGeometry(Closing):
         return full
 
     def intersect_compact(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-        coherent: bool = False,
+        self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
     ) -> tuple[np.ndarray, SurfaceHits]:
         """Like ``intersect``, but only for the rays that hit: returns their (k,) int64 ray
         numbers and a ``SurfaceHits`` of k columns (what the integrator shades), floor hits
         first. The Embree layer's compiled hit records do the bookkeeping; only smooth mesh
         normals are left to do here. ``coherent``: the rays come in runs of neighbouring
         camera rays (Embree's coherent query; the same answers, found faster)."""
-        records = self.bvh.intersect_records(
-            origins, directions, self.labels, tnear, tfar, coherent
-        )
+        records = self.bvh.intersect_records(origins, directions, self.labels, coherent=coherent)
         return records.rays, self._surfaces(records)
 
     def intersect_camera(
