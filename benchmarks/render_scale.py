@@ -57,10 +57,10 @@ class RecordingGeometry:
     def __getattr__(self, name: str):
         return getattr(self.geometry, name)
 
-    def intersect_compact(self, origins, directions, tnear=0.0, tfar=np.inf, coherent=False):
+    def intersect_compact(self, origins, directions, coherent=False):
         with self._lock:
-            self.log.append(("intersect", origins, directions, tfar, coherent))
-        return self.geometry.intersect_compact(origins, directions, tnear, tfar, coherent)
+            self.log.append(("intersect", origins, directions, np.inf, coherent))
+        return self.geometry.intersect_compact(origins, directions, coherent)
 
     def intersect_camera(self, camera, index):
         rows, surfaces, directions = self.geometry.intersect_camera(camera, index)
@@ -188,10 +188,10 @@ def stage_breakdown(renderer: Renderer, image: dict) -> dict:
         (integrator, "camera_rays", wrap("camera", camera_rays)),
         (
             camera_query,
-            "intersect_camera_serial",
-            wrap("traversal", camera_query.intersect_camera_serial),
+            "intersect_camera_chunk",
+            wrap("traversal", camera_query.intersect_camera_chunk),
         ),
-        (kernels, "intersect_serial", wrap("traversal", kernels.intersect_serial)),
+        (kernels, "intersect_chunk", wrap("traversal", kernels.intersect_chunk)),
         (geometry, "intersect_camera", wrap("records", geometry.intersect_camera)),
         (geometry, "intersect_compact", wrap("records", geometry.intersect_compact)),
         (geometry, "occluded_toward", wrap("shadow", geometry.occluded_toward)),

@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,7 +25,10 @@ from embree_rt.aovs import check_aov_names, render_aovs, save_with_aovs
 from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, Integrator, RenderStats
 from embree_rt.scene.loader import check_scene_values
-from embree_rt.scene.model import RenderSettings, Scene
+from embree_rt.scene.model import RenderSettings, Scene, SettingOverrides
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 
 @dataclass
@@ -104,24 +108,19 @@ class Renderer(Integrator):
         self,
         *,
         camera: Camera | None = None,
-        width: int | None = None,
-        height: int | None = None,
-        spp: int | None = None,
-        max_depth: int | None = None,
-        seed: int | None = None,
         aovs: Sequence[str] = (),
         quiet: bool = True,
         progress: Callable[[int, int], None] | None = None,
+        **overrides: Unpack[SettingOverrides],
     ) -> RenderResult:
-        """The scene seen by ``camera`` (default the scene's own). Settings left as None come
-        from the scene's ``render`` table (``RenderSettings.with_overrides``); ``aovs`` names
+        """The scene seen by ``camera`` (default the scene's own). ``overrides`` (width, height,
+        spp, max_depth, seed: ``SettingOverrides``) replace the scene's ``render`` table's
+        (``RenderSettings.with_overrides``), those left out or None stay; ``aovs`` names
         AOVs (``embree_rt.aovs.AOV_NAMES``) to render after the image, which they leave bitwise
         unchanged. With ``quiet=False`` a progress bar runs on stderr (when it is a terminal);
         ``progress(done, total)`` counts camera samples."""
         names = check_aov_names(aovs)
-        settings = self.scene.render.with_overrides(
-            width=width, height=height, spp=spp, max_depth=max_depth, seed=seed
-        )
+        settings = self.scene.render.with_overrides(**overrides)
         frame = camera_frame(
             self.scene.camera if camera is None else camera, settings.width, settings.height
         )
@@ -180,16 +179,12 @@ def render(
     scene: Scene,
     *,
     camera: Camera | None = None,
-    width: int | None = None,
-    height: int | None = None,
-    spp: int | None = None,
-    max_depth: int | None = None,
-    seed: int | None = None,
     aovs: Sequence[str] = (),
     threads: int | None = None,
     spheres: str = "analytic",
     batch_size: int = DEFAULT_BATCH_SIZE,
     quiet: bool = True,
+    **overrides: Unpack[SettingOverrides],
 ) -> RenderResult:
     """Render ``scene`` once: build its BVH, render (``Renderer.render``), free the BVH.
 
@@ -197,23 +192,12 @@ def render(
     machine's memory (the BVH, the image, its AOVs) raises ``budget.MemoryBudgetError`` before
     anything is built."""
     names = check_aov_names(aovs)
-    settings = scene.render.with_overrides(
-        width=width, height=height, spp=spp, max_depth=max_depth, seed=seed
-    )
+    settings = scene.render.with_overrides(**overrides)
     require_memory(
         scene, settings, spheres=spheres, threads=threads, batch_size=batch_size, aovs=names
     )
     with Renderer(scene, spheres=spheres, threads=threads, batch_size=batch_size) as renderer:
-        return renderer.render(
-            camera=camera,
-            width=settings.width,
-            height=settings.height,
-            spp=settings.spp,
-            max_depth=settings.max_depth,
-            seed=settings.seed,
-            aovs=names,
-            quiet=quiet,
-        )
+        return renderer.render(camera=camera, aovs=names, quiet=quiet, **overrides)
 
 
 def require_memory(

@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import dask
 import distributed
@@ -44,8 +45,11 @@ from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.errors import InputError
 from embree_rt.film import Film
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, RenderStats
-from embree_rt.scene.model import RenderSettings, Scene
+from embree_rt.scene.model import RenderSettings, Scene, SettingOverrides
 from embree_rt.scene.random_field import FieldPlan
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 # How long a render waits with no worker at all (lost, or not yet joined) before giving up.
 NO_WORKERS_TIMEOUT_S = 30.0
@@ -266,17 +270,40 @@ class _Frame:
     pending: int
 
 
-def single_frame(
-    render_frames: Callable, settings: RenderSettings, camera: Camera, progress=None
-) -> np.ndarray:
-    """The (height, width, 3) float32 linear image of ``camera`` from a cluster renderer's
-    ``render_frames(settings, cameras, on_frame, progress)``: one frame, asked as a sequence."""
-    images = []
-    render_frames(settings, [(0, camera)], lambda _, image: images.append(image), progress)
-    return images[0]
+class FrameRenderer:
+    """What the cluster renderers (``ClusterRenderer``, ``bricks.PartitionedRenderer``) build on
+    their own ``render_frames(settings, cameras, on_frame, progress)``, which renders each
+    ``(label, camera)`` and calls ``on_frame(label, image)``, their ``release()``, which frees
+    what the workers hold, and their ``stats``, the frames' ``RenderStats`` added up."""
+
+    def render(
+        self,
+        settings: RenderSettings,
+        camera: Camera,
+        progress: Callable[[ClusterProgress], None] | None = None,
+    ) -> np.ndarray:
+        """One (height, width, 3) float32 linear image seen by ``camera``."""
+        images = []
+        self.render_frames(settings, [(0, camera)], lambda _, image: images.append(image), progress)
+        return images[0]
+
+    def render_once(
+        self, settings: RenderSettings, camera: Camera, quiet: bool = True
+    ) -> RenderResult:
+        """``render`` with a progress bar (unless ``quiet``), then ``release``: the one image
+        of ``embree_rt.distributed.render`` and its bricks twin, as a ``RenderResult``."""
+        try:
+            with progress_bar(settings.width * settings.height * settings.spp, quiet) as show:
+                image = self.render(settings, camera, show)
+        finally:
+            self.release()
+        stats = RenderStats(
+            rays=dict(self.stats.rays), build_s=self.stats.build_s, render_s=self.stats.render_s
+        )
+        return RenderResult(image, {}, stats)
 
 
-class ClusterRenderer:
+class ClusterRenderer(FrameRenderer):
     """Renders one scene on ``client``'s cluster: frames (one camera each) share the workers'
     renderers; ``render_frames`` keeps a few frames in flight so no worker idles between them.
 
@@ -325,10 +352,6 @@ class ClusterRenderer:
     def builds(self) -> dict[str, int]:
         """Renderer builds per worker address (each worker that has taken a batch: 1)."""
         return self.client.run(_plugin_builds, name=plugin_name(self.key))
-
-    def render(self, settings: RenderSettings, camera: Camera, progress=None) -> np.ndarray:
-        """One (height, width, 3) float32 linear image seen by ``camera``."""
-        return single_frame(self.render_frames, settings, camera, progress)
 
     def render_frames(
         self,
@@ -468,35 +491,24 @@ def render(
     scene: Scene | SceneSource | str | os.PathLike,
     client: distributed.Client,
     *,
-    width: int | None = None,
-    height: int | None = None,
-    spp: int | None = None,
-    max_depth: int | None = None,
-    seed: int | None = None,
     camera: Camera | None = None,
     spheres: str = "analytic",
     batch_size: int = DEFAULT_BATCH_SIZE,
     quiet: bool = True,
+    **overrides: Unpack[SettingOverrides],
 ) -> RenderResult:
     """``embree_rt.render`` on ``client``'s cluster: the same (height, width, 3) float32 image,
     bit for bit (no AOVs: they are rendered locally). ``scene`` is a ``Scene`` (scattered once
-    to every worker) or the path of a scene file every worker can read. Arguments left as None
-    come from the scene's ``render`` table. The workers' renderers are freed afterwards; for
-    several images or frames of one scene use a ``ClusterRenderer``, which builds once per
-    worker for all of them.
+    to every worker) or the path of a scene file every worker can read. ``overrides`` (width,
+    height, spp, max_depth, seed) as ``embree_rt.render`` takes them. The workers' renderers
+    are freed afterwards; for several images or frames of one scene use a ``ClusterRenderer``,
+    which builds once per worker for all of them.
     """
     local = scene if isinstance(scene, Scene) else _local_view(scene)
-    settings = local.render.with_overrides(
-        width=width, height=height, spp=spp, max_depth=max_depth, seed=seed
-    )
+    settings = local.render.with_overrides(**overrides)
     renderer = ClusterRenderer(scene, client, spheres=spheres, batch_size=batch_size)
-    try:
-        with progress_bar(settings.width * settings.height * settings.spp, quiet) as show:
-            image = renderer.render(settings, local.camera if camera is None else camera, show)
-    finally:
-        renderer.release()  # one image: nothing to keep (a ClusterRenderer keeps its BVHs)
-    stats = RenderStats(rays=dict(renderer.stats.rays), render_s=renderer.stats.render_s)
-    return RenderResult(image, {}, stats)
+    # one image: nothing to keep (a ClusterRenderer keeps its BVHs)
+    return renderer.render_once(settings, local.camera if camera is None else camera, quiet)
 
 
 def _local_view(source: SceneSource | str | os.PathLike) -> Scene:

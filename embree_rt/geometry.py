@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.embree import BVH, HitLabels, HitRecords, spheres_in_spatial_order
 from embree_rt.mesh_attributes import (
@@ -107,7 +108,7 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
     return (vectors / np.maximum(length, np.float32(1e-30))).astype(np.float32, copy=False)
 
 
-class SceneGeometry:
+class SceneGeometry(Closing):
     """The BVH of a scene plus the tables that turn Embree's ids into shading inputs."""
 
     def __init__(self, scene: Scene, spheres: str = "analytic", threads: int | None = None):
@@ -328,25 +329,13 @@ class SceneGeometry:
         for child in self._children:
             child.close()
 
-    def __enter__(self) -> SceneGeometry:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
-
     # -- queries ------------------------------------------------------------------------------
 
-    def intersect(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-    ) -> RaySurfaces:
+    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> RaySurfaces:
         """Nearest surface on each of n rays; ``origins``, ``directions`` (3, n) float32, unit
         directions. Returns a ``RaySurfaces``: every field has one column per ray (zeros where
         ``hit`` is False)."""
-        rows, compact = self.intersect_compact(origins, directions, tnear, tfar)
+        rows, compact = self.intersect_compact(origins, directions)
         n = np.shape(origins)[1]
         full = RaySurfaces(
             hit=np.zeros(n, bool),
@@ -368,21 +357,14 @@ class SceneGeometry:
         return full
 
     def intersect_compact(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-        coherent: bool = False,
+        self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
     ) -> tuple[np.ndarray, SurfaceHits]:
         """Like ``intersect``, but only for the rays that hit: returns their (k,) int64 ray
         numbers and a ``SurfaceHits`` of k columns (what the integrator shades), floor hits
         first. The Embree layer's compiled hit records do the bookkeeping; only smooth mesh
         normals are left to do here. ``coherent``: the rays come in runs of neighbouring
         camera rays (Embree's coherent query; the same answers, found faster)."""
-        records = self.bvh.intersect_records(
-            origins, directions, self.labels, tnear, tfar, coherent
-        )
+        records = self.bvh.intersect_records(origins, directions, self.labels, coherent=coherent)
         return records.rays, self._surfaces(records)
 
     def intersect_camera(

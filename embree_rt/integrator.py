@@ -20,6 +20,7 @@ import numpy as np
 from embree_rt import shading
 from embree_rt.batches import batch_ranges, ordered_results, worker_count
 from embree_rt.camera import CameraFrame, camera_rays, sample_rays, tiled_samples
+from embree_rt.closing import Closing
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.compiled import retain_freed_memory
 from embree_rt.compiled.camera_rays import CameraRays, sample_directions
@@ -124,7 +125,7 @@ class Tracer(Protocol):
     def close(self) -> None: ...
 
 
-class Integrator:
+class Integrator(Closing):
     """The Whitted integrator of one scene: builds its BVH once, then traces and shades batches
     of camera samples (``render_image``, ``trace_batch``, ``trace_pixels``). ``embree_rt.Renderer``
     adds the public ``render`` to it; Dask workers and the browser preview use it as it is.
@@ -195,12 +196,6 @@ class Integrator:
 
     def close(self) -> None:
         self.geometry.close()
-
-    def __enter__(self) -> Integrator:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     def render_image(
         self,

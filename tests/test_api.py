@@ -56,6 +56,8 @@ def test_settings_left_out_come_from_the_scene() -> None:
     assert scene.render.width == 40  # the scene's own table is left as it was
     result = rt.render(scene, width=20)
     assert result.image.shape == (24, 20, 3) and result.aovs == {}
+    with pytest.raises(TypeError, match="'widht'"):  # a misspelt setting is no silent default
+        rt.render(scene, widht=20)
     np.testing.assert_array_equal(result.image, rt.render(scene, **{**SIZE, "width": 20}).image)
 
 

@@ -134,7 +134,7 @@ def test_images_are_the_same_on_one_and_two_threads() -> None:
 COMPILED = [
     camera_module.sample_directions,
     camera_module.write_directions,
-    camera_query.intersect_camera_serial,
+    camera_query.intersect_camera_chunk,
     film_sums.add_weighted,
     film_sums.mean_image,
 ]

@@ -24,6 +24,7 @@ from embree_rt.bricks.contents import scene_brick, without_objects
 from embree_rt.bricks.nearest import nearest_over_bricks
 from embree_rt.bricks.partition import Partition
 from embree_rt.bricks.ray_boxes import boxes_reached, padded_boxes, rows_by_brick
+from embree_rt.closing import Closing
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.scene.model import Scene
 
@@ -63,7 +64,7 @@ class BrickTraffic:
                 setattr(self, name, getattr(self, name) + value)
 
 
-class BrickSet:
+class BrickSet(Closing):
     """The integrator's tracer over bricks of ``scene`` whose boxes are ``bounds`` (K, 2, 3)
     float64, answered by ``queries``. ``scene`` gives the floor (its objects are not used)."""
 
@@ -76,12 +77,6 @@ class BrickSet:
     def close(self) -> None:
         self.floor.close()
         self.queries.close()
-
-    def __enter__(self) -> BrickSet:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     def intersect_compact(
         self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False

@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import distributed
 import numpy as np
@@ -50,16 +51,18 @@ from embree_rt.distributed import (
     ClusterError,
     ClusterProgress,
     FieldRecipe,
+    FrameRenderer,
     SceneFile,
     SceneSource,
     WorkerSceneError,
-    progress_bar,
-    single_frame,
 )
 from embree_rt.errors import InputError
 from embree_rt.geometry import sphere_kind
 from embree_rt.integrator import Integrator, RenderStats
-from embree_rt.scene.model import RenderSettings, Scene
+from embree_rt.scene.model import RenderSettings, Scene, SettingOverrides
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 # Batches of camera samples the client traces at once. Each depth of a batch costs three round
 # trips to the bricks (rays, then shadow segments for each of two lights) whatever its size, so
@@ -346,7 +349,7 @@ def assign_bricks(bricks: int, workers: Sequence[str]) -> dict[int, str]:
     return {index: ordered[index % len(ordered)] for index in range(bricks)}
 
 
-class PartitionedRenderer:
+class PartitionedRenderer(FrameRenderer):
     """Renders one scene on ``client``'s cluster, data-parallel: the scene cut into
     ``partition`` bricks held by the workers, shading on this process (``threads`` batches
     in flight, ``batch_size`` camera samples each). ``scene`` as for ``ClusterRenderer``: a
@@ -407,15 +410,6 @@ class PartitionedRenderer:
     def bricks_held(self) -> dict[str, int]:
         """Bricks (of any scene) held by each worker."""
         return self.client.run(bricks_held)
-
-    def render(
-        self,
-        settings: RenderSettings,
-        camera: Camera,
-        progress: Callable[[ClusterProgress], None] | None = None,
-    ) -> np.ndarray:
-        """One (height, width, 3) float32 linear image seen by ``camera``."""
-        return single_frame(self.render_frames, settings, camera, progress)
 
     def render_frames(
         self,
@@ -489,7 +483,7 @@ def render(
     batch_size: int = DATA_PARALLEL_BATCH_SIZE,
     threads: int = DEFAULT_CLIENT_THREADS,
     quiet: bool = True,
-    **overrides: int | None,
+    **overrides: Unpack[SettingOverrides],
 ) -> RenderResult:
     """``embree_rt.distributed.render``'s twin with the scene cut into ``partition`` bricks on
     the workers: the same image, bit for bit (see ``nearest`` for exact ties between bricks);
@@ -500,14 +494,9 @@ def render(
     )
     try:
         settings = renderer.scene.render.with_overrides(**overrides)
-        view = renderer.scene.camera if camera is None else camera
-        with progress_bar(settings.width * settings.height * settings.spp, quiet) as show:
-            image = renderer.render(settings, view, show)
-    finally:
+    except BaseException:
         renderer.release()
-    stats = RenderStats(
-        rays=dict(renderer.stats.rays),
-        build_s=renderer.stats.build_s,
-        render_s=renderer.stats.render_s,
+        raise
+    return renderer.render_once(
+        settings, renderer.scene.camera if camera is None else camera, quiet
     )
-    return RenderResult(image, {}, stats)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.compiled.work_split import parallel_region
 from embree_rt.embree import (
@@ -113,7 +114,7 @@ def _release_handles(lib: ctypes.CDLL, scene: int, dev: device_module.Device) ->
     device_module.release(dev)
 
 
-class BVH:
+class BVH(Closing):
     """One Embree scene: add geometry, ``commit()``, then ``intersect`` / ``occluded`` batches.
 
     ``threads`` is the number of threads the queries run on (default: all cores); ``lanes`` how
@@ -197,12 +198,6 @@ class BVH:
         """Release the Embree scene (and the device, when no other BVH uses it)."""
         self._finalizer()
         self._scene = None
-
-    def __enter__(self) -> BVH:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     def _live_scene(self) -> int:
         if not self._scene:
@@ -463,11 +458,12 @@ class BVH:
 
     # -- queries ------------------------------------------------------------------------------
 
-    def _run_query(self, serial, parallel, arguments: tuple) -> None:
-        """Run a query kernel: ``serial`` in the calling thread on one thread (several Python
-        threads may do so at once), else ``parallel`` on numba's threads."""
+    def _run_query(self, chunk, parallel, arguments: tuple, n: int) -> None:
+        """Run a query over n rays: on one thread, its ``chunk`` kernel over all of them in the
+        calling thread (no threading layer: several Python threads may do so at once), else
+        ``parallel``, its driver, on numba's threads."""
         if self.threads == 1:
-            serial(*arguments)
+            chunk(np.empty(kernels.SCRATCH_WORDS, np.uint32), 0, n, *arguments)
         else:
             with parallel_region:
                 numba.set_num_threads(self.threads)
@@ -502,7 +498,7 @@ class BVH:
                 self._nearest(hits),
                 self._copy_numbers(hits),
             )
-            self._run_query(kernels.intersect_serial, kernels.intersect, arguments)
+            self._run_query(kernels.intersect_chunk, kernels.intersect, arguments, len(origins))
         return hits
 
     def _copy_numbers(self, hits: Hits) -> np.ndarray | None:
@@ -600,7 +596,7 @@ class BVH:
                 self._copy_numbers(hits),
             )
             self._run_query(
-                camera_query.intersect_camera_serial, camera_query.intersect_camera, arguments
+                camera_query.intersect_camera_chunk, camera_query.intersect_camera, arguments, n
             )
         origins = np.broadcast_to(camera.origin[:, None], (3, n))
         return self._records(origins, directions, rays.tnear, rays.tfar, hits, labels), directions
@@ -710,7 +706,7 @@ class BVH:
                 kernels.Rays(origins, directions, tnear, tfar),
                 blocked,
             )
-            self._run_query(kernels.occluded_serial, kernels.occluded, arguments)
+            self._run_query(kernels.occluded_chunk, kernels.occluded, arguments, len(origins))
         return blocked
 
     def occluded_toward(
@@ -739,7 +735,9 @@ class BVH:
                 points, rows, target, has_plane, np.float32(plane_y if has_plane else 0.0)
             )
             arguments = (self._query(False), shadow, blocked)
-            self._run_query(segments.occluded_toward_serial, segments.occluded_toward, arguments)
+            self._run_query(
+                segments.occluded_toward_chunk, segments.occluded_toward, arguments, len(rows)
+            )
         return blocked
 
     def all_hits(

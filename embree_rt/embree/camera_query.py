@@ -31,9 +31,12 @@ def camera_query_rays(origin: np.ndarray, directions: np.ndarray) -> Rays:
 
 
 @njit(nogil=True, cache=True)
-def _camera_chunk(query, words, first, stop, camera, index, directions, rays, hits, inst_prim):
+def intersect_camera_chunk(
+    words, first, stop, query, camera, index, directions, rays, hits, inst_prim
+):
+    """Samples first .. stop: their directions written, their rays traced (``intersect_chunk``)."""
     write_directions(camera, index, first, stop, directions)
-    intersect_chunk(query, words, first, stop, rays, hits, inst_prim)
+    intersect_chunk(words, first, stop, query, rays, hits, inst_prim)
 
 
 # ``query`` a ``kernels.Query``; ``camera`` a ``compiled.camera_rays.CameraRays``, ``index``
@@ -48,23 +51,7 @@ def intersect_camera(query, camera, index, directions, rays, hits, inst_prim):
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _camera_chunk(
-            query,
-            scratch[c],
-            c * CHUNK,
-            min(n, (c + 1) * CHUNK),
-            camera,
-            index,
-            directions,
-            rays,
-            hits,
-            inst_prim,
+        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+        intersect_camera_chunk(
+            scratch[c], first, stop, query, camera, index, directions, rays, hits, inst_prim
         )
-
-
-@njit(nogil=True, cache=True)
-def intersect_camera_serial(query, camera, index, directions, rays, hits, inst_prim):
-    scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _camera_chunk(
-        query, scratch, 0, index.shape[0], camera, index, directions, rays, hits, inst_prim
-    )

@@ -199,7 +199,7 @@ def occluded_packet(lanes, valid_address, scene, address, query):
 
 
 @njit(nogil=True, cache=True)
-def intersect_chunk(query, words, first_ray, stop, rays, hits, inst_prim):
+def intersect_chunk(words, first_ray, stop, query, rays, hits, inst_prim):
     """Rays first_ray .. stop of ``rays`` (``Rays``) through Embree's nearest-hit query
     (``query``: a ``Query``), their answers into ``hits`` (``NearestHits``), with ``words`` a
     uint32 scratch row of ``SCRATCH_WORDS``. ``inst_prim``: (n,) int32 for Embree's
@@ -235,7 +235,9 @@ def intersect_chunk(query, words, first_ray, stop, rays, hits, inst_prim):
 
 
 @njit(nogil=True, cache=True)
-def _occluded_chunk(query, words, first_ray, stop, rays, blocked):
+def occluded_chunk(words, first_ray, stop, query, rays, blocked):
+    """Rays first_ray .. stop of ``rays`` (``Rays``) through Embree's occlusion query, whether
+    each is blocked into ``blocked`` (n,) bool; ``query`` and ``words`` as ``intersect_chunk``'s."""
     scene, arguments, lanes = query
     floats = words.view(np.float32)
     b = aligned_word(words, PACKET_ALIGN)
@@ -249,12 +251,11 @@ def _occluded_chunk(query, words, first_ray, stop, rays, blocked):
             blocked[first + lane] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
 
-# Drivers: the parallel ones spread chunks over numba's threads (the chunk bodies are compiled
-# functions of their own, not inlined: numba's parallel lowering loses stores made through a
-# tuple's arrays in an inlined body, and ``hits`` is such a tuple); the serial ones run in the
-# calling thread with no threading layer at all, so several Python threads may call them at once.
-# ``query`` a ``Query``, ``rays`` a ``Rays``, ``hits`` a ``NearestHits`` to fill, ``inst_prim``
-# an (n,) int32 array for the hits' instance-array copy numbers, or None; ``blocked`` (n,) bool.
+# The parallel drivers spread chunks over numba's threads (``chunks``); on one thread, a chunk
+# kernel called from Python over all the rays needs no threading layer at all, so several Python
+# threads may run it at once. ``query`` a ``Query``, ``rays`` a ``Rays``, ``hits`` a
+# ``NearestHits`` to fill, ``inst_prim`` an (n,) int32 array for the hits' instance-array copy
+# numbers, or None; ``blocked`` (n,) bool.
 
 
 @njit(parallel=True, nogil=True, cache=True)
@@ -263,15 +264,8 @@ def intersect(query, rays, hits, inst_prim):
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        intersect_chunk(
-            query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), rays, hits, inst_prim
-        )
-
-
-@njit(nogil=True, cache=True)
-def intersect_serial(query, rays, hits, inst_prim):
-    scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    intersect_chunk(query, scratch, 0, rays.origins.shape[0], rays, hits, inst_prim)
+        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+        intersect_chunk(scratch[c], first, stop, query, rays, hits, inst_prim)
 
 
 @njit(parallel=True, nogil=True, cache=True)
@@ -280,10 +274,4 @@ def occluded(query, rays, blocked):
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _occluded_chunk(query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), rays, blocked)
-
-
-@njit(nogil=True, cache=True)
-def occluded_serial(query, rays, blocked):
-    scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _occluded_chunk(query, scratch, 0, rays.origins.shape[0], rays, blocked)
+        occluded_chunk(scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), query, rays, blocked)

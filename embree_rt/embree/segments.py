@@ -44,7 +44,9 @@ class Segments(NamedTuple):
 
 
 @njit(nogil=True, cache=True)
-def _segments_chunk(query, words, first_row, stop, segments, blocked):
+def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
+    """Segments first_row .. stop: whether each is blocked, into ``blocked``; ``words`` a
+    scratch row of ``kernels.SCRATCH_WORDS``."""
     scene, arguments, lanes = query
     points, rows, target, has_plane, plane_y = segments
     floats = words.view(np.float32)
@@ -96,10 +98,5 @@ def occluded_toward(query, segments, blocked):
     n_chunks = (n + CHUNK - 1) // CHUNK
     scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
     for c in prange(n_chunks):
-        _segments_chunk(query, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), segments, blocked)
-
-
-@njit(nogil=True, cache=True)
-def occluded_toward_serial(query, segments, blocked):
-    scratch = np.empty(SCRATCH_WORDS, np.uint32)
-    _segments_chunk(query, scratch, 0, segments.rows.shape[0], segments, blocked)
+        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+        occluded_toward_chunk(scratch[c], first, stop, query, segments, blocked)

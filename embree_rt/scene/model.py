@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -18,6 +18,7 @@ from embree_rt.transforms import as_affine
 
 if TYPE_CHECKING:  # trimesh (and SciPy behind it) loads in ~1 s: only scenes with meshes pay
     import trimesh
+    from typing_extensions import Unpack
 
 
 @dataclass
@@ -67,11 +68,27 @@ class RenderSettings:
         """The ``film.Look`` these settings ask for."""
         return Look(exposure=self.exposure, tonemap=self.tonemap, transfer=self.transfer)
 
-    def with_overrides(self, **values: int | None) -> RenderSettings:
-        """These settings with each field named in ``values`` (width, height, spp, max_depth,
-        seed) replaced, unless its value is None: the one rule by which flags and keyword
-        arguments override a scene's ``render`` table. An unknown name raises TypeError."""
+    def with_overrides(self, **values: Unpack[SettingOverrides]) -> RenderSettings:
+        """These settings with each field named in ``values`` (``SettingOverrides``) replaced,
+        unless its value is None: the one rule by which flags and keyword arguments override a
+        scene's ``render`` table. An unknown name raises TypeError."""
+        unknown = sorted(set(values) - set(SettingOverrides.__annotations__))
+        if unknown:
+            names = ", ".join(SettingOverrides.__annotations__)
+            raise TypeError(f"unknown render setting {unknown[0]!r}: expected one of {names}")
         return replace(self, **{name: value for name, value in values.items() if value is not None})
+
+
+class SettingOverrides(TypedDict, total=False):
+    """The settings a render call may override by keyword (``render(scene, spp=64)``), each
+    None or left out for the scene's own: image ``width`` and ``height`` in pixels, ``spp``
+    samples per pixel, ``max_depth`` bounces, ``seed``."""
+
+    width: int | None
+    height: int | None
+    spp: int | None
+    max_depth: int | None
+    seed: int | None
 
 
 def render_problem(settings: RenderSettings) -> tuple[str, str] | None:

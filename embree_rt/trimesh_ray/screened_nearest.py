@@ -133,7 +133,7 @@ def _trace_chunk(query, words, first, stop, rays, limits, extent, screen, hits, 
     for i in range(first, stop):
         tnear[i] = np.float32(limits[i, 0])
         tfar[i] = np.inf
-    intersect_chunk(query, words, first, stop, rays, hits, None)
+    intersect_chunk(words, first, stop, query, rays, hits, None)
     floor_band_scale = band_ulps * _EPS32 / floor_altitude if floor_altitude > 0 else np.inf
     for i in range(first, stop):
         p = prim[i]
