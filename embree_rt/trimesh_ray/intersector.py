@@ -48,11 +48,13 @@ import trimesh
 from trimesh import caching, util
 from trimesh.constants import tol
 
+from embree_rt.compiled.work_split import parallel_region
+from embree_rt.embree.multihit import crossing_parity
 from embree_rt.embree.validation import as_points
 from embree_rt.trimesh_ray.decided_hits import decided_hits
 from embree_rt.trimesh_ray.finished_hits import finished_hits
 from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
-from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
+from embree_rt.trimesh_ray.local_frame import boxed_local_points, local_rays, ordered_local_rays
 from embree_rt.trimesh_ray.local_scene import BAND_ULPS, EDGE_BAND_SCALE, EPS32, LocalScene
 from embree_rt.trimesh_ray.plane_distances import plane_distances
 from embree_rt.trimesh_ray.screened_nearest import screened_nearest
@@ -489,17 +491,27 @@ class RayMeshIntersector:
         contains = np.zeros(len(points), dtype=bool)
         if self.mesh.bounds is None:
             return contains
-        candidates = np.flatnonzero(trimesh.bounds.contains(self.mesh.bounds, points))
+        scene = self._scene
+        candidates, local = boxed_local_points(points, self.mesh.bounds, scene.origin, scene.scale)
         if not len(candidates):
             return contains
-        scene = self._scene
-        local = scene.to_local(points[candidates])
         band = scene.contains_band
         votes = np.zeros(len(candidates), np.int64)
         pending = np.arange(len(candidates))
         for k, direction in enumerate(_CONTAINS_DIRECTIONS):
-            directions = np.tile(direction.astype(np.float32), (len(pending), 1))
-            odd, clear = scene.bvh.crossing_parity(local[pending], directions, band, _GRAZE_COS)
+            # the points are finite (inside the box), so Embree is called directly; every ray
+            # of a pass shares its direction (a broadcast row, no (n, 3) copy)
+            origins = local if k == 0 else local[pending]
+            directions = np.broadcast_to(direction.astype(np.float32), (len(pending), 3))
+            with parallel_region:
+                odd, clear = crossing_parity(
+                    scene.bvh.committed_scene(),
+                    origins,
+                    directions,
+                    band,
+                    _GRAZE_COS,
+                    scene.bvh.threads,
+                )
             last = k == len(_CONTAINS_DIRECTIONS) - 1
             votes[pending] += odd
             settled = clear | last
