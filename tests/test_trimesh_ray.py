@@ -271,21 +271,42 @@ def test_rays_along_faces_and_edges_count_once_per_crossing():
     assert not along.any()
 
 
-def test_rays_starting_on_a_surface_do_not_hit_it_again():
+def test_rays_starting_on_a_surface_do_not_hit_it_again_with_tnear_none():
     mesh = _placed(trimesh.creation.icosphere(subdivisions=3), 1e8, 0.0)
     ours = RayMeshIntersector(mesh)
     origins, directions = _outside_rays(mesh, 300, seed=5)
     locations, index_ray, index_tri = ours.intersects_location(
         origins, directions, multiple_hits=False
     )
-    again_tri, again_ray = ours.intersects_id(locations, directions[index_ray])
+    again_tri, again_ray = ours.intersects_id(locations, directions[index_ray], tnear=None)
     assert not (_pairs(again_tri, again_ray) & _pairs(index_tri, np.arange(len(index_ray))))
     # the far side of the sphere is what's left: one more hit each (or none on a grazing ray)
     assert np.bincount(again_ray, minlength=len(index_ray)).max() <= 2
     assert len(set(again_ray.tolist())) >= 0.95 * len(index_ray)
-    # asked for, with tnear = 0, the surface it starts on may come back
-    near_tri, near_ray = ours.intersects_id(locations, directions[index_ray], tnear=0.0)
+    # by default (tnear = 0, as trimesh's embree backend) the surface it starts on may come back
+    near_tri, near_ray = ours.intersects_id(locations, directions[index_ray])
     assert _pairs(again_tri, again_ray) <= _pairs(near_tri, near_ray)
+
+
+@pytest.mark.parametrize("scale", [1e-4, 0.1, 1.0, 10.0, 1e4, 1e8])
+def test_a_ray_from_exactly_on_a_face_hits_it_by_default(scale):
+    """trimesh's test_embree_duplicate_hits: a ray from the centre of a subdivided box's top
+    face (a vertex where 4 triangles meet, on the face's plane exactly at every scale: s/2 is
+    a float) straight down crosses the box twice, at the top face (distance 0) and at the
+    bottom (distance s), whatever the scale, as trimesh's embree backend counts from tnear 0.
+    With tnear=None the face it starts on is skipped: only the bottom."""
+    mesh = trimesh.creation.box().subdivide().subdivide()
+    mesh.apply_scale(scale)
+    ours = RayMeshIntersector(mesh, scale_to_box=False)
+    origins, directions = np.array([[0.0, 0.0, scale / 2.0]]), np.array([[0.0, 0.0, -1.0]])
+    locations, index_ray, index_tri = ours.intersects_location(origins, directions)
+    assert index_ray.tolist() == [0, 0]
+    normals = mesh.face_normals[index_tri]
+    np.testing.assert_allclose(normals[:, 2], [1.0, -1.0])  # top face, then the bottom
+    np.testing.assert_allclose(locations[:, 2], [scale / 2, -scale / 2], rtol=0, atol=1e-9 * scale)
+    assert mesh.face_normals[ours.intersects_first(origins, directions)[0], 2] == 1.0
+    skipped_tri, _ = ours.intersects_id(origins, directions, tnear=None)
+    assert mesh.face_normals[skipped_tri, 2].tolist() == [-1.0]
 
 
 def test_max_hits_keeps_the_nearest_hits_in_trimesh_order():

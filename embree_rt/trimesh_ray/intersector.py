@@ -30,10 +30,11 @@ crossing of the surface:
   this holds at any scale.
 - A ray meeting a triangle at |cos| <= 1e-5 (in its plane, to float64 precision) does not hit
   it, as ``trimesh.intersections.planes_lines`` rules.
-- Where ``ray_triangle`` keeps hits up to 1e-6 (absolute) *behind* the origin, a ray here hits
-  only what lies ahead of its origin by more than float32 resolution (``tnear``, see
-  ``intersects_id``): a ray starting on a surface does not hit that surface again. Pass
-  ``tnear=0.0`` to include hits at the origin.
+- A ray hits what lies at or ahead of its origin (float64 distance >= ``tnear``, 0 by default),
+  as trimesh's embree backend counts hits from ``tnear`` 0 (``ray_triangle`` even keeps hits up
+  to 1e-6, absolute, *behind* it): a ray starting exactly on a surface hits that surface, as
+  trimesh's own test suite expects. ``tnear=None`` skips hits within a few float32 ulps of the
+  origin instead, so a ray starting on a surface (to float32 precision) does not hit it again.
 - ``max_hits`` keeps each ray's nearest hits (``ray_pyembree`` keeps the first it found).
 
 Hits come in ``ray_pyembree``'s order: every ray's first hit (rays ascending), then every
@@ -48,11 +49,13 @@ import trimesh
 from trimesh import caching, util
 from trimesh.constants import tol
 
+from embree_rt.compiled.work_split import parallel_region
+from embree_rt.embree.multihit import crossing_parity
 from embree_rt.embree.validation import as_points
 from embree_rt.trimesh_ray.decided_hits import decided_hits
 from embree_rt.trimesh_ray.finished_hits import finished_hits
 from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
-from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
+from embree_rt.trimesh_ray.local_frame import boxed_local_points, local_rays, ordered_local_rays
 from embree_rt.trimesh_ray.local_scene import BAND_ULPS, EDGE_BAND_SCALE, EPS32, LocalScene
 from embree_rt.trimesh_ray.plane_distances import plane_distances
 from embree_rt.trimesh_ray.screened_nearest import screened_nearest
@@ -416,7 +419,7 @@ class RayMeshIntersector:
         max_hits: int = 100,
         return_locations: bool = False,
         *,
-        tnear=None,
+        tnear=0.0,
     ):
         """Triangles hit by rays: ``(index_tri, index_ray)`` (m,) int64, and with
         ``return_locations`` also ``locations`` (m, 3) float64.
@@ -424,8 +427,9 @@ class RayMeshIntersector:
         ``ray_origins``, ``ray_directions`` (n, 3) float (directions need not be unit);
         ``multiple_hits``: every hit along each ray (up to its nearest ``max_hits``; 100 by
         default, as in trimesh 5's embree backend) or only the first; ``tnear`` (scalar or
-        (n,), world units): report hits at distance >= tnear; by default hits beyond a few
-        float32 ulps of the origin, so a ray starting on a surface does not hit it. Order: all
+        (n,), world units): report hits at distance >= tnear (0 by default, as trimesh's embree
+        backend: a ray starting exactly on a surface hits it); None: hits beyond a few float32
+        ulps of the origin, so a ray starting on a surface does not hit it. Order: all
         first hits by ray, then all second hits, ... (as trimesh's embree backend). One hit per
         crossing of the surface: where a ray meets several triangles at one point (an edge, a
         vertex) the lowest index of them stands for the point (module docstring).
@@ -451,7 +455,7 @@ class RayMeshIntersector:
         return tris, rays
 
     def intersects_location(
-        self, ray_origins, ray_directions, multiple_hits: bool = True, *, tnear=None
+        self, ray_origins, ray_directions, multiple_hits: bool = True, *, tnear=0.0
     ):
         """Where rays hit: ``(locations (m, 3) float64, index_ray (m,) int64, index_tri (m,)
         int64)``, one per crossing of the surface (see ``intersects_id``)."""
@@ -464,13 +468,13 @@ class RayMeshIntersector:
         )
         return locations, index_ray, index_tri
 
-    def intersects_first(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
+    def intersects_first(self, ray_origins, ray_directions, *, tnear=0.0) -> np.ndarray:
         """(n,) int32 (as trimesh's embree backend): the first triangle each ray hits, -1 for
         none (on an edge, the lowest index of the triangles there)."""
         origins, directions = _ray_arrays(ray_origins, ray_directions)
         return self._first_hits(origins, directions, tnear).astype(np.int32)
 
-    def intersects_any(self, ray_origins, ray_directions, *, tnear=None) -> np.ndarray:
+    def intersects_any(self, ray_origins, ray_directions, *, tnear=0.0) -> np.ndarray:
         """(n,) bool: whether each ray hits the mesh."""
         return self.intersects_first(ray_origins, ray_directions, tnear=tnear) != -1
 
@@ -489,17 +493,27 @@ class RayMeshIntersector:
         contains = np.zeros(len(points), dtype=bool)
         if self.mesh.bounds is None:
             return contains
-        candidates = np.flatnonzero(trimesh.bounds.contains(self.mesh.bounds, points))
+        scene = self._scene
+        candidates, local = boxed_local_points(points, self.mesh.bounds, scene.origin, scene.scale)
         if not len(candidates):
             return contains
-        scene = self._scene
-        local = scene.to_local(points[candidates])
         band = scene.contains_band
         votes = np.zeros(len(candidates), np.int64)
         pending = np.arange(len(candidates))
         for k, direction in enumerate(_CONTAINS_DIRECTIONS):
-            directions = np.tile(direction.astype(np.float32), (len(pending), 1))
-            odd, clear = scene.bvh.crossing_parity(local[pending], directions, band, _GRAZE_COS)
+            # the points are finite (inside the box), so Embree is called directly; every ray
+            # of a pass shares its direction (a broadcast row, no (n, 3) copy)
+            origins = local if k == 0 else local[pending]
+            directions = np.broadcast_to(direction.astype(np.float32), (len(pending), 3))
+            with parallel_region:
+                odd, clear = crossing_parity(
+                    scene.bvh.committed_scene(),
+                    origins,
+                    directions,
+                    band,
+                    _GRAZE_COS,
+                    scene.bvh.threads,
+                )
             last = k == len(_CONTAINS_DIRECTIONS) - 1
             votes[pending] += odd
             settled = clear | last
