@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt import budget, film
-from embree_rt.aovs import check_aov_names, render_aovs, save_with_aovs
+from embree_rt.aovs import aov_pixel_bytes, check_aov_names, render_aovs, save_with_aovs
 from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, Integrator, RenderStats
 from embree_rt.scene.loader import check_scene_values
@@ -218,7 +218,7 @@ def require_memory(
             settings,
             batch_size=batch_size,
             threads=threads,
-            aovs=aovs,
+            aov_pixel_bytes=aov_pixel_bytes(aovs),
         )
     )
 
