@@ -109,9 +109,9 @@ def parse_aov_list(text: str) -> tuple[str, ...]:
     return check_aov_names(names)
 
 
-def aov_bytes(width: int, height: int, names: tuple[str, ...]) -> int:
-    """Memory the arrays of the AOVs ``names`` take for a ``width`` x ``height`` image."""
-    return width * height * sum(AOV_BYTES[name] for name in names)
+def aov_pixel_bytes(names: tuple[str, ...]) -> int:
+    """Memory a pixel of the arrays of the AOVs ``names`` takes (``budget.render_needs``)."""
+    return sum(AOV_BYTES[name] for name in names)
 
 
 # -- ids --------------------------------------------------------------------------------------

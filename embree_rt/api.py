@@ -21,10 +21,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt import budget, film
-from embree_rt.aovs import check_aov_names, render_aovs, save_with_aovs
+from embree_rt.aovs import aov_pixel_bytes, check_aov_names, render_aovs, save_with_aovs
 from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, Integrator, RenderStats
-from embree_rt.scene.loader import check_scene_values
 from embree_rt.scene.model import RenderSettings, Scene, SettingOverrides
 
 if TYPE_CHECKING:
@@ -87,22 +86,10 @@ class Renderer(Integrator):
     context manager) to free the BVH.
 
     An ``Integrator`` (which holds the BVH and traces the batches) with the one method a user
-    needs, ``render``. A scene built in Python is first held to a scene file's limits
-    (``scene.loader.check_scene_values``): a value no file could hold, a light of intensity
-    1e39 say, raises the ``SceneError`` the file would (a ValueError) instead of putting NaN in
-    the image.
+    needs, ``render``. Like every integrator, it first holds a scene built in Python to a scene
+    file's limits: a value no file could hold raises the ``SceneError`` (a ValueError) the
+    file's would.
     """
-
-    def __init__(
-        self,
-        scene: Scene,
-        *,
-        spheres: str = "analytic",
-        threads: int | None = None,
-        batch_size: int = DEFAULT_BATCH_SIZE,
-    ) -> None:
-        check_scene_values(scene)
-        super().__init__(scene, spheres=spheres, threads=threads, batch_size=batch_size)
 
     def render(
         self,
@@ -218,7 +205,7 @@ def require_memory(
             settings,
             batch_size=batch_size,
             threads=threads,
-            aovs=aovs,
+            aov_pixel_bytes=aov_pixel_bytes(aovs),
         )
     )
 

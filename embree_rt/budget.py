@@ -156,18 +156,17 @@ def render_needs(
     *,
     batch_size: int,
     threads: int | None,
-    aovs: tuple[str, ...] = (),
+    aov_pixel_bytes: int = 0,
 ) -> dict[str, tuple[int, str]]:
     """What a render of ``settings`` needs beyond the scene itself, for ``require``: the BVH of
     ``sphere_count`` spheres in mode ``spheres``, and the image with its batches of
-    ``batch_size`` samples on ``threads`` (None: every core) and its ``aovs``' arrays."""
-    from embree_rt.aovs import aov_bytes
-
+    ``batch_size`` samples on ``threads`` (None: every core) and its AOVs' arrays,
+    ``aov_pixel_bytes`` a pixel (``aovs.aov_pixel_bytes``; 0: no AOVs)."""
     width, height, spp = settings.width, settings.height, settings.spp
     image = width * height * FILM_BYTES_PER_PIXEL
     text = f"a {width}x{height} image"
-    if aovs:
-        image += aov_bytes(width, height, aovs)
+    if aov_pixel_bytes:
+        image += width * height * aov_pixel_bytes
         text += " with AOVs"
     batches = batch_bytes(width * height, spp, batch_size, worker_count(threads))
     return {

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from embree_rt import Scene, load_scene, render
+from embree_rt.integrator import Integrator
 from embree_rt.materials import Checker, Material
 from embree_rt.scene import SceneError
 
@@ -326,6 +327,10 @@ def test_python_built_values_are_held_to_a_files_limits_before_rendering(case: s
     with pytest.raises(SceneError) as caught:
         render(scene, width=8, height=8, spp=1)
     assert caught.value.file == "scene" and caught.value.key == key, str(caught.value)
+    # So is it by the bare Integrator that Dask workers and the browser preview build.
+    with pytest.raises(SceneError) as caught:
+        Integrator(scene, threads=1)
+    assert caught.value.key == key, str(caught.value)
 
 
 def test_python_built_values_at_the_limits_render_without_nan() -> None:

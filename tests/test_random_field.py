@@ -6,7 +6,9 @@ whatever its ring size or thread count."""
 from __future__ import annotations
 
 import importlib
+import inspect
 import math
+import pydoc
 import time
 
 import numpy as np
@@ -208,6 +210,18 @@ def test_mix_limits_the_kinds() -> None:
 def test_bad_parameters_name_the_parameter(arguments: dict, name: str) -> None:
     with pytest.raises(ValueError, match=name):
         random_field(100, **arguments)
+
+
+def test_random_field_shows_the_parameters_it_takes() -> None:
+    # Declared once, on plan_field: help() must still list them on random_field, and they stay
+    # keyword-only past the seed.
+    parameters = inspect.signature(random_field).parameters
+    assert list(parameters) == ["count", "seed", "extent", "radius", "mix", "heroes"]
+    assert parameters == inspect.signature(plan_field).parameters
+    assert parameters["extent"].kind is inspect.Parameter.KEYWORD_ONLY
+    assert "count: 'int', seed: 'int' = 0, *, extent" in pydoc.render_doc(random_field)
+    with pytest.raises(TypeError):
+        random_field(10, 0, 5.0)  # extent given by position
 
 
 # -- generation in rings ---------------------------------------------------------------------

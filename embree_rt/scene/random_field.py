@@ -19,10 +19,13 @@ memory).
 
 from __future__ import annotations
 
+import functools
+import inspect
 import math
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import ParamSpec
 
 import numpy as np
 
@@ -61,6 +64,8 @@ HERO_CLEARANCE = 0.9
 VIEW_POSITION = np.array([12.0, 2.4, 7.0])
 VIEW_LOOK_AT = np.array([0.0, 0.8, 0.0])
 VIEW_FRAME = 5.0
+
+_Parameters = ParamSpec("_Parameters")
 
 
 class FieldParameterError(ValueError):
@@ -296,17 +301,30 @@ def _ring_maker(scene: Scene, plan: FieldPlan):
     return layout.rings(plan.small, RING_CELLS), make
 
 
-def random_field(
-    count: int,
-    seed: int = 0,
-    *,
-    extent: float | None = None,
-    radius: tuple[float, float] | None = None,
-    mix: Mapping[str, float] | None = None,
-    heroes: bool = True,
-) -> Scene:
+def _with_parameters_of(
+    plan: Callable[_Parameters, FieldPlan],
+) -> Callable[[Callable[[FieldPlan], Scene]], Callable[_Parameters, Scene]]:
+    """Make ``build(field_plan) -> Scene`` a function of ``plan``'s parameters, which it plans
+    with first: the parameters are declared once, on ``plan``, and ``help()`` and type checkers
+    show them on both."""
+
+    def decorate(build: Callable[[FieldPlan], Scene]) -> Callable[_Parameters, Scene]:
+        def planned(*args: _Parameters.args, **kwargs: _Parameters.kwargs) -> Scene:
+            return build(plan(*args, **kwargs))
+
+        functools.update_wrapper(planned, build)  # its name and docstring
+        returns = build.__annotations__["return"]
+        planned.__annotations__ = {**plan.__annotations__, "return": returns}
+        planned.__signature__ = inspect.signature(plan).replace(return_annotation=returns)
+        return planned
+
+    return decorate
+
+
+@_with_parameters_of(plan_field)
+def random_field(plan: FieldPlan) -> Scene:
     """A random sphere field of exactly ``count`` spheres resting on a reflective checkerboard,
-    deterministic for a given ``seed``.
+    deterministic for a given ``seed``. Takes ``plan_field``'s parameters:
 
     ``heroes``: the first (up to) three spheres are the radius-1 hero spheres in the centre.
     ``extent``: radius of the disc the small spheres cover (default: grows as sqrt(count) at one
@@ -315,7 +333,6 @@ def random_field(
     ``DEFAULT_MIX``). The camera and the lights adapt to the field's size. Raises
     ``FieldParameterError`` (a ``ValueError``) for a bad parameter.
     """
-    plan = plan_field(count, seed, extent=extent, radius=radius, mix=mix, heroes=heroes)
     scene = field_scene(plan)
     add_field_spheres(scene, plan)
     return scene

@@ -38,7 +38,7 @@ function onMessage(message, blob) {
     );
     renderButton.textContent = `Render full size (${settings.width}×${settings.height}, ` +
       `${settings.spp} spp)`;
-    document.getElementById("scene-info").textContent =
+    document.getElementById("hint").textContent =
       `${message.spheres} spheres · converges to embree-rt render's ${settings.spp} spp`;
     sendSize();
   } else if (message.type === "pass") {
