@@ -73,8 +73,13 @@ class Brick:
         surfaces.prim_id = surfaces.inst_id = surfaces.inst_prim_id = None
         return BrickHits(rows, self.object_ids[local], group, surfaces)
 
-    def occluded(self, points: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """(k,) bool: whether an object of this brick lies on the segment from each of the
-        ``points`` (3, k) float32 to ``target`` (3,) float32."""
-        rows = np.arange(points.shape[1], dtype=np.int64)
-        return self.geometry.occluded_toward(points, rows, target)
+    def occluded(self, segments: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
+        """Per ``(points, target)`` of ``segments``, (k,) bool: whether an object of this brick
+        lies on the segment from each of the ``points`` (3, k) float32 to ``target`` (3,)
+        float32."""
+        return [
+            self.geometry.occluded_toward(
+                points, np.arange(points.shape[1], dtype=np.int64), target
+            )
+            for points, target in segments
+        ]

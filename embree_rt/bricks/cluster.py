@@ -156,8 +156,8 @@ class BrickActor:
     def intersect(self, origins: np.ndarray, directions: np.ndarray, coherent: bool) -> BrickHits:
         return self.brick.intersect(origins, directions, coherent)
 
-    def occluded(self, points: np.ndarray, target: np.ndarray) -> np.ndarray:
-        return self.brick.occluded(points, target)
+    def occluded(self, segments: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
+        return self.brick.occluded(segments)
 
     def close(self) -> None:
         self.brick.close()
@@ -231,8 +231,8 @@ class DaskBricks:
     def intersect(self, requests: list[IntersectRequest]) -> list[BrickHits]:
         return self._run([(b, "intersect", (o, d, coherent)) for b, o, d, coherent in requests])
 
-    def occluded(self, requests: list[OccludedRequest]) -> list[np.ndarray]:
-        return self._run([(b, "occluded", (points, target)) for b, points, target in requests])
+    def occluded(self, requests: list[OccludedRequest]) -> list[list[np.ndarray]]:
+        return self._run([(b, "occluded", (segments,)) for b, segments in requests])
 
     def close(self) -> None:
         """Close every brick's BVH on its worker and let the actors go."""
