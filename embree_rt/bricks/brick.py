@@ -25,11 +25,13 @@ SPHERE_GROUP, OTHER_GROUP = 1, 2
 
 @dataclass
 class BrickHits:
-    """The nearest hits a brick found among the rays it was sent: ``rows`` (k,) int64 which of
-    them hit; ``object_id`` (k,) int64 the whole scene's id of the object hit; ``group`` (k,)
-    int8 ``SPHERE_GROUP`` or ``OTHER_GROUP``; ``surfaces`` their ``SurfaceHits`` (k columns, no
-    floor hits, Embree's ``prim_id``/``inst_id``/``inst_prim_id`` None: they name this brick's
-    own BVH, not the scene's)."""
+    """The nearest hits a brick found among the rays it was sent, as little as travels back:
+    ``rows`` (k,) int32 which of them hit; ``object_id`` (k,) int64 the whole scene's id of the
+    object hit; ``group`` (k,) int8 ``SPHERE_GROUP`` or ``OTHER_GROUP``; ``surfaces`` their
+    ``SurfaceHits`` (k columns, no floor hits) with ``material`` (k,) int32 and without what
+    the asker has or cannot use: ``incoming`` (the rays' own directions) and Embree's
+    ``prim_id``/``inst_id``/``inst_prim_id`` (they name this brick's own BVH, not the scene's)
+    are None."""
 
     rows: np.ndarray
     object_id: np.ndarray
@@ -71,7 +73,10 @@ class Brick:
         if self.spheres_as_set:
             group[local < self.sphere_count] = SPHERE_GROUP
         surfaces.prim_id = surfaces.inst_id = surfaces.inst_prim_id = None
-        return BrickHits(rows, self.object_ids[local], group, surfaces)
+        surfaces.incoming = None
+        # material ids index the scene's few materials: int32 holds them exactly
+        surfaces.material = surfaces.material.astype(np.int32)
+        return BrickHits(rows.astype(np.int32), self.object_ids[local], group, surfaces)
 
     def occluded(self, segments: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
         """Per ``(points, target)`` of ``segments``, (k,) bool: whether an object of this brick

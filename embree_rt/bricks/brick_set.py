@@ -110,6 +110,7 @@ class BrickSet:
         answers = self.queries.intersect(requests) if requests else []
         answered = [(rows, hits) for (_, rows), hits in zip(routes, answers, strict=True)]
         rays, surfaces, ties = nearest_over_bricks(n, floor, answered)
+        surfaces.incoming = np.take(directions, rays, axis=1)
         self.traffic.add(rays=n, ray_sends=sum(len(rows) for _, rows in routes), ties=ties)
         return rays, surfaces
 
