@@ -49,15 +49,21 @@ def brick_sphere_mode(total_spheres: int, spheres: str) -> str:
 
 class Brick:
     """Brick ``contents.index``: the BVH of its objects, entered as ``spheres``
-    (``brick_sphere_mode`` of the whole scene), queried on the calling thread."""
+    (``brick_sphere_mode`` of the whole scene), queried on the calling thread. The brick takes
+    the contents' spheres over: its BVH holds them, the contents' scene is left without."""
 
     def __init__(self, contents: BrickContents, spheres: str) -> None:
         self.index = contents.index
-        self.object_ids = contents.object_ids
+        ids = contents.object_ids
+        # int32 where the scene's ids fit (a field of 2e8 spheres: 4 bytes a sphere saved)
+        small = len(ids) == 0 or ids.max() <= np.iinfo(np.int32).max
+        self.object_ids = ids.astype(np.int32) if small else ids
+        del ids
+        contents.object_ids = self.object_ids
         self.sphere_count = len(contents.scene.sphere_radii)
         self.spheres_as_set = spheres != "mesh"
         self.bounds = contents.bounds()
-        self.geometry = SceneGeometry(contents.scene, spheres=spheres, threads=1)
+        self.geometry = SceneGeometry(contents.scene, spheres=spheres, threads=1, take_spheres=True)
 
     def close(self) -> None:
         self.geometry.close()
@@ -76,7 +82,8 @@ class Brick:
         surfaces.incoming = None
         # material ids index the scene's few materials: int32 holds them exactly
         surfaces.material = surfaces.material.astype(np.int32)
-        return BrickHits(rows.astype(np.int32), self.object_ids[local], group, surfaces)
+        object_id = self.object_ids[local].astype(np.int64)
+        return BrickHits(rows.astype(np.int32), object_id, group, surfaces)
 
     def occluded(self, segments: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
         """Per ``(points, target)`` of ``segments``, (k,) bool: whether an object of this brick
