@@ -61,10 +61,11 @@ from embree_rt.geometry import sphere_kind
 from embree_rt.integrator import Integrator, RenderStats
 from embree_rt.scene.model import RenderSettings, Scene
 
-# Batches of camera samples the client traces at once. Each depth of a batch costs three round
-# trips to the bricks (rays, then shadow segments for each of two lights) whatever its size, so
-# batches are large and only a few are in flight: a 1e6 field at 960x540 took 1.4 s in batches
-# of 2^17 and 2.8 s in batches of 2^15 (2 workers, 4 client threads, this loaded machine).
+# Batches of camera samples the client traces at once. Each depth of a batch costs two round
+# trips to the bricks (rays, then every light's shadow segments) whatever its size, and each
+# call a fixed ~1-2 ms of CPU on both sides, so batches are large and only a few are in flight:
+# a 1e7 field at 960x540 took 2.2 CPU-s in batches of 2^16, 1.3 in batches of 2^17 (2 workers,
+# 4 client threads, this loaded machine).
 DATA_PARALLEL_BATCH_SIZE = 1 << 17
 # Batches the client keeps in flight (its shading threads); each waits on the workers most of
 # the time, so more than the client's cores.
