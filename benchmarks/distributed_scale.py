@@ -14,10 +14,12 @@ sums that come back.
 
 With ``--partition K`` it measures data-parallel rendering instead (``embree_rt.bricks``): the
 field cut into K bricks on a ``LocalCluster`` of ``--workers`` processes, each generating and
-building only its bricks, shading on the client; against one local render on 2 threads in a
-process of its own. Both images must be bitwise equal. Reported: render times, the peak
-resident memory of each worker, of the client and of the single process, and the rays that
-crossed to the bricks (each ray is sent to every brick whose box it reaches).
+building only its bricks, shading on the client; against a local render on 2 threads in a
+process of its own, the two taking turns ``--rounds`` times so that both see the same load from
+other work. Both images must be bitwise equal. Reported: render times and their ratio per turn,
+the CPU seconds a render takes (the client's and the workers' together: what the load cannot
+stretch), the peak resident memory of each worker, of the client and of the single process,
+and the rays that crossed to the bricks (each ray is sent to every brick whose box it reaches).
 
     python benchmarks/distributed_scale.py --partition 2 --count 10000000 --spp 1 --rounds 2
 
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import pickle
 import resource
 import statistics
@@ -56,25 +59,41 @@ def peak_rss_bytes() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
-def local_renders(count: int, image: dict, rounds: int) -> dict:
-    """In a process of its own: the field made and rendered on 2 threads, a warm-up and
-    ``rounds`` renders; their times, the image and the process's peak memory."""
+# The local renderer of the --partition mode, in a process of its own (its memory apart from the
+# client's), kept between turns: (renderer, field seconds, build seconds).
+_LOCAL: dict = {}
+
+
+def cpu_seconds() -> float:
+    """This process's user and system CPU time so far."""
+    times = os.times()
+    return times.user + times.system
+
+
+def local_setup(count: int) -> None:
+    """In the local process: the field made and its BVH built, for 2 threads."""
     started = time.perf_counter()
     scene = random_field(count)
-    made_s = time.perf_counter() - started
-    with Renderer(scene, threads=2) as renderer:
-        result = renderer.render(**image)
-        times = []
-        for _ in range(rounds):
-            result = renderer.render(**image)
-            times.append(result.stats.render_s)
-        build_s = renderer.build_s
+    field_s = time.perf_counter() - started
+    renderer = Renderer(scene, threads=2)
+    _LOCAL.update(renderer=renderer, field_s=field_s, build_s=renderer.build_s)
+
+
+def local_render(image: dict, keep_image: bool = False) -> tuple[float, float, np.ndarray | None]:
+    """In the local process: one render's wall and CPU seconds (and its image)."""
+    began, cpu = time.perf_counter(), cpu_seconds()
+    result = _LOCAL["renderer"].render(**image)
+    seconds, cpu = time.perf_counter() - began, cpu_seconds() - cpu
+    _LOCAL["rays"] = result.stats.total_rays
+    return seconds, cpu, result.image if keep_image else None
+
+
+def local_facts() -> dict:
+    """In the local process: its set-up times, rays per image and peak memory."""
     return {
-        "field_s": made_s,
-        "build_s": build_s,
-        "render_s": times,
-        "image": result.image,
-        "rays": result.stats.total_rays,
+        "field_s": _LOCAL["field_s"],
+        "build_s": _LOCAL["build_s"],
+        "rays": _LOCAL["rays"],
         "peak_rss": peak_rss_bytes(),
     }
 
@@ -85,57 +104,77 @@ def data_parallel(args: argparse.Namespace) -> dict:
 
     image = {"width": args.width, "height": args.height, "spp": args.spp, "max_depth": 6, "seed": 0}
     settings = RenderSettings(args.width, args.height, args.spp, max_depth=6, seed=0)
-    with ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn")) as pool:
-        local = pool.submit(local_renders, args.count, image, args.rounds).result()
     recipe = rd.FieldRecipe(plan_field(args.count))
+    local_times, local_cpu, times, cpu = [], [], [], []
     with (
+        ProcessPoolExecutor(
+            max_workers=1,
+            mp_context=get_context("spawn"),
+            initializer=local_setup,
+            initargs=(args.count,),
+        ) as local,
         rd.local_cluster(args.workers, silence_logs=50) as cluster,
         distributed.Client(cluster) as client,
     ):
+        local.submit(local_render, image).result()  # the field, the BVH, a warm-up render
         client.wait_for_workers(args.workers)
         started = time.perf_counter()
         renderer = PartitionedRenderer(recipe, client, partition=args.partition)
         setup_s = time.perf_counter() - started
         try:
             camera = renderer.scene.camera
-            times = []
-            for _ in range(args.rounds + 1):  # the first renders warm the client's kernels
-                began = time.perf_counter()
+            renderer.render(settings, camera)  # warms the client's kernels
+            for turn in range(args.rounds):  # turns: both see the same load from other work
+                seconds, seconds_cpu, local_image = local.submit(
+                    local_render, image, turn == args.rounds - 1
+                ).result()
+                local_times.append(seconds)
+                local_cpu.append(seconds_cpu)
+                began, before = (
+                    time.perf_counter(),
+                    cpu_seconds() + sum(client.run(cpu_seconds).values()),
+                )
                 picture = renderer.render(settings, camera)
                 times.append(time.perf_counter() - began)
+                cpu.append(cpu_seconds() + sum(client.run(cpu_seconds).values()) - before)
             traffic = renderer.brick_set.traffic
             workers_peak = client.run(peak_rss_bytes)
         finally:
             renderer.release()
+        facts = local.submit(local_facts).result()
     names = ("rays", "ray_sends", "segments", "segment_sends", "ties")
     per_image = {name: getattr(traffic, name) // (args.rounds + 1) for name in names}
-    local_median = statistics.median(local["render_s"])
-    parallel_median = statistics.median(times[1:])
+    ratios = [t / local_t for t, local_t in zip(times, local_times, strict=True)]
     gb = 1e-9
     return {
         "count": args.count,
         "image": f"{args.width}x{args.height} at {args.spp} spp",
         "bricks": args.partition,
         "workers": args.workers,
-        "bitwise_equal": bool(np.array_equal(picture, local["image"])),
+        "load_average": os.getloadavg(),
+        "bitwise_equal": bool(np.array_equal(picture, local_image)),
         "local_2_threads": {
-            "field_s": round(local["field_s"], 2),
-            "build_s": round(local["build_s"], 2),
-            "render_s": [round(t, 3) for t in local["render_s"]],
-            "peak_rss_gb": round(local["peak_rss"] * gb, 3),
+            "field_s": round(facts["field_s"], 2),
+            "build_s": round(facts["build_s"], 2),
+            "render_s": [round(t, 3) for t in local_times],
+            "render_cpu_s": [round(t, 3) for t in local_cpu],
+            "peak_rss_gb": round(facts["peak_rss"] * gb, 3),
         },
         "data_parallel": {
             "setup_s_field_and_bricks": round(setup_s, 2),
             "render_s": [round(t, 3) for t in times],
+            "render_cpu_s_client_and_workers": [round(t, 3) for t in cpu],
             "peak_rss_gb_per_worker": sorted(round(v * gb, 3) for v in workers_peak.values()),
             "peak_rss_gb_client": round(peak_rss_bytes() * gb, 3),
         },
-        "data_parallel_over_local": round(parallel_median / local_median, 3),
-        "worker_peak_over_single_process": round(max(workers_peak.values()) / local["peak_rss"], 3),
+        "data_parallel_over_local_per_turn": [round(r, 2) for r in ratios],
+        "data_parallel_over_local": round(statistics.median(ratios), 3),
+        "cpu_over_local": round(statistics.median(cpu) / statistics.median(local_cpu), 3),
+        "worker_peak_over_single_process": round(max(workers_peak.values()) / facts["peak_rss"], 3),
         "traffic_per_image": per_image,
         "sends_per_ray": round(per_image["ray_sends"] / max(per_image["rays"], 1), 3),
         "sends_per_segment": round(per_image["segment_sends"] / max(per_image["segments"], 1), 3),
-        "rays_per_image": local["rays"],
+        "rays_per_image": facts["rays"],
     }
 
 
@@ -162,7 +201,7 @@ def main() -> None:
     times: dict[str, list[float]] = {"local_1": [], "local_2": [], "dask_1": [], "dask_2": []}
 
     with Renderer(scene, threads=1) as one, Renderer(scene, threads=2) as two:
-        one.render(**image)
+        rays = one.render(**image).stats.total_rays
         two.render(**image)
         clusters = {}
         try:
@@ -204,7 +243,6 @@ def main() -> None:
     frame = camera_frame(scene.camera, args.width, args.height)
     task_args = len(pickle.dumps(("0" * 16, recipe, frame, args.spp, 0, 6, 0, 1)))
     median = {name: statistics.median(values) for name, values in times.items()}
-    rays = one.stats.total_rays // (args.rounds + 1)  # the stats add up every render
     result = {
         "count": args.count,
         "image": f"{args.width}x{args.height} at {args.spp} spp",

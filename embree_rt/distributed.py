@@ -556,9 +556,10 @@ WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
 
 def local_cluster(workers: int, **options) -> distributed.LocalCluster:
     """A ``LocalCluster`` of ``workers`` processes of one thread each, with ``WORKER_CONFIG``
-    and no memory limit (the BVH is memory Dask does not manage: a limit would have the nanny
-    kill a worker for holding a big scene), whose workers leave Ctrl-C to this process
-    (``dask_setup``); ``options`` go to ``LocalCluster``.
+    and no memory limit unless ``memory_limit`` is given (the BVH is memory Dask does not
+    manage: a limit would have the nanny kill a worker for holding a big scene; data-parallel
+    bricks are checked against it before they are made), whose workers leave Ctrl-C to this
+    process (``dask_setup``); ``options`` go to ``LocalCluster``.
 
     With no dashboard the scheduler still serves its health routes over HTTP, by default on
     port 8787, warning when another cluster holds it: here on any free port of 127.0.0.1."""
@@ -569,7 +570,7 @@ def local_cluster(workers: int, **options) -> distributed.LocalCluster:
             threads_per_worker=1,
             processes=True,
             dashboard_address=None,
-            memory_limit=0,
+            memory_limit=options.pop("memory_limit", 0),
             preload=[__name__],
             scheduler_kwargs=scheduler_options,
             **options,

@@ -111,7 +111,16 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
 class SceneGeometry(Closing):
     """The BVH of a scene plus the tables that turn Embree's ids into shading inputs."""
 
-    def __init__(self, scene: Scene, spheres: str = "analytic", threads: int | None = None):
+    def __init__(
+        self,
+        scene: Scene,
+        spheres: str = "analytic",
+        threads: int | None = None,
+        take_spheres: bool = False,
+    ):
+        """``take_spheres``: once the BVH holds its own copy of the spheres, before it is built,
+        they are taken out of ``scene`` (left with none): a caller that owns the scene (a
+        brick) then does not hold them twice while the BVH is built."""
         if spheres not in SPHERE_MODES:
             raise ValueError(f"spheres: expected one of {SPHERE_MODES}, got {spheres!r}")
         self.bvh = BVH(threads=threads)
@@ -152,6 +161,12 @@ class SceneGeometry(Closing):
                     self._add_analytic_spheres(sphere_kind(len(self.sphere_radii), spheres))
                 else:
                     self._add_tessellated_spheres()
+            # Only the building reads the centres and radii (the BVH has its own copy).
+            self.sphere_centers = self.sphere_radii = None
+            if take_spheres:
+                scene.sphere_centers = np.zeros((0, 3), np.float32)  # (no views: they
+                scene.sphere_radii = np.zeros(0, np.float32)  # would keep the arrays)
+                scene.sphere_materials = np.zeros(0, np.int32)
             self._add_meshes(scene)
             self.bvh.commit()
             self._finish_tables()

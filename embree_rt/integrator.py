@@ -106,6 +106,15 @@ def surface_offset(scale: np.ndarray) -> np.ndarray:
     return (np.float32(RELATIVE_OFFSET) * (np.float32(1.0) + scale)).astype(np.float32, copy=False)
 
 
+def facing_light(
+    position: np.ndarray, points: np.ndarray, normal: np.ndarray, takes_light: np.ndarray | None
+) -> np.ndarray:
+    """(k,) int64 the columns of ``points`` (3, n) float32 whose ``normal`` (3, n) faces the
+    light at ``position`` (3,), among those that ``takes_light`` ((n,) bool; None: all)."""
+    facing = shading.dot(position[:, None] - points, normal) > 0
+    return np.flatnonzero(facing if takes_light is None else facing & takes_light)
+
+
 class Tracer(Protocol):
     """Where the integrator's two geometric stages come from: the nearest hits of a wavefront
     (``intersect_compact``: the (k,) int64 rays that hit and their ``SurfaceHits``, floor hits
@@ -113,7 +122,9 @@ class Tracer(Protocol):
     segments from ``points[:, rows]`` to ``target``). ``SceneGeometry`` (one BVH of the whole
     scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask.
     A tracer may also make camera rays inside its query (``SceneGeometry.intersect_camera``);
-    one that does not is given them as columns."""
+    one that does not is given them as columns. One may also answer the shadow segments toward
+    every light in one query (``occluded_toward_each(points, rows_each, targets)``: per target
+    (L, 3), the (k,) bool of ``occluded_toward``)."""
 
     def intersect_compact(
         self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
@@ -521,6 +532,19 @@ class Integrator(Closing):
             np.take(weight, keep, axis=1),
         )
 
+    def _blocked_each(self, points: np.ndarray, facing_each: list[np.ndarray]) -> list[np.ndarray]:
+        """Per light, (k,) bool whether the segment from each of the ``points`` (3, n) at its
+        rows ``facing_each[light]`` to the light is blocked: in one query when the tracer
+        answers every light at once (``occluded_toward_each``: a tracer of bricks on other
+        machines pays a round trip a query), else a query a light."""
+        each = getattr(self.geometry, "occluded_toward_each", None)
+        if each is not None:
+            return each(points, facing_each, self.light_positions)
+        return [
+            self.geometry.occluded_toward(points, facing, position)
+            for facing, position in zip(facing_each, self.light_positions, strict=True)
+        ]
+
     def _add_direct_light(
         self, radiance, points, normal, to_viewer, color, surfaces, work: BatchWork
     ) -> None:
@@ -537,11 +561,14 @@ class Integrator(Closing):
         # Unlit surfaces take no light: no shadow rays for them.
         takes_light = None if self.lit is None else np.take(self.lit, material)
         shininess = self._per_hit(self.materials.shininess, surfaces, "shininess")
+        facing_each = [
+            facing_light(position, points, normal, takes_light) for position in self.light_positions
+        ]
+        blocked_each = self._blocked_each(points, facing_each)
         for light, position in enumerate(self.light_positions):
             to_light = position[:, None] - points
-            facing = shading.dot(to_light, normal) > 0
-            facing = np.flatnonzero(facing if takes_light is None else facing & takes_light)
-            visible = ~self.geometry.occluded_toward(points, facing, position)
+            facing = facing_each[light]
+            visible = ~blocked_each[light]
             work.rays["shadow"] += len(facing)
             lit = facing[visible]
             if len(lit) == 0:

@@ -64,6 +64,7 @@ def test_data_parallel_image_is_bitwise_the_local_image(cluster, name, as_path, 
     path = SCENES / f"{name}.toml"
     scene = rt.load_scene(path)
     settings = scene.render.with_overrides(**SMALL)
+    direct = client.direct_to_workers
     renderer = bounded(
         bc.PartitionedRenderer,
         path if as_path else scene,
@@ -74,8 +75,10 @@ def test_data_parallel_image_is_bitwise_the_local_image(cluster, name, as_path, 
     try:
         image = bounded(renderer.render, settings, scene.camera)
         assert sorted(renderer.bricks_held().values()) == ([1, 1] if bricks == 2 else [1, 2])
+        assert client.direct_to_workers is True  # the bricks are called on their workers
     finally:
         renderer.release()
+    assert client.direct_to_workers == direct  # and the client is as it was
     assert_same_image(renderer, image, rt.render(scene, **SMALL).image)
     deadline = time.monotonic() + TIMEOUT_S  # released: the workers let the bricks go
     while any(client.run(bc.bricks_held).values()) and time.monotonic() < deadline:

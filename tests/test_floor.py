@@ -86,3 +86,24 @@ def test_rays_away_from_or_along_the_floor_are_never_blocked_by_it(floor_only) -
     for tfar in (np.inf, 100.0):
         assert not occluded(floor_only, origins, directions, 0.0, tfar).any()
         assert not floor_only.intersect(origins, directions, 0.0, tfar).hit.any()
+
+
+def test_a_floor_alone_is_answered_bitwise_as_embree_answers_it_beside_an_object() -> None:
+    # A BVH with no objects answers every ray as a miss without calling Embree (the plane is
+    # the records' own); beside a sphere out of every ray's reach Embree is called and misses
+    # too, and the records, made by the same compiled pass from the same misses, are the same.
+    origins, directions = random_rays(20000, seed=3)
+    far = Scene(floor=Floor(height=HEIGHT))
+    far.add_spheres(np.array([[1e6, 1e6, 1e6]], np.float32), np.array([1.0], np.float32), "matte")
+    with (
+        SceneGeometry(Scene(floor=Floor(height=HEIGHT))) as alone,
+        SceneGeometry(far) as beside,
+    ):
+        assert alone.bvh.geometry_count == 0 and beside.bvh.geometry_count == 1
+        for tfar in (np.inf, 10.0):
+            rows, hits = alone.intersect_compact(origins, directions, tfar=tfar)
+            rows_beside, hits_beside = beside.intersect_compact(origins, directions, tfar=tfar)
+            assert 0 < len(rows) < origins.shape[1] and hits.floor_count == len(rows)
+            np.testing.assert_array_equal(rows, rows_beside)
+            for name in ("t", "position", "normal", "scale", "incoming"):
+                np.testing.assert_array_equal(getattr(hits, name), getattr(hits_beside, name))

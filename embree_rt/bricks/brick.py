@@ -25,11 +25,13 @@ SPHERE_GROUP, OTHER_GROUP = 1, 2
 
 @dataclass
 class BrickHits:
-    """The nearest hits a brick found among the rays it was sent: ``rows`` (k,) int64 which of
-    them hit; ``object_id`` (k,) int64 the whole scene's id of the object hit; ``group`` (k,)
-    int8 ``SPHERE_GROUP`` or ``OTHER_GROUP``; ``surfaces`` their ``SurfaceHits`` (k columns, no
-    floor hits, Embree's ``prim_id``/``inst_id``/``inst_prim_id`` None: they name this brick's
-    own BVH, not the scene's)."""
+    """The nearest hits a brick found among the rays it was sent, as little as travels back:
+    ``rows`` (k,) int32 which of them hit; ``object_id`` (k,) int64 the whole scene's id of the
+    object hit; ``group`` (k,) int8 ``SPHERE_GROUP`` or ``OTHER_GROUP``; ``surfaces`` their
+    ``SurfaceHits`` (k columns, no floor hits) with ``material`` (k,) int32 and without what
+    the asker has or cannot use: ``incoming`` (the rays' own directions) and Embree's
+    ``prim_id``/``inst_id``/``inst_prim_id`` (they name this brick's own BVH, not the scene's)
+    are None."""
 
     rows: np.ndarray
     object_id: np.ndarray
@@ -47,15 +49,21 @@ def brick_sphere_mode(total_spheres: int, spheres: str) -> str:
 
 class Brick:
     """Brick ``contents.index``: the BVH of its objects, entered as ``spheres``
-    (``brick_sphere_mode`` of the whole scene), queried on the calling thread."""
+    (``brick_sphere_mode`` of the whole scene), queried on the calling thread. The brick takes
+    the contents' spheres over: its BVH holds them, the contents' scene is left without."""
 
     def __init__(self, contents: BrickContents, spheres: str) -> None:
         self.index = contents.index
-        self.object_ids = contents.object_ids
+        ids = contents.object_ids
+        # int32 where the scene's ids fit (a field of 2e8 spheres: 4 bytes a sphere saved)
+        small = len(ids) == 0 or ids.max() <= np.iinfo(np.int32).max
+        self.object_ids = ids.astype(np.int32) if small else ids
+        del ids
+        contents.object_ids = self.object_ids
         self.sphere_count = len(contents.scene.sphere_radii)
         self.spheres_as_set = spheres != "mesh"
         self.bounds = contents.bounds()
-        self.geometry = SceneGeometry(contents.scene, spheres=spheres, threads=1)
+        self.geometry = SceneGeometry(contents.scene, spheres=spheres, threads=1, take_spheres=True)
 
     def close(self) -> None:
         self.geometry.close()
@@ -71,10 +79,19 @@ class Brick:
         if self.spheres_as_set:
             group[local < self.sphere_count] = SPHERE_GROUP
         surfaces.prim_id = surfaces.inst_id = surfaces.inst_prim_id = None
-        return BrickHits(rows, self.object_ids[local], group, surfaces)
+        surfaces.incoming = None
+        # material ids index the scene's few materials: int32 holds them exactly
+        surfaces.material = surfaces.material.astype(np.int32)
+        object_id = self.object_ids[local].astype(np.int64)
+        return BrickHits(rows.astype(np.int32), object_id, group, surfaces)
 
-    def occluded(self, points: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """(k,) bool: whether an object of this brick lies on the segment from each of the
-        ``points`` (3, k) float32 to ``target`` (3,) float32."""
-        rows = np.arange(points.shape[1], dtype=np.int64)
-        return self.geometry.occluded_toward(points, rows, target)
+    def occluded(self, segments: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
+        """Per ``(points, target)`` of ``segments``, (k,) bool: whether an object of this brick
+        lies on the segment from each of the ``points`` (3, k) float32 to ``target`` (3,)
+        float32."""
+        return [
+            self.geometry.occluded_toward(
+                points, np.arange(points.shape[1], dtype=np.int64), target
+            )
+            for points, target in segments
+        ]

@@ -2,7 +2,8 @@
 they reach, answers merged by ``nearest``.
 
 ``BrickSet`` is what ``integrator.Integrator`` takes as its ``tracer``: ``intersect_compact``
-and ``occluded_toward`` as ``SceneGeometry`` has them. Per call it tests every ray against every
+and ``occluded_toward`` as ``SceneGeometry`` has them (and ``occluded_toward_each``, every
+light's shadow segments in one query). Per call it tests every ray against every
 brick's box (``ray_boxes``), asks each brick reached about its rays only, and keeps the nearest
 hit (``nearest_over_bricks``); a shadow segment is blocked if any brick blocks it. The floor, an
 analytic plane, is answered here by a BVH with no objects and the scene's floor: its records
@@ -30,8 +31,8 @@ from embree_rt.scene.model import Scene
 
 # A request to brick b: (b, origins (3, k) float32, directions (3, k) float32, coherent).
 IntersectRequest = tuple[int, np.ndarray, np.ndarray, bool]
-# A request to brick b: (b, segment start points (3, k) float32, the light (3,) float32).
-OccludedRequest = tuple[int, np.ndarray, np.ndarray]
+# A request to brick b: (b, [(segment start points (3, k) float32, their light (3,) float32)]).
+OccludedRequest = tuple[int, list[tuple[np.ndarray, np.ndarray]]]
 
 
 class BrickQueries(Protocol):
@@ -40,7 +41,7 @@ class BrickQueries(Protocol):
 
     def intersect(self, requests: list[IntersectRequest]) -> list[BrickHits]: ...
 
-    def occluded(self, requests: list[OccludedRequest]) -> list[np.ndarray]: ...
+    def occluded(self, requests: list[OccludedRequest]) -> list[list[np.ndarray]]: ...
 
     def close(self) -> None: ...
 
@@ -104,6 +105,7 @@ class BrickSet(Closing):
         answers = self.queries.intersect(requests) if requests else []
         answered = [(rows, hits) for (_, rows), hits in zip(routes, answers, strict=True)]
         rays, surfaces, ties = nearest_over_bricks(n, floor, answered)
+        surfaces.incoming = np.take(directions, rays, axis=1)
         self.traffic.add(rays=n, ray_sends=sum(len(rows) for _, rows in routes), ties=ties)
         return rays, surfaces
 
@@ -112,20 +114,42 @@ class BrickSet(Closing):
     ) -> np.ndarray:
         """``SceneGeometry.occluded_toward`` over the bricks: (k,) bool whether the floor or any
         brick blocks the segment from each ``points[:, rows]`` ((3, n) float32) to ``target``."""
-        blocked = self.floor.occluded_toward(points, rows, target)
-        open_rows = np.flatnonzero(~blocked)
-        if len(open_rows) == 0:
-            return blocked
-        target = np.asarray(target, np.float32).reshape(3)
-        starts = np.ascontiguousarray(np.take(points, rows[open_rows], axis=1), np.float32)
-        toward = target[:, None] - starts
-        routes = rows_by_brick(boxes_reached(starts, toward, np.ones(len(open_rows)), self.boxes))
-        requests = [(brick, np.ascontiguousarray(starts[:, sub]), target) for brick, sub in routes]
+        return self.occluded_toward_each(points, [rows], np.reshape(target, (1, 3)))[0]
+
+    def occluded_toward_each(
+        self, points: np.ndarray, rows_each: list[np.ndarray], targets: np.ndarray
+    ) -> list[np.ndarray]:
+        """``occluded_toward`` toward each of the ``targets`` (L, 3) from its ``rows_each[l]``
+        of ``points``, in one query: each brick is asked once about every target's segments."""
+        targets = np.asarray(targets, np.float32).reshape(-1, 3)
+        blocked_each, open_each, sent = [], [], {}
+        segments = sends = 0
+        for light, (rows, target) in enumerate(zip(rows_each, targets, strict=True)):
+            blocked = self.floor.occluded_toward(points, rows, target)
+            open_rows = np.flatnonzero(~blocked)
+            blocked_each.append(blocked)
+            open_each.append(open_rows)
+            if len(open_rows) == 0:
+                continue
+            starts = np.ascontiguousarray(np.take(points, rows[open_rows], axis=1), np.float32)
+            toward = target[:, None] - starts
+            reach = np.ones(len(open_rows))
+            for brick, sub in rows_by_brick(boxes_reached(starts, toward, reach, self.boxes)):
+                sent.setdefault(brick, []).append(
+                    (light, sub, np.ascontiguousarray(starts[:, sub]))
+                )
+            segments += len(open_rows)
+        requests = [
+            (brick, [(starts, targets[light]) for light, _, starts in asked])
+            for brick, asked in sent.items()
+        ]
         answers = self.queries.occluded(requests) if requests else []
-        for (_, sub), answer in zip(routes, answers, strict=True):
-            blocked[open_rows[sub[answer]]] = True
-        self.traffic.add(segments=len(open_rows), segment_sends=sum(len(sub) for _, sub in routes))
-        return blocked
+        for asked, answer in zip(sent.values(), answers, strict=True):
+            for (light, sub, _), blocked in zip(asked, answer, strict=True):
+                blocked_each[light][open_each[light][sub[blocked]]] = True
+                sends += len(sub)
+        self.traffic.add(segments=segments, segment_sends=sends)
+        return blocked_each
 
 
 class LocalBricks:
@@ -138,8 +162,8 @@ class LocalBricks:
     def intersect(self, requests: list[IntersectRequest]) -> list[BrickHits]:
         return [self.bricks[b].intersect(o, d, coherent) for b, o, d, coherent in requests]
 
-    def occluded(self, requests: list[OccludedRequest]) -> list[np.ndarray]:
-        return [self.bricks[b].occluded(points, target) for b, points, target in requests]
+    def occluded(self, requests: list[OccludedRequest]) -> list[list[np.ndarray]]:
+        return [self.bricks[b].occluded(segments) for b, segments in requests]
 
     def close(self) -> None:
         for brick in self.bricks.values():

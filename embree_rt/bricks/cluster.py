@@ -64,10 +64,11 @@ from embree_rt.scene.model import RenderSettings, Scene, SettingOverrides
 if TYPE_CHECKING:
     from typing_extensions import Unpack
 
-# Batches of camera samples the client traces at once. Each depth of a batch costs three round
-# trips to the bricks (rays, then shadow segments for each of two lights) whatever its size, so
-# batches are large and only a few are in flight: a 1e6 field at 960x540 took 1.4 s in batches
-# of 2^17 and 2.8 s in batches of 2^15 (2 workers, 4 client threads, this loaded machine).
+# Batches of camera samples the client traces at once. Each depth of a batch costs two round
+# trips to the bricks (rays, then every light's shadow segments) whatever its size, and each
+# call a fixed ~1-2 ms of CPU on both sides, so batches are large and only a few are in flight:
+# a 1e7 field at 960x540 took 2.2 CPU-s in batches of 2^16, 1.3 in batches of 2^17 (2 workers,
+# 4 client threads, this loaded machine).
 DATA_PARALLEL_BATCH_SIZE = 1 << 17
 # Batches the client keeps in flight (its shading threads); each waits on the workers most of
 # the time, so more than the client's cores.
@@ -159,8 +160,8 @@ class BrickActor:
     def intersect(self, origins: np.ndarray, directions: np.ndarray, coherent: bool) -> BrickHits:
         return self.brick.intersect(origins, directions, coherent)
 
-    def occluded(self, points: np.ndarray, target: np.ndarray) -> np.ndarray:
-        return self.brick.occluded(points, target)
+    def occluded(self, segments: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
+        return self.brick.occluded(segments)
 
     def close(self) -> None:
         self.brick.close()
@@ -190,7 +191,13 @@ class PlacedBrick:
 class DaskBricks:
     """``BrickQueries`` on the workers of ``client``: brick b is a ``BrickActor`` on
     ``assignment[b]``; a brick whose worker is lost is made again on the live worker holding
-    the fewest, and the calls it had not answered are made there (``moves`` counts them)."""
+    the fewest, and the calls it had not answered are made there (``moves`` counts them).
+
+    While it holds bricks the client calls actors on their workers directly (Dask's
+    ``direct_to_workers``, restored on ``close``): through the scheduler, every ray and hit
+    would cross twice, and the scheduler would copy them all (a 1e7 field over 2 bricks took
+    25% more CPU and 28% more time a render that way). The client must reach the workers, as
+    it must for Dask's direct gathers; a brick no worker answers is an error, not a loop."""
 
     def __init__(
         self,
@@ -207,6 +214,8 @@ class DaskBricks:
         self.moves = 0
         self._lock = threading.Lock()
         self.placed = {index: self._place(index, worker) for index, worker in assignment.items()}
+        self._direct_before = client.direct_to_workers
+        client.direct_to_workers = True
 
     @property
     def assignment(self) -> dict[int, str]:
@@ -234,8 +243,8 @@ class DaskBricks:
     def intersect(self, requests: list[IntersectRequest]) -> list[BrickHits]:
         return self._run([(b, "intersect", (o, d, coherent)) for b, o, d, coherent in requests])
 
-    def occluded(self, requests: list[OccludedRequest]) -> list[np.ndarray]:
-        return self._run([(b, "occluded", (points, target)) for b, points, target in requests])
+    def occluded(self, requests: list[OccludedRequest]) -> list[list[np.ndarray]]:
+        return self._run([(b, "occluded", (segments,)) for b, segments in requests])
 
     def close(self) -> None:
         """Close every brick's BVH on its worker and let the actors go."""
@@ -253,6 +262,7 @@ class DaskBricks:
         for brick in placed:
             brick.future.release()
             brick.actor = brick.future = None
+        self.client.direct_to_workers = self._direct_before
         # Dask keeps an actor while any handle to it lives, and handles linger in reference
         # cycles (the closures of Dask's finished method calls): collect them, so the workers
         # free the bricks now rather than at some later collection.
@@ -293,6 +303,7 @@ class DaskBricks:
         results: list = [None] * len(jobs)
         for job, (index, name, arguments) in enumerate(jobs):
             placed, call = calls[job]
+            unreachable = 0
             while True:
                 try:
                     results[job] = call.result(timeout=POLL_S)
@@ -300,7 +311,14 @@ class DaskBricks:
                 except (TimeoutError, distributed.TimeoutError):
                     if not self._move_if_lost(placed):
                         continue
-                except OSError:  # "Unable to contact Actor's worker"
+                except OSError as error:  # "Unable to contact Actor's worker"
+                    unreachable += 1
+                    if unreachable > len(self._live_workers()) + 1:
+                        raise ClusterError(
+                            f"brick {index}: no worker that made it answered this client "
+                            f"({error}); data-parallel rendering calls the workers directly: "
+                            "can this machine reach their addresses?"
+                        ) from None
                     self._move_if_lost(placed, lost=True)
                 placed = self._actor(index)
                 call = getattr(placed.actor, name)(*arguments)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from embree_rt.bricks.partition import Partition, object_bounds, placed_bounds
+from embree_rt.compiled.heap import release_freed_memory
 from embree_rt.scene.model import Scene
 
 
@@ -106,4 +107,7 @@ def field_brick(plan, partition: Partition, index: int) -> BrickContents:
         lambda centers: partition.brick_of(centers) == index,
         within=((low[0], low[2]), (high[0], high[2])),
     )
+    # The rings generated and let go sit in the generating threads' heaps, as much again as
+    # the brick's spheres: back to the kernel before the BVH is built beside them.
+    release_freed_memory()
     return BrickContents(index, part, ids)

@@ -40,7 +40,8 @@ def nearest_over_bricks(
     floor and their floor-only ``SurfaceHits``; ``answers`` per brick asked, the (j,) int64 rays
     sent to it and its ``BrickHits`` (whose ``rows`` index those). Returns the (m,) int64 rays
     that hit something, their ``SurfaceHits`` (floor first, then the sphere set, then other
-    objects, each in ray order) and the number of exact ties between bricks (rule 2)."""
+    objects, each in ray order; ``incoming`` None, as the bricks send it: the caller has the
+    rays) and the number of exact ties between bricks (rule 2)."""
     best_t = np.full(count, np.inf, np.float32)
     best_id = np.full(count, NO_OBJECT, np.int64)
     source = np.full(count, -1, np.int64)  # which answer (len(answers): the floor)
@@ -80,7 +81,8 @@ def gather_surfaces(
 ) -> SurfaceHits:
     """One ``SurfaceHits`` whose column j is column ``column[j]`` of ``parts[source[j]]``
     ((m,) int64 each), its first ``floor_count`` columns floor hits. Every per-hit field is
-    gathered (whatever fields ``SurfaceHits`` has); a field some part lacks (None) is None."""
+    gathered (whatever fields ``SurfaceHits`` has), in the widest of the parts' dtypes; a field
+    some part lacks (None) is None."""
     picks = [np.flatnonzero(source == index) for index in range(len(parts))]
     m = len(source)
     values = {}
@@ -93,7 +95,8 @@ def gather_surfaces(
             values[name] = None
             continue
         first = arrays[0]
-        out = np.empty((*first.shape[:-1], m), first.dtype)
+        # (a brick's int32 material ids, the floor's intp: the wider type holds both)
+        out = np.empty((*first.shape[:-1], m), np.result_type(*arrays))
         for array, pick in zip(arrays, picks, strict=True):
             if len(pick):
                 out[..., pick] = np.take(array, column[pick], axis=-1)

@@ -54,3 +54,20 @@ def retain_freed_memory() -> bool:
         )
     )
     return _tuned
+
+
+def release_freed_memory() -> bool:
+    """Hand the memory freed so far back to the kernel (glibc's ``malloc_trim``), from every
+    arena: after a one-off burst of allocations (a random field generated ring by ring on
+    several threads) that the process will not make again, and before it needs the memory for
+    something else (a BVH, which Embree allocates outside the C heap). Returns whether memory
+    was released (False off glibc, or when there was none to release)."""
+    if platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        malloc_trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return False
+    malloc_trim.argtypes = (ctypes.c_size_t,)
+    malloc_trim.restype = ctypes.c_int
+    return malloc_trim(0) == 1

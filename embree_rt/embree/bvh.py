@@ -491,7 +491,15 @@ class BVH(Closing):
     def _raw_hits(self, origins, directions, tnear, tfar, coherent=False) -> Hits:
         """Embree's answers as it gives them (normals in object space) for validated rays."""
         hits = self._empty_hits(len(origins))
-        if len(origins):
+        if len(origins) and self.geometry_count == 0:
+            # Nothing to hit (a scene of the ground plane alone, answered by the records): the
+            # misses Embree would report (kernels' _store_miss), without a call a ray.
+            hits.t.fill(np.inf)
+            for numbers in (hits.geom_id, hits.prim_id, hits.inst_id, hits.inst_prim_id):
+                numbers.fill(-1)
+            for values in (hits.normal, hits.u, hits.v):
+                values.fill(0.0)
+        elif len(origins):
             arguments = (
                 self._query(coherent),
                 kernels.Rays(origins, directions, tnear, tfar),

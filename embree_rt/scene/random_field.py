@@ -258,10 +258,20 @@ def add_field_spheres_where(
 
         with ThreadPoolExecutor(max_workers=worker_count(threads)) as pool:
             pieces.extend(pool.map(fill, rings))
-    ids, centers, radii, materials = (np.concatenate(part) for part in zip(*pieces, strict=True))
+    # Joined one column at a time, each column's pieces let go as it is joined: at most the
+    # pieces and one joined column are held at once, not the pieces and all four columns.
+    columns = [list(column) for column in zip(*pieces, strict=True)]
     del pieces
+    ids, centers, radii, materials = (_join(column) for column in columns)
     scene.add_spheres(centers, radii, materials, copy=False)
     return ids
+
+
+def _join(pieces: list[np.ndarray]) -> np.ndarray:
+    """``np.concatenate(pieces)``, emptying ``pieces`` as it goes."""
+    joined = np.concatenate(pieces)
+    pieces.clear()
+    return joined
 
 
 def _ring_reaches(
