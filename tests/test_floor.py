@@ -46,6 +46,11 @@ def occluded(geometry: SceneGeometry, origins, directions, tnear, tfar) -> np.nd
     )
 
 
+def nearest(geometry: SceneGeometry, origins, directions, tnear, tfar):
+    """The hit records of the scene's nearest-hit query inside [tnear, tfar]."""
+    return geometry.bvh.intersect_records(origins, directions, geometry.labels, tnear, tfar)
+
+
 @pytest.fixture(scope="module")
 def floor_only():
     with SceneGeometry(Scene(floor=Floor(height=HEIGHT))) as geometry:
@@ -70,13 +75,15 @@ def test_floor_hits_and_occlusion_match_the_closed_form(floor_only, tnear, tfar)
     blocked = occluded(floor_only, origins, directions, tnear, tfar)
     np.testing.assert_array_equal(blocked[clear], expected[clear])
 
-    hits = floor_only.intersect(origins, directions, tnear, tfar)
-    np.testing.assert_array_equal(hits.hit[clear], expected[clear])
-    assert hits.floor[hits.hit].all()
-    both = hits.hit & clear
-    assert_close(hits.t[both], t[both], atol=atol[both])
+    records = nearest(floor_only, origins, directions, tnear, tfar)
+    hit = np.zeros(origins.shape[1], bool)
+    hit[records.rays] = True
+    np.testing.assert_array_equal(hit[clear], expected[clear])
+    assert records.counts[0] == len(records.rays)  # every hit is on the plane
+    both = clear[records.rays]
+    assert_close(records.t[both], t[records.rays][both], atol=atol[records.rays][both])
     # o_y + t d_y lands on the plane to rounding of coordinates up to 20
-    assert_close(hits.position[1, hits.hit], HEIGHT, atol=position_atol(origins))
+    assert_close(records.position[1], HEIGHT, atol=position_atol(origins))
 
 
 def test_rays_away_from_or_along_the_floor_are_never_blocked_by_it(floor_only) -> None:
@@ -85,7 +92,7 @@ def test_rays_away_from_or_along_the_floor_are_never_blocked_by_it(floor_only) -
     directions = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]], np.float32).T
     for tfar in (np.inf, 100.0):
         assert not occluded(floor_only, origins, directions, 0.0, tfar).any()
-        assert not floor_only.intersect(origins, directions, 0.0, tfar).hit.any()
+        assert len(nearest(floor_only, origins, directions, 0.0, tfar).rays) == 0
 
 
 def test_a_floor_alone_is_answered_bitwise_as_embree_answers_it_beside_an_object() -> None:
@@ -101,9 +108,9 @@ def test_a_floor_alone_is_answered_bitwise_as_embree_answers_it_beside_an_object
     ):
         assert alone.bvh.geometry_count == 0 and beside.bvh.geometry_count == 1
         for tfar in (np.inf, 10.0):
-            rows, hits = alone.intersect_compact(origins, directions, tfar=tfar)
-            rows_beside, hits_beside = beside.intersect_compact(origins, directions, tfar=tfar)
-            assert 0 < len(rows) < origins.shape[1] and hits.floor_count == len(rows)
-            np.testing.assert_array_equal(rows, rows_beside)
+            hits = nearest(alone, origins, directions, 0.0, tfar)
+            hits_beside = nearest(beside, origins, directions, 0.0, tfar)
+            assert 0 < len(hits.rays) < origins.shape[1] and hits.counts[0] == len(hits.rays)
+            np.testing.assert_array_equal(hits.rays, hits_beside.rays)
             for name in ("t", "position", "normal", "scale", "incoming"):
                 np.testing.assert_array_equal(getattr(hits, name), getattr(hits_beside, name))
