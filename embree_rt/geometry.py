@@ -12,6 +12,7 @@ the horizon and lose float32 precision far away.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -480,6 +481,17 @@ class SceneGeometry:
         """(k,) bool: whether any surface, floor included, lies between each of the ``points``
         (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``BVH.occluded_toward``."""
         return self.bvh.occluded_toward(points, rows, target, plane_y=self.labels.plane_y)
+
+    def toward_lights(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        targets: np.ndarray,
+        takes: np.ndarray | None = None,
+    ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+        """Per light of ``targets`` (L, 3), what the ``points`` (3, n) float32 with unit
+        ``normals`` (3, n) see of it, the floor included: ``BVH.toward_lights``."""
+        return self.bvh.toward_lights(points, normals, targets, takes, self.labels.plane_y)
 
 
 @dataclass

@@ -110,8 +110,10 @@ class Tracer(Protocol):
     first) and whether shadow segments are blocked (``occluded_toward``: (k,) bool for the
     segments from ``points[:, rows]`` to ``target``). ``SceneGeometry`` (one BVH of the whole
     scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask.
-    A tracer may also make camera rays inside its query (``SceneGeometry.intersect_camera``);
-    one that does not is given them as columns."""
+    A tracer may also make camera rays inside its query (``SceneGeometry.intersect_camera``)
+    and shadow segments toward every light from the points that face it
+    (``SceneGeometry.toward_lights``); one that does not is given camera rays as columns, and
+    its ``occluded_toward`` the segments made here."""
 
     def intersect_compact(
         self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
@@ -528,33 +530,22 @@ class Integrator:
         n = points.shape[1]
         if n == 0 or len(self.light_positions) == 0:
             return
-        # Shadow rays only where the light is in front of the surface: the segment from the
-        # point to the light, which the Embree layer builds from the points' columns.
         material = surfaces.material
         diffuse = self._per_hit(self.diffuse_share, surfaces, "diffuse_share")
         specular = self._per_hit(self.specular, surfaces, "specular")
         # Unlit surfaces take no light: no shadow rays for them.
         takes_light = None if self.lit is None else np.take(self.lit, material)
         shininess = self._per_hit(self.materials.shininess, surfaces, "shininess")
-        for light, position in enumerate(self.light_positions):
-            to_light = position[:, None] - points
-            facing = shading.dot(to_light, normal) > 0
-            facing = np.flatnonzero(facing if takes_light is None else facing & takes_light)
-            visible = ~self.geometry.occluded_toward(points, facing, position)
-            work.rays["shadow"] += len(facing)
-            lit = facing[visible]
-            if len(lit) == 0:
+        for light, (visible, direction, made) in enumerate(
+            self._toward_lights(points, normal, takes_light)
+        ):
+            work.rays["shadow"] += made
+            lit_count = np.count_nonzero(visible)
+            if lit_count == 0:
                 continue
-            if len(lit) > n // 2:
+            if lit_count > n // 2:
                 # Mostly lit: shade every point, with no light where it is not seen (a zero
                 # direction), cheaper than gathering seven arrays and scattering back.
-                seen = np.zeros(n, np.float32)
-                seen[facing] = visible
-                # direction = to_light · seen / max(|to_light|, 1e-30), formed in place
-                scale = np.sqrt(shading.dot(to_light, to_light))
-                np.maximum(scale, np.float32(1e-30), out=scale)
-                np.divide(seen, scale, out=scale)
-                direction = np.multiply(to_light, scale, out=to_light)
                 radiance += shading.blinn_phong(
                     normal,
                     to_viewer,
@@ -566,13 +557,14 @@ class Integrator:
                     self.light_rgb[light],
                 )
                 continue
+            lit = np.flatnonzero(visible)
             scatter_add(
                 radiance,
                 lit,
                 shading.blinn_phong(
                     np.take(normal, lit, axis=1),
                     np.take(to_viewer, lit, axis=1),
-                    shading.normalize(np.take(to_light, lit, axis=1)),
+                    np.take(direction, lit, axis=1),
                     np.take(color, lit, axis=1),
                     diffuse[lit],
                     specular[lit],
@@ -580,3 +572,24 @@ class Integrator:
                     self.light_rgb[light],
                 ),
             )
+
+    def _toward_lights(self, points, normal, takes_light):
+        """Per light, what the ``points`` (3, n) with facing unit normals ``normal`` (3, n) see
+        of it: (n,) bool visible, (3, n) float32 unit directions toward it where visible (zero
+        elsewhere), and the shadow rays traced: one segment from each point that faces the
+        light and takes light (``takes_light`` (n,) bool, None: all). The tracer's
+        ``toward_lights`` when it has one (shadow rays made in its kernel), else the same
+        segments made here for its ``occluded_toward``."""
+        toward_lights = getattr(self.geometry, "toward_lights", None)
+        if toward_lights is not None:
+            yield from toward_lights(points, normal, self.light_positions, takes_light)
+            return
+        for position in self.light_positions:
+            to_light = position[:, None] - points
+            facing = shading.dot(to_light, normal) > 0
+            facing = np.flatnonzero(facing if takes_light is None else facing & takes_light)
+            visible = np.zeros(points.shape[1], bool)
+            visible[facing] = ~self.geometry.occluded_toward(points, facing, position)
+            direction = shading.normalize(to_light, out=to_light)
+            direction *= visible  # (x · 1 is x: the visible columns' bits stay)
+            yield visible, direction, len(facing)

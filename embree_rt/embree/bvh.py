@@ -5,6 +5,7 @@ from __future__ import annotations
 import ctypes
 import threading
 import weakref
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numba
@@ -463,15 +464,15 @@ class BVH:
 
     # -- queries ------------------------------------------------------------------------------
 
-    def _run_query(self, serial, parallel, arguments: tuple) -> None:
+    def _run_query(self, serial, parallel, arguments: tuple):
         """Run a query kernel: ``serial`` in the calling thread on one thread (several Python
-        threads may do so at once), else ``parallel`` on numba's threads."""
+        threads may do so at once), else ``parallel`` on numba's threads; returns what it
+        returns."""
         if self.threads == 1:
-            serial(*arguments)
-        else:
-            with parallel_region:
-                numba.set_num_threads(self.threads)
-                parallel(*arguments)
+            return serial(*arguments)
+        with parallel_region:
+            numba.set_num_threads(self.threads)
+            return parallel(*arguments)
 
     def _ready_to_query(self) -> None:
         """Refuse a query before ``commit``; make Embree's functions known to the kernels."""
@@ -741,6 +742,51 @@ class BVH:
             arguments = (self._query(False), shadow, blocked)
             self._run_query(segments.occluded_toward_serial, segments.occluded_toward, arguments)
         return blocked
+
+    def toward_lights(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        targets: np.ndarray,
+        takes: np.ndarray | None = None,
+        plane_y: float | None = None,
+    ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+        """Per light, what each of n surface points sees of it: for each row of ``targets``
+        (L, 3) in turn (computed when asked for), (n,) bool ``visible``, (3, n) float32 unit
+        ``directions`` toward the light where visible (zero elsewhere) and the number of shadow
+        segments made. A segment ``p + t (target - p)``, t in [0, 1], is made from each point
+        ``points`` (3, n) float whose unit normal ``normals`` (3, n) float faces the light
+        (``(target - p) · normal > 0``) and, with ``takes`` (n,) bool, that takes light; it is
+        the segment ``occluded_toward`` traces, built inside the kernel (``segments``), and
+        the plane y = ``plane_y`` blocks it too. The points are checked once for all lights."""
+        self._ready_to_query()
+        points, normals = (np.asarray(values) for values in (points, normals))
+        for name, values in (("points", points), ("normals", normals)):
+            if values.ndim != 2 or values.shape != (3, points.shape[-1]):
+                raise ValueError(f"{name}: expected shape (3, n), got {values.shape}")
+        n = points.shape[1]
+        points = np.ascontiguousarray(as_points(points.T, "points").T)
+        normals = np.ascontiguousarray(as_points(normals.T, "normals").T)
+        targets = as_points(np.reshape(targets, (-1, 3)), "targets")
+        if takes is None:
+            takes = np.zeros(0, bool)
+        elif np.shape(takes) != (n,) or np.asarray(takes).dtype != bool:
+            raise ValueError(f"takes: expected ({n},) bool, got {np.shape(takes)}")
+        has_plane = plane_y is not None
+        plane = np.float32(plane_y if has_plane else 0.0)
+        for target in targets:
+            visible = np.empty(n, bool)
+            directions = np.empty((3, n), np.float32)
+            made = 0
+            if n:
+                light = segments.LightSegments(
+                    points, normals, np.ascontiguousarray(takes), target.copy(), has_plane, plane
+                )
+                arguments = (self._query(False), light, visible, directions)
+                made = self._run_query(
+                    segments.toward_light_serial, segments.toward_light, arguments
+                )
+            yield visible, directions, int(made)
 
     def all_hits(
         self,
