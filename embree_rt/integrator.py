@@ -321,10 +321,8 @@ class Integrator:
                 sky = shading.sky_at(rays.directions[1][escaped], self.horizon, self.zenith)
                 work.block.add_weighted(rays.pixel, rays.weight, sky, escaped)
             # The hits' origins are not needed again: their surfaces say where they are.
-            if rays.weight is None:  # camera rays: unit weights, made for the hits alone
-                weight = np.ones((3, len(rows)), np.float32)
-            else:
-                weight = np.take(rays.weight, rows, axis=1)
+            # (camera rays' unit weights stay None: 1 · x is x, bit for bit)
+            weight = None if rays.weight is None else np.take(rays.weight, rows, axis=1)
             hit_rays = RayBatch(None, surfaces.incoming, np.take(rays.pixel, rows), weight)
             rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
@@ -351,16 +349,22 @@ class Integrator:
         d = rays.directions
         normal, face_normal, entering = self.facing_the_ray(d, surfaces)
         material = surfaces.material
+        if rays.weight is None and (
+            self.absorption is not None
+            or (surfaces.looks is not None and surfaces.looks.coverage is not None)
+        ):
+            rays.weight = np.ones((3, len(rays)), np.float32)  # weighed in place below
         if self.absorption is not None:
             self._absorb_inside(rays.weight, surfaces.t, material, entering)
         color = self.surface_color(surfaces)
         offset = surface_offset(surfaces.scale)
         passing = self._see_through(rays, surfaces, face_normal, offset, work, spawn)
-        outside = surfaces.position + face_normal * offset
+        outside = np.multiply(face_normal, offset)
+        outside += surfaces.position  # (position + face_normal · offset)
         radiance = self._per_hit(self.ambient_share, surfaces, "ambient_share") * color
         if surfaces.looks is not None and surfaces.looks.occlusion is not None:
             radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
-        self._add_direct_light(radiance, outside, normal, -d, color, surfaces, work)
+        self._add_direct_light(radiance, outside, normal, d, color, surfaces, work)
         self._add_emission(radiance, surfaces)
         work.block.add_weighted(rays.pixel, rays.weight, radiance)
         if not spawn:
@@ -478,7 +482,10 @@ class Integrator:
         )
         reflect_share[glass] += transparency[glass] * fresnel
         # Glass tints what passes through it (the green marble), not what it reflects.
-        weight = np.take(rays.weight, glass, axis=1)
+        if rays.weight is None:
+            weight = np.ones((3, len(glass)), np.float32)
+        else:
+            weight = np.take(rays.weight, glass, axis=1)
         weight *= transparency[glass] * (1.0 - fresnel)
         weight *= np.take(color, glass, axis=1)
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
@@ -497,7 +504,10 @@ class Integrator:
         """Mirrors, metals and glass's Fresnel share reflect: the mirror rays whose weight can
         still show, started just outside the surface. Most hits reflect a little, so the
         weights are formed on every row and only the rows kept are gathered."""
-        weight = rays.weight * reflect_share
+        if rays.weight is None:
+            weight = np.repeat(reflect_share[None, :], 3, axis=0)
+        else:
+            weight = rays.weight * reflect_share
         looks = surfaces.looks
         if self.metallic is not None or (looks is not None and looks.shading is not None):
             # Metals tint what they reflect by their colour; the rest reflect untinted. (Metals
@@ -512,8 +522,9 @@ class Integrator:
         work.rays["reflection"] += len(keep)
         if len(keep) == len(weight[0]):  # every hit reflects: no gathers
             return RayBatch(outside, shading.reflect(rays.directions, normal), rays.pixel, weight)
+        normal_kept = np.take(normal, keep, axis=1)
         reflected = shading.reflect(
-            np.take(rays.directions, keep, axis=1), np.take(normal, keep, axis=1)
+            np.take(rays.directions, keep, axis=1), normal_kept, out=normal_kept
         )
         return RayBatch(
             np.take(outside, keep, axis=1),
@@ -523,10 +534,10 @@ class Integrator:
         )
 
     def _add_direct_light(
-        self, radiance, points, normal, to_viewer, color, surfaces, work: BatchWork
+        self, radiance, points, normal, incoming, color, surfaces, work: BatchWork
     ) -> None:
         """Add to ``radiance`` (3, n) the Blinn-Phong light from every point light that the
-        ``points`` (3, n) see."""
+        ``points`` (3, n) see, toward the viewer against the ``incoming`` (3, n) rays."""
         n = points.shape[1]
         if n == 0 or len(self.light_positions) == 0:
             return
@@ -548,7 +559,7 @@ class Integrator:
                 # direction), cheaper than gathering seven arrays and scattering back.
                 radiance += shading.blinn_phong(
                     normal,
-                    to_viewer,
+                    incoming,
                     direction,
                     color,
                     diffuse,
@@ -563,7 +574,7 @@ class Integrator:
                 lit,
                 shading.blinn_phong(
                     np.take(normal, lit, axis=1),
-                    np.take(to_viewer, lit, axis=1),
+                    np.take(incoming, lit, axis=1),
                     np.take(direction, lit, axis=1),
                     np.take(color, lit, axis=1),
                     diffuse[lit],
