@@ -775,8 +775,8 @@ class BVH:
         has_plane = plane_y is not None
         plane = np.float32(plane_y if has_plane else 0.0)
         for target in targets:
-            visible = np.empty(n, bool)
-            directions = np.empty((3, n), np.float32)
+            visible = np.zeros(n, bool)
+            directions = np.zeros((3, n), np.float32)
             made = 0
             if n:
                 light = segments.LightSegments(

@@ -128,8 +128,8 @@ class LightSegments(NamedTuple):
 @njit(nogil=True, cache=True)
 def _light_chunk(query, words, first, stop, light, visible, directions):
     """Points first .. stop of ``light`` (``LightSegments``): ``visible`` (n,) bool and the
-    unit ``directions`` (3, n) float32 toward the light where visible (zero elsewhere) filled;
-    returns how many segments were made (the points facing the light)."""
+    unit ``directions`` (3, n) float32 toward the light set where visible (both all zero on
+    entry); returns how many segments were made (the points facing the light)."""
     scene, arguments, lanes = query
     points, normals, takes, target, has_plane, plane_y = light
     floats = words.view(np.float32)
@@ -148,10 +148,6 @@ def _light_chunk(query, words, first, stop, light, visible, directions):
         while count < lanes and i < stop:
             r = i
             i += 1
-            visible[r] = False
-            directions[0, r] = 0.0
-            directions[1, r] = 0.0
-            directions[2, r] = 0.0
             if not (all_take or takes[r]):
                 continue
             # (target - p) · normal, summed as shading.dot sums: (x + y) + z
@@ -184,7 +180,7 @@ def _light_chunk(query, words, first, stop, light, visible, directions):
 
 
 # ``query`` a ``kernels.Query``, ``light`` a ``LightSegments``, ``visible`` (n,) bool and
-# ``directions`` (3, n) float32 out; each returns the number of segments made.
+# ``directions`` (3, n) float32 out, zeros on entry; each returns the number of segments made.
 
 
 @njit(parallel=True, nogil=True, cache=True)
