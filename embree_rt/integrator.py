@@ -455,12 +455,19 @@ class Integrator:
 
     def surface_color(self, surfaces: SurfaceHits) -> np.ndarray:
         """(3, k) float32 colour of each hit: its material's, the checker's on the floor."""
-        color = np.take(self.material_color, surfaces.material, axis=1)
+        floor = surfaces.floor_count
+        color = np.empty((3, len(surfaces)), np.float32)
+        # the materials' colours gathered for the hits off the floor alone, straight into
+        # place (mode "clip": an ``out`` is not copied first, and the ids are all in range)
+        material = surfaces.material[floor:]
+        for row, table in zip(color, self.material_color, strict=True):
+            np.take(table, material, out=row[floor:], mode="clip")
         if surfaces.colored is not None:  # mesh looks: textures, vertex colours per hit
             scatter(color, surfaces.colored, surfaces.color)
-        floor = slice(0, surfaces.floor_count)
-        if surfaces.floor_count:
-            color[:, floor] = shading.checker(surfaces.position[:, floor], self.scene.floor.checker)
+        if floor:
+            shading.checker(
+                surfaces.position[:, :floor], self.scene.floor.checker, color[:, :floor]
+            )
         return color
 
     def _refraction_children(

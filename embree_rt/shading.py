@@ -236,9 +236,10 @@ def sky_at(height: np.ndarray, horizon: np.ndarray, zenith: np.ndarray) -> np.nd
     return color
 
 
-def checker(points: np.ndarray, checker: Checker) -> np.ndarray:
+def checker(points: np.ndarray, checker: Checker, out: np.ndarray | None = None) -> np.ndarray:
     """(3, n) float32 checkerboard color at (3, n) ``points``, by squares of the xz-plane:
-    ``checker.color_a`` where ``floor(x / size) + floor(z / size)`` is even, else ``color_b``."""
+    ``checker.color_a`` where ``floor(x / size) + floor(z / size)`` is even, else ``color_b``.
+    ``out``: a (3, n) float32 array (or view) to write them to."""
     # float64 so the square a point falls in does not depend on float32 rounding of x / size.
     # The parity taken in float64, not through int64: a far hit (a grazing ray meets the floor
     # at any distance) over a small square passes 2**63 squares; beyond 2**53 all are even.
@@ -248,9 +249,13 @@ def checker(points: np.ndarray, checker: Checker) -> np.ndarray:
         np.divide(square, checker.size, out=square)
         np.floor(square, out=square)
     x += z
-    odd = odd_integers(x)
+    odd = odd_integers(x).astype(np.intp)
     palette = np.array([checker.color_a, checker.color_b], np.float32).T  # (3, 2): even, odd
-    return np.take(palette, odd.astype(np.intp), axis=1)
+    if out is None:
+        return np.take(palette, odd, axis=1)
+    for row, colors in zip(out, palette, strict=True):  # ("clip": no copy of out; 0 and 1)
+        np.take(colors, odd, out=row, mode="clip")
+    return out
 
 
 def odd_integers(values: np.ndarray) -> np.ndarray:
