@@ -320,6 +320,7 @@ class SceneGeometry:
             instance_labels=instance_labels,
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
+        self.has_meshes = self.instance_count > 0
         self.object_start = np.full(size, -1, np.int64)
         for geom_id, start in self._object_start.items():
             self.object_start[geom_id] = start
@@ -375,24 +376,29 @@ class SceneGeometry:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
         coherent: bool = False,
+        ids: bool = True,
     ) -> tuple[np.ndarray, SurfaceHits]:
         """Like ``intersect``, but only for the rays that hit: returns their (k,) int64 ray
         numbers and a ``SurfaceHits`` of k columns (what the integrator shades), floor hits
         first. The Embree layer's compiled hit records do the bookkeeping; only smooth mesh
         normals are left to do here. ``coherent``: the rays come in runs of neighbouring
-        camera rays (Embree's coherent query; the same answers, found faster)."""
+        camera rays (Embree's coherent query; the same answers, found faster). ``ids``: whether
+        the surfaces carry Embree's ids of each hit (``prim_id``, ``inst_id``,
+        ``inst_prim_id``; None without them, unless the scene has meshes, which need them)."""
         records = self.bvh.intersect_records(
-            origins, directions, self.labels, tnear, tfar, coherent
+            origins, directions, self.labels, tnear, tfar, coherent, ids or self.has_meshes
         )
         return records.rays, self._surfaces(records)
 
     def intersect_camera(
-        self, camera: CameraRays, index: np.ndarray
+        self, camera: CameraRays, index: np.ndarray, ids: bool = True
     ) -> tuple[np.ndarray, SurfaceHits, np.ndarray]:
         """``intersect_compact`` of the camera rays of samples ``index`` (n,) int64, made
         inside the query (``BVH.intersect_camera_records``): the (k,) ray numbers that hit,
         their ``SurfaceHits``, and the (3, n) float32 directions of all n rays."""
-        records, directions = self.bvh.intersect_camera_records(camera, index, self.labels)
+        records, directions = self.bvh.intersect_camera_records(
+            camera, index, self.labels, ids or self.has_meshes
+        )
         return records.rays, self._surfaces(records), directions
 
     def _surfaces(self, records: HitRecords) -> SurfaceHits:

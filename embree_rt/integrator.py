@@ -311,7 +311,7 @@ class Integrator:
                 rows, surfaces, rays.directions = self._camera_hits(*camera)
             else:
                 rows, surfaces = self.geometry.intersect_compact(
-                    rays.origins, rays.directions, coherent=depth == 0
+                    rays.origins, rays.directions, coherent=depth == 0, **self._without_ids()
                 )
             if len(rows) < len(rays):
                 escaped = np.ones(len(rays), bool)
@@ -335,11 +335,16 @@ class Integrator:
         (a tracer of bricks is asked for the same rays as columns)."""
         intersect_camera = getattr(self.geometry, "intersect_camera", None)
         if intersect_camera is not None:
-            return intersect_camera(camera, index)
+            return intersect_camera(camera, index, **self._without_ids())
         directions = sample_directions(camera, index)
         origins = np.repeat(camera.origin[:, None], len(index), axis=1)
         rows, surfaces = self.geometry.intersect_compact(origins, directions, coherent=True)
         return rows, surfaces, directions
+
+    def _without_ids(self) -> dict:
+        """What asks ``SceneGeometry``'s queries to leave out Embree's ids of each hit, which
+        shading never reads (they name objects for the AOVs); other tracers are asked plainly."""
+        return {"ids": False} if isinstance(self.geometry, SceneGeometry) else {}
 
     def _shade(
         self, rays: RayBatch, surfaces: SurfaceHits, work: BatchWork, spawn: bool

@@ -22,10 +22,11 @@ import llvmlite.binding as llvm
 import numba
 import numpy as np
 import pytest
+import trimesh
 from camera_reference import sample_rays as reference_rays
 from camera_reference import tiled_samples as reference_order
 
-from embree_rt import Camera, random_field, render
+from embree_rt import Camera, Scene, random_field, render
 from embree_rt.camera import camera_frame, camera_rays, sample_rays, tiled_samples
 from embree_rt.compiled import camera_rays as camera_module
 from embree_rt.compiled import film_sums
@@ -78,6 +79,42 @@ def test_camera_rays_made_inside_the_query_are_the_numpy_rays_and_hit_the_same(t
     for name in ("t", "position", "normal", "face_normal", "material", "scale", "incoming"):
         assert getattr(surfaces, name).tobytes() == getattr(expected, name).tobytes(), name
     assert surfaces.floor_count == expected.floor_count > 0
+
+
+def test_records_without_ids_are_the_records_with_them_less_the_ids() -> None:
+    """Shading asks for hit records without Embree's ids (the AOVs' object names): the same
+    rows and fields, bit for bit, and no ids; a scene with meshes keeps them (its smooth
+    normals and looks read them)."""
+    scene = random_field(300, seed=6)
+    frame = camera_frame(scene.camera, 97, 61)
+    index, _ = tiled_samples(frame, 1, 0, frame.width * frame.height)
+    camera = camera_rays(frame, 1, 3)
+    origins, directions, _ = reference_rays(frame, 1, 3, index)
+    with SceneGeometry(scene, threads=1) as geometry:
+        assert not geometry.has_meshes
+        for with_ids, without in (
+            (
+                geometry.intersect_camera(camera, index),
+                geometry.intersect_camera(camera, index, ids=False),
+            ),
+            (
+                geometry.intersect_compact(origins, directions),
+                geometry.intersect_compact(origins, directions, ids=False),
+            ),
+        ):
+            assert np.array_equal(with_ids[0], without[0]) and 0 < len(without[0]) < len(index)
+            full, bare = with_ids[1], without[1]
+            for name in ("t", "position", "normal", "face_normal", "material", "scale", "incoming"):
+                assert getattr(full, name).tobytes() == getattr(bare, name).tobytes(), name
+            assert full.prim_id is not None and (full.prim_id >= 0).any()
+            assert bare.prim_id is None and bare.inst_id is None and bare.inst_prim_id is None
+    meshes = Scene(camera=scene.camera)
+    meshes.add_mesh(trimesh.creation.icosphere(), material="matte")
+    with SceneGeometry(meshes, threads=1) as geometry:
+        assert geometry.has_meshes
+        _, surfaces = geometry.intersect_compact(origins, directions, ids=False)
+        on_mesh = surfaces.inst_id[surfaces.floor_count :]
+        assert len(on_mesh) and (on_mesh >= 0).all()
 
 
 def test_film_block_sums_equal_one_bincount_per_channel_bit_for_bit() -> None:

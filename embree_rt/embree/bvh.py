@@ -567,18 +567,20 @@ class BVH:
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
         coherent: bool = False,
+        ids: bool = True,
     ) -> HitRecords:
         """The nearest hits of rays given as columns, ``origins``, ``directions`` (3, n), with
         ``labels``' ground plane, as ``HitRecords``: only the rays that hit, grouped by kind,
-        with world positions, unit normals and labels worked out in one compiled pass."""
+        with world positions, unit normals and labels worked out in one compiled pass (and,
+        with ``ids``, Embree's ids and (u, v) of each hit)."""
         origins = np.ascontiguousarray(origins, np.float32)
         directions = np.ascontiguousarray(directions, np.float32)
         rows, columns, near, far = self._query_inputs(origins.T, directions.T, tnear, tfar)
         hits = self._raw_hits(rows, columns, near, far, coherent)
-        return self._records(origins, directions, near, far, hits, labels)
+        return self._records(origins, directions, near, far, hits, labels, ids)
 
     def intersect_camera_records(
-        self, camera: CameraRays, index: np.ndarray, labels: HitLabels
+        self, camera: CameraRays, index: np.ndarray, labels: HitLabels, ids: bool = True
     ) -> tuple[HitRecords, np.ndarray]:
         """``intersect_records`` of the camera rays of samples ``index`` (n,) int64 (below
         ``width * height * spp`` of ``camera``), made inside the query (``camera_query``):
@@ -604,10 +606,13 @@ class BVH:
                 camera_query.intersect_camera_serial, camera_query.intersect_camera, arguments
             )
         origins = np.broadcast_to(camera.origin[:, None], (3, n))
-        return self._records(origins, directions, rays.tnear, rays.tfar, hits, labels), directions
+        records = self._records(origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
+        return records, directions
 
-    def _records(self, origins, directions, near, far, hits: Hits, labels: HitLabels):
-        """The ``HitRecords`` of raw ``hits`` of rays given as (3, n) columns."""
+    def _records(self, origins, directions, near, far, hits: Hits, labels: HitLabels, ids=True):
+        """The ``HitRecords`` of raw ``hits`` of rays given as (3, n) columns (without Embree's
+        ids unless ``ids``; instance arrays need them)."""
+        ids = ids or bool(self.array_count)
         spheres, sphere_slot = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
         sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
         has_plane = labels.plane_y is not None
@@ -632,8 +637,12 @@ class BVH:
             record_labels,
             self._normal_matrix_table,
             self._array_table,
+            ids,
         )
         result = HitRecords(*fields)
+        if not ids:
+            result.prim_id = result.inst_id = result.u = result.v = None
+            return result
         result.inst_prim_id = np.full(len(result.t), -1, np.int32)
         if self.array_count:
             other = result.group("other")
