@@ -57,13 +57,15 @@ class RecordingGeometry:
     def __getattr__(self, name: str):
         return getattr(self.geometry, name)
 
-    def intersect_compact(self, origins, directions, tnear=0.0, tfar=np.inf, coherent=False):
+    def intersect_compact(
+        self, origins, directions, tnear=0.0, tfar=np.inf, coherent=False, ids=True
+    ):
         with self._lock:
             self.log.append(("intersect", origins, directions, tfar, coherent))
-        return self.geometry.intersect_compact(origins, directions, tnear, tfar, coherent)
+        return self.geometry.intersect_compact(origins, directions, tnear, tfar, coherent, ids)
 
-    def intersect_camera(self, camera, index):
-        rows, surfaces, directions = self.geometry.intersect_camera(camera, index)
+    def intersect_camera(self, camera, index, ids=True):
+        rows, surfaces, directions = self.geometry.intersect_camera(camera, index, ids)
         # The camera rays, made inside the query, as the rays they are.
         origins = np.repeat(camera.origin[:, None], directions.shape[1], axis=1)
         with self._lock:

@@ -157,6 +157,7 @@ class Integrator:
         retain_freed_memory()
         start = time.perf_counter()
         self.geometry: Tracer = tracer
+        self._own_geometry = tracer is None
         if tracer is None:
             self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
         self.build_s = time.perf_counter() - start
@@ -342,9 +343,10 @@ class Integrator:
         return rows, surfaces, directions
 
     def _without_ids(self) -> dict:
-        """What asks ``SceneGeometry``'s queries to leave out Embree's ids of each hit, which
-        shading never reads (they name objects for the AOVs); other tracers are asked plainly."""
-        return {"ids": False} if isinstance(self.geometry, SceneGeometry) else {}
+        """What asks the integrator's own ``SceneGeometry`` to leave Embree's ids of each hit
+        out of its records (shading never reads them; they name objects for the AOVs); a
+        tracer given to the integrator is asked plainly."""
+        return {"ids": False} if self._own_geometry else {}
 
     def _shade(
         self, rays: RayBatch, surfaces: SurfaceHits, work: BatchWork, spawn: bool
