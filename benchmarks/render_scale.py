@@ -11,9 +11,9 @@ end over raw rays/s: pairs taken close together keep the ratio fair on a noisy s
 stages add up to its ``render_s``: ``camera`` (the batches' tile order and the camera rays,
 which are made inside the first query: their share is timed apart by making the same rays
 again), ``traversal`` (Embree's nearest-hit queries), ``records`` (hit records and surface
-normals and looks around them), ``shadow`` (the shadow-segment queries), ``film`` (sums into
-the film and the final image) and ``shading`` (the rest: NumPy shading and the wavefront's
-bookkeeping). The instruments cost a few microseconds a call.
+normals and looks around them), ``shadow`` (the shadow-segment queries, the segments made
+inside them), ``film`` (sums into the film and the final image) and ``shading`` (the rest:
+NumPy shading and the wavefront's bookkeeping). The instruments cost a few microseconds a call.
 
     python benchmarks/render_scale.py                       # 1e3..1e6 spheres, 1920x1080, 1 spp
     python benchmarks/render_scale.py --counts 1000000 --threads 1
@@ -34,7 +34,7 @@ import numpy as np
 
 from embree_rt import Renderer, film, integrator
 from embree_rt.compiled.camera_rays import sample_directions
-from embree_rt.embree import camera_query, kernels
+from embree_rt.embree import camera_query, kernels, segments
 from embree_rt.integrator import DEFAULT_BATCH_SIZE
 from embree_rt.scene import random_field
 
@@ -57,18 +57,33 @@ class RecordingGeometry:
     def __getattr__(self, name: str):
         return getattr(self.geometry, name)
 
-    def intersect_compact(self, origins, directions, coherent=False):
+    def intersect_compact(self, origins, directions, coherent=False, ids=True):
         with self._lock:
             self.log.append(("intersect", origins, directions, np.inf, coherent))
-        return self.geometry.intersect_compact(origins, directions, coherent)
+        return self.geometry.intersect_compact(origins, directions, coherent, ids)
 
-    def intersect_camera(self, camera, index):
-        rows, surfaces, directions = self.geometry.intersect_camera(camera, index)
+    def intersect_camera(self, camera, index, ids=True):
+        rows, surfaces, directions = self.geometry.intersect_camera(camera, index, ids)
         # The camera rays, made inside the query, as the rays they are.
         origins = np.repeat(camera.origin[:, None], directions.shape[1], axis=1)
         with self._lock:
             self.log.append(("intersect", origins, directions, np.inf, True))
         return rows, surfaces, directions
+
+    def toward_lights(self, points, normals, targets, takes=None):
+        # The shadow segments the kernel makes: from each point facing the light (and taking
+        # light) to the light, t in [0, 1], as occluded_toward's below.
+        for target, answer in zip(
+            targets, self.geometry.toward_lights(points, normals, targets, takes), strict=True
+        ):
+            to_light = np.asarray(target, np.float32)[:, None] - points
+            facing = (to_light[0] * normals[0] + to_light[1] * normals[1]) + to_light[2] * normals[
+                2
+            ] > 0
+            rows = np.flatnonzero(facing if takes is None else facing & takes)
+            with self._lock:
+                self.log.append(("occluded", points[:, rows], to_light[:, rows], 1.0, False))
+            yield answer
 
     def occluded_toward(self, points, rows, target):
         # The shadow segments as the rays they are: from each point to the target, t in [0, 1].
@@ -195,6 +210,7 @@ def stage_breakdown(renderer: Renderer, image: dict) -> dict:
         (geometry, "intersect_camera", wrap("records", geometry.intersect_camera)),
         (geometry, "intersect_compact", wrap("records", geometry.intersect_compact)),
         (geometry, "occluded_toward", wrap("shadow", geometry.occluded_toward)),
+        (segments, "toward_light_chunk", wrap("shadow", segments.toward_light_chunk)),
         (film.FilmBlock, "add", wrap("film", film.FilmBlock.add)),
         (film.FilmBlock, "add_weighted", wrap("film", film.FilmBlock.add_weighted)),
         (film.Film, "add_block", wrap("film", film.Film.add_block)),

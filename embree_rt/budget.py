@@ -40,16 +40,16 @@ GEOMETRY_BYTES_PER_SPHERE = {"user": 152, "point": 51, "mesh": 310}
 BYTES_PER_TRIANGLE = 12 + 12 + 64
 BYTES_PER_INSTANCE = 256
 BYTES_PER_ARRAYED_INSTANCE = 128
-# Per pixel: the film's float64 sums (24 bytes), the float32 image, the tone mapping's float32
-# temporaries and the encoder's bytes. 1920x1080 -> 7680x4320 at 1 spp grew by 75-87 bytes a
-# pixel for a PNG (66 for a .npy), when the film still made a transposed copy of the image (12
-# bytes): an upper bound now.
-FILM_BYTES_PER_PIXEL = 88
+# Per pixel: the float32 image, the film's float64 sums of the blocks in flight, the tone
+# mapping's float32 temporaries and the encoder's bytes. 3840x2160 and 7680x4320 at 1 spp grew
+# by 72 bytes a pixel with a PNG written (36 before it).
+FILM_BYTES_PER_PIXEL = 76
 # Per camera sample in flight: the rays and hit records of the batches the workers hold (up to
-# three batches a worker). 1920x1080 at 1 spp, 2 workers: ~60 bytes a sample. Independent of the
-# depth: a batch's film block sums its samples whenever it holds more than the batch's camera
-# samples (inside a closed mirror, 320x180: 254 MB peak at depth 6, 60 and 600 alike).
-BYTES_PER_SAMPLE_IN_FLIGHT = 100
+# three batches a worker). 1920x1080 at 1 spp, 2 workers, 2^18-sample batches: 69 bytes a
+# sample inside a closed mirror (every ray hits and reflects, depth 6), 19-41 in a random field.
+# Independent of the depth: a batch's film block sums its samples whenever it holds more than
+# the batch's camera samples (benchmarks/depth_memory.py: the same peak at depth 6, 60, 600).
+BYTES_PER_SAMPLE_IN_FLIGHT = 72
 BATCHES_IN_FLIGHT_PER_WORKER = 3
 
 

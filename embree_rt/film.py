@@ -76,11 +76,31 @@ class Film:
         self.height = int(height)
         if self.width < 1 or self.height < 1:
             raise ValueError(f"film size must be positive, got {width}x{height}")
-        # One float64 accumulator per channel: float32 sums of millions of samples drift.
-        self._sum = np.zeros((3, self.width * self.height), np.float64)
+        # One float64 accumulator per channel (float32 sums of millions of samples drift),
+        # made only when blocks overlap: blocks that come in pixel order without overlapping
+        # (a render's batches, each pixel summed in one block) are kept as (first, sums) and
+        # their means written straight into the image, with no whole-film buffer to fault in
+        # and add into (0 + x is x: the same bits).
+        self._sum: np.ndarray | None = None
+        self._blocks: list[tuple[int, np.ndarray]] = []
+        self._end = 0  # where the kept blocks end
 
     def add_block(self, block: FilmBlock) -> None:
         """Add a finished block's sums into its pixels."""
+        if block.first < 0 or block.first + block.count > self.width * self.height:
+            raise ValueError(
+                f"block of pixels {block.first}..{block.first + block.count - 1} is outside "
+                f"the film's {self.width * self.height}"
+            )
+        if self._sum is None and block.first >= self._end:
+            self._blocks.append((block.first, block.sums))
+            self._end = block.first + block.count
+            return
+        if self._sum is None:  # an overlap: from here on, sums in the whole-film buffer
+            self._sum = np.zeros((3, self.width * self.height), np.float64)
+            for first, sums in self._blocks:
+                self._sum[:, first : first + sums.shape[1]] += sums
+            self._blocks = []
         self._sum[:, block.first : block.first + block.count] += block.sums
 
     def image(self, spp: int) -> np.ndarray:
@@ -88,7 +108,17 @@ class Film:
         if spp < 1:
             raise ValueError(f"spp: must be >= 1, got {spp}")
         # One pass: divide in float64, round once to float32, written pixel-major.
-        return film_sums.mean_image(self._sum, spp).reshape(self.height, self.width, 3)
+        if self._sum is not None:
+            mean = film_sums.mean_image(self._sum, spp)
+        else:
+            mean = np.empty((self.width * self.height, 3), np.float32)
+            covered = 0
+            for first, sums in self._blocks:
+                mean[covered:first] = 0.0  # pixels no block reached: 0 / spp
+                film_sums.mean_into(mean, first, sums, spp)
+                covered = first + sums.shape[1]
+            mean[covered:] = 0.0
+        return mean.reshape(self.height, self.width, 3)
 
 
 class FilmBlock:

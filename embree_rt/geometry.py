@@ -12,6 +12,7 @@ the horizon and lose float32 precision far away.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -335,6 +336,7 @@ class SceneGeometry(Closing):
             instance_labels=instance_labels,
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
+        self.has_meshes = self.instance_count > 0
         self.object_start = np.full(size, -1, np.int64)
         for geom_id, start in self._object_start.items():
             self.object_start[geom_id] = start
@@ -372,23 +374,33 @@ class SceneGeometry(Closing):
         return full
 
     def intersect_compact(
-        self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        coherent: bool = False,
+        ids: bool = True,
     ) -> tuple[np.ndarray, SurfaceHits]:
         """Like ``intersect``, but only for the rays that hit: returns their (k,) int64 ray
         numbers and a ``SurfaceHits`` of k columns (what the integrator shades), floor hits
         first. The Embree layer's compiled hit records do the bookkeeping; only smooth mesh
         normals are left to do here. ``coherent``: the rays come in runs of neighbouring
-        camera rays (Embree's coherent query; the same answers, found faster)."""
-        records = self.bvh.intersect_records(origins, directions, self.labels, coherent=coherent)
+        camera rays (Embree's coherent query; the same answers, found faster). ``ids``: whether
+        the surfaces carry Embree's ids of each hit (``prim_id``, ``inst_id``,
+        ``inst_prim_id``; None without them, unless the scene has meshes, which need them)."""
+        records = self.bvh.intersect_records(
+            origins, directions, self.labels, coherent=coherent, ids=ids or self.has_meshes
+        )
         return records.rays, self._surfaces(records)
 
     def intersect_camera(
-        self, camera: CameraRays, index: np.ndarray
+        self, camera: CameraRays, index: np.ndarray, ids: bool = True
     ) -> tuple[np.ndarray, SurfaceHits, np.ndarray]:
         """``intersect_compact`` of the camera rays of samples ``index`` (n,) int64, made
         inside the query (``BVH.intersect_camera_records``): the (k,) ray numbers that hit,
         their ``SurfaceHits``, and the (3, n) float32 directions of all n rays."""
-        records, directions = self.bvh.intersect_camera_records(camera, index, self.labels)
+        records, directions = self.bvh.intersect_camera_records(
+            camera, index, self.labels, ids or self.has_meshes
+        )
         return records.rays, self._surfaces(records), directions
 
     def _surfaces(self, records: HitRecords) -> SurfaceHits:
@@ -477,6 +489,17 @@ class SceneGeometry(Closing):
         """(k,) bool: whether any surface, floor included, lies between each of the ``points``
         (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``BVH.occluded_toward``."""
         return self.bvh.occluded_toward(points, rows, target, plane_y=self.labels.plane_y)
+
+    def toward_lights(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        targets: np.ndarray,
+        takes: np.ndarray | None = None,
+    ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+        """Per light of ``targets`` (L, 3), what the ``points`` (3, n) float32 with unit
+        ``normals`` (3, n) see of it, the floor included: ``BVH.toward_lights``."""
+        return self.bvh.toward_lights(points, normals, targets, takes, self.labels.plane_y)
 
 
 @dataclass

@@ -121,10 +121,12 @@ class Tracer(Protocol):
     first) and whether shadow segments are blocked (``occluded_toward``: (k,) bool for the
     segments from ``points[:, rows]`` to ``target``). ``SceneGeometry`` (one BVH of the whole
     scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask.
-    A tracer may also make camera rays inside its query (``SceneGeometry.intersect_camera``);
-    one that does not is given them as columns. One may also answer the shadow segments toward
-    every light in one query (``occluded_toward_each(points, rows_each, targets)``: per target
-    (L, 3), the (k,) bool of ``occluded_toward``)."""
+    A tracer may also make camera rays inside its query (``SceneGeometry.intersect_camera``)
+    and shadow segments toward every light from the points that face it
+    (``SceneGeometry.toward_lights``); one that does not is given camera rays as columns and
+    the segments made here, for every light in one query when it answers them so
+    (``occluded_toward_each(points, rows_each, targets)``: per target (L, 3), the (k,) bool of
+    ``occluded_toward``), else a query a light."""
 
     def intersect_compact(
         self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
@@ -173,6 +175,7 @@ class Integrator(Closing):
         retain_freed_memory()
         start = time.perf_counter()
         self.geometry: Tracer = tracer
+        self._own_geometry = tracer is None
         if tracer is None:
             self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
         self.build_s = time.perf_counter() - start
@@ -321,7 +324,7 @@ class Integrator(Closing):
                 rows, surfaces, rays.directions = self._camera_hits(*camera)
             else:
                 rows, surfaces = self.geometry.intersect_compact(
-                    rays.origins, rays.directions, coherent=depth == 0
+                    rays.origins, rays.directions, coherent=depth == 0, **self._without_ids()
                 )
             if len(rows) < len(rays):
                 escaped = np.ones(len(rays), bool)
@@ -331,10 +334,8 @@ class Integrator(Closing):
                 sky = shading.sky_at(rays.directions[1][escaped], self.horizon, self.zenith)
                 work.block.add_weighted(rays.pixel, rays.weight, sky, escaped)
             # The hits' origins are not needed again: their surfaces say where they are.
-            if rays.weight is None:  # camera rays: unit weights, made for the hits alone
-                weight = np.ones((3, len(rows)), np.float32)
-            else:
-                weight = np.take(rays.weight, rows, axis=1)
+            # (camera rays' unit weights stay None: 1 · x is x, bit for bit)
+            weight = None if rays.weight is None else np.take(rays.weight, rows, axis=1)
             hit_rays = RayBatch(None, surfaces.incoming, np.take(rays.pixel, rows), weight)
             rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
@@ -347,11 +348,17 @@ class Integrator(Closing):
         (a tracer of bricks is asked for the same rays as columns)."""
         intersect_camera = getattr(self.geometry, "intersect_camera", None)
         if intersect_camera is not None:
-            return intersect_camera(camera, index)
+            return intersect_camera(camera, index, **self._without_ids())
         directions = sample_directions(camera, index)
         origins = np.repeat(camera.origin[:, None], len(index), axis=1)
         rows, surfaces = self.geometry.intersect_compact(origins, directions, coherent=True)
         return rows, surfaces, directions
+
+    def _without_ids(self) -> dict:
+        """What asks the integrator's own ``SceneGeometry`` to leave Embree's ids of each hit
+        out of its records (shading never reads them; they name objects for the AOVs); a
+        tracer given to the integrator is asked plainly."""
+        return {"ids": False} if self._own_geometry else {}
 
     def _shade(
         self, rays: RayBatch, surfaces: SurfaceHits, work: BatchWork, spawn: bool
@@ -361,16 +368,22 @@ class Integrator(Closing):
         d = rays.directions
         normal, face_normal, entering = self.facing_the_ray(d, surfaces)
         material = surfaces.material
+        if rays.weight is None and (
+            self.absorption is not None
+            or (surfaces.looks is not None and surfaces.looks.coverage is not None)
+        ):
+            rays.weight = np.ones((3, len(rays)), np.float32)  # weighed in place below
         if self.absorption is not None:
             self._absorb_inside(rays.weight, surfaces.t, material, entering)
         color = self.surface_color(surfaces)
         offset = surface_offset(surfaces.scale)
         passing = self._see_through(rays, surfaces, face_normal, offset, work, spawn)
-        outside = surfaces.position + face_normal * offset
+        outside = np.multiply(face_normal, offset)
+        outside += surfaces.position  # (position + face_normal · offset)
         radiance = self._per_hit(self.ambient_share, surfaces, "ambient_share") * color
         if surfaces.looks is not None and surfaces.looks.occlusion is not None:
             radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
-        self._add_direct_light(radiance, outside, normal, -d, color, surfaces, work)
+        self._add_direct_light(radiance, outside, normal, d, color, surfaces, work)
         self._add_emission(radiance, surfaces)
         work.block.add_weighted(rays.pixel, rays.weight, radiance)
         if not spawn:
@@ -461,12 +474,19 @@ class Integrator(Closing):
 
     def surface_color(self, surfaces: SurfaceHits) -> np.ndarray:
         """(3, k) float32 colour of each hit: its material's, the checker's on the floor."""
-        color = np.take(self.material_color, surfaces.material, axis=1)
+        floor = surfaces.floor_count
+        color = np.empty((3, len(surfaces)), np.float32)
+        # the materials' colours gathered for the hits off the floor alone, straight into
+        # place (mode "clip": an ``out`` is not copied first, and the ids are all in range)
+        material = surfaces.material[floor:]
+        for row, table in zip(color, self.material_color, strict=True):
+            np.take(table, material, out=row[floor:], mode="clip")
         if surfaces.colored is not None:  # mesh looks: textures, vertex colours per hit
             scatter(color, surfaces.colored, surfaces.color)
-        floor = slice(0, surfaces.floor_count)
-        if surfaces.floor_count:
-            color[:, floor] = shading.checker(surfaces.position[:, floor], self.scene.floor.checker)
+        if floor:
+            shading.checker(
+                surfaces.position[:, :floor], self.scene.floor.checker, color[:, :floor]
+            )
         return color
 
     def _refraction_children(
@@ -488,7 +508,10 @@ class Integrator(Closing):
         )
         reflect_share[glass] += transparency[glass] * fresnel
         # Glass tints what passes through it (the green marble), not what it reflects.
-        weight = np.take(rays.weight, glass, axis=1)
+        if rays.weight is None:
+            weight = np.ones((3, len(glass)), np.float32)
+        else:
+            weight = np.take(rays.weight, glass, axis=1)
         weight *= transparency[glass] * (1.0 - fresnel)
         weight *= np.take(color, glass, axis=1)
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
@@ -507,7 +530,10 @@ class Integrator(Closing):
         """Mirrors, metals and glass's Fresnel share reflect: the mirror rays whose weight can
         still show, started just outside the surface. Most hits reflect a little, so the
         weights are formed on every row and only the rows kept are gathered."""
-        weight = rays.weight * reflect_share
+        if rays.weight is None:
+            weight = np.repeat(reflect_share[None, :], 3, axis=0)
+        else:
+            weight = rays.weight * reflect_share
         looks = surfaces.looks
         if self.metallic is not None or (looks is not None and looks.shading is not None):
             # Metals tint what they reflect by their colour; the rest reflect untinted. (Metals
@@ -522,8 +548,9 @@ class Integrator(Closing):
         work.rays["reflection"] += len(keep)
         if len(keep) == len(weight[0]):  # every hit reflects: no gathers
             return RayBatch(outside, shading.reflect(rays.directions, normal), rays.pixel, weight)
+        normal_kept = np.take(normal, keep, axis=1)
         reflected = shading.reflect(
-            np.take(rays.directions, keep, axis=1), np.take(normal, keep, axis=1)
+            np.take(rays.directions, keep, axis=1), normal_kept, out=normal_kept
         )
         return RayBatch(
             np.take(outside, keep, axis=1),
@@ -531,6 +558,83 @@ class Integrator(Closing):
             rays.pixel[keep],
             np.take(weight, keep, axis=1),
         )
+
+    def _add_direct_light(
+        self, radiance, points, normal, incoming, color, surfaces, work: BatchWork
+    ) -> None:
+        """Add to ``radiance`` (3, n) the Blinn-Phong light from every point light that the
+        ``points`` (3, n) see, toward the viewer against the ``incoming`` (3, n) rays."""
+        n = points.shape[1]
+        if n == 0 or len(self.light_positions) == 0:
+            return
+        material = surfaces.material
+        diffuse = self._per_hit(self.diffuse_share, surfaces, "diffuse_share")
+        specular = self._per_hit(self.specular, surfaces, "specular")
+        # Unlit surfaces take no light: no shadow rays for them.
+        takes_light = None if self.lit is None else np.take(self.lit, material)
+        shininess = self._per_hit(self.materials.shininess, surfaces, "shininess")
+        for light, (visible, direction, made) in enumerate(
+            self._toward_lights(points, normal, takes_light)
+        ):
+            work.rays["shadow"] += made
+            lit_count = np.count_nonzero(visible)
+            if lit_count == 0:
+                continue
+            if lit_count > n // 2:
+                # Mostly lit: shade every point, with no light where it is not seen (a zero
+                # direction), cheaper than gathering seven arrays and scattering back.
+                radiance += shading.blinn_phong(
+                    normal,
+                    incoming,
+                    direction,
+                    color,
+                    diffuse,
+                    specular,
+                    shininess,
+                    self.light_rgb[light],
+                )
+                continue
+            lit = np.flatnonzero(visible)
+            scatter_add(
+                radiance,
+                lit,
+                shading.blinn_phong(
+                    np.take(normal, lit, axis=1),
+                    np.take(incoming, lit, axis=1),
+                    np.take(direction, lit, axis=1),
+                    np.take(color, lit, axis=1),
+                    diffuse[lit],
+                    specular[lit],
+                    shininess[lit],
+                    self.light_rgb[light],
+                ),
+            )
+
+    def _toward_lights(self, points, normal, takes_light):
+        """Per light, what the ``points`` (3, n) with facing unit normals ``normal`` (3, n) see
+        of it: (n,) bool visible, (3, n) float32 unit directions toward it where visible (zero
+        elsewhere), and the shadow rays traced: one segment from each point that faces the
+        light and takes light (``takes_light`` (n,) bool, None: all). The tracer's
+        ``toward_lights`` when it has one (shadow rays made in its kernel), else the same
+        segments made here for its ``occluded_toward``."""
+        toward_lights = getattr(self.geometry, "toward_lights", None)
+        if toward_lights is not None:
+            yield from toward_lights(points, normal, self.light_positions, takes_light)
+            return
+        facing_each = [
+            facing_light(position, points, normal, takes_light) for position in self.light_positions
+        ]
+        for position, facing, blocked in zip(
+            self.light_positions,
+            facing_each,
+            self._blocked_each(points, facing_each),
+            strict=True,
+        ):
+            visible = np.zeros(points.shape[1], bool)
+            visible[facing] = ~blocked
+            direction = shading.normalize(position[:, None] - points)
+            direction *= visible  # (x · 1 is x: the visible columns' bits stay)
+            yield visible, direction, len(facing)
 
     def _blocked_each(self, points: np.ndarray, facing_each: list[np.ndarray]) -> list[np.ndarray]:
         """Per light, (k,) bool whether the segment from each of the ``points`` (3, n) at its
@@ -544,67 +648,3 @@ class Integrator(Closing):
             self.geometry.occluded_toward(points, facing, position)
             for facing, position in zip(facing_each, self.light_positions, strict=True)
         ]
-
-    def _add_direct_light(
-        self, radiance, points, normal, to_viewer, color, surfaces, work: BatchWork
-    ) -> None:
-        """Add to ``radiance`` (3, n) the Blinn-Phong light from every point light that the
-        ``points`` (3, n) see."""
-        n = points.shape[1]
-        if n == 0 or len(self.light_positions) == 0:
-            return
-        # Shadow rays only where the light is in front of the surface: the segment from the
-        # point to the light, which the Embree layer builds from the points' columns.
-        material = surfaces.material
-        diffuse = self._per_hit(self.diffuse_share, surfaces, "diffuse_share")
-        specular = self._per_hit(self.specular, surfaces, "specular")
-        # Unlit surfaces take no light: no shadow rays for them.
-        takes_light = None if self.lit is None else np.take(self.lit, material)
-        shininess = self._per_hit(self.materials.shininess, surfaces, "shininess")
-        facing_each = [
-            facing_light(position, points, normal, takes_light) for position in self.light_positions
-        ]
-        blocked_each = self._blocked_each(points, facing_each)
-        for light, position in enumerate(self.light_positions):
-            to_light = position[:, None] - points
-            facing = facing_each[light]
-            visible = ~blocked_each[light]
-            work.rays["shadow"] += len(facing)
-            lit = facing[visible]
-            if len(lit) == 0:
-                continue
-            if len(lit) > n // 2:
-                # Mostly lit: shade every point, with no light where it is not seen (a zero
-                # direction), cheaper than gathering seven arrays and scattering back.
-                seen = np.zeros(n, np.float32)
-                seen[facing] = visible
-                # direction = to_light · seen / max(|to_light|, 1e-30), formed in place
-                scale = np.sqrt(shading.dot(to_light, to_light))
-                np.maximum(scale, np.float32(1e-30), out=scale)
-                np.divide(seen, scale, out=scale)
-                direction = np.multiply(to_light, scale, out=to_light)
-                radiance += shading.blinn_phong(
-                    normal,
-                    to_viewer,
-                    direction,
-                    color,
-                    diffuse,
-                    specular,
-                    shininess,
-                    self.light_rgb[light],
-                )
-                continue
-            scatter_add(
-                radiance,
-                lit,
-                shading.blinn_phong(
-                    np.take(normal, lit, axis=1),
-                    np.take(to_viewer, lit, axis=1),
-                    shading.normalize(np.take(to_light, lit, axis=1)),
-                    np.take(color, lit, axis=1),
-                    diffuse[lit],
-                    specular[lit],
-                    shininess[lit],
-                    self.light_rgb[light],
-                ),
-            )

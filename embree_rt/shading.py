@@ -37,12 +37,16 @@ def normalize(v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     return np.multiply(v, inverse_length, out=out)
 
 
-def reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
+def reflect(d: np.ndarray, n: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """(3, n) float32 mirror directions ``d - 2 (d·n) n`` of (3, n) ``d`` about (3, n) unit
-    normals ``n``; the length of ``d`` is kept."""
+    normals ``n``; the length of ``d`` is kept. ``out``: a (3, n) float32 array for them,
+    which may be ``d`` or ``n`` itself (a gathered copy the caller no longer needs)."""
     d = np.asarray(d, np.float32)
     n = np.asarray(n, np.float32)
-    return d - (np.float32(2.0) * dot(d, n)) * n
+    twice = dot(d, n)
+    twice *= np.float32(2.0)
+    scaled = np.multiply(n, twice, out=n if out is n else None)
+    return np.subtract(d, scaled, out=scaled if out is None else out)
 
 
 def refract(d: np.ndarray, n: np.ndarray, eta: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -56,7 +60,17 @@ def refract(d: np.ndarray, n: np.ndarray, eta: float | np.ndarray) -> tuple[np.n
     d = np.asarray(d, np.float32)
     n = np.asarray(n, np.float32)
     eta = np.broadcast_to(np.asarray(eta, np.float32), (d.shape[1],))
-    cos_i = np.clip(-dot(d, n), np.float32(0.0), np.float32(1.0))
+    directions, total_internal, _, _ = _snell(d, n, eta)
+    return directions, total_internal
+
+
+def _snell(d: np.ndarray, n: np.ndarray, eta: np.ndarray):
+    """``refract`` of float32 ``d``, ``n`` (3, n) and ``eta`` (n,), and the (n,) float32
+    cosines of incidence (clipped to [0, 1]) and of transmission it forms on the way, which
+    Schlick's term reads again: (directions, total internal reflection, cos_i, cos_t)."""
+    cos_i = dot(d, n)
+    np.negative(cos_i, out=cos_i)
+    np.clip(cos_i, np.float32(0.0), np.float32(1.0), out=cos_i)
     sin2_t = eta * eta * (np.float32(1.0) - cos_i * cos_i)
     total_internal = sin2_t > 1.0
     cos_t = np.sqrt(np.maximum(np.float32(0.0), np.float32(1.0) - sin2_t))
@@ -68,7 +82,7 @@ def refract(d: np.ndarray, n: np.ndarray, eta: float | np.ndarray) -> tuple[np.n
             mirrored,
             reflect(np.take(d, mirrored, axis=1), np.take(n, mirrored, axis=1)),
         )
-    return normalize(directions), total_internal
+    return normalize(directions, out=directions), total_internal, cos_i, cos_t
 
 
 def dielectric_split(
@@ -84,9 +98,16 @@ def dielectric_split(
     that reflects, the rest refracting."""
     n1 = np.where(entering, np.float32(1.0), ior)
     n2 = np.where(entering, ior, np.float32(1.0))
-    refracted, total_internal = refract(d, n, n1 / n2)
-    cos_incident = np.clip(-dot(d, n), 0.0, 1.0)
-    fresnel = fresnel_schlick(cos_incident, n1, n2)
+    d = np.asarray(d, np.float32)
+    n = np.asarray(n, np.float32)
+    eta = np.broadcast_to(np.asarray(n1 / n2, np.float32), (d.shape[1],))  # as refract takes it
+    refracted, total_internal, cos_i, cos_t = _snell(d, n, eta)
+    if n1.dtype == n2.dtype == np.float32:
+        # Schlick's term reads the cosines Snell's law has just formed: with float32 indices
+        # its own are the same float32 operations on the same values
+        fresnel = _schlick(cos_i, cos_t, total_internal, n1, n2)
+    else:
+        fresnel = fresnel_schlick(cos_i, n1, n2)
     fresnel[total_internal] = 1.0
     return refracted, total_internal, fresnel
 
@@ -105,11 +126,17 @@ def fresnel_schlick(
     cos_i = np.clip(np.asarray(cos_incident, np.float32), np.float32(0.0), np.float32(1.0))
     n1 = np.broadcast_to(np.asarray(n1, np.float32), cos_i.shape)
     n2 = np.broadcast_to(np.asarray(n2, np.float32), cos_i.shape)
-    r0 = ((n1 - n2) / (n1 + n2)) ** 2
     eta = n1 / n2
     sin2_t = eta * eta * (np.float32(1.0) - cos_i * cos_i)
     total_internal = sin2_t > 1.0
     cos_t = np.sqrt(np.maximum(np.float32(0.0), np.float32(1.0) - sin2_t))
+    return _schlick(cos_i, cos_t, total_internal, n1, n2)
+
+
+def _schlick(cos_i, cos_t, total_internal, n1, n2) -> np.ndarray:
+    """``fresnel_schlick`` given the (n,) float32 cosines of incidence and transmission and
+    where total internal reflection is, as Snell's law forms them."""
+    r0 = ((n1 - n2) / (n1 + n2)) ** 2
     cos = np.where(n1 > n2, cos_t, cos_i)
     reflectance = r0 + (np.float32(1.0) - r0) * (np.float32(1.0) - cos) ** 5
     reflectance = np.where(n1 == n2, np.float32(0.0), reflectance)
@@ -140,7 +167,7 @@ def _as_columns(rgb: np.ndarray) -> np.ndarray:
 
 def blinn_phong(
     normal: np.ndarray,
-    to_viewer: np.ndarray,
+    incoming: np.ndarray,
     to_light: np.ndarray,
     color: np.ndarray,
     diffuse: np.ndarray,
@@ -152,8 +179,9 @@ def blinn_phong(
 
     ``diffuse · max(0, N·L) · color · light_rgb + specular · max(0, N·H)^shininess · light_rgb``
     with ``H = normalize(L + V)``, and zero where ``N·L <= 0`` (no highlight on the dark side).
-    ``normal``, ``to_viewer``, ``to_light`` are (3, n) unit vectors (a zero ``to_light`` column
-    means no light there); ``color`` and ``light_rgb`` (3, n) or (3,); ``diffuse``,
+    ``normal``, ``to_light`` and ``incoming`` are (3, n) unit vectors: the viewer is at ``V =
+    -incoming``, the direction of the ray that hit (a zero ``to_light`` column means no light
+    there); ``color`` and ``light_rgb`` (3, n) or (3,); ``diffuse``,
     ``specular``, ``shininess`` (n,). The caller folds shadowing and the light's intensity
     into ``light_rgb`` or ``to_light``; there is no distance attenuation, as in the seed article.
     """
@@ -173,15 +201,16 @@ def blinn_phong(
     if glossy_count > len(glossy) // 2:
         # Mostly glossy: every column, with the others' highlight masked to zero, costs less
         # than gathering five arrays and scattering back.
-        half = to_light + to_viewer
+        half = to_light - incoming  # (L + V, bit for bit: x - y is x + (-y))
         n_dot_h = dot(normal, normalize(half, out=half))
         highlight = power(n_dot_h, shininess)
-        highlight *= specular * glossy
+        highlight *= specular
+        highlight *= glossy  # (h · s) · g is h · (s · g) for g in {0, 1}, finite h, s >= 0
         radiance += np.multiply(highlight, light_rgb, out=half)  # (half is free again)
         return radiance
     rows = np.flatnonzero(glossy)
     half = np.take(to_light, rows, axis=1)
-    half += np.take(to_viewer, rows, axis=1)
+    half -= np.take(incoming, rows, axis=1)
     n_dot_h = dot(np.take(normal, rows, axis=1), normalize(half, out=half))
     highlight = power(n_dot_h, shininess[rows])
     highlight *= specular[rows]
@@ -207,9 +236,10 @@ def sky_at(height: np.ndarray, horizon: np.ndarray, zenith: np.ndarray) -> np.nd
     return color
 
 
-def checker(points: np.ndarray, checker: Checker) -> np.ndarray:
+def checker(points: np.ndarray, checker: Checker, out: np.ndarray | None = None) -> np.ndarray:
     """(3, n) float32 checkerboard color at (3, n) ``points``, by squares of the xz-plane:
-    ``checker.color_a`` where ``floor(x / size) + floor(z / size)`` is even, else ``color_b``."""
+    ``checker.color_a`` where ``floor(x / size) + floor(z / size)`` is even, else ``color_b``.
+    ``out``: a (3, n) float32 array (or view) to write them to."""
     # float64 so the square a point falls in does not depend on float32 rounding of x / size.
     # The parity taken in float64, not through int64: a far hit (a grazing ray meets the floor
     # at any distance) over a small square passes 2**63 squares; beyond 2**53 all are even.
@@ -219,9 +249,13 @@ def checker(points: np.ndarray, checker: Checker) -> np.ndarray:
         np.divide(square, checker.size, out=square)
         np.floor(square, out=square)
     x += z
-    odd = odd_integers(x)
+    odd = odd_integers(x).astype(np.intp)
     palette = np.array([checker.color_a, checker.color_b], np.float32).T  # (3, 2): even, odd
-    return np.take(palette, odd.astype(np.intp), axis=1)
+    if out is None:
+        return np.take(palette, odd, axis=1)
+    for row, colors in zip(out, palette, strict=True):  # ("clip": no copy of out; 0 and 1)
+        np.take(colors, odd, out=row, mode="clip")
+    return out
 
 
 def odd_integers(values: np.ndarray) -> np.ndarray:

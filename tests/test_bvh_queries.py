@@ -250,6 +250,60 @@ def test_occluded_toward_answers_what_occluded_answers_on_the_same_segments(part
     assert np.array_equal(blocked[sure], expected[sure])
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_toward_lights_traces_the_facing_segments_and_gives_numpys_unit_directions(parts, threads):
+    """Per light, the points whose normal faces it (and that take light) are the segments
+    made; each is visible exactly when ``occluded_toward`` says the same segment is clear, and
+    its direction is ``(target - p) / |target - p|`` formed as NumPy forms it (float32
+    subtraction, products summed x + y then z, sqrt, 1 / max(length, 1e-30), one product per
+    axis): IEEE operations in the same order, no fused multiply-add (numba does not contract
+    without fastmath), so the bits agree on every x86-64 ISA. Single-ray queries, so the
+    answers cannot depend on how packets are cut."""
+    rng = np.random.default_rng(41)
+    points = rng.uniform(-8.0, 8.0, (3, 3000)).astype(np.float32)
+    normals = unit(rng.normal(size=(3000, 3))).T.astype(np.float32)
+    takes = rng.random(3000) < 0.8
+    targets = np.float32([[4.0, 9.0, -3.0], [-6.0, 12.0, 5.0]])
+    bvh, _ = parts.build(threads=threads)
+    with bvh:
+        bvh.lanes = 1
+        answers = list(bvh.toward_lights(points, normals, targets, takes, plane_y=-4.0))
+        assert len(answers) == 2
+        for target, (visible, directions, made) in zip(targets, answers, strict=True):
+            to_light = target[:, None] - points
+            facing = (to_light[0] * normals[0] + to_light[1] * normals[1]) + to_light[2] * normals[
+                2
+            ] > 0
+            rows = np.flatnonzero(facing & takes)
+            assert made == len(rows) and 0.2 < len(rows) / 3000 < 0.6
+            expected = np.zeros(3000, bool)
+            expected[rows] = ~bvh.occluded_toward(points, rows, target, plane_y=-4.0)
+            assert np.array_equal(visible, expected) and 0.1 < visible.mean() < 0.5
+            length = np.sqrt((to_light[0] ** 2 + to_light[1] ** 2) + to_light[2] ** 2)
+            unit_toward = to_light * (np.float32(1.0) / np.maximum(length, np.float32(1e-30)))
+            assert np.array_equal(directions[:, visible], unit_toward[:, visible])
+            assert not directions[:, ~visible].any()
+        # without ``takes`` every facing point makes a segment
+        _, _, made = next(bvh.toward_lights(points, normals, targets[:1]))
+        to_light = targets[0][:, None] - points
+        facing = (to_light[0] * normals[0] + to_light[1] * normals[1]) + to_light[2] * normals[2]
+        assert made == np.count_nonzero(facing > 0)
+
+
+def test_toward_lights_refuses_bad_points_normals_and_takes(parts):
+    bvh, _ = parts.build(("spheres",))
+    points = np.zeros((3, 5), np.float32)
+    normals = np.ones((3, 5), np.float32)
+    with bvh:
+        with pytest.raises(ValueError, match=r"normals: expected shape \(3, n\)"):
+            next(bvh.toward_lights(points, normals[:, :4], [0, 1, 0]))
+        with pytest.raises(ValueError, match=r"takes: expected \(5,\) bool"):
+            next(bvh.toward_lights(points, normals, [0, 1, 0], np.ones(5)))
+        normals[2, 1] = np.inf
+        with pytest.raises(ValueError, match="normals: row 1 is not finite"):
+            next(bvh.toward_lights(points, normals, [0, 1, 0]))
+
+
 def test_occluded_toward_refuses_bad_points_and_rows(parts):
     bvh, _ = parts.build(("spheres",))
     points = np.zeros((3, 5), np.float32)

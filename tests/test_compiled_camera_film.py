@@ -3,13 +3,15 @@
 Camera rays (``compiled.camera_rays``, and inside the first query ``embree.camera_query``) and
 the film's sums and mean (``compiled.film_sums``) must give exactly the bits the NumPy
 expressions gave (``camera_reference``; ``np.bincount``; ``np.divide``), so that no image
-changes. Why that holds on every x86-64 ISA (SSE2, AVX2, AVX-512), and is not luck on this
-machine: both sides use only IEEE 754 operations that are correctly rounded whatever the
-vector width (+, -, *, /, sqrt, conversions between int64, float32 and float64), in the same
-order and precision; NumPy runs each ufunc as its own pass, so it never fuses a multiply and an
-add; numba compiles without ``fastmath``, so LLVM may neither contract a multiply and an add
-into an FMA nor reassociate a sum. The last two tests check those premises of the compiled side
-on the code itself: no fastmath option, no FMA instruction in the machine code.
+changes; so must the shadow segments' facing test and unit directions toward a light
+(``embree.segments``, against NumPy in ``test_bvh_queries``). Why that holds on every x86-64
+ISA (SSE2, AVX2, AVX-512), and is not luck on this machine: both sides use only IEEE 754
+operations that are correctly rounded whatever the vector width (+, -, *, /, sqrt, conversions
+between int64, float32 and float64), in the same order and precision; NumPy runs each ufunc as
+its own pass, so it never fuses a multiply and an add; numba compiles without ``fastmath``, so
+LLVM may neither contract a multiply and an add into an FMA nor reassociate a sum. The last two
+tests check those premises of the compiled side on the code itself: no fastmath option, no FMA
+instruction in the machine code.
 """
 
 from __future__ import annotations
@@ -20,14 +22,15 @@ import llvmlite.binding as llvm
 import numba
 import numpy as np
 import pytest
+import trimesh
 from camera_reference import sample_rays as reference_rays
 from camera_reference import tiled_samples as reference_order
 
-from embree_rt import Camera, random_field, render
+from embree_rt import Camera, Scene, random_field, render
 from embree_rt.camera import camera_frame, camera_rays, sample_rays, tiled_samples
 from embree_rt.compiled import camera_rays as camera_module
 from embree_rt.compiled import film_sums
-from embree_rt.embree import camera_query
+from embree_rt.embree import BVH, camera_query, kernels, segments
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry
 
@@ -78,6 +81,42 @@ def test_camera_rays_made_inside_the_query_are_the_numpy_rays_and_hit_the_same(t
     assert surfaces.floor_count == expected.floor_count > 0
 
 
+def test_records_without_ids_are_the_records_with_them_less_the_ids() -> None:
+    """Shading asks for hit records without Embree's ids (the AOVs' object names): the same
+    rows and fields, bit for bit, and no ids; a scene with meshes keeps them (its smooth
+    normals and looks read them)."""
+    scene = random_field(300, seed=6)
+    frame = camera_frame(scene.camera, 97, 61)
+    index, _ = tiled_samples(frame, 1, 0, frame.width * frame.height)
+    camera = camera_rays(frame, 1, 3)
+    origins, directions, _ = reference_rays(frame, 1, 3, index)
+    with SceneGeometry(scene, threads=1) as geometry:
+        assert not geometry.has_meshes
+        for with_ids, without in (
+            (
+                geometry.intersect_camera(camera, index),
+                geometry.intersect_camera(camera, index, ids=False),
+            ),
+            (
+                geometry.intersect_compact(origins, directions),
+                geometry.intersect_compact(origins, directions, ids=False),
+            ),
+        ):
+            assert np.array_equal(with_ids[0], without[0]) and 0 < len(without[0]) < len(index)
+            full, bare = with_ids[1], without[1]
+            for name in ("t", "position", "normal", "face_normal", "material", "scale", "incoming"):
+                assert getattr(full, name).tobytes() == getattr(bare, name).tobytes(), name
+            assert full.prim_id is not None and (full.prim_id >= 0).any()
+            assert bare.prim_id is None and bare.inst_id is None and bare.inst_prim_id is None
+    meshes = Scene(camera=scene.camera)
+    meshes.add_mesh(trimesh.creation.icosphere(), material="matte")
+    with SceneGeometry(meshes, threads=1) as geometry:
+        assert geometry.has_meshes
+        _, surfaces = geometry.intersect_compact(origins, directions, ids=False)
+        on_mesh = surfaces.inst_id[surfaces.floor_count :]
+        assert len(on_mesh) and (on_mesh >= 0).all()
+
+
 def test_film_block_sums_equal_one_bincount_per_channel_bit_for_bit() -> None:
     rng = np.random.default_rng(2)
     first, count = 40, 300
@@ -113,15 +152,24 @@ def test_film_block_refuses_a_pixel_outside_it_and_adds_nothing() -> None:
     assert not block.sums.any()
 
 
-def test_film_image_is_the_float64_mean_rounded_once() -> None:
+@pytest.mark.parametrize("spp", [1, 7, 8, 12, 64])
+def test_film_image_is_the_float64_mean_rounded_once(spp) -> None:
+    """Divided in float64 (multiplied by 1 / spp when spp is a power of two: the same real
+    number, so the same rounding) and rounded once to float32, as NumPy's divide; sums that
+    round to float32 subnormals, zero and infinity included."""
     film = Film(37, 23)
     block = FilmBlock(0, 37 * 23)
     rng = np.random.default_rng(3)
     block.add(rng.integers(0, 37 * 23, 9000), rng.lognormal(0.0, 4.0, (3, 9000)).astype(np.float32))
+    # means that are float32 subnormals, beyond float32 (inf), a float64 subnormal sum
+    block.sums[:, :4] = [1e-44 * spp, 3e-39 * spp, 2.4e40 * spp, 5e-324]
     film.add_block(block)
     expected = np.empty((37 * 23, 3), np.float32)
-    np.divide(block.sums.T, 7, out=expected, casting="same_kind")
-    assert film.image(7).tobytes() == expected.reshape(23, 37, 3).tobytes()
+    with np.errstate(over="ignore"):
+        np.divide(block.sums.T, spp, out=expected, casting="same_kind")
+    image = film.image(spp)
+    assert image.tobytes() == expected.reshape(23, 37, 3).tobytes()
+    assert (image.reshape(-1, 3)[0] > 0).all() and np.isinf(image.reshape(-1, 3)[2]).all()
 
 
 def test_images_are_the_same_on_one_and_two_threads() -> None:
@@ -137,6 +185,8 @@ COMPILED = [
     camera_query.intersect_camera_chunk,
     film_sums.add_weighted,
     film_sums.mean_image,
+    film_sums.mean_into,
+    segments.toward_light_chunk,
 ]
 
 
@@ -150,6 +200,7 @@ def test_compiled_camera_and_film_code_has_no_fused_multiply_add() -> None:
     # Python source again, with the same options, for the arguments a render gives them
     # (sample_direction is inlined into write_directions), and read the machine code.
     frame = camera_frame(Camera(), 64, 48)
+    bvh = BVH(threads=1)
     index, pixel = tiled_samples(frame, 4, 0, 64 * 48 * 4)
     rgb = np.ones((3, len(index)), np.float32)
     calls = [
@@ -159,7 +210,9 @@ def test_compiled_camera_and_film_code_has_no_fused_multiply_add() -> None:
         ),
         (film_sums.add_weighted, (np.zeros((3, 64 * 48)), 0, pixel, rgb, rgb, None)),
         (film_sums.add_weighted, (np.zeros((3, 64 * 48)), 0, pixel, None, rgb, index)),
-        (film_sums.mean_image, (np.zeros((3, 64 * 48)), 4)),
+        (film_sums.mean_into, (np.empty((64 * 48, 3), np.float32), 0, np.zeros((3, 64 * 48)), 4)),
+        (film_sums.mean_into, (np.empty((64 * 48, 3), np.float32), 0, np.zeros((3, 64 * 48)), 3)),
+        (segments.toward_light_chunk, light_chunk_arguments(bvh)),
     ]
     fused = re.compile(r"\bv?f(n?)m(add|sub)\d", re.IGNORECASE)
     if "fma" in llvm.get_host_cpu_features().flatten():  # the pattern does see a contraction
@@ -171,3 +224,19 @@ def test_compiled_camera_and_film_code_has_no_fused_multiply_add() -> None:
         fresh(*arguments)
         (code,) = fresh.inspect_asm().values()
         assert "ret" in code and not fused.search(code), function
+    bvh.close()
+
+
+def light_chunk_arguments(bvh: BVH) -> tuple:
+    """Arguments of ``segments.toward_light_chunk`` (the shadow segments toward one light,
+    with their facing test and unit directions) as a query on one thread passes them, on
+    ``bvh``, a committed BVH of one sphere."""
+    bvh.add_spheres(np.zeros((1, 3), np.float32), np.ones(1, np.float32))
+    bvh.commit()
+    points = np.ones((3, 16), np.float32) * 3
+    light = segments.LightSegments(
+        points, points / 3, np.zeros(0, bool), np.float32([9, 9, 9]), True, np.float32(0.0)
+    )
+    query = kernels.Query(bvh.committed_scene(), kernels.query_arguments(False), bvh.lanes)
+    words = np.empty(kernels.SCRATCH_WORDS, np.uint32)
+    return words, 0, 16, query, light, np.zeros(16, bool), np.zeros((3, 16), np.float32)

@@ -129,6 +129,34 @@ def test_film_add_block_equals_adding_the_samples_directly() -> None:
     np.testing.assert_allclose(blocked.image(4), direct.image(4), rtol=1e-12)
 
 
+def test_film_keeps_blocks_in_pixel_order_apart_and_gives_the_bits_of_the_summed_film() -> None:
+    """Blocks in pixel order that do not overlap (a render's batches) are kept apart and
+    their means written straight into the image; any other order folds them into one float64
+    sum. The two ways are bitwise equal (0 + x is x: each pixel's sum is its block's), gaps
+    included (0 / spp), and a block added again after the image was read still counts."""
+    ranges = [(0, 9), (12, 10), (22, 13)]  # pixels 9..11 in no block
+    blocks = []
+    for seed, (first, count) in enumerate(ranges):
+        block = FilmBlock(first, count)
+        block.add(*random_samples(30 + seed, 200, first, first + count))
+        blocks.append(block)
+    in_order, reversed_order = Film(WIDTH, HEIGHT), Film(WIDTH, HEIGHT)
+    for block in blocks:
+        in_order.add_block(block)
+    for block in blocks[::-1]:
+        reversed_order.add_block(block)
+    image = in_order.image(3)
+    assert image.tobytes() == reversed_order.image(3).tobytes()
+    assert not image.reshape(-1, 3)[9:12].any() and image.reshape(-1, 3)[:9].all()
+    in_order.add_block(blocks[1])  # an overlap: now summed in the whole-film buffer
+    reversed_order.add_block(blocks[1])
+    assert in_order.image(2).tobytes() == reversed_order.image(2).tobytes()
+    twice = (blocks[1].sums * 2).T.astype(np.float32)  # (x + x is 2x exactly)
+    assert in_order.image(1).reshape(-1, 3)[12:22].tobytes() == twice.tobytes()
+    with pytest.raises(ValueError, match=r"block of pixels 30\.\.35 is outside the film.s 35"):
+        in_order.add_block(FilmBlock(30, 6))
+
+
 def test_film_blocks_split_from_one_batch_add_up_to_the_same_image() -> None:
     pixel, rgb = random_samples(20, 300)
     pixel = np.sort(pixel)

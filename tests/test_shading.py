@@ -89,12 +89,13 @@ def refract_reference(d: np.ndarray, n: np.ndarray, eta: float) -> tuple[np.ndar
     return t / np.linalg.norm(t), False
 
 
-def scalar_blinn_phong(normal, to_viewer, to_light, color, diffuse, specular, shininess, light):
-    """One ray, plain Python floats: the model as the materials docstring states it."""
+def scalar_blinn_phong(normal, incoming, to_light, color, diffuse, specular, shininess, light):
+    """One ray, plain Python floats: the model as the materials docstring states it (the
+    viewer is at -incoming, against the ray that hit)."""
     n_dot_l = sum(a * b for a, b in zip(normal, to_light, strict=True))
     if n_dot_l <= 0.0:
         return [0.0, 0.0, 0.0]
-    half = [a + b for a, b in zip(to_light, to_viewer, strict=True)]
+    half = [a - b for a, b in zip(to_light, incoming, strict=True)]
     half_length = math.sqrt(sum(h * h for h in half))
     n_dot_h = 0.0
     if half_length > 0.0:
@@ -105,7 +106,7 @@ def scalar_blinn_phong(normal, to_viewer, to_light, color, diffuse, specular, sh
 
 BLINN_PHONG_ARGUMENTS = (
     "normal",
-    "to_viewer",
+    "incoming",
     "to_light",
     "color",
     "diffuse",
@@ -342,7 +343,7 @@ def blinn_phong_inputs(seed: int, count: int) -> dict[str, np.ndarray]:
     specular[rng.random(count) < 0.3] = 0.0  # matte rows take the no-highlight path
     return {
         "normal": columns(random_unit(rng, count)),
-        "to_viewer": columns(random_unit(rng, count)),
+        "incoming": columns(random_unit(rng, count)),
         "to_light": columns(random_unit(rng, count)),
         "color": columns(rng.uniform(0.0, 1.0, (count, 3))),
         "diffuse": rng.uniform(0.0, 1.0, count).astype(np.float32),
@@ -442,7 +443,7 @@ def test_blinn_phong_is_the_same_with_most_or_few_rays_glossy(
     specular = rng.uniform(0.2, 1.0, count).astype(np.float32)
     inputs = {
         "normal": columns(normal),
-        "to_viewer": columns(to_viewer),
+        "incoming": columns(-to_viewer),
         "to_light": columns(to_light),
         "color": columns(rng.uniform(0.0, 1.0, (count, 3))),
         "diffuse": rng.uniform(0.0, 1.0, count).astype(np.float32),
@@ -539,7 +540,7 @@ def test_blinn_phong_peaks_when_light_normal_and_viewer_coincide() -> None:
     def shade(normal: np.ndarray, to_viewer: np.ndarray, to_light: np.ndarray) -> np.ndarray:
         return shading.blinn_phong(
             columns(normal),
-            columns(to_viewer),
+            columns(-to_viewer),
             columns(to_light),
             columns(np.tile(color, (len(normal), 1))),
             np.full(len(normal), diffuse, np.float32),
@@ -563,11 +564,11 @@ def test_blinn_phong_is_finite_for_opposite_light_and_viewer() -> None:
     # L = -V makes the half vector zero; N·L = 0 is the grazing edge of the lit side.
     normal = np.float32([[0, 1, 0], [0, 1, 0]])
     to_light = np.float32([[1, 0, 0], [0.6, 0.8, 0]])
-    viewer = -to_light
+    incoming = to_light  # the viewer at -incoming = -L
     ones = np.ones(2, np.float32)
     radiance = shading.blinn_phong(
         columns(normal),
-        columns(viewer),
+        columns(incoming),
         columns(to_light),
         np.ones((3, 2), np.float32),
         ones,
@@ -700,12 +701,12 @@ def test_everything_stays_finite_at_grazing_incidence() -> None:
     white = np.ones((3, count), np.float32)
     for to_viewer in (d, -d):
         radiance = shading.blinn_phong(
-            columns(n), columns(to_viewer), columns(d), white, ones, ones, ones * 64, ones[:3]
+            columns(n), columns(-to_viewer), columns(d), white, ones, ones, ones * 64, ones[:3]
         )
         assert np.isfinite(radiance).all() and (radiance >= 0).all()
     lit = (n + d) / np.float32(math.sqrt(2))
     radiance = shading.blinn_phong(
-        columns(n), columns(-lit), columns(lit), white, ones, ones, ones * 64, ones[:3]
+        columns(n), columns(lit), columns(lit), white, ones, ones, ones * 64, ones[:3]
     )
     assert np.isfinite(radiance).all()
     sky = shading.sky(columns(d * np.array([1, 0, 1], np.float32)), (1, 1, 1), (0, 0, 1))

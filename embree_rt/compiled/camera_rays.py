@@ -127,6 +127,15 @@ def tile_order(width, spp, tile_width, tile_height, first, stop):
     top = first // width // tile_height * tile_height
     last_row = (stop - 1) // width
     for band in range(top, last_row + 1, tile_height):
+        whole = band * width >= first and (band + tile_height) * width <= stop
+        if whole and spp == 1:  # (most bands of a batch: no bounds to test, one array)
+            for left in range(0, width, tile_width):
+                right = min(left + tile_width, width)
+                for row in range(band, band + tile_height):
+                    for p in range(row * width + left, row * width + right):
+                        index[k] = p
+                        k += 1
+            continue
         for left in range(0, width, tile_width):
             right = min(left + tile_width, width)
             for row in range(band, band + tile_height):

@@ -65,11 +65,27 @@ def mean_image(sums, spp):
     """(n, 3) float32 pixel-major means of the (3, n) float64 ``sums`` over ``spp`` samples:
     each divided in float64 and rounded once to float32, as NumPy's
     ``np.divide(sums.T, spp, out=float32)`` does, in one pass."""
+    mean = np.empty((sums.shape[1], 3), np.float32)
+    mean_into(mean, 0, sums, spp)
+    return mean
+
+
+@njit(nogil=True, cache=True)
+def mean_into(mean, first, sums, spp):
+    """``mean_image(sums, spp)`` written into rows ``first ..`` of the (m, 3) float32
+    ``mean``. When ``spp`` is a power of two the sums are multiplied by its reciprocal, which
+    is exact: x / 2^k and x · 2^-k are the same real number, so IEEE rounds them to the same
+    double (subnormal results included), and a multiplication costs a fraction of a division."""
     n = sums.shape[1]
-    mean = np.empty((n, 3), np.float32)
+    if spp & (spp - 1) == 0:
+        scale = 1.0 / np.float64(spp)
+        for p in range(n):
+            mean[first + p, 0] = np.float32(sums[0, p] * scale)
+            mean[first + p, 1] = np.float32(sums[1, p] * scale)
+            mean[first + p, 2] = np.float32(sums[2, p] * scale)
+        return
     divisor = np.float64(spp)
     for p in range(n):
-        mean[p, 0] = np.float32(sums[0, p] / divisor)
-        mean[p, 1] = np.float32(sums[1, p] / divisor)
-        mean[p, 2] = np.float32(sums[2, p] / divisor)
-    return mean
+        mean[first + p, 0] = np.float32(sums[0, p] / divisor)
+        mean[first + p, 1] = np.float32(sums[1, p] / divisor)
+        mean[first + p, 2] = np.float32(sums[2, p] / divisor)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ctypes
 import threading
 import weakref
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numba
@@ -458,16 +459,15 @@ class BVH(Closing):
 
     # -- queries ------------------------------------------------------------------------------
 
-    def _run_query(self, chunk, parallel, arguments: tuple, n: int) -> None:
+    def _run_query(self, chunk, parallel, arguments: tuple, n: int):
         """Run a query over n rays: on one thread, its ``chunk`` kernel over all of them in the
         calling thread (no threading layer: several Python threads may do so at once), else
-        ``parallel``, its driver, on numba's threads."""
+        ``parallel``, its driver, on numba's threads; returns what the kernel returns."""
         if self.threads == 1:
-            chunk(np.empty(kernels.SCRATCH_WORDS, np.uint32), 0, n, *arguments)
-        else:
-            with parallel_region:
-                numba.set_num_threads(self.threads)
-                parallel(*arguments)
+            return chunk(np.empty(kernels.SCRATCH_WORDS, np.uint32), 0, n, *arguments)
+        with parallel_region:
+            numba.set_num_threads(self.threads)
+            return parallel(*arguments)
 
     def _ready_to_query(self) -> None:
         """Refuse a query before ``commit``; make Embree's functions known to the kernels."""
@@ -570,18 +570,20 @@ class BVH(Closing):
         tnear: float | np.ndarray = 0.0,
         tfar: float | np.ndarray = np.inf,
         coherent: bool = False,
+        ids: bool = True,
     ) -> HitRecords:
         """The nearest hits of rays given as columns, ``origins``, ``directions`` (3, n), with
         ``labels``' ground plane, as ``HitRecords``: only the rays that hit, grouped by kind,
-        with world positions, unit normals and labels worked out in one compiled pass."""
+        with world positions, unit normals and labels worked out in one compiled pass (and,
+        with ``ids``, Embree's ids and (u, v) of each hit)."""
         origins = np.ascontiguousarray(origins, np.float32)
         directions = np.ascontiguousarray(directions, np.float32)
         rows, columns, near, far = self._query_inputs(origins.T, directions.T, tnear, tfar)
         hits = self._raw_hits(rows, columns, near, far, coherent)
-        return self._records(origins, directions, near, far, hits, labels)
+        return self._records(origins, directions, near, far, hits, labels, ids)
 
     def intersect_camera_records(
-        self, camera: CameraRays, index: np.ndarray, labels: HitLabels
+        self, camera: CameraRays, index: np.ndarray, labels: HitLabels, ids: bool = True
     ) -> tuple[HitRecords, np.ndarray]:
         """``intersect_records`` of the camera rays of samples ``index`` (n,) int64 (below
         ``width * height * spp`` of ``camera``), made inside the query (``camera_query``):
@@ -607,10 +609,13 @@ class BVH(Closing):
                 camera_query.intersect_camera_chunk, camera_query.intersect_camera, arguments, n
             )
         origins = np.broadcast_to(camera.origin[:, None], (3, n))
-        return self._records(origins, directions, rays.tnear, rays.tfar, hits, labels), directions
+        records = self._records(origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
+        return records, directions
 
-    def _records(self, origins, directions, near, far, hits: Hits, labels: HitLabels):
-        """The ``HitRecords`` of raw ``hits`` of rays given as (3, n) columns."""
+    def _records(self, origins, directions, near, far, hits: Hits, labels: HitLabels, ids=True):
+        """The ``HitRecords`` of raw ``hits`` of rays given as (3, n) columns (without Embree's
+        ids unless ``ids``; instance arrays need them)."""
+        ids = ids or bool(self.array_count)
         spheres, sphere_slot = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
         sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
         has_plane = labels.plane_y is not None
@@ -635,8 +640,12 @@ class BVH(Closing):
             record_labels,
             self._normal_matrix_table,
             self._array_table,
+            ids,
         )
         result = HitRecords(*fields)
+        if not ids:
+            result.prim_id = result.inst_id = result.u = result.v = None
+            return result
         result.inst_prim_id = np.full(len(result.t), -1, np.int32)
         if self.array_count:
             other = result.group("other")
@@ -747,6 +756,51 @@ class BVH(Closing):
                 segments.occluded_toward_chunk, segments.occluded_toward, arguments, len(rows)
             )
         return blocked
+
+    def toward_lights(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        targets: np.ndarray,
+        takes: np.ndarray | None = None,
+        plane_y: float | None = None,
+    ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+        """Per light, what each of n surface points sees of it: for each row of ``targets``
+        (L, 3) in turn (computed when asked for), (n,) bool ``visible``, (3, n) float32 unit
+        ``directions`` toward the light where visible (zero elsewhere) and the number of shadow
+        segments made. A segment ``p + t (target - p)``, t in [0, 1], is made from each point
+        ``points`` (3, n) float whose unit normal ``normals`` (3, n) float faces the light
+        (``(target - p) · normal > 0``) and, with ``takes`` (n,) bool, that takes light; it is
+        the segment ``occluded_toward`` traces, built inside the kernel (``segments``), and
+        the plane y = ``plane_y`` blocks it too. The points are checked once for all lights."""
+        self._ready_to_query()
+        points, normals = (np.asarray(values) for values in (points, normals))
+        for name, values in (("points", points), ("normals", normals)):
+            if values.ndim != 2 or values.shape != (3, points.shape[-1]):
+                raise ValueError(f"{name}: expected shape (3, n), got {values.shape}")
+        n = points.shape[1]
+        points = np.ascontiguousarray(as_points(points.T, "points").T)
+        normals = np.ascontiguousarray(as_points(normals.T, "normals").T)
+        targets = as_points(np.reshape(targets, (-1, 3)), "targets")
+        if takes is None:
+            takes = np.zeros(0, bool)
+        elif np.shape(takes) != (n,) or np.asarray(takes).dtype != bool:
+            raise ValueError(f"takes: expected ({n},) bool, got {np.shape(takes)}")
+        has_plane = plane_y is not None
+        plane = np.float32(plane_y if has_plane else 0.0)
+        for target in targets:
+            visible = np.zeros(n, bool)
+            directions = np.zeros((3, n), np.float32)
+            made = 0
+            if n:
+                light = segments.LightSegments(
+                    points, normals, np.ascontiguousarray(takes), target.copy(), has_plane, plane
+                )
+                arguments = (self._query(False), light, visible, directions)
+                made = self._run_query(
+                    segments.toward_light_chunk, segments.toward_light, arguments, n
+                )
+            yield visible, directions, int(made)
 
     def all_hits(
         self,

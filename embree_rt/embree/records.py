@@ -61,6 +61,8 @@ class HitRecords:
     otherwise); ``incoming`` (3, k) float32 ray directions; ``prim_id``, ``inst_id`` (k,) int32
     and ``u``, ``v`` (k,) float32 as Embree reported them (``prim_id`` -1 on the plane);
     ``inst_prim_id`` (k,) int32 the instance's number inside its instance array (-1 elsewhere).
+    The last five are None when the records were made without ids (``ids=False``: what a
+    renderer of spheres and the floor never reads is not written).
     """
 
     rays: np.ndarray
@@ -71,10 +73,10 @@ class HitRecords:
     label: np.ndarray
     scale: np.ndarray
     incoming: np.ndarray
-    prim_id: np.ndarray
-    inst_id: np.ndarray
-    u: np.ndarray
-    v: np.ndarray
+    prim_id: np.ndarray | None
+    inst_id: np.ndarray | None
+    u: np.ndarray | None
+    v: np.ndarray | None
     inst_prim_id: np.ndarray | None = None
 
     def group(self, name: str) -> slice:
@@ -120,14 +122,15 @@ class RecordLabels(NamedTuple):
 
 @njit(nogil=True, cache=True)
 def build_records(
-    origins, directions, tnear, tfar, hits, inst_prim, labels, normal_matrices, arrays
+    origins, directions, tnear, tfar, hits, inst_prim, labels, normal_matrices, arrays, ids
 ):
     """The compiled pass behind ``BVH.intersect_records``: classify, count, then fill.
 
     Inputs per ray: ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32
     and the raw hits: ``hits`` (``kernels.NearestHits``, normals in the object's space) and
     ``inst_prim`` (n,) int32. ``labels``: a ``RecordLabels``; ``normal_matrices`` and
-    ``arrays``: the BVH's tables for world normals (``world_normals``).
+    ``arrays``: the BVH's tables for world normals (``world_normals``). ``ids``: whether to
+    fill Embree's ids and (u, v) of each hit (else they are returned empty).
     """
     t, ng, u, v, prim, geom, inst = hits
     (
@@ -162,10 +165,11 @@ def build_records(
     label = np.empty(k_total, np.int64)
     scale = np.empty(k_total, np.float32)
     incoming = np.empty((3, k_total), np.float32)
-    out_prim = np.empty(k_total, np.int32)
-    out_inst = np.empty(k_total, np.int32)
-    out_u = np.empty(k_total, np.float32)
-    out_v = np.empty(k_total, np.float32)
+    k_ids = k_total if ids else 0
+    out_prim = np.empty(k_ids, np.int32)
+    out_inst = np.empty(k_ids, np.int32)
+    out_u = np.empty(k_ids, np.float32)
+    out_v = np.empty(k_ids, np.float32)
     cursor = np.array([0, counts[0], counts[0] + counts[1]], np.int64)
     for i in range(n):
         k = kind[i]
@@ -180,8 +184,9 @@ def build_records(
         incoming[0, j] = dx
         incoming[1, j] = dy
         incoming[2, j] = dz
-        out_u[j] = u[i]
-        out_v[j] = v[i]
+        if ids:
+            out_u[j] = u[i]
+            out_v[j] = v[i]
         if k == PLANE:
             tp = plane_t[i]
             out_t[j] = tp
@@ -195,13 +200,15 @@ def build_records(
             normal[2, j] = 0.0
             label[j] = plane_label
             scale[j] = max(abs(px), abs(np.float32(plane_y)), abs(pz))
-            out_prim[j] = -1
-            out_inst[j] = -1
+            if ids:
+                out_prim[j] = -1
+                out_inst[j] = -1
             continue
         ti = t[i]
         out_t[j] = ti
-        out_prim[j] = prim[i]
-        out_inst[j] = inst[i]
+        if ids:
+            out_prim[j] = prim[i]
+            out_inst[j] = inst[i]
         if k == SPHERE:
             p = prim[i]
             s = sphere_slot[p] if len(sphere_slot) else p

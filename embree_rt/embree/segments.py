@@ -43,6 +43,22 @@ class Segments(NamedTuple):
     plane_y: np.float32
 
 
+@njit(inline="always")
+def _segment_lane(origins, directions, lane, points, r, target, has_plane, plane_y):
+    """Write the segment from ``points[:, r]`` to ``target`` into packet lane ``lane`` (the
+    direction ``target - p`` in float32, as NumPy forms it); True when the ground plane blocks
+    it (then the lane is not used)."""
+    for axis in range(3):
+        origins[lane, axis] = points[axis, r]
+        directions[lane, axis] = target[axis] - points[axis, r]
+    if not has_plane:
+        return False
+    crossing = plane_crossing(
+        origins[lane, 1], directions[lane, 1], np.float32(0.0), np.float32(1.0), plane_y
+    )
+    return not math.isnan(crossing)
+
+
 @njit(nogil=True, cache=True)
 def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
     """Segments first_row .. stop: whether each is blocked, into ``blocked``; ``words`` a
@@ -62,20 +78,9 @@ def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
     while k < stop:
         count = 0
         while count < lanes and k < stop:
-            r = rows[k]
-            for axis in range(3):
-                origins[count, axis] = points[axis, r]
-                directions[count, axis] = target[axis] - points[axis, r]
-            crossing = np.float32(np.nan)
-            if has_plane:
-                crossing = plane_crossing(
-                    origins[count, 1],
-                    directions[count, 1],
-                    np.float32(0.0),
-                    np.float32(1.0),
-                    plane_y,
-                )
-            if not math.isnan(crossing):
+            if _segment_lane(
+                origins, directions, count, points, rows[k], target, has_plane, plane_y
+            ):
                 blocked[k] = True
             else:
                 order[count] = k
@@ -100,3 +105,88 @@ def occluded_toward(query, segments, blocked):
     for c in prange(n_chunks):
         first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
         occluded_toward_chunk(scratch[c], first, stop, query, segments, blocked)
+
+
+class LightSegments(NamedTuple):
+    """Segments from n surface points to one light, made only where they can carry its light:
+    ``points`` (3, n) float32, ``normals`` (3, n) float32 unit normals on the points' side
+    (a segment is made where ``(target - p) · normal > 0``), ``takes`` (n,) bool which points
+    take light at all (empty: every point), ``target`` (3,) float32; with ``has_plane`` the
+    ground plane y = ``plane_y`` (float32) blocks too."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    takes: np.ndarray
+    target: np.ndarray
+    has_plane: bool
+    plane_y: np.float32
+
+
+@njit(nogil=True, cache=True)
+def toward_light_chunk(words, first, stop, query, light, visible, directions):
+    """Points first .. stop of ``light`` (``LightSegments``): ``visible`` (n,) bool and the
+    unit ``directions`` (3, n) float32 toward the light set where visible (both all zero on
+    entry); returns how many segments were made (the points facing the light)."""
+    scene, arguments, lanes = query
+    points, normals, takes, target, has_plane, plane_y = light
+    floats = words.view(np.float32)
+    b = aligned_word(words, PACKET_ALIGN)
+    address = words.ctypes.data + 4 * b
+    valid_address = address + 4 * PACKET_FIELDS * lanes
+    origins = np.empty((lanes, 3), np.float32)
+    toward = np.empty((lanes, 3), np.float32)
+    packet = Rays(origins, toward, np.zeros(lanes, np.float32), np.ones(lanes, np.float32))
+    order = np.empty(lanes, np.int64)  # which point each filled lane is
+    all_take = takes.shape[0] == 0
+    made = 0
+    i = first
+    while i < stop:
+        count = 0
+        while count < lanes and i < stop:
+            r = i
+            i += 1
+            if not (all_take or takes[r]):
+                continue
+            # (target - p) · normal, summed as shading.dot sums: (x + y) + z
+            facing = (target[0] - points[0, r]) * normals[0, r]
+            facing += (target[1] - points[1, r]) * normals[1, r]
+            facing += (target[2] - points[2, r]) * normals[2, r]
+            if not facing > 0:
+                continue
+            made += 1
+            if not _segment_lane(origins, toward, count, points, r, target, has_plane, plane_y):
+                order[count] = r
+                count += 1
+        if count == 0:
+            continue
+        fill_packet(words, floats, b, lanes, 0, count, packet)
+        occluded_packet(lanes, valid_address, scene, address, arguments)
+        for lane in range(count):
+            if floats[b + RAY_TFAR * lanes + lane] == -np.inf:
+                continue
+            r = order[lane]
+            visible[r] = True
+            # the unit direction as shading.normalize forms it: v · (1 / max(|v|, 1e-30))
+            x, y, z = toward[lane, 0], toward[lane, 1], toward[lane, 2]
+            length = np.sqrt(x * x + y * y + z * z)
+            inverse = np.float32(1.0) / max(length, np.float32(1e-30))
+            directions[0, r] = x * inverse
+            directions[1, r] = y * inverse
+            directions[2, r] = z * inverse
+    return made
+
+
+# ``query`` a ``kernels.Query``, ``light`` a ``LightSegments``, ``visible`` (n,) bool and
+# ``directions`` (3, n) float32 out, zeros on entry; each returns the number of segments made.
+
+
+@njit(parallel=True, nogil=True, cache=True)
+def toward_light(query, light, visible, directions):
+    n = light.points.shape[1]
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
+    made = np.zeros(n_chunks, np.int64)
+    for c in prange(n_chunks):
+        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+        made[c] = toward_light_chunk(scratch[c], first, stop, query, light, visible, directions)
+    return made.sum()
