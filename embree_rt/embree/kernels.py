@@ -150,7 +150,7 @@ def _store_miss(i, hits):
 
 
 @njit(inline="always")
-def fill_packet(words, floats, b, lanes, first, count, rays):
+def _fill_packet(words, floats, b, lanes, first, count, rays):
     """Write ``rays`` (``Rays``) first .. first + count into the packet at word ``b`` (one ray:
     ``lanes`` 1, an ``RTCRayHit``, whose fields are the same words with one lane)."""
     origins, directions, tnear, tfar = rays
@@ -174,28 +174,39 @@ def fill_packet(words, floats, b, lanes, first, count, rays):
         words[valid + lane] = 0xFFFFFFFF if lane < count else 0
 
 
-@njit(inline="always")
-def _intersect_packet(lanes, valid_address, scene, address, query):
-    if lanes == 8:
-        rtc_intersect8(valid_address, scene, address, query)
-    elif lanes == 16:
-        rtc_intersect16(valid_address, scene, address, query)
-    elif lanes == 4:
-        rtc_intersect4(valid_address, scene, address, query)
-    else:
-        rtc_intersect1(scene, address, query)
+# Embree's query entry points by packet width: 1 (an ``RTCRayHit``, no valid mask), 4, 8, 16
+INTERSECT = (rtc_intersect1, rtc_intersect4, rtc_intersect8, rtc_intersect16)
+OCCLUDED = (rtc_occluded1, rtc_occluded4, rtc_occluded8, rtc_occluded16)
 
 
 @njit(inline="always")
-def occluded_packet(lanes, valid_address, scene, address, query):
+def _query_packet(entries, lanes, valid_address, scene, address, arguments):
+    # the packet at `address` through the `lanes`-wide one of `entries`
+    one, four, eight, sixteen = entries
     if lanes == 8:
-        rtc_occluded8(valid_address, scene, address, query)
+        eight(valid_address, scene, address, arguments)
     elif lanes == 16:
-        rtc_occluded16(valid_address, scene, address, query)
+        sixteen(valid_address, scene, address, arguments)
     elif lanes == 4:
-        rtc_occluded4(valid_address, scene, address, query)
+        four(valid_address, scene, address, arguments)
     else:
-        rtc_occluded1(scene, address, query)
+        one(scene, address, arguments)
+
+
+@njit(inline="always")
+def traced_packet(words, query, entries, rays, first, count):
+    """Rays first .. first + count (at most ``query.lanes``) of ``rays`` (``Rays``) as one
+    packet in ``words``, a uint32 scratch row of ``SCRATCH_WORDS``, through Embree's
+    ``entries`` (``INTERSECT`` or ``OCCLUDED``: the 1, 4, 8 and 16-wide entry points), the
+    ``query`` a ``Query``. Returns ``floats`` (the row's float32 view) and ``b``: lane ``lane``
+    of field ``F`` of the answer is word ``b + F * lanes + lane``."""
+    scene, arguments, lanes = query
+    floats = words.view(np.float32)
+    b = aligned_word(words, PACKET_ALIGN)
+    address = words.ctypes.data + 4 * b
+    _fill_packet(words, floats, b, lanes, first, count, rays)
+    _query_packet(entries, lanes, address + 4 * PACKET_FIELDS * lanes, scene, address, arguments)
+    return floats, b
 
 
 @njit(nogil=True, cache=True)
@@ -205,15 +216,10 @@ def intersect_chunk(words, first_ray, stop, query, rays, hits, inst_prim):
     uint32 scratch row of ``SCRATCH_WORDS``. ``inst_prim``: (n,) int32 for Embree's
     instPrimID[0] (instance arrays), or None; numba compiles the None case apart, with the test
     pruned: the plain loop pays nothing for it."""
-    scene, arguments, lanes = query
-    floats = words.view(np.float32)
-    b = aligned_word(words, PACKET_ALIGN)
-    address = words.ctypes.data + 4 * b
-    valid_address = address + 4 * PACKET_FIELDS * lanes
+    lanes = query.lanes
     for first in range(first_ray, stop, lanes):
         count = min(lanes, stop - first)
-        fill_packet(words, floats, b, lanes, first, count, rays)
-        _intersect_packet(lanes, valid_address, scene, address, arguments)
+        floats, b = traced_packet(words, query, INTERSECT, rays, first, count)
         for lane in range(count):
             i = first + lane
             if words[b + HIT_GEOM_ID * lanes + lane] == INVALID_ID:
@@ -238,15 +244,10 @@ def intersect_chunk(words, first_ray, stop, query, rays, hits, inst_prim):
 def occluded_chunk(words, first_ray, stop, query, rays, blocked):
     """Rays first_ray .. stop of ``rays`` (``Rays``) through Embree's occlusion query, whether
     each is blocked into ``blocked`` (n,) bool; ``query`` and ``words`` as ``intersect_chunk``'s."""
-    scene, arguments, lanes = query
-    floats = words.view(np.float32)
-    b = aligned_word(words, PACKET_ALIGN)
-    address = words.ctypes.data + 4 * b
-    valid_address = address + 4 * PACKET_FIELDS * lanes
+    lanes = query.lanes
     for first in range(first_ray, stop, lanes):
         count = min(lanes, stop - first)
-        fill_packet(words, floats, b, lanes, first, count, rays)
-        occluded_packet(lanes, valid_address, scene, address, arguments)
+        floats, b = traced_packet(words, query, OCCLUDED, rays, first, count)
         for lane in range(count):
             blocked[first + lane] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 

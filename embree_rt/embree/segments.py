@@ -19,14 +19,11 @@ from numba import njit, prange
 
 from embree_rt.embree.kernels import (
     CHUNK,
-    PACKET_ALIGN,
-    PACKET_FIELDS,
+    OCCLUDED,
     RAY_TFAR,
     SCRATCH_WORDS,
     Rays,
-    aligned_word,
-    fill_packet,
-    occluded_packet,
+    traced_packet,
 )
 from embree_rt.embree.records import plane_crossing
 
@@ -47,13 +44,9 @@ class Segments(NamedTuple):
 def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
     """Segments first_row .. stop: whether each is blocked, into ``blocked``; ``words`` a
     scratch row of ``kernels.SCRATCH_WORDS``."""
-    scene, arguments, lanes = query
+    lanes = query.lanes
     points, rows, target, has_plane, plane_y = segments
-    floats = words.view(np.float32)
-    b = aligned_word(words, PACKET_ALIGN)
-    address = words.ctypes.data + 4 * b
-    valid_address = address + 4 * PACKET_FIELDS * lanes
-    # One packet's rays at a time, as fill_packet takes them: (lanes, 3) origins, directions.
+    # One packet's rays at a time, as traced_packet takes them: (lanes, 3) origins, directions.
     origins = np.empty((lanes, 3), np.float32)
     directions = np.empty((lanes, 3), np.float32)
     packet = Rays(origins, directions, np.zeros(lanes, np.float32), np.ones(lanes, np.float32))
@@ -83,8 +76,7 @@ def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
             k += 1
         if count == 0:
             continue
-        fill_packet(words, floats, b, lanes, 0, count, packet)
-        occluded_packet(lanes, valid_address, scene, address, arguments)
+        floats, b = traced_packet(words, query, OCCLUDED, packet, 0, count)
         for lane in range(count):
             blocked[order[lane]] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
