@@ -16,6 +16,7 @@ import llvmlite.binding as llvm
 import numpy as np
 from numba import njit, prange, types
 
+from embree_rt.compiled.work_split import chunk_scratch, chunk_span
 from embree_rt.embree import library
 
 # RTCRayHit, in 4-byte words (Embree 4, RTC_MAX_INSTANCE_LEVEL_COUNT = 1): RTCRay is 48 bytes,
@@ -262,17 +263,16 @@ def occluded_chunk(words, first_ray, stop, query, rays, blocked):
 @njit(parallel=True, nogil=True, cache=True)
 def intersect(query, rays, hits, inst_prim):
     n = rays.origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
-        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
         intersect_chunk(scratch[c], first, stop, query, rays, hits, inst_prim)
 
 
 @njit(parallel=True, nogil=True, cache=True)
 def occluded(query, rays, blocked):
     n = rays.origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
-        occluded_chunk(scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), query, rays, blocked)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
+        occluded_chunk(scratch[c], first, stop, query, rays, blocked)

@@ -17,6 +17,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from embree_rt.compiled.work_split import chunk_scratch, chunk_span
 from embree_rt.embree.kernels import (
     CHUNK,
     OCCLUDED,
@@ -87,8 +88,7 @@ def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
 @njit(parallel=True, nogil=True, cache=True)
 def occluded_toward(query, segments, blocked):
     n = segments.rows.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
-        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
         occluded_toward_chunk(scratch[c], first, stop, query, segments, blocked)

@@ -31,7 +31,7 @@ import numpy as np
 from numba import carray, cfunc, njit, prange
 
 from embree_rt.compiled.pointers import doubles, floats, words64
-from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
 from embree_rt.embree import point_query
 
 # The triangle table: a, b, c (shifted, float64) and the unit normal, one row a triangle.
@@ -306,13 +306,12 @@ def _closest_chunk(query, first, stop, points, scratch, user, found):
 @njit(parallel=True, nogil=True, cache=True, error_model="numpy")
 def _closest(query, points, found):
     n = points.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
+    n_chunks = chunk_count(n, CHUNK)
     scratch = np.empty((n_chunks, point_query.SCRATCH_WORDS), np.uint32)
     user = np.empty((n_chunks, _HEADER + _ENTRY * query.capacity), np.float64)
     for c in prange(n_chunks):
-        _closest_chunk(
-            query, c * CHUNK, min(n, (c + 1) * CHUNK), points, scratch[c], user[c], found
-        )
+        first, stop = chunk_span(c, CHUNK, n)
+        _closest_chunk(query, first, stop, points, scratch[c], user[c], found)
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
