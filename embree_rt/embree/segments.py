@@ -24,6 +24,7 @@ from embree_rt.embree.kernels import (
     RAY_TFAR,
     SCRATCH_WORDS,
     Rays,
+    packet_layout,
     traced_packet,
 )
 from embree_rt.embree.records import plane_crossing
@@ -47,6 +48,7 @@ def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
     scratch row of ``kernels.SCRATCH_WORDS``."""
     lanes = query.lanes
     points, rows, target, has_plane, plane_y = segments
+    floats, b = packet_layout(words)
     # One packet's rays at a time, as traced_packet takes them: (lanes, 3) origins, directions.
     origins = np.empty((lanes, 3), np.float32)
     directions = np.empty((lanes, 3), np.float32)
@@ -77,7 +79,7 @@ def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
             k += 1
         if count == 0:
             continue
-        floats, b = traced_packet(words, query, OCCLUDED, packet, 0, count)
+        traced_packet(words, floats, b, query, OCCLUDED, packet, 0, count)
         for lane in range(count):
             blocked[order[lane]] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
