@@ -204,15 +204,17 @@ def packet_layout(words):
 
 
 @njit(inline="always")
-def traced_packet(words, floats, b, query, entries, rays, first, count):
-    """Rays first .. first + count (at most ``query.lanes``) of ``rays`` (``Rays``) as one
+def traced_packet(words, floats, b, query, entries, rays, first, stop):
+    """Rays first .. stop of ``rays`` (``Rays``), at most ``query.lanes`` of them, as one
     packet at ``floats``, ``b`` (``packet_layout``'s) of ``words``, through Embree's
     ``entries`` (``INTERSECT`` or ``OCCLUDED``: the 1, 4, 8 and 16-wide entry points), the
-    ``query`` a ``Query``; the answer is left in the packet."""
+    ``query`` a ``Query``. Returns how many rays the packet took; their answers are left in it."""
     scene, arguments, lanes = query
+    count = min(lanes, stop - first)
     address = words.ctypes.data + 4 * b
     _fill_packet(words, floats, b, lanes, first, count, rays)
     _query_packet(entries, lanes, address + 4 * PACKET_FIELDS * lanes, scene, address, arguments)
+    return count
 
 
 @njit(nogil=True, cache=True)
@@ -225,8 +227,7 @@ def intersect_chunk(words, first_ray, stop, query, rays, hits, inst_prim):
     lanes = query.lanes
     floats, b = packet_layout(words)
     for first in range(first_ray, stop, lanes):
-        count = min(lanes, stop - first)
-        traced_packet(words, floats, b, query, INTERSECT, rays, first, count)
+        count = traced_packet(words, floats, b, query, INTERSECT, rays, first, stop)
         for lane in range(count):
             i = first + lane
             if words[b + HIT_GEOM_ID * lanes + lane] == INVALID_ID:
@@ -254,8 +255,7 @@ def occluded_chunk(words, first_ray, stop, query, rays, blocked):
     lanes = query.lanes
     floats, b = packet_layout(words)
     for first in range(first_ray, stop, lanes):
-        count = min(lanes, stop - first)
-        traced_packet(words, floats, b, query, OCCLUDED, rays, first, count)
+        count = traced_packet(words, floats, b, query, OCCLUDED, rays, first, stop)
         for lane in range(count):
             blocked[first + lane] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
