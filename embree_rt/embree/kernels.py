@@ -198,8 +198,8 @@ def _query_packet(entries, lanes, valid_address, scene, address, arguments):
 def packet_layout(words):
     """Where a packet lies in ``words``, a uint32 scratch row of ``SCRATCH_WORDS``: the row's
     float32 view and the packet's first word ``b`` (aligned for Embree); lane ``lane`` of field
-    ``F`` is word ``b + F * lanes + lane``. Made once a chunk, not once a packet: a view for
-    each single-ray packet measured a few percent slower."""
+    ``F`` is word ``b + F * lanes + lane``. Made once a chunk: the place is the same for every
+    packet, and a view per packet would be a new array for each single ray."""
     return words.view(np.float32), aligned_word(words, PACKET_ALIGN)
 
 
