@@ -481,17 +481,19 @@ class BVH(Closing):
         self._ready_to_query()
         return self._live_scene()
 
-    def _query_inputs(self, origins, directions, tnear, tfar):
+    def _query_rays(self, origins, directions, tnear, tfar) -> kernels.Rays:
+        """A query's rays, validated, as the kernels take them (refused before ``commit``)."""
         self._ready_to_query()
         origins = as_points(origins, "origins")
         directions = as_points(directions, "directions", len(origins))
         tnear, tfar = as_ray_bounds(tnear, tfar, len(origins))
-        return origins, directions, tnear, tfar
+        return kernels.Rays(origins, directions, tnear, tfar)
 
-    def _raw_hits(self, origins, directions, tnear, tfar, coherent=False) -> Hits:
+    def _raw_hits(self, rays: kernels.Rays, coherent: bool) -> Hits:
         """Embree's answers as it gives them (normals in object space) for validated rays."""
-        hits = self._empty_hits(len(origins))
-        if len(origins) and self.geometry_count == 0:
+        n = len(rays.origins)
+        hits = self._empty_hits(n)
+        if n and self.geometry_count == 0:
             # Nothing to hit (a scene of the ground plane alone, answered by the records): the
             # misses Embree would report (kernels' _store_miss), without a call a ray.
             hits.t.fill(np.inf)
@@ -499,14 +501,9 @@ class BVH(Closing):
                 numbers.fill(-1)
             for values in (hits.normal, hits.u, hits.v):
                 values.fill(0.0)
-        elif len(origins):
-            arguments = (
-                self._query(coherent),
-                kernels.Rays(origins, directions, tnear, tfar),
-                self._nearest(hits),
-                self._copy_numbers(hits),
-            )
-            self._run_query(kernels.intersect_chunk, kernels.intersect, arguments, len(origins))
+        elif n:
+            arguments = (self._query(coherent), rays, self._nearest(hits), self._copy_numbers(hits))
+            self._run_query(kernels.intersect_chunk, kernels.intersect, arguments, n)
         return hits
 
     def _copy_numbers(self, hits: Hits) -> np.ndarray | None:
@@ -550,8 +547,7 @@ class BVH(Closing):
 
         ``origins``, ``directions`` (n, 3); ``tnear``, ``tfar`` scalars or (n,).
         """
-        origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
-        hits = self._raw_hits(origins, directions, tnear, tfar, coherent)
+        hits = self._raw_hits(self._query_rays(origins, directions, tnear, tfar), coherent)
         if self._has_instances:
             world_normals.hits_to_world(
                 hits.inst_id,
@@ -578,9 +574,9 @@ class BVH(Closing):
         with ``ids``, Embree's ids and (u, v) of each hit)."""
         origins = np.ascontiguousarray(origins, np.float32)
         directions = np.ascontiguousarray(directions, np.float32)
-        rows, columns, near, far = self._query_inputs(origins.T, directions.T, tnear, tfar)
-        hits = self._raw_hits(rows, columns, near, far, coherent)
-        return self._records(origins, directions, near, far, hits, labels, ids)
+        rays = self._query_rays(origins.T, directions.T, tnear, tfar)
+        hits = self._raw_hits(rays, coherent)
+        return self._records(origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
 
     def intersect_camera_records(
         self, camera: CameraRays, index: np.ndarray, labels: HitLabels, ids: bool = True
@@ -715,15 +711,12 @@ class BVH(Closing):
     ) -> np.ndarray:
         """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``.
         ``origins``, ``directions`` (n, 3)."""
-        origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
-        blocked = np.zeros(len(origins), bool)
-        if len(origins):
-            arguments = (
-                self._query(coherent),
-                kernels.Rays(origins, directions, tnear, tfar),
-                blocked,
-            )
-            self._run_query(kernels.occluded_chunk, kernels.occluded, arguments, len(origins))
+        rays = self._query_rays(origins, directions, tnear, tfar)
+        n = len(rays.origins)
+        blocked = np.zeros(n, bool)
+        if n:
+            arguments = (self._query(coherent), rays, blocked)
+            self._run_query(kernels.occluded_chunk, kernels.occluded, arguments, n)
         return blocked
 
     def occluded_toward(
@@ -813,7 +806,7 @@ class BVH(Closing):
     ) -> multihit.HitBuffers:
         """Up to ``capacity`` nearest hits of each ray, each primitive once (a ``filters=True``
         BVH of one geometry, no instances): see ``multihit.all_hits`` for what it returns."""
-        origins, directions, tnear, tfar = self._query_inputs(origins, directions, tnear, tfar)
+        origins, directions, tnear, tfar = self._query_rays(origins, directions, tnear, tfar)
         self._require_filters()
         with parallel_region:
             return multihit.all_hits(
@@ -832,7 +825,7 @@ class BVH(Closing):
     ) -> tuple[np.ndarray, np.ndarray]:
         """(n,) bool parity of each ray's crossings and (n,) bool whether it is clear of edges
         and grazing hits (a ``filters=True`` BVH): see ``multihit.crossing_parity``."""
-        origins, directions, _, _ = self._query_inputs(origins, directions, 0.0, np.inf)
+        origins, directions, _, _ = self._query_rays(origins, directions, 0.0, np.inf)
         self._require_filters()
         if np.shape(edge_band) != (self.primitive_count,):
             raise ValueError(f"edge_band: expected shape ({self.primitive_count},)")

@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit, prange
 
 from embree_rt.compiled.camera_rays import write_directions
+from embree_rt.compiled.work_split import chunk_scratch, chunk_span
 from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, Rays, intersect_chunk
 
 
@@ -48,10 +49,9 @@ def intersect_camera_chunk(
 @njit(parallel=True, nogil=True, cache=True)
 def intersect_camera(query, camera, index, directions, rays, hits, inst_prim):
     n = index.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
-        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
         intersect_camera_chunk(
             scratch[c], first, stop, query, camera, index, directions, rays, hits, inst_prim
         )

@@ -16,6 +16,7 @@ import llvmlite.binding as llvm
 import numpy as np
 from numba import njit, prange, types
 
+from embree_rt.compiled.work_split import chunk_scratch, chunk_span
 from embree_rt.embree import library
 
 # RTCRayHit, in 4-byte words (Embree 4, RTC_MAX_INSTANCE_LEVEL_COUNT = 1): RTCRay is 48 bytes,
@@ -150,7 +151,7 @@ def _store_miss(i, hits):
 
 
 @njit(inline="always")
-def fill_packet(words, floats, b, lanes, first, count, rays):
+def _fill_packet(words, floats, b, lanes, first, count, rays):
     """Write ``rays`` (``Rays``) first .. first + count into the packet at word ``b`` (one ray:
     ``lanes`` 1, an ``RTCRayHit``, whose fields are the same words with one lane)."""
     origins, directions, tnear, tfar = rays
@@ -174,28 +175,46 @@ def fill_packet(words, floats, b, lanes, first, count, rays):
         words[valid + lane] = 0xFFFFFFFF if lane < count else 0
 
 
-@njit(inline="always")
-def _intersect_packet(lanes, valid_address, scene, address, query):
-    if lanes == 8:
-        rtc_intersect8(valid_address, scene, address, query)
-    elif lanes == 16:
-        rtc_intersect16(valid_address, scene, address, query)
-    elif lanes == 4:
-        rtc_intersect4(valid_address, scene, address, query)
-    else:
-        rtc_intersect1(scene, address, query)
+# Embree's query entry points by packet width: 1 (an ``RTCRayHit``, no valid mask), 4, 8, 16
+INTERSECT = (rtc_intersect1, rtc_intersect4, rtc_intersect8, rtc_intersect16)
+OCCLUDED = (rtc_occluded1, rtc_occluded4, rtc_occluded8, rtc_occluded16)
 
 
 @njit(inline="always")
-def occluded_packet(lanes, valid_address, scene, address, query):
+def _query_packet(entries, lanes, valid_address, scene, address, arguments):
+    # the packet at `address` through the `lanes`-wide one of `entries`
+    one, four, eight, sixteen = entries
     if lanes == 8:
-        rtc_occluded8(valid_address, scene, address, query)
+        eight(valid_address, scene, address, arguments)
     elif lanes == 16:
-        rtc_occluded16(valid_address, scene, address, query)
+        sixteen(valid_address, scene, address, arguments)
     elif lanes == 4:
-        rtc_occluded4(valid_address, scene, address, query)
+        four(valid_address, scene, address, arguments)
     else:
-        rtc_occluded1(scene, address, query)
+        one(scene, address, arguments)
+
+
+@njit(inline="always")
+def packet_layout(words):
+    """Where a packet lies in ``words``, a uint32 scratch row of ``SCRATCH_WORDS``: the row's
+    float32 view and the packet's first word ``b`` (aligned for Embree); lane ``lane`` of field
+    ``F`` is word ``b + F * lanes + lane``. Made once a chunk: the place is the same for every
+    packet, and a view per packet would be a new array for each single ray."""
+    return words.view(np.float32), aligned_word(words, PACKET_ALIGN)
+
+
+@njit(inline="always")
+def traced_packet(words, floats, b, query, entries, rays, first, stop):
+    """Rays first .. stop of ``rays`` (``Rays``), at most ``query.lanes`` of them, as one
+    packet at ``floats``, ``b`` (``packet_layout``'s) of ``words``, through Embree's
+    ``entries`` (``INTERSECT`` or ``OCCLUDED``: the 1, 4, 8 and 16-wide entry points), the
+    ``query`` a ``Query``. Returns how many rays the packet took; their answers are left in it."""
+    scene, arguments, lanes = query
+    count = min(lanes, stop - first)
+    address = words.ctypes.data + 4 * b
+    _fill_packet(words, floats, b, lanes, first, count, rays)
+    _query_packet(entries, lanes, address + 4 * PACKET_FIELDS * lanes, scene, address, arguments)
+    return count
 
 
 @njit(nogil=True, cache=True)
@@ -205,15 +224,10 @@ def intersect_chunk(words, first_ray, stop, query, rays, hits, inst_prim):
     uint32 scratch row of ``SCRATCH_WORDS``. ``inst_prim``: (n,) int32 for Embree's
     instPrimID[0] (instance arrays), or None; numba compiles the None case apart, with the test
     pruned: the plain loop pays nothing for it."""
-    scene, arguments, lanes = query
-    floats = words.view(np.float32)
-    b = aligned_word(words, PACKET_ALIGN)
-    address = words.ctypes.data + 4 * b
-    valid_address = address + 4 * PACKET_FIELDS * lanes
+    lanes = query.lanes
+    floats, b = packet_layout(words)
     for first in range(first_ray, stop, lanes):
-        count = min(lanes, stop - first)
-        fill_packet(words, floats, b, lanes, first, count, rays)
-        _intersect_packet(lanes, valid_address, scene, address, arguments)
+        count = traced_packet(words, floats, b, query, INTERSECT, rays, first, stop)
         for lane in range(count):
             i = first + lane
             if words[b + HIT_GEOM_ID * lanes + lane] == INVALID_ID:
@@ -238,15 +252,10 @@ def intersect_chunk(words, first_ray, stop, query, rays, hits, inst_prim):
 def occluded_chunk(words, first_ray, stop, query, rays, blocked):
     """Rays first_ray .. stop of ``rays`` (``Rays``) through Embree's occlusion query, whether
     each is blocked into ``blocked`` (n,) bool; ``query`` and ``words`` as ``intersect_chunk``'s."""
-    scene, arguments, lanes = query
-    floats = words.view(np.float32)
-    b = aligned_word(words, PACKET_ALIGN)
-    address = words.ctypes.data + 4 * b
-    valid_address = address + 4 * PACKET_FIELDS * lanes
+    lanes = query.lanes
+    floats, b = packet_layout(words)
     for first in range(first_ray, stop, lanes):
-        count = min(lanes, stop - first)
-        fill_packet(words, floats, b, lanes, first, count, rays)
-        occluded_packet(lanes, valid_address, scene, address, arguments)
+        count = traced_packet(words, floats, b, query, OCCLUDED, rays, first, stop)
         for lane in range(count):
             blocked[first + lane] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
@@ -261,17 +270,16 @@ def occluded_chunk(words, first_ray, stop, query, rays, blocked):
 @njit(parallel=True, nogil=True, cache=True)
 def intersect(query, rays, hits, inst_prim):
     n = rays.origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
-        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
         intersect_chunk(scratch[c], first, stop, query, rays, hits, inst_prim)
 
 
 @njit(parallel=True, nogil=True, cache=True)
 def occluded(query, rays, blocked):
     n = rays.origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
-        occluded_chunk(scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), query, rays, blocked)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
+        occluded_chunk(scratch[c], first, stop, query, rays, blocked)

@@ -43,7 +43,7 @@ import numpy as np
 from numba import carray, cfunc, njit, prange, types
 
 from embree_rt.compiled import pointers
-from embree_rt.compiled.work_split import threads_for
+from embree_rt.compiled.work_split import chunk_scratch, chunk_span, threads_for
 from embree_rt.embree.kernels import (
     FEATURE_FLAG_ALL,
     HIT_GEOM_ID,
@@ -264,12 +264,10 @@ def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
 @njit(parallel=True, nogil=True, cache=True)
 def _all_hits(scene, filter_address, rays, hits):
     n = rays.origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
-        _all_hits_chunk(
-            scene, filter_address, scratch[c], c * CHUNK, min(n, (c + 1) * CHUNK), rays, hits
-        )
+    scratch = chunk_scratch(n, CHUNK, _SCRATCH_WORDS)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
+        _all_hits_chunk(scene, filter_address, scratch[c], first, stop, rays, hits)
 
 
 @njit(nogil=True, cache=True)
@@ -296,15 +294,15 @@ def _parity_chunk(scene, filter_address, words, first, stop, origins, directions
 def _crossing_parity(scene, filter_address, origins, directions, screen, parity):
     # screen: (capacity, (primitives,) float32 edge band, float32 graze); parity: (odd, clear)
     n = origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, _SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
+    scratch = chunk_scratch(n, CHUNK, _SCRATCH_WORDS)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
         _parity_chunk(
             scene,
             filter_address,
             scratch[c],
-            c * CHUNK,
-            min(n, (c + 1) * CHUNK),
+            first,
+            stop,
             origins,
             directions,
             screen,

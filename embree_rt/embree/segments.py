@@ -17,16 +17,15 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from embree_rt.compiled.work_split import chunk_scratch, chunk_span
 from embree_rt.embree.kernels import (
     CHUNK,
-    PACKET_ALIGN,
-    PACKET_FIELDS,
+    OCCLUDED,
     RAY_TFAR,
     SCRATCH_WORDS,
     Rays,
-    aligned_word,
-    fill_packet,
-    occluded_packet,
+    packet_layout,
+    traced_packet,
 )
 from embree_rt.embree.records import plane_crossing
 
@@ -63,13 +62,10 @@ def _segment_lane(origins, directions, lane, points, r, target, has_plane, plane
 def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
     """Segments first_row .. stop: whether each is blocked, into ``blocked``; ``words`` a
     scratch row of ``kernels.SCRATCH_WORDS``."""
-    scene, arguments, lanes = query
+    lanes = query.lanes
     points, rows, target, has_plane, plane_y = segments
-    floats = words.view(np.float32)
-    b = aligned_word(words, PACKET_ALIGN)
-    address = words.ctypes.data + 4 * b
-    valid_address = address + 4 * PACKET_FIELDS * lanes
-    # One packet's rays at a time, as fill_packet takes them: (lanes, 3) origins, directions.
+    floats, b = packet_layout(words)
+    # One packet's rays at a time, as traced_packet takes them: (lanes, 3) origins, directions.
     origins = np.empty((lanes, 3), np.float32)
     directions = np.empty((lanes, 3), np.float32)
     packet = Rays(origins, directions, np.zeros(lanes, np.float32), np.ones(lanes, np.float32))
@@ -88,8 +84,7 @@ def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
             k += 1
         if count == 0:
             continue
-        fill_packet(words, floats, b, lanes, 0, count, packet)
-        occluded_packet(lanes, valid_address, scene, address, arguments)
+        traced_packet(words, floats, b, query, OCCLUDED, packet, 0, count)
         for lane in range(count):
             blocked[order[lane]] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
@@ -100,10 +95,9 @@ def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
 @njit(parallel=True, nogil=True, cache=True)
 def occluded_toward(query, segments, blocked):
     n = segments.rows.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
-    for c in prange(n_chunks):
-        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
         occluded_toward_chunk(scratch[c], first, stop, query, segments, blocked)
 
 
@@ -127,12 +121,9 @@ def toward_light_chunk(words, first, stop, query, light, visible, directions):
     """Points first .. stop of ``light`` (``LightSegments``): ``visible`` (n,) bool and the
     unit ``directions`` (3, n) float32 toward the light set where visible (both all zero on
     entry); returns how many segments were made (the points facing the light)."""
-    scene, arguments, lanes = query
+    lanes = query.lanes
     points, normals, takes, target, has_plane, plane_y = light
-    floats = words.view(np.float32)
-    b = aligned_word(words, PACKET_ALIGN)
-    address = words.ctypes.data + 4 * b
-    valid_address = address + 4 * PACKET_FIELDS * lanes
+    floats, b = packet_layout(words)
     origins = np.empty((lanes, 3), np.float32)
     toward = np.empty((lanes, 3), np.float32)
     packet = Rays(origins, toward, np.zeros(lanes, np.float32), np.ones(lanes, np.float32))
@@ -159,8 +150,7 @@ def toward_light_chunk(words, first, stop, query, light, visible, directions):
                 count += 1
         if count == 0:
             continue
-        fill_packet(words, floats, b, lanes, 0, count, packet)
-        occluded_packet(lanes, valid_address, scene, address, arguments)
+        traced_packet(words, floats, b, query, OCCLUDED, packet, 0, count)
         for lane in range(count):
             if floats[b + RAY_TFAR * lanes + lane] == -np.inf:
                 continue
@@ -183,10 +173,9 @@ def toward_light_chunk(words, first, stop, query, light, visible, directions):
 @njit(parallel=True, nogil=True, cache=True)
 def toward_light(query, light, visible, directions):
     n = light.points.shape[1]
-    n_chunks = (n + CHUNK - 1) // CHUNK
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
-    made = np.zeros(n_chunks, np.int64)
-    for c in prange(n_chunks):
-        first, stop = c * CHUNK, min(n, (c + 1) * CHUNK)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
+    made = np.zeros(len(scratch), np.int64)
+    for c in prange(len(scratch)):
+        first, stop = chunk_span(c, CHUNK, n)
         made[c] = toward_light_chunk(scratch[c], first, stop, query, light, visible, directions)
     return made.sum()

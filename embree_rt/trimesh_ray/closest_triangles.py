@@ -31,7 +31,7 @@ import numpy as np
 from numba import carray, cfunc, njit, prange
 
 from embree_rt.compiled.pointers import doubles, floats, words64
-from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
 from embree_rt.embree import point_query
 
 # The triangle table: a, b, c (shifted, float64) and the unit normal, one row a triangle.
@@ -84,6 +84,27 @@ def _nearer(px, py, pz, best, x, y, z):
 
 
 @njit(inline="always")
+def _corner_regions(p, corner, a, edge, other, along, across):
+    """Ericson's Voronoi regions of a triangle's ``corner`` (b or c) and of its ``edge`` from
+    a (corner - a), for point p; ``other`` is the triangle's other edge from a, ``along`` and
+    ``across`` the dot products of ``edge`` and ``other`` with p - a. Returns (inside, x, y, z,
+    near, far, weight): whether the closest point lies in one of these regions, and then that
+    point; ``near`` and ``far``, the dot products of ``edge`` and ``other`` with p - corner, and
+    ``weight``, the barycentric weight of the corner opposite the edge, for the later tests.
+    (For corner c the products come in the other order, which leaves them bitwise the same.)"""
+    qx, qy, qz = p[0] - corner[0], p[1] - corner[1], p[2] - corner[2]
+    near = edge[0] * qx + edge[1] * qy + edge[2] * qz
+    far = other[0] * qx + other[1] * qy + other[2] * qz
+    if near >= 0.0 and far <= near:
+        return True, corner[0], corner[1], corner[2], near, far, 0.0
+    weight = along * far - near * across
+    if weight <= 0.0 and along >= 0.0 and near <= 0.0:
+        s = along / (along - near) if along > near else 0.0
+        return True, a[0] + s * edge[0], a[1] + s * edge[1], a[2] + s * edge[2], near, far, weight
+    return False, 0.0, 0.0, 0.0, near, far, weight
+
+
+@njit(inline="always")
 def closest_on_triangle(px, py, pz, t):
     """Closest point to p on the triangle t[0:9] (a, b, c), float64, by Ericson's Voronoi
     regions. Returns (x, y, z, interior): interior is True when the point is inside the
@@ -96,24 +117,13 @@ def closest_on_triangle(px, py, pz, t):
     d2 = acx * apx + acy * apy + acz * apz
     if d1 <= 0.0 and d2 <= 0.0:
         return ax, ay, az, False
-    bpx, bpy, bpz = px - t[3], py - t[4], pz - t[5]
-    d3 = abx * bpx + aby * bpy + abz * bpz
-    d4 = acx * bpx + acy * bpy + acz * bpz
-    if d3 >= 0.0 and d4 <= d3:
-        return t[3], t[4], t[5], False
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = d1 / (d1 - d3) if d1 > d3 else 0.0
-        return ax + v * abx, ay + v * aby, az + v * abz, False
-    cpx, cpy, cpz = px - t[6], py - t[7], pz - t[8]
-    d5 = abx * cpx + aby * cpy + abz * cpz
-    d6 = acx * cpx + acy * cpy + acz * cpz
-    if d6 >= 0.0 and d5 <= d6:
-        return t[6], t[7], t[8], False
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = d2 / (d2 - d6) if d2 > d6 else 0.0
-        return ax + w * acx, ay + w * acy, az + w * acz, False
+    p, a, ab, ac = (px, py, pz), (ax, ay, az), (abx, aby, abz), (acx, acy, acz)
+    inside, x, y, z, d3, d4, vc = _corner_regions(p, (t[3], t[4], t[5]), a, ab, ac, d1, d2)
+    if inside:
+        return x, y, z, False
+    inside, x, y, z, d6, d5, vb = _corner_regions(p, (t[6], t[7], t[8]), a, ac, ab, d2, d1)
+    if inside:
+        return x, y, z, False
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
         span = (d4 - d3) + (d5 - d6)
@@ -306,13 +316,12 @@ def _closest_chunk(query, first, stop, points, scratch, user, found):
 @njit(parallel=True, nogil=True, cache=True, error_model="numpy")
 def _closest(query, points, found):
     n = points.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
+    n_chunks = chunk_count(n, CHUNK)
     scratch = np.empty((n_chunks, point_query.SCRATCH_WORDS), np.uint32)
     user = np.empty((n_chunks, _HEADER + _ENTRY * query.capacity), np.float64)
     for c in prange(n_chunks):
-        _closest_chunk(
-            query, c * CHUNK, min(n, (c + 1) * CHUNK), points, scratch[c], user[c], found
-        )
+        first, stop = chunk_span(c, CHUNK, n)
+        _closest_chunk(query, first, stop, points, scratch[c], user[c], found)
 
 
 @njit(nogil=True, cache=True, error_model="numpy")

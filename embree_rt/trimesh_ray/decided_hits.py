@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 from embree_rt.compiled.pointers import prefetch
-from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
 from embree_rt.embree.multihit import HitBuffers
 from embree_rt.trimesh_ray.hit_inputs import MeshTables, Tolerances, WorldRays
 from embree_rt.trimesh_ray.plane_distances import insert_by_distance, plane_distance
@@ -61,7 +61,8 @@ def _barycentric_hit(triangles, f, px, py, pz, zero):
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _bounds_chunk(first, stop, rows, positions, hits, rays, mesh, tolerances, fans, totals):
+def _bounds_chunk(first, stop, chosen, hits, rays, mesh, tolerances, fans, totals):
+    rows, positions = chosen
     _t, prim, u, v, cos, count, _more = hits
     magnitude = rays.magnitude
     altitude = mesh.altitude
@@ -83,17 +84,16 @@ def _bounds_chunk(first, stop, rows, positions, hits, rays, mesh, tolerances, fa
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def _decide_chunk(
-    first, stop, bound, rows, positions, hits, rays, mesh, tolerances, fans, work, kept
-):
-    # rays first .. stop; ray a's candidates and hits in bound[a] .. bound[a + 1] of `work`
-    # (candidates, tested, tris, distance), kept[a] hits
+def _decide_chunk(first, stop, chosen, hits, rays, mesh, tolerances, fans, work):
+    # rays first .. stop; ray a's candidates and hits in bound[a] .. bound[a + 1] of `work`'s
+    # arrays, kept[a] hits
+    rows, positions = chosen
     _t, prim, u, v, cos, count, _more = hits
     origins, directions, magnitude, near, inclusive = rays
     planes, triangles, altitude, _floor_altitude = mesh
     band_scale, graze, parallel_cos, zero = tolerances
     canonical, fan_starts, fan_faces = fans
-    candidates, tested, out_tris, out_distance = work
+    bound, candidates, tested, out_tris, out_distance, kept = work
     for a in range(first, stop):
         r, q = rows[a], positions[a]
         stop_a = bound[a]
@@ -156,8 +156,8 @@ def _decide_chunk(
 
 
 @njit(nogil=True, cache=True)
-def _gather_chunk(first, stop, bound, places, positions, work, kept, out):
-    _candidates, _tested, tris, distance = work
+def _gather_chunk(first, stop, positions, work, places, out):
+    bound, _candidates, _tested, tris, distance, kept = work
     out_rays, out_tris, out_distance = out
     for a in range(first, stop):
         for i in range(kept[a]):
@@ -180,45 +180,27 @@ def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
     # in parallel over chunks of rays, each in its own ranges (a prefix sum of bounds, then of
     # kept hits): the same output on any number of threads
     m = rows.shape[0]
-    n_chunks = (m + CHUNK - 1) // CHUNK
+    n_chunks = chunk_count(m, CHUNK)
+    chosen = (rows, positions)
     totals = np.empty(m, np.int64)
     for c in prange(n_chunks):
-        _bounds_chunk(
-            c * CHUNK,
-            min(m, (c + 1) * CHUNK),
-            rows,
-            positions,
-            hits,
-            rays,
-            mesh,
-            tolerances,
-            fans,
-            totals,
-        )
+        first, stop = chunk_span(c, CHUNK, m)
+        _bounds_chunk(first, stop, chosen, hits, rays, mesh, tolerances, fans, totals)
     bound = _offsets(totals)
-    # candidates, tested (decided in float64, else Embree's hit stands), tris, distance
+    kept = np.empty(m, np.int64)
+    # each ray's range of candidates, then candidates, tested (decided in float64, else
+    # Embree's hit stands), tris, distance, and how many of its hits each ray keeps
     work = (
+        bound,
         np.empty(bound[m], np.int64),
         np.empty(bound[m], np.bool_),
         np.empty(bound[m], np.int64),
         np.empty(bound[m], np.float64),
+        kept,
     )
-    kept = np.empty(m, np.int64)
     for c in prange(n_chunks):
-        _decide_chunk(
-            c * CHUNK,
-            min(m, (c + 1) * CHUNK),
-            bound,
-            rows,
-            positions,
-            hits,
-            rays,
-            mesh,
-            tolerances,
-            fans,
-            work,
-            kept,
-        )
+        first, stop = chunk_span(c, CHUNK, m)
+        _decide_chunk(first, stop, chosen, hits, rays, mesh, tolerances, fans, work)
     places = _offsets(kept)
     out = (
         np.empty(places[m], np.int64),
@@ -226,7 +208,8 @@ def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
         np.empty(places[m], np.float64),
     )
     for c in prange(n_chunks):
-        _gather_chunk(c * CHUNK, min(m, (c + 1) * CHUNK), bound, places, positions, work, kept, out)
+        first, stop = chunk_span(c, CHUNK, m)
+        _gather_chunk(first, stop, positions, work, places, out)
     return out
 
 

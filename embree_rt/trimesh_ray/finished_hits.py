@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit, prange
 
 from embree_rt.compiled.pointers import prefetch
-from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
 
 _EPS64 = np.finfo(np.float64).eps
 _SAME_POINT_ULPS = 1e4
@@ -221,18 +221,10 @@ def _finish(parts, order, ray_count, capacity, merge, points, scratch):
         grouped_tris[slot] = tris[k]
         grouped_distance[slot] = distance[k]
     # 2. in parallel over chunks of rays: one hit per crossing and cut, in each ray's range
-    n_chunks = (ray_count + CHUNK - 1) // CHUNK
+    n_chunks = chunk_count(ray_count, CHUNK)
     for c in prange(n_chunks):
-        _merge_chunk(
-            c * CHUNK,
-            min(ray_count, (c + 1) * CHUNK),
-            starts,
-            capacity,
-            merge,
-            points[1],
-            grouped,
-            kept,
-        )
+        first, stop = chunk_span(c, CHUNK, ray_count)
+        _merge_chunk(first, stop, starts, capacity, merge, points[1], grouped, kept)
     # 3. depth-major: rays with more than d hits, ascending, for each depth d; each chunk's
     # hits of depth d follow the earlier chunks' (a prefix sum over chunks, depth by depth), so
     # the placement is the serial one on any number of threads
@@ -241,7 +233,8 @@ def _finish(parts, order, ray_count, capacity, merge, points, scratch):
         depth = max(depth, kept[r])
     slots = np.zeros((n_chunks, depth + 1), np.int64)
     for c in range(n_chunks):
-        for r in range(c * CHUNK, min(ray_count, (c + 1) * CHUNK)):
+        first, stop = chunk_span(c, CHUNK, ray_count)
+        for r in range(first, stop):
             for d in range(kept[r]):
                 slots[c, d] += 1
     total = 0
@@ -255,9 +248,8 @@ def _finish(parts, order, ray_count, capacity, merge, points, scratch):
     locations = np.empty((total if with_locations else 0, 3), np.float64)
     out = (out_rays, out_tris, locations)
     for c in prange(n_chunks):
-        _place_chunk(
-            c * CHUNK, min(ray_count, (c + 1) * CHUNK), slots[c], starts, kept, grouped, points, out
-        )
+        first, stop = chunk_span(c, CHUNK, ray_count)
+        _place_chunk(first, stop, slots[c], starts, kept, grouped, points, out)
     return out
 
 

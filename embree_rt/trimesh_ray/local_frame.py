@@ -22,7 +22,7 @@ from numba import njit, prange
 
 from embree_rt.compiled.morton import radix_order
 from embree_rt.compiled.pointers import prefetch
-from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
 from embree_rt.trimesh_ray.ray_order import box, segment_key
 
 CHUNK = 1024  # rays per parallel iteration of the ordering passes
@@ -187,18 +187,19 @@ def _scatter_chunk(first, stop, position, origins, directions, frame, out, bad):
 @njit(parallel=True, nogil=True, cache=True)
 def _ordered_local_rays(origins, directions, frame, box, out, bad):
     n = origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
+    n_chunks = chunk_count(n, CHUNK)
     keys = np.empty(n, np.uint32)
     for c in prange(n_chunks):
-        _key_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), origins, directions, box, keys)
+        first, stop = chunk_span(c, CHUNK, n)
+        _key_chunk(first, stop, origins, directions, box, keys)
     order = radix_order(keys)
     position = np.empty(n, np.int64)
     for c in prange(n_chunks):
-        _inverse_chunk(c * CHUNK, min(n, (c + 1) * CHUNK), order, position)
+        first, stop = chunk_span(c, CHUNK, n)
+        _inverse_chunk(first, stop, order, position)
     for c in prange(n_chunks):
-        _scatter_chunk(
-            c * CHUNK, min(n, (c + 1) * CHUNK), position, origins, directions, frame, out, bad
-        )
+        first, stop = chunk_span(c, CHUNK, n)
+        _scatter_chunk(first, stop, position, origins, directions, frame, out, bad)
     return order
 
 

@@ -31,7 +31,13 @@ import numpy as np
 from numba import njit, prange
 
 from embree_rt.compiled.morton import radix_order
-from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.compiled.work_split import (
+    chunk_count,
+    chunk_scratch,
+    chunk_span,
+    parallel_region,
+    threads_for,
+)
 from embree_rt.embree import BVH
 from embree_rt.embree.kernels import (
     CHUNK,
@@ -63,13 +69,15 @@ class Near(NamedTuple):
 class Screen(NamedTuple):
     """What makes a hit suspect: ``altitude`` (primitives,) float64 smallest local altitude of
     each triangle (0: degenerate, always suspect) and ``floor_altitude`` its smallest value; a
-    barycentric distance from an edge within ``band_ulps`` float32 ulps of the magnitude over
-    the altitude; |cos| <= ``graze``."""
+    barycentric distance from an edge within ``band_ulps`` float32 ulps of the magnitude (the
+    largest of the ray's local origin coordinates and the mesh's, ``extent``) over the
+    altitude; |cos| <= ``graze``."""
 
     altitude: np.ndarray
     floor_altitude: float
     band_ulps: float
     graze: float
+    extent: float
 
 
 @njit(nogil=True, cache=True)
@@ -124,11 +132,11 @@ def _gather_chunk(first, stop, order, rays, limits, ordered_rays, ordered_limits
 
 
 @njit(nogil=True, cache=True)
-def _trace_chunk(query, words, first, stop, rays, limits, extent, screen, hits, suspect):
+def _trace_chunk(query, words, first, stop, rays, limits, screen, hits, suspect):
     # local rays first .. stop of `rays` (kernels.Rays; tnear and tfar written here from
     # limits (n, 2) float64), their nearest hits into `hits` (kernels.NearestHits)
     origins, directions, tnear, tfar = rays
-    altitude, floor_altitude, band_ulps, graze = screen
+    altitude, floor_altitude, band_ulps, graze, extent = screen
     t, normal, u, v, prim, _geom, _inst = hits
     for i in range(first, stop):
         tnear[i] = np.float32(limits[i, 0])
@@ -170,37 +178,21 @@ def _screened(
     query, origins, directions, frame, reorder, box, near_rule, screen, prim, suspect, bad
 ):
     n = origins.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
+    n_chunks = chunk_count(n, CHUNK)
     rays = np.empty((n, 6), np.float32)
     limits = np.empty((n, 2), np.float64)
     keys = np.empty(n if reorder else 0, np.uint32)
     staged = (rays, limits, keys)
     for c in prange(n_chunks):
-        _frame_chunk(
-            c * CHUNK,
-            min(n, (c + 1) * CHUNK),
-            origins,
-            directions,
-            frame,
-            near_rule,
-            box,
-            staged,
-            bad,
-        )
+        first, stop = chunk_span(c, CHUNK, n)
+        _frame_chunk(first, stop, origins, directions, frame, near_rule, box, staged, bad)
     if reorder:
         order = radix_order(keys)
         ordered_rays = np.empty((n, 6), np.float32)
         ordered_limits = np.empty((n, 2), np.float64)
         for c in prange(n_chunks):
-            _gather_chunk(
-                c * CHUNK,
-                min(n, (c + 1) * CHUNK),
-                order,
-                rays,
-                limits,
-                ordered_rays,
-                ordered_limits,
-            )
+            first, stop = chunk_span(c, CHUNK, n)
+            _gather_chunk(first, stop, order, rays, limits, ordered_rays, ordered_limits)
     else:
         order = np.arange(0)
         ordered_rays, ordered_limits = rays, limits
@@ -218,31 +210,16 @@ def _screened(
         np.empty(n, np.int32),
         np.empty(n, np.int32),
     )
-    scratch = np.empty((n_chunks, SCRATCH_WORDS), np.uint32)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
     for c in prange(n_chunks):
+        first, stop = chunk_span(c, CHUNK, n)
         _trace_chunk(
-            query,
-            scratch[c],
-            c * CHUNK,
-            min(n, (c + 1) * CHUNK),
-            local,
-            ordered_limits,
-            frame.extent,
-            screen,
-            hits,
-            ordered_suspect,
+            query, scratch[c], first, stop, local, ordered_limits, screen, hits, ordered_suspect
         )
     if reorder:
         for c in prange(n_chunks):
-            _scatter_chunk(
-                c * CHUNK,
-                min(n, (c + 1) * CHUNK),
-                order,
-                ordered_prim,
-                ordered_suspect,
-                prim,
-                suspect,
-            )
+            first, stop = chunk_span(c, CHUNK, n)
+            _scatter_chunk(first, stop, order, ordered_prim, ordered_suspect, prim, suspect)
 
 
 def screened_nearest(
@@ -300,6 +277,7 @@ def screened_nearest(
         float(floor_altitude),
         float(band_ulps),
         float(graze),
+        float(extent),
     )
     with parallel_region:
         if n:

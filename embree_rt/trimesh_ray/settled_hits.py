@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 from embree_rt.compiled.pointers import prefetch
-from embree_rt.compiled.work_split import parallel_region, threads_for
+from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
 from embree_rt.embree.multihit import HitBuffers
 from embree_rt.trimesh_ray.hit_inputs import MeshTables, Tolerances, WorldRays
 from embree_rt.trimesh_ray.plane_distances import insert_by_distance, plane_distance
@@ -98,7 +98,7 @@ def _copy_chunk(source, stop, target, kept, ray_offset, out):
 def _settle(hits, retrace_more, rays, mesh, tolerances, messy, scratch, ray_offset, out):
     count = hits.count
     n = count.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
+    n_chunks = chunk_count(n, CHUNK)
     starts = np.zeros(n_chunks + 1, np.int64)  # each chunk's scratch range: hits found
     for i in range(n):
         starts[i // CHUNK + 1] += count[i]
@@ -106,9 +106,10 @@ def _settle(hits, retrace_more, rays, mesh, tolerances, messy, scratch, ray_offs
         starts[c + 1] += starts[c]
     ends = np.empty(n_chunks, np.int64)
     for c in prange(n_chunks):
+        first, stop = chunk_span(c, CHUNK, n)
         ends[c] = _settle_chunk(
-            c * CHUNK,
-            min(n, (c + 1) * CHUNK),
+            first,
+            stop,
             starts[c],
             hits,
             retrace_more,
