@@ -37,14 +37,9 @@ def retain_freed_memory() -> bool:
     global _tuned
     if _tuned:
         return True
-    if platform.libc_ver()[0] != "glibc":
+    mallopt = _glibc_function("mallopt", (ctypes.c_int, ctypes.c_int), ctypes.c_int)
+    if mallopt is None:
         return False
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):
-        return False
-    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
-    mallopt.restype = ctypes.c_int
     _tuned = all(
         mallopt(parameter, value) == 1
         for parameter, value in (
@@ -62,12 +57,17 @@ def release_freed_memory() -> bool:
     several threads) that the process will not make again, and before it needs the memory for
     something else (a BVH, which Embree allocates outside the C heap). Returns whether memory
     was released (False off glibc, or when there was none to release)."""
+    malloc_trim = _glibc_function("malloc_trim", (ctypes.c_size_t,), ctypes.c_int)
+    return malloc_trim is not None and malloc_trim(0) == 1
+
+
+def _glibc_function(name: str, argtypes: tuple, restype: type):
+    """glibc's function ``name`` with its C signature, as a ctypes function; None off glibc."""
     if platform.libc_ver()[0] != "glibc":
-        return False
+        return None
     try:
-        malloc_trim = ctypes.CDLL(None).malloc_trim
+        function = getattr(ctypes.CDLL(None), name)
     except (OSError, AttributeError):
-        return False
-    malloc_trim.argtypes = (ctypes.c_size_t,)
-    malloc_trim.restype = ctypes.c_int
-    return malloc_trim(0) == 1
+        return None
+    function.argtypes, function.restype = argtypes, restype
+    return function
