@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import importlib.util
 import itertools
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
+from asset_meaning import assert_same_meaning, glb_meaning
 from bvh_reference import triangle_hits
 from camera_samples import primary_rays
 
@@ -400,7 +402,41 @@ def test_make_assets_makes_exactly_the_files_in_assets(tmp_path: Path) -> None:
     made = sorted(p.name for p in tmp_path.iterdir())
     assert made == sorted(p.name for p in ASSETS.iterdir() if p.suffix != ".py")
     for name in made:
-        assert (tmp_path / name).read_bytes() == (ASSETS / name).read_bytes(), name
+        assert_same_meaning(tmp_path / name, ASSETS / name)
+
+
+def test_asset_meaning_sees_a_changed_pixel_value_or_vertex(tmp_path: Path) -> None:
+    """The meaning comparison above is not blind: another deflate stream of the same pixels is
+    the same, but one texel changed by one code, one float of a glTF accessor changed, or one
+    vertex of the torus moved by 1e-4 fails it."""
+    from PIL import Image
+
+    with Image.open(ASSETS / "quadrants.png") as image:
+        texels = np.array(image)
+    Image.fromarray(texels).save(tmp_path / "quadrants.png", compress_level=1)
+    assert (tmp_path / "quadrants.png").read_bytes() != (ASSETS / "quadrants.png").read_bytes()
+    assert_same_meaning(tmp_path / "quadrants.png", ASSETS / "quadrants.png")
+    texels[0, 0, 0] ^= 1
+    Image.fromarray(texels).save(tmp_path / "quadrants.png")
+    with pytest.raises(AssertionError):
+        assert_same_meaning(tmp_path / "quadrants.png", ASSETS / "quadrants.png")
+
+    gallery = bytearray((ASSETS / "gltf_materials.glb").read_bytes())
+    _, accessors, _ = glb_meaning(bytes(gallery))
+    json_length = int.from_bytes(gallery[12:16], "little")
+    document = json.loads(gallery[20 : 20 + json_length])
+    view = document["bufferViews"][document["accessors"][0]["bufferView"]]
+    first = 28 + json_length + view.get("byteOffset", 0)  # accessor 0's first value
+    assert accessors[0].dtype == np.float32
+    gallery[first : first + 4] = np.float32(accessors[0][0, 0] + 0.01).tobytes()
+    (tmp_path / "gallery.glb").write_bytes(bytes(gallery))
+    with pytest.raises(AssertionError):
+        assert_same_meaning(tmp_path / "gallery.glb", ASSETS / "gltf_materials.glb")
+
+    torus = (ASSETS / "torus.obj").read_text().replace("v 0.82000000 ", "v 0.82010000 ", 1)
+    (tmp_path / "torus.obj").write_text(torus)
+    with pytest.raises(AssertionError):
+        assert_same_meaning(tmp_path / "torus.obj", ASSETS / "torus.obj")
 
 
 def test_the_node_scaled_gltf_scales_by_its_node() -> None:
