@@ -495,10 +495,11 @@ class SceneGeometry(Closing):
         points: np.ndarray,
         normals: np.ndarray,
         targets: np.ndarray,
-        takes: np.ndarray | None = None,
+        takes: np.ndarray,
     ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
         """Per light of ``targets`` (L, 3), what the ``points`` (3, n) float32 with unit
-        ``normals`` (3, n) see of it, the floor included: ``BVH.toward_lights``."""
+        ``normals`` (3, n) that ``takes`` ((n,) bool) light see of it, the floor included:
+        ``BVH.toward_lights``."""
         return self.bvh.toward_lights(points, normals, targets, takes, self.labels.plane_y)
 
 

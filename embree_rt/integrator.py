@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import NamedTuple
 
 import numpy as np
 
@@ -23,12 +23,12 @@ from embree_rt.camera import CameraFrame, camera_rays, sample_rays, tiled_sample
 from embree_rt.closing import Closing
 from embree_rt.columns import column_max, scatter, scatter_add
 from embree_rt.compiled import retain_freed_memory
-from embree_rt.compiled.camera_rays import CameraRays, sample_directions
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.materials import MaterialTable, shading_shares
 from embree_rt.scene.loader import check_scene_values
 from embree_rt.scene.model import Scene
+from embree_rt.tracer import Tracer
 
 DEFAULT_BATCH_SIZE = 1 << 18
 # A child whose every channel weighs less than half an 8-bit step cannot change the picture.
@@ -66,15 +66,14 @@ class BatchWork:
 @dataclass
 class RayBatch:
     """Rays in flight, one per column: ``origins``, ``directions`` (3, n) float32 (unit
-    directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput. ``origins`` is
-    None for rays that have hit (their surface hits hold the points) and for camera rays not
-    yet traced (made inside the query), whose ``directions`` are None until then and whose
-    ``weight`` is None: all ones, never spread into an array (1 · x is x, bit for bit)."""
+    directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput. Camera rays'
+    origins (the eye) and unit weights are zero-stride views (``camera_batch``): every stage
+    reads them as any other, and 1 · x is x, bit for bit."""
 
-    origins: np.ndarray | None
-    directions: np.ndarray | None
+    origins: np.ndarray
+    directions: np.ndarray
     pixel: np.ndarray
-    weight: np.ndarray | None
+    weight: np.ndarray
 
     def __len__(self) -> int:
         return len(self.pixel)
@@ -99,44 +98,33 @@ NO_RAYS = RayBatch(
 )
 
 
+class HitRays(NamedTuple):
+    """The rays of a batch that hit, as shading reads them (their surfaces hold the points):
+    ``directions`` (3, k) float32 unit, ``pixel`` (k,) int64, ``weight`` (3, k) float32."""
+
+    directions: np.ndarray
+    pixel: np.ndarray
+    weight: np.ndarray
+
+
+def camera_batch(origin: np.ndarray, directions: np.ndarray, pixel: np.ndarray) -> RayBatch:
+    """The ``RayBatch`` of n camera rays from one ``origin`` (3,) float32 along ``directions``
+    (3, n) float32 of ``pixel`` (n,) int64, weighing one: the eye and the ones repeated by zero
+    strides, not copied."""
+    n = len(pixel)
+    return RayBatch(
+        np.broadcast_to(np.asarray(origin, np.float32)[:, None], (3, n)),
+        directions,
+        pixel,
+        np.broadcast_to(np.float32(1.0), (3, n)),
+    )
+
+
 def surface_offset(scale: np.ndarray) -> np.ndarray:
     """(n,) float32 distance to push a ray origin off a surface whose hit was computed from
     coordinates no larger than ``scale`` (n,) (``SurfaceHits.scale``): relative to that size,
     as float32 rounding is (pbrt's OffsetRayOrigin bounds the error the same way)."""
     return (np.float32(RELATIVE_OFFSET) * (np.float32(1.0) + scale)).astype(np.float32, copy=False)
-
-
-def facing_light(
-    position: np.ndarray, points: np.ndarray, normal: np.ndarray, takes_light: np.ndarray | None
-) -> np.ndarray:
-    """(k,) int64 the columns of ``points`` (3, n) float32 whose ``normal`` (3, n) faces the
-    light at ``position`` (3,), among those that ``takes_light`` ((n,) bool; None: all)."""
-    facing = shading.dot(position[:, None] - points, normal) > 0
-    return np.flatnonzero(facing if takes_light is None else facing & takes_light)
-
-
-class Tracer(Protocol):
-    """Where the integrator's two geometric stages come from: the nearest hits of a wavefront
-    (``intersect_compact``: the (k,) int64 rays that hit and their ``SurfaceHits``, floor hits
-    first) and whether shadow segments are blocked (``occluded_toward``: (k,) bool for the
-    segments from ``points[:, rows]`` to ``target``). ``SceneGeometry`` (one BVH of the whole
-    scene) is the default; ``bricks.BrickSet`` answers from bricks of it, here or on Dask.
-    A tracer may also make camera rays inside its query (``SceneGeometry.intersect_camera``)
-    and shadow segments toward every light from the points that face it
-    (``SceneGeometry.toward_lights``); one that does not is given camera rays as columns and
-    the segments made here, for every light in one query when it answers them so
-    (``occluded_toward_each(points, rows_each, targets)``: per target (L, 3), the (k,) bool of
-    ``occluded_toward``), else a query a light."""
-
-    def intersect_compact(
-        self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
-    ) -> tuple[np.ndarray, SurfaceHits]: ...
-
-    def occluded_toward(
-        self, points: np.ndarray, rows: np.ndarray, target: np.ndarray
-    ) -> np.ndarray: ...
-
-    def close(self) -> None: ...
 
 
 class Integrator(Closing):
@@ -174,10 +162,9 @@ class Integrator(Closing):
         self.workers = worker_count(threads)
         retain_freed_memory()
         start = time.perf_counter()
-        self.geometry: Tracer = tracer
-        self._own_geometry = tracer is None
-        if tracer is None:
-            self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
+        self.geometry: Tracer = (
+            SceneGeometry(scene, spheres=spheres, threads=1) if tracer is None else tracer
+        )
         self.build_s = time.perf_counter() - start
         # Material ids are the scene's materials in order, then the floor's.
         self.materials = table = MaterialTable.from_materials(
@@ -193,10 +180,9 @@ class Integrator(Closing):
         self.specular = table.specular
         self.transparency = table.transparency
         # Unlit materials show their colour alone: all of it as "ambient", nothing else, and
-        # no shadow rays (``lit``: None when every material is lit).
-        self.lit = None
+        # no shadow rays (``lit``: (m,) bool, which materials take light).
+        self.lit = ~table.unlit
         if table.unlit.any():
-            self.lit = ~table.unlit
             self.ambient_share = np.where(table.unlit, 1.0, self.ambient_share).astype(np.float32)
             for name in ("diffuse_share", "reflect_share", "specular", "transparency"):
                 setattr(
@@ -288,7 +274,8 @@ class Integrator(Closing):
         work = BatchWork(FilmBlock(first, count))
         rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
         work.rays["primary"] += count
-        self._trace(rays, work, max_depth)
+        rows, surfaces = self.geometry.intersect_compact(origins, directions, True, ids=False)
+        self._trace(rays, rows, surfaces, work, max_depth)
         return work.block
 
     # -- one batch, all depths ----------------------------------------------------------------
@@ -303,29 +290,25 @@ class Integrator(Closing):
         work = BatchWork(FilmBlock(start // spp, count // spp))
         index, pixel = tiled_samples(frame, spp, start, count)
         # Camera rays are made inside the first query, from their sample indices.
-        rays = RayBatch(None, None, pixel, None)
+        camera = camera_rays(frame, spp, seed)
+        rows, surfaces, directions = self.geometry.intersect_camera(camera, index, ids=False)
         work.rays["primary"] += count
-        self._trace(rays, work, max_depth, (camera_rays(frame, spp, seed), index))
+        rays = camera_batch(camera.origin, directions, pixel)
+        self._trace(rays, rows, surfaces, work, max_depth)
         return work
 
     def _trace(
         self,
         rays: RayBatch,
+        rows: np.ndarray,
+        surfaces: SurfaceHits,
         work: BatchWork,
         max_depth: int,
-        camera: tuple[CameraRays, np.ndarray] | None = None,
     ) -> None:
-        """Trace ``rays`` and their children to ``max_depth``; with ``camera`` (its
-        ``CameraRays`` and the (n,) sample indices of ``rays``), ``rays`` are those camera
-        samples and their origins and directions (None) are made inside the first query."""
+        """Shade ``rays``, whose rays ``rows`` (k,) int64 hit ``surfaces``, and trace and
+        shade their children to ``max_depth``."""
         depth = 0
-        while len(rays):
-            if depth == 0 and camera is not None:
-                rows, surfaces, rays.directions = self._camera_hits(*camera)
-            else:
-                rows, surfaces = self.geometry.intersect_compact(
-                    rays.origins, rays.directions, coherent=depth == 0, **self._without_ids()
-                )
+        while True:
             if len(rows) < len(rays):
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False
@@ -334,45 +317,25 @@ class Integrator(Closing):
                 sky = shading.sky_at(rays.directions[1][escaped], self.horizon, self.zenith)
                 work.block.add_weighted(rays.pixel, rays.weight, sky, escaped)
             # The hits' origins are not needed again: their surfaces say where they are.
-            # (camera rays' unit weights stay None: 1 · x is x, bit for bit)
-            weight = None if rays.weight is None else np.take(rays.weight, rows, axis=1)
-            hit_rays = RayBatch(None, surfaces.incoming, np.take(rays.pixel, rows), weight)
+            hit_rays = HitRays(
+                surfaces.incoming, np.take(rays.pixel, rows), np.take(rays.weight, rows, axis=1)
+            )
             rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
-
-    def _camera_hits(
-        self, camera: CameraRays, index: np.ndarray
-    ) -> tuple[np.ndarray, SurfaceHits, np.ndarray]:
-        """The camera samples ``index``' hits (``SceneGeometry.intersect_camera``: rays that
-        hit, their surfaces, all (3, n) directions), made inside the query when the tracer can
-        (a tracer of bricks is asked for the same rays as columns)."""
-        intersect_camera = getattr(self.geometry, "intersect_camera", None)
-        if intersect_camera is not None:
-            return intersect_camera(camera, index, **self._without_ids())
-        directions = sample_directions(camera, index)
-        origins = np.repeat(camera.origin[:, None], len(index), axis=1)
-        rows, surfaces = self.geometry.intersect_compact(origins, directions, coherent=True)
-        return rows, surfaces, directions
-
-    def _without_ids(self) -> dict:
-        """What asks the integrator's own ``SceneGeometry`` to leave Embree's ids of each hit
-        out of its records (shading never reads them; they name objects for the AOVs); a
-        tracer given to the integrator is asked plainly."""
-        return {"ids": False} if self._own_geometry else {}
+            if not len(rays):
+                return
+            rows, surfaces = self.geometry.intersect_compact(
+                rays.origins, rays.directions, False, ids=False
+            )
 
     def _shade(
-        self, rays: RayBatch, surfaces: SurfaceHits, work: BatchWork, spawn: bool
+        self, rays: HitRays, surfaces: SurfaceHits, work: BatchWork, spawn: bool
     ) -> RayBatch:
-        """Light the ``surfaces`` that ``rays`` (directions, pixels, weights; no origins) hit,
-        into ``work``; returns their reflection and refraction children."""
+        """Light the ``surfaces`` that ``rays`` hit, into ``work``; returns their reflection
+        and refraction children."""
         d = rays.directions
         normal, face_normal, entering = self.facing_the_ray(d, surfaces)
         material = surfaces.material
-        if rays.weight is None and (
-            self.absorption is not None
-            or (surfaces.looks is not None and surfaces.looks.coverage is not None)
-        ):
-            rays.weight = np.ones((3, len(rays)), np.float32)  # weighed in place below
         if self.absorption is not None:
             self._absorb_inside(rays.weight, surfaces.t, material, entering)
         color = self.surface_color(surfaces)
@@ -508,10 +471,7 @@ class Integrator(Closing):
         )
         reflect_share[glass] += transparency[glass] * fresnel
         # Glass tints what passes through it (the green marble), not what it reflects.
-        if rays.weight is None:
-            weight = np.ones((3, len(glass)), np.float32)
-        else:
-            weight = np.take(rays.weight, glass, axis=1)
+        weight = np.take(rays.weight, glass, axis=1)
         weight *= transparency[glass] * (1.0 - fresnel)
         weight *= np.take(color, glass, axis=1)
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
@@ -530,10 +490,7 @@ class Integrator(Closing):
         """Mirrors, metals and glass's Fresnel share reflect: the mirror rays whose weight can
         still show, started just outside the surface. Most hits reflect a little, so the
         weights are formed on every row and only the rows kept are gathered."""
-        if rays.weight is None:
-            weight = np.repeat(reflect_share[None, :], 3, axis=0)
-        else:
-            weight = rays.weight * reflect_share
+        weight = rays.weight * reflect_share
         looks = surfaces.looks
         if self.metallic is not None or (looks is not None and looks.shading is not None):
             # Metals tint what they reflect by their colour; the rest reflect untinted. (Metals
@@ -571,11 +528,10 @@ class Integrator(Closing):
         diffuse = self._per_hit(self.diffuse_share, surfaces, "diffuse_share")
         specular = self._per_hit(self.specular, surfaces, "specular")
         # Unlit surfaces take no light: no shadow rays for them.
-        takes_light = None if self.lit is None else np.take(self.lit, material)
+        takes_light = np.take(self.lit, material)
         shininess = self._per_hit(self.materials.shininess, surfaces, "shininess")
-        for light, (visible, direction, made) in enumerate(
-            self._toward_lights(points, normal, takes_light)
-        ):
+        answers = self.geometry.toward_lights(points, normal, self.light_positions, takes_light)
+        for light, (visible, direction, made) in enumerate(answers):
             work.rays["shadow"] += made
             lit_count = np.count_nonzero(visible)
             if lit_count == 0:
@@ -609,42 +565,3 @@ class Integrator(Closing):
                     self.light_rgb[light],
                 ),
             )
-
-    def _toward_lights(self, points, normal, takes_light):
-        """Per light, what the ``points`` (3, n) with facing unit normals ``normal`` (3, n) see
-        of it: (n,) bool visible, (3, n) float32 unit directions toward it where visible (zero
-        elsewhere), and the shadow rays traced: one segment from each point that faces the
-        light and takes light (``takes_light`` (n,) bool, None: all). The tracer's
-        ``toward_lights`` when it has one (shadow rays made in its kernel), else the same
-        segments made here for its ``occluded_toward``."""
-        toward_lights = getattr(self.geometry, "toward_lights", None)
-        if toward_lights is not None:
-            yield from toward_lights(points, normal, self.light_positions, takes_light)
-            return
-        facing_each = [
-            facing_light(position, points, normal, takes_light) for position in self.light_positions
-        ]
-        for position, facing, blocked in zip(
-            self.light_positions,
-            facing_each,
-            self._blocked_each(points, facing_each),
-            strict=True,
-        ):
-            visible = np.zeros(points.shape[1], bool)
-            visible[facing] = ~blocked
-            direction = shading.normalize(position[:, None] - points)
-            direction *= visible  # (x · 1 is x: the visible columns' bits stay)
-            yield visible, direction, len(facing)
-
-    def _blocked_each(self, points: np.ndarray, facing_each: list[np.ndarray]) -> list[np.ndarray]:
-        """Per light, (k,) bool whether the segment from each of the ``points`` (3, n) at its
-        rows ``facing_each[light]`` to the light is blocked: in one query when the tracer
-        answers every light at once (``occluded_toward_each``: a tracer of bricks on other
-        machines pays a round trip a query), else a query a light."""
-        each = getattr(self.geometry, "occluded_toward_each", None)
-        if each is not None:
-            return each(points, facing_each, self.light_positions)
-        return [
-            self.geometry.occluded_toward(points, facing, position)
-            for facing, position in zip(facing_each, self.light_positions, strict=True)
-        ]

@@ -1,15 +1,17 @@
 """A set of bricks in the integrator's place of one BVH: rays routed to the bricks whose boxes
 they reach, answers merged by ``nearest``.
 
-``BrickSet`` is what ``integrator.Integrator`` takes as its ``tracer``: ``intersect_compact``
-and ``occluded_toward`` as ``SceneGeometry`` has them (and ``occluded_toward_each``, every
-light's shadow segments in one query). Per call it tests every ray against every
-brick's box (``ray_boxes``), asks each brick reached about its rays only, and keeps the nearest
-hit (``nearest_over_bricks``); a shadow segment is blocked if any brick blocks it. The floor, an
-analytic plane, is answered here by a BVH with no objects and the scene's floor: its records
-are those the whole scene's BVH makes, and a ray that meets the floor need not look for objects
-beyond it. Where the bricks live is the business of a ``BrickQueries``: ``LocalBricks`` holds
-them in this process; ``bricks.cluster`` on Dask workers.
+``BrickSet`` is a ``tracer.Tracer``, what ``integrator.Integrator`` takes as its ``tracer``:
+``intersect_compact`` and ``occluded_toward`` as ``SceneGeometry`` has them, every light's
+shadow segments in one query (``occluded_toward_each``), and from those, through
+``tracer.RaysInNumPy``, the camera rays and the segments toward the lights. Per call it
+tests every ray against every brick's box (``ray_boxes``), asks each brick reached about its
+rays only, and keeps the nearest hit (``nearest_over_bricks``); a shadow segment is blocked if
+any brick blocks it. The floor, an analytic plane, is answered here by a BVH with no objects
+and the scene's floor: its records are those the whole scene's BVH makes, and a ray that meets
+the floor need not look for objects beyond it. Where the bricks live is the business of a
+``BrickQueries``: ``LocalBricks`` holds them in this process; ``bricks.cluster`` on Dask
+workers.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from embree_rt.bricks.ray_boxes import boxes_reached, padded_boxes, rows_by_bric
 from embree_rt.closing import Closing
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.scene.model import Scene
+from embree_rt.tracer import RaysInNumPy
 
 # A request to brick b: (b, origins (3, k) float32, directions (3, k) float32, coherent).
 IntersectRequest = tuple[int, np.ndarray, np.ndarray, bool]
@@ -65,7 +68,7 @@ class BrickTraffic:
                 setattr(self, name, getattr(self, name) + value)
 
 
-class BrickSet(Closing):
+class BrickSet(RaysInNumPy, Closing):
     """The integrator's tracer over bricks of ``scene`` whose boxes are ``bounds`` (K, 2, 3)
     float64, answered by ``queries``. ``scene`` gives the floor (its objects are not used)."""
 
@@ -80,11 +83,12 @@ class BrickSet(Closing):
         self.queries.close()
 
     def intersect_compact(
-        self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False
+        self, origins: np.ndarray, directions: np.ndarray, coherent: bool = False, ids: bool = True
     ) -> tuple[np.ndarray, SurfaceHits]:
         """``SceneGeometry.intersect_compact`` over the bricks: the (m,) int64 rays that hit
         and their ``SurfaceHits``, bitwise those of one BVH of the whole scene but for exact
-        ties between bricks (``nearest``)."""
+        ties between bricks (``nearest``). Their Embree ids are None whatever ``ids`` asks:
+        a brick's ids name its own BVH, not the scene's."""
         origins = np.ascontiguousarray(origins, np.float32)
         directions = np.ascontiguousarray(directions, np.float32)
         n = origins.shape[1]
