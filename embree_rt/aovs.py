@@ -190,16 +190,16 @@ def render_aovs(
             flat["z_depth"][hit] = surfaces.t * cosine
         if "position" in flat:
             fill_vectors("position", batch, hit, surfaces.position)
-        if "uv" in flat and surfaces.looks is not None and surfaces.looks.uv is not None:
+        if "uv" in flat and surfaces.looks.uv is not None:
             # The coordinates the texture lookup used (inf on the untextured among them).
-            fill_vectors("uv", batch, hit[surfaces.colored], surfaces.looks.uv)
+            fill_vectors("uv", batch, hit[surfaces.looks.rows], surfaces.looks.uv)
         # The integrator's own stages, not copies of them: the normal it shades with, turned
         # to the side the ray came from, and the colour it lights.
         if "normal" in flat:
             normal, _, _ = integrator.facing_the_ray(surfaces.incoming, surfaces)
             fill_vectors("normal", batch, hit, normal)
         if "albedo" in flat:
-            fill_vectors("albedo", batch, hit, integrator.surface_color(surfaces))
+            fill_vectors("albedo", batch, hit, integrator.hit_materials(surfaces).color)
         if "material_id" in flat:
             flat["material_id"][hit] = surfaces.material
         if "object_id" in flat:

@@ -13,7 +13,7 @@ the horizon and lose float32 precision far away.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -26,6 +26,7 @@ from embree_rt.mesh_attributes import (
     MeshColors,
     blend_normals,
     mesh_hit_filter,
+    no_looks,
     unit_vertex_normals,
 )
 from embree_rt.scene.model import MeshObject, Scene
@@ -66,9 +67,9 @@ class SurfaceHits:
     the rest objects; ``scale`` (k,) float32, a bound on the size of the coordinates the hit was
     computed from (at least max |position|, and the object's |centre| + extent): its rounding
     error scales with it; ``incoming`` (3, k) float32, the direction of the ray that made it.
-    ``colored`` (j,) int64 columns whose base colour is the surface's own (a mesh's texture or
-    vertex colours), ``color`` (3, j) float32 linear those colours; both None when none is;
-    ``looks`` the rest those hits show (``mesh_attributes.HitLooks``, rows ``colored``).
+    ``looks`` what the hits on meshes with per-point looks show of their own
+    (``mesh_attributes.HitLooks``: their colours from textures and vertex colours, and more),
+    at its ``rows`` (j,) int64 (none when no hit has looks).
     ``prim_id``, ``inst_id``, ``inst_prim_id`` (k,) int32: Embree's primitive, top-level
     instance and instance-array copy ids of each hit (-1 on the floor; ``inst_id`` -1 on the
     sphere set; ``inst_prim_id`` -1 outside instance arrays), which name the object hit
@@ -84,9 +85,7 @@ class SurfaceHits:
     floor_count: int
     scale: np.ndarray
     incoming: np.ndarray
-    colored: np.ndarray | None = None
-    color: np.ndarray | None = None
-    looks: HitLooks | None = None
+    looks: HitLooks = field(default_factory=no_looks)
     prim_id: np.ndarray | None = None
     inst_id: np.ndarray | None = None
     inst_prim_id: np.ndarray | None = None
@@ -369,8 +368,8 @@ class SceneGeometry(Closing):
             getattr(full, name)[rows] = getattr(compact, name)
         for name in ("position", "normal", "face_normal"):
             getattr(full, name)[:, rows] = getattr(compact, name)
-        if compact.colored is not None:
-            full.colored, full.color = rows[compact.colored], compact.color
+        if len(compact.looks.rows):
+            full.colored, full.color = rows[compact.looks.rows], compact.looks.color
         return full
 
     def intersect_compact(
@@ -442,7 +441,7 @@ class SceneGeometry(Closing):
                 meshes.start,
             )
             if looks is not None:
-                surfaces.colored, surfaces.color, surfaces.looks = looks.rows, looks.color, looks
+                surfaces.looks = looks
                 if looks.normal is not None:
                     self._apply_normal_maps(surfaces, records, looks)
         return surfaces

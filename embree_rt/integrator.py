@@ -21,11 +21,11 @@ from embree_rt import shading
 from embree_rt.batches import batch_ranges, ordered_results, worker_count
 from embree_rt.camera import CameraFrame, camera_rays, sample_rays, tiled_samples
 from embree_rt.closing import Closing
-from embree_rt.columns import column_max, scatter, scatter_add
+from embree_rt.columns import column_max, scatter_add
 from embree_rt.compiled import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
-from embree_rt.materials import MaterialTable, shading_shares
+from embree_rt.materials import HitMaterials, MaterialTable
 from embree_rt.scene.loader import check_scene_values
 from embree_rt.scene.model import Scene
 from embree_rt.tracer import Tracer
@@ -167,31 +167,9 @@ class Integrator(Closing):
         )
         self.build_s = time.perf_counter() - start
         # Material ids are the scene's materials in order, then the floor's.
-        self.materials = table = MaterialTable.from_materials(
+        self.materials = MaterialTable.from_materials(
             [*scene.materials.values(), *([scene.floor.material] if scene.floor else [])]
         )
-        # Per material: the seed article's blend of local shading, reflection and transmission.
-        self.material_color = np.ascontiguousarray(table.color.T)  # (3, m)
-        self.ambient_share, self.diffuse_share, self.reflect_share = shading_shares(
-            table.ambient, table.diffuse, table.reflectivity, table.transparency
-        )
-        # Which materials are metals; None when none is (nothing to tint).
-        self.metallic = table.metallic if table.metallic.any() else None
-        self.specular = table.specular
-        self.transparency = table.transparency
-        # Unlit materials show their colour alone: all of it as "ambient", nothing else, and
-        # no shadow rays (``lit``: (m,) bool, which materials take light).
-        self.lit = ~table.unlit
-        if table.unlit.any():
-            self.ambient_share = np.where(table.unlit, 1.0, self.ambient_share).astype(np.float32)
-            for name in ("diffuse_share", "reflect_share", "specular", "transparency"):
-                setattr(
-                    self, name, np.where(table.unlit, 0.0, getattr(self, name)).astype(np.float32)
-                )
-        # (3, m) glow and Beer–Lambert absorption per unit length; None when no material has any.
-        self.emission = np.ascontiguousarray(table.emission.T) if table.emission.any() else None
-        absorbs = (table.absorption > 0).any()
-        self.absorption = np.ascontiguousarray(table.absorption.T) if absorbs else None
         lights = scene.lights
         self.light_positions = np.array([lt.position for lt in lights], np.float32).reshape(-1, 3)
         self.light_rgb = np.array(
@@ -335,29 +313,25 @@ class Integrator(Closing):
         and refraction children."""
         d = rays.directions
         normal, face_normal, entering = self.facing_the_ray(d, surfaces)
-        material = surfaces.material
-        if self.absorption is not None:
-            self._absorb_inside(rays.weight, surfaces.t, material, entering)
-        color = self.surface_color(surfaces)
+        hits = self.hit_materials(surfaces)
+        ambient_share, diffuse_share, reflect_share = hits.shares()
+        self._absorb_inside(rays.weight, surfaces.t, hits.absorption, entering)
         offset = surface_offset(surfaces.scale)
-        passing = self._see_through(rays, surfaces, face_normal, offset, work, spawn)
+        passing = self._see_through(rays, surfaces, hits.coverage, face_normal, offset, work, spawn)
         outside = np.multiply(face_normal, offset)
         outside += surfaces.position  # (position + face_normal · offset)
-        radiance = self._per_hit(self.ambient_share, surfaces, "ambient_share") * color
-        if surfaces.looks is not None and surfaces.looks.occlusion is not None:
-            radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
-        self._add_direct_light(radiance, outside, normal, d, color, surfaces, work)
-        self._add_emission(radiance, surfaces)
+        radiance = ambient_share * hits.color
+        radiance *= hits.occlusion  # (x · 1 is x: the bits of unoccluded hits stay)
+        self._add_direct_light(radiance, outside, normal, d, hits, diffuse_share, work)
+        if self.materials.glows:
+            radiance += hits.emission
         work.block.add_weighted(rays.pixel, rays.weight, radiance)
         if not spawn:
             return NO_RAYS
-        reflect_share = self._per_hit(self.reflect_share, surfaces, "reflect_share")
         children = self._refraction_children(
-            rays, surfaces, normal, face_normal, entering, color, offset, reflect_share, work
+            rays, surfaces, hits, normal, face_normal, entering, offset, reflect_share, work
         )
-        reflected = self._reflection_children(
-            rays, outside, normal, color, reflect_share, surfaces, work
-        )
+        reflected = self._reflection_children(rays, outside, normal, hits, reflect_share, work)
         children.insert(0, reflected)
         children.append(passing)
         children = [batch for batch in children if len(batch)]
@@ -365,21 +339,23 @@ class Integrator(Closing):
 
     # -- the stages of shading --------------------------------------------------------------
 
-    @staticmethod
-    def _per_hit(table: np.ndarray, surfaces: SurfaceHits, name: str) -> np.ndarray:
-        """(k,) values of a per-material ``table`` at the hits' materials, with the hits'
-        own where a mesh's textures vary it (``HitLooks.shading[name]``)."""
-        values = np.take(table, surfaces.material)
-        looks = surfaces.looks
-        if looks is not None and looks.shading is not None:
-            values[looks.rows[looks.shading_at]] = looks.shading[name]
-        return values
+    def hit_materials(self, surfaces: SurfaceHits) -> HitMaterials:
+        """The ``HitMaterials`` of the ``surfaces``: their materials' columns, with what the
+        hits show of their own written over them (a mesh's textures and colours, the
+        checker's colour on the floor)."""
+        floor = surfaces.floor_count
+        hits = HitMaterials.gather(self.materials, surfaces.material, color_from=floor)
+        surfaces.looks.apply_to(hits, self.materials.glows)
+        if floor:
+            checker = self.scene.floor.checker
+            shading.checker(surfaces.position[:, :floor], checker, hits.color[:, :floor])
+        return hits
 
-    def _absorb_inside(self, weight, t, material, entering) -> None:
+    @staticmethod
+    def _absorb_inside(weight, t, absorption, entering) -> None:
         """Beer–Lambert: a ray that reaches a glass surface from inside (not ``entering``) has
         crossed ``t`` (k,) of that glass; its ``weight`` (3, k) is multiplied in place by
-        ``exp(-absorption · t)`` of the material's (3, m) absorption per unit length."""
-        absorption = np.take(self.absorption, material, axis=1)
+        ``exp(-absorption · t)`` of the hits' (3, k) ``absorption`` per unit length."""
         inside = np.flatnonzero(~entering & (column_max(absorption) > 0))
         if len(inside) == 0:
             return
@@ -388,31 +364,21 @@ class Integrator(Closing):
         optical_depth = np.nan_to_num(optical_depth, nan=0.0)
         weight[:, inside] *= np.exp(-optical_depth)
 
-    def _add_emission(self, radiance, surfaces: SurfaceHits) -> None:
-        """Add to ``radiance`` (3, k) the light the surfaces give off themselves: their
-        material's ``emission``, or per hit a mesh's emissive texture's."""
-        if self.emission is None:
-            return
-        emission = np.take(self.emission, surfaces.material, axis=1)
-        looks = surfaces.looks
-        if looks is not None and looks.emission is not None:
-            scatter(emission, looks.rows, looks.emission)
-        radiance += emission
-
-    def _see_through(self, rays, surfaces, face_normal, offset, work, spawn) -> RayBatch:
-        """See-through (glTF BLEND) hits of coverage a: the surface keeps ``a`` of each ray's
-        weight (scaled in place, so all it shows and spawns is weighed by it), and ``1 − a``
-        goes straight on past it, as a ray started just beyond the surface: returned (no rays
-        when none pass, or ``spawn`` is False)."""
-        looks = surfaces.looks
-        if looks is None or looks.coverage is None:
+    @staticmethod
+    def _see_through(rays, surfaces, coverage, face_normal, offset, work, spawn) -> RayBatch:
+        """See-through (glTF BLEND) hits of ``coverage`` a < 1 ((k,) float32): the surface
+        keeps ``a`` of each ray's weight (scaled in place, so all it shows and spawns is
+        weighed by it), and ``1 − a`` goes straight on past it, as a ray started just beyond
+        the surface: returned (no rays when none pass, or ``spawn`` is False)."""
+        rows = np.flatnonzero(coverage < 1)
+        if len(rows) == 0:
             return NO_RAYS
-        rows = looks.rows
+        covered = coverage[rows]
         weight = np.take(rays.weight, rows, axis=1)
-        rays.weight[:, rows] = weight * looks.coverage
+        rays.weight[:, rows] = weight * covered
         if not spawn:
             return NO_RAYS
-        weight *= np.float32(1.0) - looks.coverage
+        weight *= np.float32(1.0) - covered
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
         through = rows[keep]
         beyond = np.take(surfaces.position, through, axis=1)
@@ -435,45 +401,27 @@ class Integrator(Closing):
         face_normal = normal if surfaces.flat else surfaces.face_normal * side
         return normal, face_normal, entering
 
-    def surface_color(self, surfaces: SurfaceHits) -> np.ndarray:
-        """(3, k) float32 colour of each hit: its material's, the checker's on the floor."""
-        floor = surfaces.floor_count
-        color = np.empty((3, len(surfaces)), np.float32)
-        # the materials' colours gathered for the hits off the floor alone, straight into
-        # place (mode "clip": an ``out`` is not copied first, and the ids are all in range)
-        material = surfaces.material[floor:]
-        for row, table in zip(color, self.material_color, strict=True):
-            np.take(table, material, out=row[floor:], mode="clip")
-        if surfaces.colored is not None:  # mesh looks: textures, vertex colours per hit
-            scatter(color, surfaces.colored, surfaces.color)
-        if floor:
-            shading.checker(
-                surfaces.position[:, :floor], self.scene.floor.checker, color[:, :floor]
-            )
-        return color
-
+    @staticmethod
     def _refraction_children(
-        self, rays, surfaces, normal, face_normal, entering, color, offset, reflect_share, work
+        rays, surfaces, hits, normal, face_normal, entering, offset, reflect_share, work
     ) -> list[RayBatch]:
         """Glass splits by Fresnel between reflection and refraction (total internal reflection
         reflects everything): adds the reflected share to ``reflect_share`` (k,) in place and
         returns the refracted rays, started just inside the surface, tinted by the glass."""
-        table = self.materials
-        material = surfaces.material
-        transparency = self._per_hit(self.transparency, surfaces, "transparency")
+        transparency = hits.transparency
         glass = np.flatnonzero(transparency > 0)
         if len(glass) == 0:
             return []
         d_glass = np.take(rays.directions, glass, axis=1)
         normal_glass = np.take(normal, glass, axis=1)
         refracted, _, fresnel = shading.dielectric_split(
-            d_glass, normal_glass, entering[glass], table.ior[material[glass]]
+            d_glass, normal_glass, entering[glass], hits.ior[glass]
         )
         reflect_share[glass] += transparency[glass] * fresnel
         # Glass tints what passes through it (the green marble), not what it reflects.
         weight = np.take(rays.weight, glass, axis=1)
         weight *= transparency[glass] * (1.0 - fresnel)
-        weight *= np.take(color, glass, axis=1)
+        weight *= np.take(hits.color, glass, axis=1)
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
         through = glass[keep]
         inside = np.take(surfaces.position, through, axis=1)
@@ -484,21 +432,17 @@ class Integrator(Closing):
             weight = np.take(weight, keep, axis=1)
         return [RayBatch(inside, refracted, rays.pixel[through], weight)]
 
-    def _reflection_children(
-        self, rays, outside, normal, color, reflect_share, surfaces, work
-    ) -> RayBatch:
+    @staticmethod
+    def _reflection_children(rays, outside, normal, hits, reflect_share, work) -> RayBatch:
         """Mirrors, metals and glass's Fresnel share reflect: the mirror rays whose weight can
         still show, started just outside the surface. Most hits reflect a little, so the
         weights are formed on every row and only the rows kept are gathered."""
         weight = rays.weight * reflect_share
-        looks = surfaces.looks
-        if self.metallic is not None or (looks is not None and looks.shading is not None):
-            # Metals tint what they reflect by their colour; the rest reflect untinted. (Metals
-            # are few: three row passes over them beat a tint factor formed on every row.)
-            metallic = self.metallic if self.metallic is not None else self.materials.metallic
-            metals = np.flatnonzero(self._per_hit(metallic, surfaces, "metallic"))
-            for row in range(3):
-                weight[row, metals] *= color[row, metals]
+        # Metals tint what they reflect by their colour; the rest reflect untinted. (Metals
+        # are few: three row passes over them beat a tint factor formed on every row.)
+        metals = np.flatnonzero(hits.metallic)
+        for row in range(3):
+            weight[row, metals] *= hits.color[row, metals]
         keep = np.flatnonzero(column_max(weight) >= MIN_WEIGHT)
         if len(keep) == 0:
             return NO_RAYS
@@ -517,20 +461,17 @@ class Integrator(Closing):
         )
 
     def _add_direct_light(
-        self, radiance, points, normal, incoming, color, surfaces, work: BatchWork
+        self, radiance, points, normal, incoming, hits: HitMaterials, diffuse, work: BatchWork
     ) -> None:
         """Add to ``radiance`` (3, n) the Blinn-Phong light from every point light that the
-        ``points`` (3, n) see, toward the viewer against the ``incoming`` (3, n) rays."""
+        ``points`` (3, n) see, toward the viewer against the ``incoming`` (3, n) rays, by the
+        hits' colour, ``diffuse`` (n,) share, specular and shininess."""
         n = points.shape[1]
         if n == 0 or len(self.light_positions) == 0:
             return
-        material = surfaces.material
-        diffuse = self._per_hit(self.diffuse_share, surfaces, "diffuse_share")
-        specular = self._per_hit(self.specular, surfaces, "specular")
+        color, specular, shininess = hits.color, hits.specular, hits.shininess
         # Unlit surfaces take no light: no shadow rays for them.
-        takes_light = np.take(self.lit, material)
-        shininess = self._per_hit(self.materials.shininess, surfaces, "shininess")
-        answers = self.geometry.toward_lights(points, normal, self.light_positions, takes_light)
+        answers = self.geometry.toward_lights(points, normal, self.light_positions, hits.lit)
         for light, (visible, direction, made) in enumerate(answers):
             work.rays["shadow"] += made
             lit_count = np.count_nonzero(visible)

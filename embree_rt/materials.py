@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -176,3 +176,106 @@ class MaterialTable:
             absorption=np.array([m.absorption for m in materials], np.float32).reshape(-1, 3),
             unlit=np.array([m.unlit for m in materials], bool),
         )
+
+    @property
+    def glows(self) -> bool:
+        """Whether any material gives off light of its own (``emission``)."""
+        return bool(self.emission.any())
+
+
+@dataclass
+class HitMaterials:
+    """The material of each of k hits, one column per hit, made once per bounce
+    (``HitMaterials.gather``, then what the hits show of their own written over it: a mesh's
+    textures and colours, the floor's checker): what every shading stage reads.
+
+    ``color`` (3, k) float32 linear surface colour; ``ambient``, ``diffuse``, ``specular``,
+    ``shininess``, ``reflectivity``, ``transparency``, ``ior`` (k,) float32 and ``metallic``,
+    ``lit`` (k,) bool, as ``Material`` has them (``lit``: not ``unlit``; an unlit hit's
+    specular and transparency are zero: it shows its colour alone); ``emission`` and
+    ``absorption`` (3, k) float32 (``Material.absorption``); ``occlusion`` (k,) float32 the
+    share of ambient light that reaches each point (glTF occlusion maps) and ``coverage`` (k,)
+    float32 the share of each ray a see-through surface stops (glTF BLEND alpha). Columns the
+    same for every hit (no material glows, none absorbs, no map occludes, every surface is
+    opaque) are zero-stride views of that value: read like any other, written over only after
+    ``np.array`` (the ``HitLooks`` that vary them make them so)."""
+
+    color: np.ndarray
+    ambient: np.ndarray
+    diffuse: np.ndarray
+    specular: np.ndarray
+    shininess: np.ndarray
+    reflectivity: np.ndarray
+    transparency: np.ndarray
+    ior: np.ndarray
+    metallic: np.ndarray
+    lit: np.ndarray
+    emission: np.ndarray
+    absorption: np.ndarray
+    occlusion: np.ndarray
+    coverage: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.ambient)
+
+    @classmethod
+    def gather(
+        cls, table: MaterialTable, material: np.ndarray, color_from: int = 0
+    ) -> HitMaterials:
+        """The columns of k hits on the materials ``material`` (k,) intp of ``table``; the
+        colour of the columns before ``color_from`` is left unset (the caller's: the floor's
+        checker)."""
+        k = len(material)
+        color = np.empty((3, k), np.float32)
+        # gathered straight into place (mode "clip": an ``out`` is not copied first, and the
+        # ids are all in range)
+        own = material[color_from:]
+        for row, values in zip(color, table.color.T, strict=True):
+            np.take(values, own, out=row[color_from:], mode="clip")
+
+        def vectors(values: np.ndarray, any_nonzero: bool) -> np.ndarray:
+            if any_nonzero:
+                return np.take(np.ascontiguousarray(values.T), material, axis=1)
+            return np.broadcast_to(np.float32(0.0), (3, k))
+
+        lit = ~np.take(table.unlit, material)
+        hits = cls(
+            color=color,
+            ambient=np.take(table.ambient, material),
+            diffuse=np.take(table.diffuse, material),
+            specular=np.take(table.specular, material),
+            shininess=np.take(table.shininess, material),
+            reflectivity=np.take(table.reflectivity, material),
+            transparency=np.take(table.transparency, material),
+            ior=np.take(table.ior, material),
+            metallic=np.take(table.metallic, material),
+            lit=lit,
+            emission=vectors(table.emission, table.glows),
+            absorption=vectors(table.absorption, bool((table.absorption > 0).any())),
+            occlusion=np.broadcast_to(np.float32(1.0), (k,)),
+            coverage=np.broadcast_to(np.float32(1.0), (k,)),
+        )
+        if table.unlit.any():
+            hits.specular[~lit] = 0.0
+            hits.transparency[~lit] = 0.0
+        return hits
+
+    def vary(self, rows: np.ndarray, values: object) -> None:
+        """Write the columns of the dataclass ``values`` (fields named as these columns, each
+        (j,)) at the hits ``rows`` (j,) int64."""
+        for item in fields(values):
+            getattr(self, item.name)[rows] = getattr(values, item.name)
+
+    def shares(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(k,) float32 each: the hits' shares of ambient light, of diffuse light and of the
+        mirror (``shading_shares``); an unlit hit shows its colour whole, as ambient light,
+        and nothing else."""
+        ambient, diffuse, reflect = shading_shares(
+            self.ambient, self.diffuse, self.reflectivity, self.transparency
+        )
+        unlit = np.flatnonzero(~self.lit)
+        if len(unlit):
+            ambient[unlit] = 1.0
+            diffuse[unlit] = 0.0
+            reflect[unlit] = 0.0
+        return ambient, diffuse, reflect

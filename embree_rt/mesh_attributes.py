@@ -8,13 +8,13 @@ Everything here works on whole batches of hits, in the mesh's own space.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from embree_rt.columns import scatter
-from embree_rt.materials import shading_shares
+from embree_rt.materials import HitMaterials
 from embree_rt.scene.gltf_materials import LOOKS_KEY, metallic_roughness_parameters
 from embree_rt.scene.model import MeshObject
 from embree_rt.textures import DEFAULT_SAMPLER, sample_texture
@@ -91,13 +91,12 @@ class HitLooks:
     alpha of see-through (BLEND) surfaces (None: opaque); ``normal`` (3, j) float32 unit
     shading normals a normal map gives, in the mesh's own space, of the hits at positions
     ``normal_at`` (j,) int64 among these (None: the usual normals); ``occlusion`` (k,) float32
-    the share of ambient light that reaches each point (None: all); ``shading`` the Blinn-Phong
-    parameters that metallic-roughness and transmission textures vary, by name (the
-    integrator's per-material tables': "ambient_share", "diffuse_share", "reflect_share",
-    "specular", "shininess", "transparency" (j,) float32 and "metallic" (j,) bool), of the hits
-    at positions ``shading_at`` (j,) int64 among these (None: the materials'). ``uv`` (2, k)
-    float32 the coordinates the base-colour texture is read at, inf at hits on a mesh without
-    that texture (None: no hit is on one)."""
+    the share of ambient light that reaches each point (None: all); ``parameters`` the
+    Blinn-Phong parameters that metallic-roughness and transmission textures vary
+    (``TexturedParameters``), of the hits at positions ``parameters_at`` (j,) int64 among these
+    (None: the materials'). ``uv`` (2, k) float32 the coordinates the base-colour texture is
+    read at, inf at hits on a mesh without that texture (None: no hit is on one). ``NO_LOOKS``
+    of hits that show nothing of their own has no rows."""
 
     rows: np.ndarray
     color: np.ndarray
@@ -106,9 +105,46 @@ class HitLooks:
     normal: np.ndarray | None = None
     normal_at: np.ndarray | None = None
     occlusion: np.ndarray | None = None
-    shading: dict[str, np.ndarray] | None = None
-    shading_at: np.ndarray | None = None
+    parameters: TexturedParameters | None = None
+    parameters_at: np.ndarray | None = None
     uv: np.ndarray | None = None
+
+    def apply_to(self, hits: HitMaterials, glows: bool) -> None:
+        """Write what these hits show of their own over the columns of ``hits`` (the
+        ``HitMaterials`` of every hit, these at ``rows``): colour, textured parameters,
+        occlusion, coverage and, when some material ``glows`` (else nothing glows), emission."""
+        if len(self.rows) == 0:
+            return
+        scatter(hits.color, self.rows, self.color)
+        if self.parameters is not None:
+            hits.vary(self.rows[self.parameters_at], self.parameters)
+        if self.emission is not None and glows:
+            scatter(hits.emission, self.rows, self.emission)
+        if self.occlusion is not None:
+            hits.occlusion = np.array(hits.occlusion)
+            hits.occlusion[self.rows] = self.occlusion
+        if self.coverage is not None:
+            hits.coverage = np.array(hits.coverage)
+            hits.coverage[self.rows] = self.coverage
+
+
+@dataclass
+class TexturedParameters:
+    """The Blinn-Phong parameters of j hits that metallic-roughness and transmission textures
+    vary, named as ``HitMaterials``' columns: ``diffuse``, ``specular``, ``shininess``,
+    ``reflectivity``, ``transparency`` (j,) float32 and ``metallic`` (j,) bool."""
+
+    diffuse: np.ndarray
+    specular: np.ndarray
+    shininess: np.ndarray
+    reflectivity: np.ndarray
+    transparency: np.ndarray
+    metallic: np.ndarray
+
+
+def no_looks() -> HitLooks:
+    """The ``HitLooks`` of hits that show nothing of their own: no rows."""
+    return HitLooks(np.zeros(0, np.int64), np.zeros((3, 0), np.float32))
 
 
 def surface_looks(
@@ -171,8 +207,8 @@ def surface_looks(
     if (looks.metallic_roughness is not None or looks.transmission is not None) and not (
         looks.material.unlit
     ):
-        result.shading = textured_shading(looks, blend)
-        result.shading_at = np.arange(len(face))
+        result.parameters = textured_parameters(looks, blend)
+        result.parameters_at = np.arange(len(face))
     if looks.normal is not None and frame is not None:
         slot = looks.normal
         sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[:3]
@@ -181,11 +217,11 @@ def surface_looks(
     return result
 
 
-def textured_shading(looks, blend) -> dict[str, np.ndarray]:
-    """The per-hit parameters (``HitLooks.shading``) of hits on a glTF surface whose
+def textured_parameters(looks, blend) -> TexturedParameters:
+    """The per-hit parameters (``HitLooks.parameters``) of hits on a glTF surface whose
     metallic-roughness texture (B metallic, G roughness, times the factors) or transmission
     texture (R, times the factor) varies them: the material mapping's own rule
-    (``metallic_roughness_parameters``) and the shares' (``shading_shares``), per hit."""
+    (``metallic_roughness_parameters``), per hit."""
     material = looks.material
     slot = looks.metallic_roughness
     if slot is not None:
@@ -202,22 +238,14 @@ def textured_shading(looks, blend) -> dict[str, np.ndarray]:
         slot = looks.transmission
         sample = sample_texture(slot.texels, blend(slot.uv), slot.sampler)[0]
         transparency = np.clip(np.float32(looks.transmission_factor) * sample, 0.0, 1.0)
-    f32 = {
-        name: np.asarray(values[name], np.float32)
-        for name in ("diffuse", "specular", "shininess", "reflectivity")
-    }
-    ambient, diffuse, reflect = shading_shares(
-        np.float32(material.ambient), f32["diffuse"], f32["reflectivity"], transparency
+    return TexturedParameters(
+        **{
+            name: np.asarray(values[name], np.float32)
+            for name in ("diffuse", "specular", "shininess", "reflectivity")
+        },
+        transparency=transparency.astype(np.float32),
+        metallic=np.asarray(values["metallic"], bool),
     )
-    return {
-        "ambient_share": ambient,
-        "diffuse_share": diffuse,
-        "reflect_share": reflect,
-        "specular": f32["specular"],
-        "shininess": f32["shininess"],
-        "transparency": transparency.astype(np.float32),
-        "metallic": np.asarray(values["metallic"]),
-    }
 
 
 def mapped_normals(sample, scale: float, frame, face: np.ndarray, blend) -> np.ndarray:
@@ -430,13 +458,15 @@ def _gather_looks(parts: list[HitLooks], count: int) -> HitLooks:
     if normals:
         looks.normal = np.concatenate([part.normal for part in normals], axis=1)
         looks.normal_at = np.concatenate([part.rows[part.normal_at] for part in normals])
-    shaded = [part for part in parts if part.shading is not None]
-    if shaded:
-        looks.shading = {
-            name: np.concatenate([part.shading[name] for part in shaded])
-            for name in shaded[0].shading
-        }
-        looks.shading_at = np.concatenate([part.rows[part.shading_at] for part in shaded])
+    varied = [part for part in parts if part.parameters is not None]
+    if varied:
+        looks.parameters = TexturedParameters(
+            **{
+                item.name: np.concatenate([getattr(part.parameters, item.name) for part in varied])
+                for item in fields(TexturedParameters)
+            }
+        )
+        looks.parameters_at = np.concatenate([part.rows[part.parameters_at] for part in varied])
     if any(part.occlusion is not None for part in parts):
         looks.occlusion = np.ones(count, np.float32)
         for part in parts:

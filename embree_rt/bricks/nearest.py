@@ -25,10 +25,11 @@ import numpy as np
 
 from embree_rt.bricks.brick import OTHER_GROUP, SPHERE_GROUP, BrickHits
 from embree_rt.geometry import SurfaceHits
+from embree_rt.mesh_attributes import HitLooks
 
 NO_OBJECT = np.iinfo(np.int64).max
 # Fields of SurfaceHits that are not one column per hit.
-_NOT_COLUMNS = {"flat", "floor_count", "colored", "color"}
+_NOT_COLUMNS = {"flat", "floor_count", "looks"}
 
 
 def nearest_over_bricks(
@@ -82,7 +83,7 @@ def gather_surfaces(
     """One ``SurfaceHits`` whose column j is column ``column[j]`` of ``parts[source[j]]``
     ((m,) int64 each), its first ``floor_count`` columns floor hits. Every per-hit field is
     gathered (whatever fields ``SurfaceHits`` has), in the widest of the parts' dtypes; a field
-    some part lacks (None) is None."""
+    some part lacks (None) is None. Of the parts' looks, their colours are kept."""
     picks = [np.flatnonzero(source == index) for index in range(len(parts))]
     m = len(source)
     values = {}
@@ -106,17 +107,15 @@ def gather_surfaces(
         values["face_normal"] = values["normal"]
     colored, color = [], []
     for part, pick in zip(parts, picks, strict=True):
-        if part.colored is None or not len(pick):
+        if not len(part.looks.rows) or not len(pick):
             continue
         place = np.full(len(part.t), -1, np.int64)
         place[column[pick]] = pick
-        kept = place[part.colored] >= 0
-        colored.append(place[part.colored][kept])
-        color.append(part.color[:, kept])
-    return SurfaceHits(
-        **values,
-        flat=flat,
-        floor_count=floor_count,
-        colored=np.concatenate(colored) if colored else None,
-        color=np.concatenate(color, axis=1) if color else None,
+        kept = place[part.looks.rows] >= 0
+        colored.append(place[part.looks.rows][kept])
+        color.append(part.looks.color[:, kept])
+    looks = HitLooks(
+        np.concatenate(colored) if colored else np.zeros(0, np.int64),
+        np.concatenate(color, axis=1) if color else np.zeros((3, 0), np.float32),
     )
+    return SurfaceHits(**values, flat=flat, floor_count=floor_count, looks=looks)
