@@ -34,9 +34,10 @@ import numpy as np
 
 from embree_rt import Renderer, film, integrator
 from embree_rt.compiled.camera_rays import sample_directions
-from embree_rt.embree import camera_query, kernels, segments
+from embree_rt.embree import kernels
 from embree_rt.integrator import DEFAULT_BATCH_SIZE
 from embree_rt.scene import random_field
+from embree_rt.tracing import camera_query, segments
 
 STAGES = ("camera", "traversal", "records", "shading", "shadow", "film")
 

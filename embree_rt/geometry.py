@@ -20,7 +20,7 @@ import numpy as np
 
 from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
-from embree_rt.embree import BVH, HitLabels, HitRecords, spheres_in_spatial_order
+from embree_rt.embree import BVH, spheres_in_spatial_order
 from embree_rt.mesh_attributes import (
     HitLooks,
     MeshColors,
@@ -30,6 +30,9 @@ from embree_rt.mesh_attributes import (
     unit_vertex_normals,
 )
 from embree_rt.scene.model import MeshObject, Scene
+from embree_rt.tracing import segments
+from embree_rt.tracing.camera_query import intersect_camera_records
+from embree_rt.tracing.records import HitLabels, HitRecords, intersect_records
 
 if TYPE_CHECKING:
     import trimesh
@@ -386,8 +389,13 @@ class SceneGeometry(Closing):
         camera rays (Embree's coherent query; the same answers, found faster). ``ids``: whether
         the surfaces carry Embree's ids of each hit (``prim_id``, ``inst_id``,
         ``inst_prim_id``; None without them, unless the scene has meshes, which need them)."""
-        records = self.bvh.intersect_records(
-            origins, directions, self.labels, coherent=coherent, ids=ids or self.has_meshes
+        records = intersect_records(
+            self.bvh,
+            origins,
+            directions,
+            self.labels,
+            coherent=coherent,
+            ids=ids or self.has_meshes,
         )
         return records.rays, self._surfaces(records)
 
@@ -395,10 +403,10 @@ class SceneGeometry(Closing):
         self, camera: CameraRays, index: np.ndarray, ids: bool = True
     ) -> tuple[np.ndarray, SurfaceHits, np.ndarray]:
         """``intersect_compact`` of the camera rays of samples ``index`` (n,) int64, made
-        inside the query (``BVH.intersect_camera_records``): the (k,) ray numbers that hit,
-        their ``SurfaceHits``, and the (3, n) float32 directions of all n rays."""
-        records, directions = self.bvh.intersect_camera_records(
-            camera, index, self.labels, ids or self.has_meshes
+        inside the query (``tracing.camera_query``): the (k,) ray numbers that hit, their
+        ``SurfaceHits``, and the (3, n) float32 directions of all n rays."""
+        records, directions = intersect_camera_records(
+            self.bvh, camera, index, self.labels, ids or self.has_meshes
         )
         return records.rays, self._surfaces(records), directions
 
@@ -486,8 +494,8 @@ class SceneGeometry(Closing):
         self, points: np.ndarray, rows: np.ndarray, target: np.ndarray
     ) -> np.ndarray:
         """(k,) bool: whether any surface, floor included, lies between each of the ``points``
-        (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``BVH.occluded_toward``."""
-        return self.bvh.occluded_toward(points, rows, target, plane_y=self.labels.plane_y)
+        (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``segments.occluded_toward``."""
+        return segments.occluded_toward(self.bvh, points, rows, target, self.labels.plane_y)
 
     def toward_lights(
         self,
@@ -498,8 +506,10 @@ class SceneGeometry(Closing):
     ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
         """Per light of ``targets`` (L, 3), what the ``points`` (3, n) float32 with unit
         ``normals`` (3, n) that ``takes`` ((n,) bool) light see of it, the floor included:
-        ``BVH.toward_lights``."""
-        return self.bvh.toward_lights(points, normals, targets, takes, self.labels.plane_y)
+        ``segments.toward_lights``."""
+        return segments.toward_lights(
+            self.bvh, points, normals, targets, takes, self.labels.plane_y
+        )
 
 
 @dataclass

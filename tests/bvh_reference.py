@@ -528,7 +528,7 @@ def occluded_or_below_plane(
 ) -> np.ndarray:
     """(n,) bool: ``bvh.occluded`` of rays ``origins``, ``directions`` (n, 3) float32 within
     [tnear, tfar], or the ground plane y = ``plane_y`` crossed there, decided in float32 as the
-    renderer's kernels decide it (``embree_rt.embree.records.plane_crossing``: t = (plane_y -
+    renderer's kernels decide it (``embree_rt.tracing.records.plane_crossing``: t = (plane_y -
     oy) / dy, counted when max(tnear, 0) <= t <= tfar and finite). NumPy's float32 division and
     comparisons are IEEE's, as the kernel's, so the answers are the kernel's bit for bit on
     every x86-64 ISA (no fused or reordered arithmetic is involved)."""

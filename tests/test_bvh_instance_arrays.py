@@ -19,8 +19,9 @@ from bvh_reference import (
 )
 from tolerances import assert_close, position_atol
 
-from embree_rt.embree import BVH, HitLabels
+from embree_rt.embree import BVH
 from embree_rt.embree.bvh import SPHERE_KINDS
+from embree_rt.tracing.records import HitLabels, intersect_records
 
 
 def placements(rng: np.random.Generator, count: int, *, uniform: bool = False) -> np.ndarray:
@@ -140,10 +141,11 @@ def test_hit_records_of_an_instance_array():
             geometry_scale=np.zeros(top.geometry_count, np.float32),
             instance_labels={array_gid: labels},
         )
-        records = top.intersect_records(
-            origins.T.astype(np.float32), directions.T.astype(np.float32), table
+        records = intersect_records(
+            top, origins.T.astype(np.float32), directions.T.astype(np.float32), table
         )
-        unlabelled = top.intersect_records(
+        unlabelled = intersect_records(
+            top,
             origins.T.astype(np.float32),
             directions.T.astype(np.float32),
             HitLabels(

@@ -36,6 +36,7 @@ from tolerances import (
 )
 
 from embree_rt.embree import BVH
+from embree_rt.tracing.segments import occluded_toward, toward_lights
 
 KINDS = ("spheres", "triangles", "instances")
 
@@ -233,7 +234,7 @@ def test_occluded_toward_answers_what_occluded_answers_on_the_same_segments(part
     bvh, ids = parts.build(threads=threads)
     with bvh:
         bvh.lanes = lanes
-        blocked = bvh.occluded_toward(points, rows, target, plane_y=-4.0)
+        blocked = occluded_toward(bvh, points, rows, target, plane_y=-4.0)
         origins = points[:, rows].T.copy()
         directions = (target[:, None] - points[:, rows]).T.copy()
         expected = occluded_or_below_plane(bvh, origins, directions, 0.0, 1.0, -4.0)
@@ -267,7 +268,7 @@ def test_toward_lights_traces_the_facing_segments_and_gives_numpys_unit_directio
     bvh, _ = parts.build(threads=threads)
     with bvh:
         bvh.lanes = 1
-        answers = list(bvh.toward_lights(points, normals, targets, takes, plane_y=-4.0))
+        answers = list(toward_lights(bvh, points, normals, targets, takes, plane_y=-4.0))
         assert len(answers) == 2
         for target, (visible, directions, made) in zip(targets, answers, strict=True):
             to_light = target[:, None] - points
@@ -277,14 +278,14 @@ def test_toward_lights_traces_the_facing_segments_and_gives_numpys_unit_directio
             rows = np.flatnonzero(facing & takes)
             assert made == len(rows) and 0.2 < len(rows) / 3000 < 0.6
             expected = np.zeros(3000, bool)
-            expected[rows] = ~bvh.occluded_toward(points, rows, target, plane_y=-4.0)
+            expected[rows] = ~occluded_toward(bvh, points, rows, target, plane_y=-4.0)
             assert np.array_equal(visible, expected) and 0.1 < visible.mean() < 0.5
             length = np.sqrt((to_light[0] ** 2 + to_light[1] ** 2) + to_light[2] ** 2)
             unit_toward = to_light * (np.float32(1.0) / np.maximum(length, np.float32(1e-30)))
             assert np.array_equal(directions[:, visible], unit_toward[:, visible])
             assert not directions[:, ~visible].any()
-        # without ``takes`` every facing point makes a segment
-        _, _, made = next(bvh.toward_lights(points, normals, targets[:1]))
+        # where every point takes light, every facing point makes a segment
+        _, _, made = next(toward_lights(bvh, points, normals, targets[:1], np.ones(3000, bool)))
         to_light = targets[0][:, None] - points
         facing = (to_light[0] * normals[0] + to_light[1] * normals[1]) + to_light[2] * normals[2]
         assert made == np.count_nonzero(facing > 0)
@@ -294,34 +295,35 @@ def test_toward_lights_refuses_bad_points_normals_and_takes(parts):
     bvh, _ = parts.build(("spheres",))
     points = np.zeros((3, 5), np.float32)
     normals = np.ones((3, 5), np.float32)
+    takes = np.ones(5, bool)
     with bvh:
         with pytest.raises(ValueError, match=r"normals: expected shape \(3, n\)"):
-            next(bvh.toward_lights(points, normals[:, :4], [0, 1, 0]))
+            next(toward_lights(bvh, points, normals[:, :4], [0, 1, 0], takes))
         with pytest.raises(ValueError, match=r"takes: expected \(5,\) bool"):
-            next(bvh.toward_lights(points, normals, [0, 1, 0], np.ones(5)))
+            next(toward_lights(bvh, points, normals, [0, 1, 0], np.ones(5)))
         normals[2, 1] = np.inf
         with pytest.raises(ValueError, match="normals: row 1 is not finite"):
-            next(bvh.toward_lights(points, normals, [0, 1, 0]))
+            next(toward_lights(bvh, points, normals, [0, 1, 0], takes))
 
 
 def test_occluded_toward_refuses_bad_points_and_rows(parts):
     bvh, _ = parts.build(("spheres",))
     points = np.zeros((3, 5), np.float32)
     with bvh:
-        assert bvh.occluded_toward(points, np.zeros(0, np.int64), [0, 1, 0]).shape == (0,)
+        assert occluded_toward(bvh, points, np.zeros(0, np.int64), [0, 1, 0]).shape == (0,)
         with pytest.raises(ValueError, match=r"rows: row 1 is 5, outside \[0, 5\)"):
-            bvh.occluded_toward(points, [0, 5], [0, 1, 0])
+            occluded_toward(bvh, points, [0, 5], [0, 1, 0])
         with pytest.raises(ValueError, match="rows: row 0 is -1"):
-            bvh.occluded_toward(points, [-1], [0, 1, 0])
+            occluded_toward(bvh, points, [-1], [0, 1, 0])
         with pytest.raises(ValueError, match="rows: expected"):
-            bvh.occluded_toward(points, [0.5], [0, 1, 0])
+            occluded_toward(bvh, points, [0.5], [0, 1, 0])
         with pytest.raises(ValueError, match=r"points: expected shape \(3, n\)"):
-            bvh.occluded_toward(points.T, [0], [0, 1, 0])
+            occluded_toward(bvh, points.T, [0], [0, 1, 0])
         points[1, 3] = np.nan
         with pytest.raises(ValueError, match="points: row 3 is not finite"):
-            bvh.occluded_toward(points, [0], [0, 1, 0])
+            occluded_toward(bvh, points, [0], [0, 1, 0])
         with pytest.raises(ValueError, match="target: row 0 is not finite"):
-            bvh.occluded_toward(points[:, :3], [0], [0, np.inf, 0])
+            occluded_toward(bvh, points[:, :3], [0], [0, np.inf, 0])
 
 
 def test_empty_scene_misses_everything():

@@ -1,10 +1,10 @@
 """The compiled camera rays and film against the NumPy code they replaced, bit for bit.
 
-Camera rays (``compiled.camera_rays``, and inside the first query ``embree.camera_query``) and
+Camera rays (``compiled.camera_rays``, and inside the first query ``tracing.camera_query``) and
 the film's sums and mean (``compiled.film_sums``) must give exactly the bits the NumPy
 expressions gave (``camera_reference``; ``np.bincount``; ``np.divide``), so that no image
 changes; so must the shadow segments' facing test and unit directions toward a light
-(``embree.segments``, against NumPy in ``test_bvh_queries``). Why that holds on every x86-64
+(``tracing.segments``, against NumPy in ``test_bvh_queries``). Why that holds on every x86-64
 ISA (SSE2, AVX2, AVX-512), and is not luck on this machine: both sides use only IEEE 754
 operations that are correctly rounded whatever the vector width (+, -, *, /, sqrt, conversions
 between int64, float32 and float64), in the same order and precision; NumPy runs each ufunc as
@@ -30,9 +30,10 @@ from embree_rt import Camera, Scene, random_field, render
 from embree_rt.camera import camera_frame, camera_rays, sample_rays, tiled_samples
 from embree_rt.compiled import camera_rays as camera_module
 from embree_rt.compiled import film_sums
-from embree_rt.embree import BVH, camera_query, kernels, segments
+from embree_rt.embree import BVH, kernels
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry
+from embree_rt.tracing import camera_query, segments
 
 
 def random_frames(seed: int, count: int):

@@ -15,6 +15,7 @@ from tolerances import RTOL32, assert_close, position_atol, ray_t_atol
 from embree_rt import Scene
 from embree_rt.geometry import SceneGeometry
 from embree_rt.scene.model import Floor
+from embree_rt.tracing.records import intersect_records
 
 HEIGHT = -1.5
 
@@ -48,7 +49,7 @@ def occluded(geometry: SceneGeometry, origins, directions, tnear, tfar) -> np.nd
 
 def nearest(geometry: SceneGeometry, origins, directions, tnear, tfar):
     """The hit records of the scene's nearest-hit query inside [tnear, tfar]."""
-    return geometry.bvh.intersect_records(origins, directions, geometry.labels, tnear, tfar)
+    return intersect_records(geometry.bvh, origins, directions, geometry.labels, tnear, tfar)
 
 
 @pytest.fixture(scope="module")

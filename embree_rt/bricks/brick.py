@@ -18,7 +18,7 @@ from embree_rt.aovs import hit_object_ids
 from embree_rt.bricks.contents import BrickContents
 from embree_rt.geometry import SceneGeometry, SurfaceHits, sphere_kind
 
-# The hit records' groups (embree.GROUPS) an object hit falls in: the top-level sphere set, or
+# The hit records' groups (tracing.GROUPS) an object hit falls in: the top-level sphere set, or
 # any other object (instances, instance arrays: meshes and tessellated spheres).
 SPHERE_GROUP, OTHER_GROUP = 1, 2
 

@@ -3,15 +3,6 @@ kernels that call Embree or read its structs)."""
 
 from embree_rt.embree.bvh import BVH, Hits
 from embree_rt.embree.library import EmbreeError
-from embree_rt.embree.records import GROUPS, HitLabels, HitRecords
 from embree_rt.embree.spatial_order import spheres_in_spatial_order
 
-__all__ = [
-    "BVH",
-    "GROUPS",
-    "EmbreeError",
-    "HitLabels",
-    "HitRecords",
-    "Hits",
-    "spheres_in_spatial_order",
-]
+__all__ = ["BVH", "EmbreeError", "Hits", "spheres_in_spatial_order"]

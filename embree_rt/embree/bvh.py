@@ -5,33 +5,26 @@ from __future__ import annotations
 import ctypes
 import threading
 import weakref
-from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
 from embree_rt.closing import Closing
-from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.compiled.work_split import parallel_region
+from embree_rt.embree import device as device_module
 from embree_rt.embree import (
-    camera_query,
     instance_arrays,
     kernels,
     library,
     multihit,
-    records,
-    segments,
     spatial_order,
     sphere_buffers,
     user_spheres,
     world_normals,
 )
-from embree_rt.embree import device as device_module
 from embree_rt.embree.alpha_filter import TriangleFilter
-from embree_rt.embree.records import HitLabels, HitRecords
 from embree_rt.embree.validation import (
-    as_indices,
     as_points,
     as_positive,
     as_ray_bounds,
@@ -71,7 +64,6 @@ class Hits:
 SPHERE_KINDS = ("user", "point")
 _NO_SPHERES = (np.zeros((0, 4), np.float32), np.zeros(0, np.int32))
 _IDENTITY_SLOTS = np.zeros(0, np.int32)
-_NO_LABELS = np.zeros(0, np.int32)
 _NO_NORMAL_MATRICES = np.zeros((0, 3, 3), np.float32)
 _NO_ARRAYS = np.zeros((0, instance_arrays.ARRAY_COLUMNS), np.uint64)
 
@@ -92,7 +84,7 @@ def _prepare_kernels() -> None:
 def native_lanes(device: device_module.Device) -> int:
     """The widest packet Embree runs natively on this CPU (16 with AVX-512, 8 with AVX2, else
     4). On this project's AVX2 machine 8-wide packets traced user-geometry spheres 1.2–1.8x
-    faster than 4-wide ones, and 16-wide ones (emulated there) no faster than 8 (DESIGN.md)."""
+    faster than 4-wide ones, and 16-wide ones (emulated there) no faster than 8."""
     for lanes, prop in (
         (16, library.DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED),
         (8, library.DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED),
@@ -123,8 +115,8 @@ class BVH(Closing):
     widest this CPU runs natively, see ``native_lanes``). ``build_quality`` is Embree's: "low",
     "medium" (Embree's default) or "high"; ``compact`` asks Embree for its compact (less memory)
     structures. ``robust`` selects Embree's watertight triangle test (no ray slips between two
-    triangles sharing an edge); ``filters`` enables ``all_hits`` and ``crossing_parity`` (every
-    hit along a ray, ``multihit``). Release the Embree objects with ``close()`` or a ``with``
+    triangles sharing an edge); ``filters`` enables ``all_hits`` (every hit along a ray,
+    ``multihit``). Release the Embree objects with ``close()`` or a ``with``
     block; a finalizer does it otherwise.
     """
 
@@ -459,7 +451,7 @@ class BVH(Closing):
 
     # -- queries ------------------------------------------------------------------------------
 
-    def _run_query(self, chunk, parallel, arguments: tuple, n: int):
+    def run_query(self, chunk, parallel, arguments: tuple, n: int):
         """Run a query over n rays: on one thread, its ``chunk`` kernel over all of them in the
         calling thread (no threading layer: several Python threads may do so at once), else
         ``parallel``, its driver, on numba's threads; returns what the kernel returns."""
@@ -481,7 +473,7 @@ class BVH(Closing):
         self._ready_to_query()
         return self._live_scene()
 
-    def _query_rays(self, origins, directions, tnear, tfar) -> kernels.Rays:
+    def query_rays(self, origins, directions, tnear, tfar) -> kernels.Rays:
         """A query's rays, validated, as the kernels take them (refused before ``commit``)."""
         self._ready_to_query()
         origins = as_points(origins, "origins")
@@ -489,28 +481,24 @@ class BVH(Closing):
         tnear, tfar = as_ray_bounds(tnear, tfar, len(origins))
         return kernels.Rays(origins, directions, tnear, tfar)
 
-    def _raw_hits(self, rays: kernels.Rays, coherent: bool) -> Hits:
+    def nearest_hits(self, rays: kernels.Rays, coherent: bool) -> Hits:
         """Embree's answers as it gives them (normals in object space) for validated rays."""
         n = len(rays.origins)
-        hits = self._empty_hits(n)
+        hits = self.empty_hits(n)
         if n and self.geometry_count == 0:
-            # Nothing to hit (a scene of the ground plane alone, answered by the records): the
-            # misses Embree would report (kernels' _store_miss), without a call a ray.
+            # Nothing to hit: the misses Embree would report (kernels' _store_miss), without
+            # a call a ray.
             hits.t.fill(np.inf)
             for numbers in (hits.geom_id, hits.prim_id, hits.inst_id, hits.inst_prim_id):
                 numbers.fill(-1)
             for values in (hits.normal, hits.u, hits.v):
                 values.fill(0.0)
         elif n:
-            arguments = (self._query(coherent), rays, self._nearest(hits), self._copy_numbers(hits))
-            self._run_query(kernels.intersect_chunk, kernels.intersect, arguments, n)
+            arguments = (self.query(coherent), rays, *self.kernel_hits(hits))
+            self.run_query(kernels.intersect_chunk, kernels.intersect, arguments, n)
         return hits
 
-    def _copy_numbers(self, hits: Hits) -> np.ndarray | None:
-        """Where the kernels write instance-array copy numbers: None when there are none."""
-        return hits.inst_prim_id if self.array_count else None
-
-    def _empty_hits(self, n: int) -> Hits:
+    def empty_hits(self, n: int) -> Hits:
         hits = Hits(
             t=np.empty(n, np.float32),
             geom_id=np.empty(n, np.int32),
@@ -525,15 +513,30 @@ class BVH(Closing):
         hits.inst_prim_id = np.empty(n, np.int32) if copies else np.full(n, -1, np.int32)
         return hits
 
-    def _query(self, coherent: bool) -> kernels.Query:
+    def query(self, coherent: bool = False) -> kernels.Query:
+        """What the kernels call Embree's queries on (this committed BVH; Embree's coherent
+        flag with ``coherent``), for compiled passes defined outside this class."""
+        self._ready_to_query()
         return kernels.Query(self._live_scene(), kernels.query_arguments(coherent), self.lanes)
 
-    @staticmethod
-    def _nearest(hits: Hits) -> kernels.NearestHits:
-        """The kernels' view of ``hits``' arrays."""
-        return kernels.NearestHits(
+    def kernel_hits(self, hits: Hits) -> tuple[kernels.NearestHits, np.ndarray | None]:
+        """The kernels' view of ``hits``' arrays (``kernels.intersect``'s ``hits``), and where
+        they write instance-array copy numbers (None when this BVH has no instance array)."""
+        nearest = kernels.NearestHits(
             hits.t, hits.normal, hits.u, hits.v, hits.prim_id, hits.geom_id, hits.inst_id
         )
+        return nearest, (hits.inst_prim_id if self.array_count else None)
+
+    def sphere_buffer(self, geom_id: int) -> tuple[np.ndarray, np.ndarray]:
+        """The sphere set ``geom_id``'s (m, 4) float32 (x, y, z, r) as stored, sphere p in slot
+        ``slot[p]`` ((m,) int32; empty when slot p holds sphere p); none for another geometry."""
+        return self._sphere_buffers.get(geom_id, _NO_SPHERES)
+
+    def world_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """The tables compiled passes take object-space normals to world space with
+        (``world_normals``): the (g, 3, 3) float32 normal matrices by geometry id and the
+        instance arrays' (g, ``instance_arrays.ARRAY_COLUMNS``) uint64 table."""
+        return self._normal_matrix_table, self._array_table
 
     def intersect(
         self,
@@ -547,7 +550,7 @@ class BVH(Closing):
 
         ``origins``, ``directions`` (n, 3); ``tnear``, ``tfar`` scalars or (n,).
         """
-        hits = self._raw_hits(self._query_rays(origins, directions, tnear, tfar), coherent)
+        hits = self.nearest_hits(self.query_rays(origins, directions, tnear, tfar), coherent)
         if self._has_instances:
             world_normals.hits_to_world(
                 hits.inst_id,
@@ -557,123 +560,6 @@ class BVH(Closing):
                 self._array_table,
             )
         return hits
-
-    def intersect_records(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        labels: HitLabels,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-        coherent: bool = False,
-        ids: bool = True,
-    ) -> HitRecords:
-        """The nearest hits of rays given as columns, ``origins``, ``directions`` (3, n), with
-        ``labels``' ground plane, as ``HitRecords``: only the rays that hit, grouped by kind,
-        with world positions, unit normals and labels worked out in one compiled pass (and,
-        with ``ids``, Embree's ids and (u, v) of each hit)."""
-        origins = np.ascontiguousarray(origins, np.float32)
-        directions = np.ascontiguousarray(directions, np.float32)
-        rays = self._query_rays(origins.T, directions.T, tnear, tfar)
-        hits = self._raw_hits(rays, coherent)
-        return self._records(origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
-
-    def intersect_camera_records(
-        self, camera: CameraRays, index: np.ndarray, labels: HitLabels, ids: bool = True
-    ) -> tuple[HitRecords, np.ndarray]:
-        """``intersect_records`` of the camera rays of samples ``index`` (n,) int64 (below
-        ``width * height * spp`` of ``camera``), made inside the query (``camera_query``):
-        bitwise the records of ``camera.sample_rays``' rays, coherent. Returns the records and
-        the rays' (3, n) float32 unit directions."""
-        self._ready_to_query()
-        index = np.ascontiguousarray(index, np.int64)
-        n = len(index)
-        directions = np.empty((3, n), np.float32)
-        rays = camera_query.camera_query_rays(camera.origin, directions)
-        hits = self._empty_hits(n)
-        if n:
-            arguments = (
-                self._query(True),
-                camera,
-                index,
-                directions,
-                rays,
-                self._nearest(hits),
-                self._copy_numbers(hits),
-            )
-            self._run_query(
-                camera_query.intersect_camera_chunk, camera_query.intersect_camera, arguments, n
-            )
-        origins = np.broadcast_to(camera.origin[:, None], (3, n))
-        records = self._records(origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
-        return records, directions
-
-    def _records(self, origins, directions, near, far, hits: Hits, labels: HitLabels, ids=True):
-        """The ``HitRecords`` of raw ``hits`` of rays given as (3, n) columns (without Embree's
-        ids unless ``ids``; instance arrays need them)."""
-        ids = ids or bool(self.array_count)
-        spheres, sphere_slot = self._sphere_buffers.get(labels.sphere_geom_id, _NO_SPHERES)
-        sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
-        has_plane = labels.plane_y is not None
-        record_labels = records.RecordLabels(
-            has_plane,
-            np.float32(labels.plane_y if has_plane else 0.0),
-            int(labels.plane_label),
-            int(labels.sphere_geom_id) if len(spheres) else -1,
-            spheres,
-            sphere_slot,
-            np.asarray(sphere_label, np.int32),
-            np.asarray(labels.geometry_label, np.int64),
-            np.asarray(labels.geometry_scale, np.float32),
-        )
-        fields = records.build_records(
-            origins,
-            directions,
-            near,
-            far,
-            self._nearest(hits),
-            hits.inst_prim_id,
-            record_labels,
-            self._normal_matrix_table,
-            self._array_table,
-            ids,
-        )
-        result = HitRecords(*fields)
-        if not ids:
-            result.prim_id = result.inst_id = result.u = result.v = None
-            return result
-        result.inst_prim_id = np.full(len(result.t), -1, np.int32)
-        if self.array_count:
-            other = result.group("other")
-            result.inst_prim_id[other] = instance_arrays.finish_records(
-                result.rays,
-                other.start,
-                other.stop,
-                hits.inst_id,
-                hits.inst_prim_id,
-                result.label,
-                result.scale,
-                self._labelled_array_table(labels),
-            )
-        return result
-
-    def _labelled_array_table(self, labels: HitLabels) -> np.ndarray:
-        """The array table with the caller's per-instance labels' addresses filled in."""
-        if not labels.instance_labels:
-            return self._array_table
-        table = self._array_table.copy()
-        for geom_id, values in labels.instance_labels.items():
-            if geom_id not in self._arrays:
-                raise ValueError(f"instance_labels: geometry {geom_id} is not an instance array")
-            if values.dtype != np.int32 or values.shape != (len(self._arrays[geom_id][0]),):
-                raise ValueError(
-                    f"instance_labels: geometry {geom_id} needs ({len(self._arrays[geom_id][0])},)"
-                    f" int32 labels, got {values.shape} {values.dtype}"
-                )
-            if not values.flags.c_contiguous:
-                raise ValueError(f"instance_labels: geometry {geom_id}'s labels must be contiguous")
-            table[geom_id, instance_arrays.ARRAY_LABELS] = values.ctypes.data
-        return table
 
     def instance_normals(
         self, inst_id: np.ndarray, inst_prim_id: np.ndarray, normals: np.ndarray
@@ -711,89 +597,13 @@ class BVH(Closing):
     ) -> np.ndarray:
         """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``.
         ``origins``, ``directions`` (n, 3)."""
-        rays = self._query_rays(origins, directions, tnear, tfar)
+        rays = self.query_rays(origins, directions, tnear, tfar)
         n = len(rays.origins)
         blocked = np.zeros(n, bool)
         if n:
-            arguments = (self._query(coherent), rays, blocked)
-            self._run_query(kernels.occluded_chunk, kernels.occluded, arguments, n)
+            arguments = (self.query(coherent), rays, blocked)
+            self.run_query(kernels.occluded_chunk, kernels.occluded, arguments, n)
         return blocked
-
-    def occluded_toward(
-        self,
-        points: np.ndarray,
-        rows: np.ndarray,
-        target: np.ndarray,
-        plane_y: float | None = None,
-    ) -> np.ndarray:
-        """(k,) bool: whether anything (with ``plane_y``, the ground plane y = plane_y too) lies
-        on the segment from each point ``points[:, rows[i]]`` to ``target``, the ray
-        ``p + t (target - p)`` with t in [0, 1]: the answers ``occluded`` gives for those rays,
-        which are built inside the kernel (``segments``). ``points`` (3, n) float, ``rows``
-        (k,) int indices into its columns, ``target`` (3,)."""
-        self._ready_to_query()
-        points = np.asarray(points)
-        if points.ndim != 2 or points.shape[0] != 3:
-            raise ValueError(f"points: expected shape (3, n), got {points.shape}")
-        points = np.ascontiguousarray(as_points(points.T, "points").T)
-        rows = as_indices(rows, "rows", points.shape[1])
-        target = as_points(np.reshape(target, (1, 3)), "target")[0].copy()
-        blocked = np.zeros(len(rows), bool)
-        if len(rows):
-            has_plane = plane_y is not None
-            shadow = segments.Segments(
-                points, rows, target, has_plane, np.float32(plane_y if has_plane else 0.0)
-            )
-            arguments = (self._query(False), shadow, blocked)
-            self._run_query(
-                segments.occluded_toward_chunk, segments.occluded_toward, arguments, len(rows)
-            )
-        return blocked
-
-    def toward_lights(
-        self,
-        points: np.ndarray,
-        normals: np.ndarray,
-        targets: np.ndarray,
-        takes: np.ndarray | None = None,
-        plane_y: float | None = None,
-    ) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
-        """Per light, what each of n surface points sees of it: for each row of ``targets``
-        (L, 3) in turn (computed when asked for), (n,) bool ``visible``, (3, n) float32 unit
-        ``directions`` toward the light where visible (zero elsewhere) and the number of shadow
-        segments made. A segment ``p + t (target - p)``, t in [0, 1], is made from each point
-        ``points`` (3, n) float whose unit normal ``normals`` (3, n) float faces the light
-        (``(target - p) · normal > 0``) and, with ``takes`` (n,) bool, that takes light; it is
-        the segment ``occluded_toward`` traces, built inside the kernel (``segments``), and
-        the plane y = ``plane_y`` blocks it too. The points are checked once for all lights."""
-        self._ready_to_query()
-        points, normals = (np.asarray(values) for values in (points, normals))
-        for name, values in (("points", points), ("normals", normals)):
-            if values.ndim != 2 or values.shape != (3, points.shape[-1]):
-                raise ValueError(f"{name}: expected shape (3, n), got {values.shape}")
-        n = points.shape[1]
-        points = np.ascontiguousarray(as_points(points.T, "points").T)
-        normals = np.ascontiguousarray(as_points(normals.T, "normals").T)
-        targets = as_points(np.reshape(targets, (-1, 3)), "targets")
-        if takes is None:
-            takes = np.zeros(0, bool)
-        elif np.shape(takes) != (n,) or np.asarray(takes).dtype != bool:
-            raise ValueError(f"takes: expected ({n},) bool, got {np.shape(takes)}")
-        has_plane = plane_y is not None
-        plane = np.float32(plane_y if has_plane else 0.0)
-        for target in targets:
-            visible = np.zeros(n, bool)
-            directions = np.zeros((3, n), np.float32)
-            made = 0
-            if n:
-                light = segments.LightSegments(
-                    points, normals, np.ascontiguousarray(takes), target.copy(), has_plane, plane
-                )
-                arguments = (self._query(False), light, visible, directions)
-                made = self._run_query(
-                    segments.toward_light_chunk, segments.toward_light, arguments, n
-                )
-            yield visible, directions, int(made)
 
     def all_hits(
         self,
@@ -806,7 +616,7 @@ class BVH(Closing):
     ) -> multihit.HitBuffers:
         """Up to ``capacity`` nearest hits of each ray, each primitive once (a ``filters=True``
         BVH of one geometry, no instances): see ``multihit.all_hits`` for what it returns."""
-        origins, directions, tnear, tfar = self._query_rays(origins, directions, tnear, tfar)
+        origins, directions, tnear, tfar = self.query_rays(origins, directions, tnear, tfar)
         self._require_filters()
         with parallel_region:
             return multihit.all_hits(
@@ -818,20 +628,6 @@ class BVH(Closing):
                 int(capacity),
                 self.threads,
                 out,
-            )
-
-    def crossing_parity(
-        self, origins: np.ndarray, directions: np.ndarray, edge_band: np.ndarray, graze: float
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(n,) bool parity of each ray's crossings and (n,) bool whether it is clear of edges
-        and grazing hits (a ``filters=True`` BVH): see ``multihit.crossing_parity``."""
-        origins, directions, _, _ = self._query_rays(origins, directions, 0.0, np.inf)
-        self._require_filters()
-        if np.shape(edge_band) != (self.primitive_count,):
-            raise ValueError(f"edge_band: expected shape ({self.primitive_count},)")
-        with parallel_region:
-            return multihit.crossing_parity(
-                self._live_scene(), origins, directions, edge_band, graze, self.threads
             )
 
     def committed_scene(self) -> int:

@@ -7,9 +7,8 @@ NumPy's ``M[:, :3, :4]`` as float32, 48 bytes an instance) and, for several chil
 hit reports ``instID[0]`` = the array's geometry id and ``instPrimID[0]`` = the instance's index
 (``RTCHit`` word 20; in a packet, word 20·N + lane), with ``Ng`` in the child's own space.
 
-This module holds the table that describes them to compiled passes, and the passes that read
-a hit's array, instance and child from it: ``child_of_hits`` and ``finish_records`` (each
-instance's own label and coordinate bound in ``BVH.intersect_records``' hit records). World
+This module holds the table that describes them to compiled passes, and what reads a hit's
+array, instance and child from it (``is_array``, ``transforms_of``, ``child_of_hits``). World
 normals of their hits are ``world_normals``'.
 
 Each BVH describes its arrays to these passes in one table, ``ARRAY_*`` columns by top-level
@@ -61,48 +60,4 @@ def child_of_hits(inst, inst_prim, table):
         else:
             index = carray(pointers.words32(table[g, ARRAY_CHILD_INDEX]), table[g, ARRAY_COUNT])
             out[j] = np.int32(index[inst_prim[j]])
-    return out
-
-
-# -- hit records ------------------------------------------------------------------------------
-
-
-@njit(nogil=True, cache=True)
-def finish_records(rays, start, stop, inst, inst_prim, label, scale, table):
-    """Complete ``records.build_records``' output for the instance-array hits among columns
-    [start, stop) (its "other" group), in place, and return their (stop - start,) int32
-    instance numbers (-1 for hits outside an instance array).
-
-    Per ray: ``rays`` (k,) int64 the ray of each column; ``inst``, ``inst_prim`` (n,) int32 the
-    raw hits. Per column, overwritten for instance-array hits: ``label`` (k,) int64 the
-    instance's own label where the array has per-instance labels; ``scale`` (k,) float32 a
-    bound on the coordinates of the instance: max over axes of |translation| + the child's
-    coordinate bound × the row's sum of |M|, which contains the instance's whole child.
-    """
-    out = np.full(stop - start, -1, np.int32)
-    for j in range(start, stop):
-        i = rays[j]
-        g = inst[i]
-        if not is_array(table, g):
-            continue
-        p = inst_prim[i]
-        out[j - start] = p
-        m = transforms_of(table, g)
-        if table[g, ARRAY_LABELS] != 0:
-            labels = carray(pointers.ints(table[g, ARRAY_LABELS]), table[g, ARRAY_COUNT])
-            label[j] = labels[p]
-        child = 0
-        if table[g, ARRAY_CHILD_INDEX] != 0:
-            index = carray(pointers.words32(table[g, ARRAY_CHILD_INDEX]), table[g, ARRAY_COUNT])
-            child = index[p]
-        bound = np.float64(carray(pointers.floats(table[g, ARRAY_CHILD_BOUND]), child + 1)[child])
-        largest = 0.0
-        for row in range(3):
-            reach = abs(np.float64(m[p, row, 3])) + bound * (
-                abs(np.float64(m[p, row, 0]))
-                + abs(np.float64(m[p, row, 1]))
-                + abs(np.float64(m[p, row, 2]))
-            )
-            largest = max(largest, reach)
-        scale[j] = largest
     return out

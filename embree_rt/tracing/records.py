@@ -1,11 +1,12 @@
-"""Hit records: the bookkeeping between Embree's raw answers and shading, compiled.
+"""Hit records: the bookkeeping between Embree's raw answers and shading, compiled
+(``intersect_records``).
 
 After a batch is traced, one compiled pass turns each ray's raw hit (t, ids, object-space Ng)
 into what shading reads — the hit point, the unit world-space geometric normal, a label (the
 caller's material id) and the size of the coordinates the hit was computed from — and sorts the
 hits into three groups written straight into (3, k) columns: the ground plane, the top-level
-sphere set, and everything else (instances, top-level triangles). Done in NumPy this took a
-dozen array passes and gathers per bounce.
+sphere set, and everything else (instances, top-level triangles), in one pass where NumPy
+would take a dozen array passes and gathers per bounce.
 
 The optional ground plane ``y = plane_y`` is analytic (an infinite plane cannot go into a BVH
 without cutting the horizon and losing float32 precision far away): exact at any distance.
@@ -18,8 +19,19 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import carray, njit
 
+from embree_rt.compiled import pointers
+from embree_rt.embree import BVH, Hits
+from embree_rt.embree.instance_arrays import (
+    ARRAY_CHILD_BOUND,
+    ARRAY_CHILD_INDEX,
+    ARRAY_COUNT,
+    ARRAY_LABELS,
+    ARRAY_TRANSFORMS,
+    is_array,
+    transforms_of,
+)
 from embree_rt.embree.world_normals import unit_world_normal
 
 GROUPS = ("plane", "spheres", "other")
@@ -27,7 +39,7 @@ GROUPS = ("plane", "spheres", "other")
 
 @dataclass
 class HitLabels:
-    """What the caller attaches to Embree's ids, for ``BVH.intersect_records``.
+    """What the caller attaches to Embree's ids, for ``intersect_records``.
 
     ``geometry_label`` (g,) int64 and ``geometry_scale`` (g,) float32, by top-level geometry
     id (the instance's id for an instance hit): the label of every hit on that geometry and a
@@ -124,7 +136,7 @@ class RecordLabels(NamedTuple):
 def build_records(
     origins, directions, tnear, tfar, hits, inst_prim, labels, normal_matrices, arrays, ids
 ):
-    """The compiled pass behind ``BVH.intersect_records``: classify, count, then fill.
+    """The compiled pass behind ``intersect_records``: classify, count, then fill.
 
     Inputs per ray: ``origins``, ``directions`` (3, n) float32, ``tnear``, ``tfar`` (n,) float32
     and the raw hits: ``hits`` (``kernels.NearestHits``, normals in the object's space) and
@@ -262,3 +274,156 @@ def build_records(
         out_u,
         out_v,
     )
+
+
+# -- instance arrays ------------------------------------------------------------------------------
+
+
+@njit(nogil=True, cache=True)
+def finish_records(rays, start, stop, inst, inst_prim, label, scale, table):
+    """Complete ``build_records``' output for the instance-array hits among columns
+    [start, stop) (its "other" group), in place, and return their (stop - start,) int32
+    instance numbers (-1 for hits outside an instance array).
+
+    Per ray: ``rays`` (k,) int64 the ray of each column; ``inst``, ``inst_prim`` (n,) int32 the
+    raw hits. Per column, overwritten for instance-array hits: ``label`` (k,) int64 the
+    instance's own label where the array has per-instance labels; ``scale`` (k,) float32 a
+    bound on the coordinates of the instance: max over axes of |translation| + the child's
+    coordinate bound × the row's sum of |M|, which contains the instance's whole child.
+    """
+    out = np.full(stop - start, -1, np.int32)
+    for j in range(start, stop):
+        i = rays[j]
+        g = inst[i]
+        if not is_array(table, g):
+            continue
+        p = inst_prim[i]
+        out[j - start] = p
+        m = transforms_of(table, g)
+        if table[g, ARRAY_LABELS] != 0:
+            labels = carray(pointers.ints(table[g, ARRAY_LABELS]), table[g, ARRAY_COUNT])
+            label[j] = labels[p]
+        child = 0
+        if table[g, ARRAY_CHILD_INDEX] != 0:
+            index = carray(pointers.words32(table[g, ARRAY_CHILD_INDEX]), table[g, ARRAY_COUNT])
+            child = index[p]
+        bound = np.float64(carray(pointers.floats(table[g, ARRAY_CHILD_BOUND]), child + 1)[child])
+        largest = 0.0
+        for row in range(3):
+            reach = abs(np.float64(m[p, row, 3])) + bound * (
+                abs(np.float64(m[p, row, 0]))
+                + abs(np.float64(m[p, row, 1]))
+                + abs(np.float64(m[p, row, 2]))
+            )
+            largest = max(largest, reach)
+        scale[j] = largest
+    return out
+
+
+# -- the queries --------------------------------------------------------------------------------
+
+_NO_LABELS = np.zeros(0, np.int32)
+
+
+def intersect_records(
+    bvh: BVH,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    labels: HitLabels,
+    tnear: float | np.ndarray = 0.0,
+    tfar: float | np.ndarray = np.inf,
+    coherent: bool = False,
+    ids: bool = True,
+) -> HitRecords:
+    """The nearest hits in ``bvh`` of rays given as columns, ``origins``, ``directions``
+    (3, n), with ``labels``' ground plane, as ``HitRecords``: only the rays that hit, grouped by
+    kind, with world positions, unit normals and labels worked out in one compiled pass (and,
+    with ``ids``, Embree's ids and (u, v) of each hit)."""
+    origins = np.ascontiguousarray(origins, np.float32)
+    directions = np.ascontiguousarray(directions, np.float32)
+    rays = bvh.query_rays(origins.T, directions.T, tnear, tfar)
+    hits = bvh.nearest_hits(rays, coherent)
+    return records_of(bvh, origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
+
+
+def records_of(
+    bvh: BVH,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    tnear: np.ndarray,
+    tfar: np.ndarray,
+    hits: Hits,
+    labels: HitLabels,
+    ids: bool = True,
+) -> HitRecords:
+    """The ``HitRecords`` of ``bvh``'s raw ``hits`` (``BVH.nearest_hits``) of rays given as
+    (3, n) float32 columns with (n,) float32 bounds (without Embree's ids unless ``ids``;
+    instance arrays need them)."""
+    ids = ids or bool(bvh.array_count)
+    spheres, sphere_slot = bvh.sphere_buffer(labels.sphere_geom_id)
+    sphere_label = labels.sphere_label if labels.sphere_label is not None else _NO_LABELS
+    has_plane = labels.plane_y is not None
+    record_labels = RecordLabels(
+        has_plane,
+        np.float32(labels.plane_y if has_plane else 0.0),
+        int(labels.plane_label),
+        int(labels.sphere_geom_id) if len(spheres) else -1,
+        spheres,
+        sphere_slot,
+        np.asarray(sphere_label, np.int32),
+        np.asarray(labels.geometry_label, np.int64),
+        np.asarray(labels.geometry_scale, np.float32),
+    )
+    normal_matrices, arrays = bvh.world_tables()
+    nearest, _ = bvh.kernel_hits(hits)
+    fields = build_records(
+        origins,
+        directions,
+        tnear,
+        tfar,
+        nearest,
+        hits.inst_prim_id,
+        record_labels,
+        normal_matrices,
+        arrays,
+        ids,
+    )
+    result = HitRecords(*fields)
+    if not ids:
+        result.prim_id = result.inst_id = result.u = result.v = None
+        return result
+    result.inst_prim_id = np.full(len(result.t), -1, np.int32)
+    if bvh.array_count:
+        other = result.group("other")
+        result.inst_prim_id[other] = finish_records(
+            result.rays,
+            other.start,
+            other.stop,
+            hits.inst_id,
+            hits.inst_prim_id,
+            result.label,
+            result.scale,
+            labelled_array_table(arrays, labels),
+        )
+    return result
+
+
+def labelled_array_table(arrays: np.ndarray, labels: HitLabels) -> np.ndarray:
+    """The instance arrays' table ``arrays`` (``BVH.world_tables``) with the addresses of
+    ``labels``' per-instance labels filled in."""
+    if not labels.instance_labels:
+        return arrays
+    table = arrays.copy()
+    for geom_id, values in labels.instance_labels.items():
+        if not (0 <= geom_id < len(arrays) and arrays[geom_id, ARRAY_TRANSFORMS]):
+            raise ValueError(f"instance_labels: geometry {geom_id} is not an instance array")
+        count = int(arrays[geom_id, ARRAY_COUNT])
+        if values.dtype != np.int32 or values.shape != (count,):
+            raise ValueError(
+                f"instance_labels: geometry {geom_id} needs ({count},) int32 labels, got "
+                f"{values.shape} {values.dtype}"
+            )
+        if not values.flags.c_contiguous:
+            raise ValueError(f"instance_labels: geometry {geom_id}'s labels must be contiguous")
+        table[geom_id, ARRAY_LABELS] = values.ctypes.data
+    return table

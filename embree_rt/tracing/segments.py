@@ -12,12 +12,14 @@ segment the plane blocks needs no traversal.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
 from embree_rt.compiled.work_split import chunk_scratch, chunk_span
+from embree_rt.embree import BVH
 from embree_rt.embree.kernels import (
     CHUNK,
     OCCLUDED,
@@ -27,7 +29,8 @@ from embree_rt.embree.kernels import (
     packet_layout,
     traced_packet,
 )
-from embree_rt.embree.records import plane_crossing
+from embree_rt.embree.validation import as_indices, as_points
+from embree_rt.tracing.records import plane_crossing
 
 
 class Segments(NamedTuple):
@@ -93,7 +96,7 @@ def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def occluded_toward(query, segments, blocked):
+def occluded_segments(query, segments, blocked):
     n = segments.rows.shape[0]
     scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
     for c in prange(len(scratch)):
@@ -179,3 +182,75 @@ def toward_light(query, light, visible, directions):
         first, stop = chunk_span(c, CHUNK, n)
         made[c] = toward_light_chunk(scratch[c], first, stop, query, light, visible, directions)
     return made.sum()
+
+
+def occluded_toward(
+    bvh: BVH,
+    points: np.ndarray,
+    rows: np.ndarray,
+    target: np.ndarray,
+    plane_y: float | None = None,
+) -> np.ndarray:
+    """(k,) bool: whether anything in ``bvh`` (with ``plane_y``, the ground plane y = plane_y
+    too) lies on the segment from each point ``points[:, rows[i]]`` to ``target``, the ray
+    ``p + t (target - p)`` with t in [0, 1]: the answers ``BVH.occluded`` gives for those rays,
+    which are built inside the kernel. ``points`` (3, n) float, ``rows`` (k,) int indices into
+    its columns, ``target`` (3,)."""
+    query = bvh.query(False)
+    points = np.asarray(points)
+    if points.ndim != 2 or points.shape[0] != 3:
+        raise ValueError(f"points: expected shape (3, n), got {points.shape}")
+    points = np.ascontiguousarray(as_points(points.T, "points").T)
+    rows = as_indices(rows, "rows", points.shape[1])
+    target = as_points(np.reshape(target, (1, 3)), "target")[0].copy()
+    blocked = np.zeros(len(rows), bool)
+    if len(rows):
+        has_plane = plane_y is not None
+        shadow = Segments(
+            points, rows, target, has_plane, np.float32(plane_y if has_plane else 0.0)
+        )
+        arguments = (query, shadow, blocked)
+        bvh.run_query(occluded_toward_chunk, occluded_segments, arguments, len(rows))
+    return blocked
+
+
+def toward_lights(
+    bvh: BVH,
+    points: np.ndarray,
+    normals: np.ndarray,
+    targets: np.ndarray,
+    takes: np.ndarray,
+    plane_y: float | None = None,
+) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+    """Per light, what each of n surface points sees of it in ``bvh``: for each row of
+    ``targets`` (L, 3) in turn (computed when asked for), (n,) bool ``visible``, (3, n) float32
+    unit ``directions`` toward the light where visible (zero elsewhere) and the number of
+    shadow segments made. A segment ``p + t (target - p)``, t in [0, 1], is made from each
+    point ``points`` (3, n) float whose unit normal ``normals`` (3, n) float faces the light
+    (``(target - p) · normal > 0``) and that ``takes`` ((n,) bool) light; it is the segment
+    ``occluded_toward`` traces, built inside the kernel, and the plane y = ``plane_y`` blocks
+    it too. The points are checked once for all lights."""
+    query = bvh.query(False)
+    points, normals = (np.asarray(values) for values in (points, normals))
+    for name, values in (("points", points), ("normals", normals)):
+        if values.ndim != 2 or values.shape != (3, points.shape[-1]):
+            raise ValueError(f"{name}: expected shape (3, n), got {values.shape}")
+    n = points.shape[1]
+    points = np.ascontiguousarray(as_points(points.T, "points").T)
+    normals = np.ascontiguousarray(as_points(normals.T, "normals").T)
+    targets = as_points(np.reshape(targets, (-1, 3)), "targets")
+    if np.shape(takes) != (n,) or np.asarray(takes).dtype != bool:
+        raise ValueError(f"takes: expected ({n},) bool, got {np.shape(takes)}")
+    takes = np.ascontiguousarray(takes)
+    has_plane = plane_y is not None
+    plane = np.float32(plane_y if has_plane else 0.0)
+    for target in targets:
+        visible = np.zeros(n, bool)
+        directions = np.zeros((3, n), np.float32)
+        made = 0
+        if n:
+            light = LightSegments(points, normals, takes, target.copy(), has_plane, plane)
+            made = bvh.run_query(
+                toward_light_chunk, toward_light, (query, light, visible, directions), n
+            )
+        yield visible, directions, int(made)

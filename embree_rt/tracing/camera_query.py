@@ -13,9 +13,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.compiled.camera_rays import write_directions
+from embree_rt.compiled.camera_rays import CameraRays, write_directions
 from embree_rt.compiled.work_split import chunk_scratch, chunk_span
+from embree_rt.embree import BVH
 from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, Rays, intersect_chunk
+from embree_rt.tracing.records import HitLabels, HitRecords, records_of
 
 
 def camera_query_rays(origin: np.ndarray, directions: np.ndarray) -> Rays:
@@ -55,3 +57,24 @@ def intersect_camera(query, camera, index, directions, rays, hits, inst_prim):
         intersect_camera_chunk(
             scratch[c], first, stop, query, camera, index, directions, rays, hits, inst_prim
         )
+
+
+def intersect_camera_records(
+    bvh: BVH, camera: CameraRays, index: np.ndarray, labels: HitLabels, ids: bool = True
+) -> tuple[HitRecords, np.ndarray]:
+    """``records.intersect_records`` of the camera rays of samples ``index`` (n,) int64 (below
+    ``width * height * spp`` of ``camera``) in ``bvh``, made inside the query: bitwise the
+    records of ``camera.sample_rays``' rays, coherent. Returns the records and the rays' (3, n)
+    float32 unit directions."""
+    query = bvh.query(True)
+    index = np.ascontiguousarray(index, np.int64)
+    n = len(index)
+    directions = np.empty((3, n), np.float32)
+    rays = camera_query_rays(camera.origin, directions)
+    hits = bvh.empty_hits(n)
+    if n:
+        arguments = (query, camera, index, directions, rays, *bvh.kernel_hits(hits))
+        bvh.run_query(intersect_camera_chunk, intersect_camera, arguments, n)
+    origins = np.broadcast_to(camera.origin[:, None], (3, n))
+    records = records_of(bvh, origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
+    return records, directions
