@@ -43,7 +43,7 @@ SPHERE_MODES = ("analytic", "point", "mesh")
 # geometry there (primary 9.3-9.6 against 10.3-13.7 Mrays/s, shadow 12.3-14.4 against 12.4-12.9),
 # build in 2.9 s instead of 5.0-5.4 s, and take 49 bytes a sphere in Embree instead of 93 (the
 # whole command: 71 against 148), so 1e8 spheres fit in 8 GB. Below it user geometry traces up to
-# 1.5x faster (DESIGN.md).
+# 1.5x faster.
 USER_GEOMETRY_MAX_SPHERES = 1 << 23
 ICOSPHERE_SUBDIVISIONS = 3
 
@@ -104,6 +104,38 @@ class SurfaceHits:
         return mask
 
 
+@dataclass
+class BuiltMesh:
+    """A distinct triangle mesh, built once into a BVH of its own (``bvh``) and placed any
+    number of times: ``faces`` (f, 3) int64; ``vertex_normals`` (v, 3) float32 unit or zero and
+    ``missing_normals`` (v,) float32 (``mesh_attributes.unit_vertex_normals``);
+    ``face_normals`` (f, 3) float32; ``bounds`` (2, 3) float64 its box."""
+
+    bvh: BVH
+    faces: np.ndarray
+    vertex_normals: np.ndarray
+    missing_normals: np.ndarray
+    face_normals: np.ndarray
+    bounds: np.ndarray
+
+
+@dataclass
+class Placement:
+    """A top-level geometry that places built meshes (indices ``meshes``): one instance, or
+    (``in_array``) an instance array whose instance i has material ``materials[i]`` ((n,)
+    int32; a single instance's is its one material); ``smooth`` shading; ``first_object`` the
+    object id of its first copy (``Scene.object_id_starts``); ``scale`` a bound on a single
+    instance's world coordinates (an array's hit records bound each instance themselves)."""
+
+    geom_id: int
+    meshes: list[int]
+    materials: np.ndarray
+    smooth: bool
+    first_object: int
+    scale: float = 0.0
+    in_array: bool = False
+
+
 def _unit(vectors: np.ndarray) -> np.ndarray:
     """(3, n) float32 unit vectors along the columns of (3, n) ``vectors``."""
     x, y, z = vectors
@@ -127,7 +159,8 @@ class SceneGeometry(Closing):
         if spheres not in SPHERE_MODES:
             raise ValueError(f"spheres: expected one of {SPHERE_MODES}, got {spheres!r}")
         self.bvh = BVH(threads=threads)
-        self._children: list[BVH] = []
+        self._meshes: list[BuiltMesh] = []
+        self._placements: list[Placement] = []
         self.sphere_centers = np.asarray(scene.sphere_centers, np.float32)
         self.sphere_radii = np.asarray(scene.sphere_radii, np.float32)
         # int32 as the scene holds them: no N-sized copies (1e8 spheres are 0.4 GB of them)
@@ -140,22 +173,6 @@ class SceneGeometry(Closing):
         self.floor = scene.floor
         # The floor's material comes after the scene's own in the renderer's material table.
         self.floor_material = len(scene.materials)
-        # Per top-level instance geometry id: which child mesh, material, shading mode.
-        self._instance_child: list[int] = []
-        self._instance_material: list[int] = []
-        self._instance_smooth: list[bool] = []
-        self._instance_geom_ids: list[int] = []
-        self._instance_scale: list[float] = []
-        self._mesh_bounds: list[np.ndarray] = []
-        self._mesh_face_offset: list[int] = []
-        self._mesh_vertex_normals: list[np.ndarray] = []
-        self._mesh_missing_normals: list[np.ndarray] = []
-        self._mesh_face_normals: list[np.ndarray] = []
-        self._mesh_faces: list[np.ndarray] = []
-        # Instance arrays: (geom id, its child mesh indices, per-instance materials, smooth)
-        self._arrays: list[tuple[int, list[int], np.ndarray, bool]] = []
-        # Object id of each instance geometry's first copy, by geometry id (Scene.object_id_starts)
-        self._object_start: dict[int, int] = {}
         self.triangle_count = 0
         self.instance_count = 0
         try:
@@ -180,26 +197,30 @@ class SceneGeometry(Closing):
     # -- building -----------------------------------------------------------------------------
 
     def _child(self, mesh: trimesh.Trimesh) -> int:
+        """Build ``mesh`` into a BVH of its own; its index among the built meshes."""
         child = BVH(threads=self.bvh.threads)
-        self._children.append(child)
+        vertex_normals, missing_normals = unit_vertex_normals(mesh.vertex_normals)
+        self._meshes.append(
+            BuiltMesh(
+                child,
+                np.asarray(mesh.faces, np.int64),
+                vertex_normals,
+                missing_normals,
+                np.asarray(mesh.face_normals, np.float32),
+                np.asarray(mesh.bounds, np.float64),
+            )
+        )
         child.add_triangles(mesh.vertices, mesh.faces, mesh_hit_filter(mesh))
         child.commit()
-        self._mesh_face_offset.append(sum(len(f) for f in self._mesh_faces))
-        self._mesh_faces.append(np.asarray(mesh.faces, np.int64))
-        vertex_normals, missing_normals = unit_vertex_normals(mesh.vertex_normals)
-        self._mesh_vertex_normals.append(vertex_normals)
-        self._mesh_missing_normals.append(missing_normals)
-        self._mesh_face_normals.append(np.asarray(mesh.face_normals, np.float32))
-        self._mesh_bounds.append(np.asarray(mesh.bounds, np.float64))
-        return len(self._children) - 1
+        return len(self._meshes) - 1
 
-    def _place(self, child: int, transform: np.ndarray, material: int, smooth: bool) -> None:
-        geom_id = self.bvh.add_instance(self._children[child], transform)
-        self._instance_geom_ids.append(geom_id)
-        self._instance_child.append(child)
-        self._instance_material.append(material)
-        self._instance_smooth.append(smooth)
-        low, high = self._mesh_bounds[child]
+    def _place(
+        self, child: int, transform: np.ndarray, material: int, smooth: bool, first_object: int
+    ) -> int:
+        """Place built mesh ``child`` by the (4, 4) ``transform``; returns its geometry id."""
+        mesh = self._meshes[child]
+        geom_id = self.bvh.add_instance(mesh.bvh, transform)
+        low, high = mesh.bounds
         corners = np.array(
             [
                 [x, y, z]
@@ -209,9 +230,19 @@ class SceneGeometry(Closing):
             ]
         )
         world = corners @ transform[:3, :3].T + transform[:3, 3]
-        self._instance_scale.append(float(np.abs(world).max()))
-        self.triangle_count += len(self._mesh_faces[child])
+        self._placements.append(
+            Placement(
+                geom_id,
+                [child],
+                np.array([material], np.int32),
+                smooth,
+                first_object,
+                scale=float(np.abs(world).max()),
+            )
+        )
+        self.triangle_count += len(mesh.faces)
         self.instance_count += 1
+        return geom_id
 
     def _place_array(
         self,
@@ -220,17 +251,25 @@ class SceneGeometry(Closing):
         child_index: np.ndarray | None,
         materials: np.ndarray,
         smooth: bool,
+        first_object: int,
     ) -> int:
-        """Place meshes ``children`` (indices into ``_children``) by (n, 4, 4) ``transforms``
-        as one instance array, ``child_index`` (n,) picking each one's mesh (None: the only
-        one), with (n,) int32 ``materials``; returns its geometry id."""
+        """Place built meshes ``children`` by (n, 4, 4) ``transforms`` as one instance array,
+        ``child_index`` (n,) picking each one's mesh (None: the only one), with (n,) int32
+        ``materials``; returns its geometry id."""
         geom_id = self.bvh.add_instances(
-            [self._children[c] for c in children], transforms, child_index
+            [self._meshes[c].bvh for c in children], transforms, child_index
         )
-        self._arrays.append(
-            (geom_id, children, np.ascontiguousarray(materials, np.int32), bool(smooth))
+        self._placements.append(
+            Placement(
+                geom_id,
+                children,
+                np.ascontiguousarray(materials, np.int32),
+                bool(smooth),
+                first_object,
+                in_array=True,
+            )
         )
-        faces = np.array([len(self._mesh_faces[c]) for c in children], np.int64)
+        faces = np.array([len(self._meshes[c].faces) for c in children], np.int64)
         placed = faces[0] * len(transforms) if child_index is None else faces[child_index].sum()
         self.triangle_count += int(placed)
         self.instance_count += len(transforms)
@@ -264,21 +303,24 @@ class SceneGeometry(Closing):
             transforms[:, axis, axis] = self.sphere_radii
         transforms[:, :3, 3] = self.sphere_centers
         transforms[:, 3, 3] = 1.0
-        geom_id = self._place_array([child], transforms, None, self.sphere_materials, smooth=True)
-        self._object_start[geom_id] = 0  # copy j is sphere j
+        # copy j is sphere j: object j
+        self._place_array([child], transforms, None, self.sphere_materials, True, first_object=0)
 
     def _add_meshes(self, scene: Scene) -> None:
         children: dict[int, int] = {}
         mesh_ids, instance_starts = scene.object_id_starts()
+        # Mesh looks: the placements showing their own texture or vertex colours, by geom id.
+        geom_ids = []
         for placement, object_id in zip(scene.meshes, mesh_ids, strict=True):
             key = id(placement.mesh)
             if key not in children:
                 children[key] = self._child(placement.mesh)
             material = scene.material_index(placement.material)
-            self._place(children[key], placement.transform, material, placement.smooth)
-            self._object_start[self._instance_geom_ids[-1]] = int(object_id)
-        # Mesh looks: the placements showing their own texture or vertex colours, by geom id.
-        geom_ids = self._instance_geom_ids[len(self._instance_geom_ids) - len(scene.meshes) :]
+            geom_ids.append(
+                self._place(
+                    children[key], placement.transform, material, placement.smooth, int(object_id)
+                )
+            )
         looks = list(scene.meshes)
         # one instance array per entry, its mesh built once
         for entry, first_id in zip(scene.instances, instance_starts, strict=True):
@@ -287,47 +329,53 @@ class SceneGeometry(Closing):
                 children[key] = self._child(entry.mesh)
             geom_ids.append(
                 self._place_array(
-                    [children[key]], entry.transforms, None, entry.materials, entry.smooth
+                    [children[key]],
+                    entry.transforms,
+                    None,
+                    entry.materials,
+                    entry.smooth,
+                    int(first_id),
                 )
             )
-            self._object_start[geom_ids[-1]] = int(first_id)
             # a one-mesh array's hits name its faces as the mesh's own: the same lookups
             looks.append(MeshObject(mesh=entry.mesh, mesh_colors=entry.mesh_colors))
         self.mesh_colors = MeshColors(looks, geom_ids)
 
     def _finish_tables(self) -> None:
+        """The tables by top-level geometry id and the meshes' concatenated tables that turn a
+        hit's ids into its material, scale and smooth normal, from the placements and meshes."""
         size = self.bvh.geometry_count
         self.instance_child = np.full(size, -1, np.int32)
         self.instance_material = np.zeros(size, np.intp)
         self.instance_smooth = np.zeros(size, bool)
         self.instance_scale = np.zeros(size, np.float32)
-        if self._instance_geom_ids:
-            ids = np.asarray(self._instance_geom_ids)
-            self.instance_child[ids] = self._instance_child
-            self.instance_material[ids] = self._instance_material
-            self.instance_smooth[ids] = self._instance_smooth
-            self.instance_scale[ids] = self._instance_scale
+        self.object_start = np.full(size, -1, np.int64)
         # Per instance array: its mesh by (geom id, position among the array's children); the
         # transforms themselves stay in the BVH, which takes its hits' normals to world space.
-        widest = max((len(children) for _, children, _, _ in self._arrays), default=1)
+        arrays = [placement for placement in self._placements if placement.in_array]
+        widest = max((len(placement.meshes) for placement in arrays), default=1)
         self.array_child = np.full((size, widest), -1, np.int32)
-        instance_labels = {}
-        for geom_id, children, materials, smooth in self._arrays:
-            self.array_child[geom_id, : len(children)] = children
-            self.instance_child[geom_id] = children[0]
-            self.instance_material[geom_id] = materials[0]
-            self.instance_smooth[geom_id] = smooth
-            instance_labels[geom_id] = materials
-        if self._mesh_faces:
-            vertex_offsets = np.cumsum([0] + [len(n) for n in self._mesh_vertex_normals[:-1]])
+        for placement in self._placements:
+            geom_id = placement.geom_id
+            self.instance_child[geom_id] = placement.meshes[0]
+            self.instance_material[geom_id] = placement.materials[0]
+            self.instance_smooth[geom_id] = placement.smooth
+            self.instance_scale[geom_id] = placement.scale
+            self.object_start[geom_id] = placement.first_object
+            if placement.in_array:
+                self.array_child[geom_id, : len(placement.meshes)] = placement.meshes
+        meshes = self._meshes
+        if meshes:
+            face_counts = [len(mesh.faces) for mesh in meshes]
+            self.mesh_face_offset = np.cumsum([0, *face_counts[:-1]]).astype(np.int64)
+            vertex_offsets = np.cumsum([0] + [len(m.vertex_normals) for m in meshes[:-1]])
             self.mesh_faces = np.concatenate(
-                [f + o for f, o in zip(self._mesh_faces, vertex_offsets, strict=True)]
+                [mesh.faces + o for mesh, o in zip(meshes, vertex_offsets, strict=True)]
             )
-            self.mesh_vertex_normals = np.concatenate(self._mesh_vertex_normals)
-            missing = np.concatenate(self._mesh_missing_normals)
+            self.mesh_vertex_normals = np.concatenate([mesh.vertex_normals for mesh in meshes])
+            missing = np.concatenate([mesh.missing_normals for mesh in meshes])
             self.mesh_missing_normals = missing if missing.any() else None
-            self.mesh_face_normals = np.concatenate(self._mesh_face_normals)
-            self.mesh_face_offset = np.asarray(self._mesh_face_offset, np.int64)
+            self.mesh_face_normals = np.concatenate([mesh.face_normals for mesh in meshes])
         self.labels = HitLabels(
             geometry_label=self.instance_material.astype(np.int64),
             geometry_scale=self.instance_scale,
@@ -335,18 +383,15 @@ class SceneGeometry(Closing):
             sphere_label=self._sphere_labels,
             plane_y=None if self.floor is None else float(self.floor.height),
             plane_label=self.floor_material,
-            instance_labels=instance_labels,
+            instance_labels={placement.geom_id: placement.materials for placement in arrays},
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
         self.has_meshes = self.instance_count > 0
-        self.object_start = np.full(size, -1, np.int64)
-        for geom_id, start in self._object_start.items():
-            self.object_start[geom_id] = start
 
     def close(self) -> None:
         self.bvh.close()
-        for child in self._children:
-            child.close()
+        for mesh in self._meshes:
+            mesh.bvh.close()
 
     # -- queries ------------------------------------------------------------------------------
 
@@ -471,7 +516,7 @@ class SceneGeometry(Closing):
         (k,) the instance within an instance array (-1 for other hits)."""
         smooth = self.instance_smooth[inst]
         child = self.instance_child[inst]
-        if self._arrays:
+        if self.bvh.array_count:
             position = self.bvh.instance_children(inst, inst_prim)
             in_array = position >= 0
             child = np.where(in_array, self.array_child[inst, np.maximum(position, 0)], child)
