@@ -71,7 +71,7 @@ class RecordingGeometry:
             self.log.append(("intersect", origins, directions, np.inf, True))
         return rows, surfaces, directions
 
-    def toward_lights(self, points, normals, targets, takes=None):
+    def toward_lights(self, points, normals, targets, takes):
         # The shadow segments the kernel makes: from each point facing the light (and taking
         # light) to the light, t in [0, 1], as occluded_toward's below.
         for target, answer in zip(
@@ -81,7 +81,7 @@ class RecordingGeometry:
             facing = (to_light[0] * normals[0] + to_light[1] * normals[1]) + to_light[2] * normals[
                 2
             ] > 0
-            rows = np.flatnonzero(facing if takes is None else facing & takes)
+            rows = np.flatnonzero(facing & takes)
             with self._lock:
                 self.log.append(("occluded", points[:, rows], to_light[:, rows], 1.0, False))
             yield answer

@@ -1,8 +1,10 @@
 """The Whitted integrator as a wavefront: whole batches of rays per bounce, shaded with NumPy.
 
 Per batch of camera samples, and per depth, it reads like pbrt-v4's wavefront integrator:
-intersect → escaped rays take the sky → surfaces take ambient + Blinn-Phong light through one
-batch of shadow rays for all lights → reflection and refraction children form the next depth.
+intersect → escaped rays take the sky → the hits' materials become columns → surfaces take
+ambient + Blinn-Phong light through one shadow query a light → reflection and refraction
+children form the next depth. Every geometric query goes to a ``tracer.Tracer`` (pbrt-v4's
+Integrator/Aggregate split): ``SceneGeometry`` by default, ``bricks.BrickSet`` for bricks.
 The seed article's recursion ``color = local·(1−r) + r·trace(reflected)`` (and for glass,
 ``F·trace(reflected) + (1−F)·trace(refracted)``) becomes a throughput weight carried by each ray.
 """
