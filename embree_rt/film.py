@@ -142,12 +142,12 @@ class FilmBlock:
     def add_weighted(
         self,
         pixel: np.ndarray,
-        weight: np.ndarray | None,
+        weight: np.ndarray,
         rgb: np.ndarray,
         columns: np.ndarray | None = None,
     ) -> None:
         """``add(pixel[columns], weight[:, columns] * rgb)`` with no temporaries: ``pixel``
-        (n,) int64, ``weight`` (3, n) float32 ray weights (None: all ones), ``rgb`` (3, k)
+        (n,) int64, ``weight`` (3, n) float32 ray weights, ``rgb`` (3, k)
         float32, ``columns`` (k,) int64 the rays ``rgb`` belongs to (None: all n, k = n)."""
         outside = film_sums.add_weighted(self._sums, self.first, pixel, weight, rgb, columns)
         self._check(outside, pixel, columns)

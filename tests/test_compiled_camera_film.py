@@ -136,7 +136,7 @@ def test_film_block_sums_equal_one_bincount_per_channel_bit_for_bit() -> None:
         wide = rng.integers(first, first + count, n + 7)
         block.add_weighted(wide, weight, rgb, columns)
         pixels.append(wide[columns]), values.append(weight[:, columns] * rgb)
-    block.add_weighted(pixel, None, rgb)  # unit weights
+    block.add_weighted(pixel, np.broadcast_to(np.float32(1.0), (3, len(pixel))), rgb)  # camera's
     pixels.append(pixel), values.append(rgb)
     local = np.concatenate(pixels) - first
     rgb = np.concatenate(values, axis=1)
@@ -149,7 +149,12 @@ def test_film_block_refuses_a_pixel_outside_it_and_adds_nothing() -> None:
     with pytest.raises(ValueError, match=r"pixel 15 is outside the block's pixels 10\.\.14"):
         block.add(np.array([10, 15]), np.ones((3, 2), np.float32))
     with pytest.raises(ValueError, match="pixel 9 is outside"):
-        block.add_weighted(np.array([9, 10]), None, np.ones((3, 1), np.float32), np.array([0]))
+        block.add_weighted(
+            np.array([9, 10]),
+            np.ones((3, 2), np.float32),
+            np.ones((3, 1), np.float32),
+            np.array([0]),
+        )
     assert not block.sums.any()
 
 
@@ -204,13 +209,14 @@ def test_compiled_camera_and_film_code_has_no_fused_multiply_add() -> None:
     bvh = BVH(threads=1)
     index, pixel = tiled_samples(frame, 4, 0, 64 * 48 * 4)
     rgb = np.ones((3, len(index)), np.float32)
+    ones = np.broadcast_to(np.float32(1.0), rgb.shape)  # camera rays' weights
     calls = [
         (
             camera_module.write_directions,
             (camera_rays(frame, 4, 1), index, 0, len(index), np.empty((3, len(index)), np.float32)),
         ),
         (film_sums.add_weighted, (np.zeros((3, 64 * 48)), 0, pixel, rgb, rgb, None)),
-        (film_sums.add_weighted, (np.zeros((3, 64 * 48)), 0, pixel, None, rgb, index)),
+        (film_sums.add_weighted, (np.zeros((3, 64 * 48)), 0, pixel, ones, rgb, index)),
         (film_sums.mean_into, (np.empty((64 * 48, 3), np.float32), 0, np.zeros((3, 64 * 48)), 4)),
         (film_sums.mean_into, (np.empty((64 * 48, 3), np.float32), 0, np.zeros((3, 64 * 48)), 3)),
         (segments.toward_light_chunk, light_chunk_arguments(bvh)),

@@ -37,8 +37,8 @@ def add_samples(sums, first, pixel, rgb):
 def add_weighted(sums, first, pixel, weight, rgb, columns):
     """``add_samples`` of the float32 products ``weight[:, j] * rgb[:, k]``, j = ``columns[k]``
     ((k,) int64; ``weight`` (3, n) float32 and ``pixel`` (n,) read at those columns) or, with
-    ``columns`` None, j = k; ``weight`` None: all ones (1 · x is x, bit for bit). Returns as
-    ``add_samples`` does, with k for the sample."""
+    ``columns`` None, j = k (``weight`` may be a zero-stride view, camera rays' ones). Returns
+    as ``add_samples`` does, with k for the sample."""
     count = sums.shape[1]
     n = rgb.shape[1]
     for k in range(n):
@@ -49,14 +49,9 @@ def add_weighted(sums, first, pixel, weight, rgb, columns):
     for k in range(n):
         j = k if columns is None else columns[k]
         p = pixel[j] - first
-        if weight is None:
-            sums[0, p] += np.float64(rgb[0, k])
-            sums[1, p] += np.float64(rgb[1, k])
-            sums[2, p] += np.float64(rgb[2, k])
-        else:
-            sums[0, p] += np.float64(weight[0, j] * rgb[0, k])
-            sums[1, p] += np.float64(weight[1, j] * rgb[1, k])
-            sums[2, p] += np.float64(weight[2, j] * rgb[2, k])
+        sums[0, p] += np.float64(weight[0, j] * rgb[0, k])
+        sums[1, p] += np.float64(weight[1, j] * rgb[1, k])
+        sums[2, p] += np.float64(weight[2, j] * rgb[2, k])
     return -1
 
 
