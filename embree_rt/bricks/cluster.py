@@ -47,6 +47,7 @@ from embree_rt.bricks.partition import (
 )
 from embree_rt.camera import Camera, camera_frame
 from embree_rt.distributed import (
+    NO_WORKERS_TIMEOUT_S,
     POLL_S,
     ClusterError,
     ClusterProgress,
@@ -73,8 +74,6 @@ DATA_PARALLEL_BATCH_SIZE = 1 << 17
 # Batches the client keeps in flight (its shading threads); each waits on the workers most of
 # the time, so more than the client's cores.
 DEFAULT_CLIENT_THREADS = 4
-# How long a brick may wait with no worker at all before the render gives up.
-NO_WORKERS_TIMEOUT_S = 30.0
 
 
 @dataclass(frozen=True)
