@@ -185,6 +185,7 @@ def test_one_progress_bar_counts_samples_and_names_workers_only_on_a_cluster(
         assert ("3 workers" in terminal.text) == (workers == 3), terminal.text
     # A render's own callback reaches the caller's progress(done, total) with no bar too.
     seen = []
-    rt.render(small_scene(), quiet=True, progress=lambda d, t: seen.append((d, t)), **SIZE)
+    with rt.Renderer(small_scene(), threads=1) as renderer:
+        renderer.render(quiet=True, progress=lambda d, t: seen.append((d, t)), **SIZE)
     total = SIZE["width"] * SIZE["height"] * SIZE["spp"]
     assert seen and seen[-1] == (total, total)
