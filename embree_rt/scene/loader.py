@@ -145,13 +145,10 @@ def _check_unpacking(
         return
     if headers is None:
         return
-    needed, what = cost(headers)
-    available = budget.available_memory()
-    if available is not None and needed > available:
-        raise fail(
-            f"{what} would need ~{budget.format_bytes(needed)} of memory, this machine has "
-            f"{budget.format_bytes(available)} available"
-        )
+    try:
+        budget.require({"archive": cost(headers)})
+    except budget.MemoryBudgetError as error:
+        raise fail(str(error)) from None
 
 
 def _sphere_array_cost(headers: Headers) -> tuple[int, str]:
