@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from embree_rt.batches import worker_count
 from embree_rt.errors import InputError
+from embree_rt.sphere_modes import sphere_kind
 
 if TYPE_CHECKING:
     from embree_rt.scene.model import RenderSettings
@@ -105,7 +106,7 @@ def field_bytes(count: int) -> int:
 
 def geometry_bytes(count: int, kind: str) -> int:
     """What building the BVH of ``count`` spheres needs beyond the scene's own arrays, the
-    spheres going in as ``kind`` ("user", "point" or "mesh": ``geometry.sphere_kind``)."""
+    spheres going in as ``kind`` ("user", "point" or "mesh": ``sphere_modes.sphere_kind``)."""
     return count * GEOMETRY_BYTES_PER_SPHERE[kind]
 
 
@@ -143,8 +144,6 @@ def bvh_needs(sphere_count: int, spheres: str) -> dict[str, tuple[int, str]]:
     """What building the BVH of ``sphere_count`` spheres in mode ``spheres`` ("analytic",
     "point", "mesh") needs, for ``require`` (a Dask worker's whole need: the film stays with
     the client)."""
-    from embree_rt.geometry import sphere_kind
-
     kind = sphere_kind(sphere_count, spheres)
     return {"spheres": (geometry_bytes(sphere_count, kind), f"the BVH of {sphere_count:,} spheres")}
 

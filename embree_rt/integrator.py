@@ -144,7 +144,7 @@ class Integrator(Closing):
     of camera samples (``render_image``, ``trace_batch``, ``trace_pixels``). ``embree_rt.Renderer``
     adds the public ``render`` to it; Dask workers and the browser preview use it as it is.
 
-    ``spheres``: how spheres enter the BVH (``geometry.SPHERE_MODES``); ``threads``: the worker
+    ``spheres``: how spheres enter the BVH (``sphere_modes.SPHERE_MODES``); ``threads``: the worker
     threads (None: every core, ``batches.worker_count``); ``batch_size``: camera samples a batch
     traces at most.
 

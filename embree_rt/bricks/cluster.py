@@ -58,9 +58,9 @@ from embree_rt.distributed import (
     WorkerSceneError,
 )
 from embree_rt.errors import InputError
-from embree_rt.geometry import sphere_kind
 from embree_rt.integrator import Integrator, RenderStats
 from embree_rt.scene.model import RenderSettings, Scene, SettingOverrides
+from embree_rt.sphere_modes import sphere_kind
 
 if TYPE_CHECKING:
     from typing_extensions import Unpack
