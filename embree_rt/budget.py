@@ -12,14 +12,11 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from embree_rt.batches import worker_count
 from embree_rt.errors import InputError
 from embree_rt.sphere_modes import sphere_kind
-
-if TYPE_CHECKING:
-    from embree_rt.scene.model import RenderSettings
 
 # The scene model's sphere arrays: (3,) float32 centre, float32 radius, int32 material.
 SCENE_BYTES_PER_SPHERE = 20
@@ -52,6 +49,15 @@ FILM_BYTES_PER_PIXEL = 76
 # the batch's camera samples (benchmarks/depth_memory.py: the same peak at depth 6, 60, 600).
 BYTES_PER_SAMPLE_IN_FLIGHT = 72
 BATCHES_IN_FLIGHT_PER_WORKER = 3
+
+
+class ImageSettings(Protocol):
+    """What a budget reads of a render's settings (a scene's ``RenderSettings``): the image's
+    ``width`` and ``height`` in pixels and its ``spp`` samples per pixel."""
+
+    width: int
+    height: int
+    spp: int
 
 
 class MemoryBudgetError(InputError, ValueError):
@@ -151,7 +157,7 @@ def bvh_needs(sphere_count: int, spheres: str) -> dict[str, tuple[int, str]]:
 def render_needs(
     sphere_count: int,
     spheres: str,
-    settings: RenderSettings,
+    settings: ImageSettings,
     *,
     batch_size: int,
     threads: int | None,
