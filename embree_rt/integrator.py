@@ -27,7 +27,6 @@ from embree_rt.compiled.camera_rays import CameraRays, sample_directions
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.materials import MaterialTable, shading_shares
-from embree_rt.scene.loader import check_scene_values
 from embree_rt.scene.model import Scene
 
 DEFAULT_BATCH_SIZE = 1 << 18
@@ -151,7 +150,7 @@ class Integrator(Closing):
     ``tracer`` replaces the BVH: intersection and occlusion come from it (closed with the
     integrator), shading stays here; ``spheres`` is then unused.
 
-    The scene is first held to a scene file's limits (``scene.loader.check_scene_values``): a
+    The scene is first held to a scene file's limits (``Scene.check``): a
     value no file could hold, a light of intensity 1e39 say, raises the ``SceneError`` the file
     would (a ValueError) instead of putting NaN in float32 shading and the image."""
 
@@ -164,7 +163,7 @@ class Integrator(Closing):
         batch_size: int = DEFAULT_BATCH_SIZE,
         tracer: Tracer | None = None,
     ) -> None:
-        check_scene_values(scene)
+        scene.check()
         if batch_size < 1:
             raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
         self.scene = scene
