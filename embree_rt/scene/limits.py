@@ -46,23 +46,19 @@ def shown(value: object) -> str:
 
 
 def number_problem(
-    value: object,
-    low: float | None = None,
-    high: float | None = None,
-    *,
-    low_open: bool = False,
-    high_open: bool = False,
+    value: object, low: float | None = None, high: float | None = None, **open_bounds: bool
 ) -> str | None:
     """What keeps ``value`` from being a number of a scene, or None: not a real number, not
     finite, beyond ``COORDINATE_LIMIT`` (every number of a scene lies within it), or out of
-    [``low``, ``high``] (``errors.range_problem``)."""
+    [``low``, ``high``] (``errors.range_problem``, which ``open_bounds``, ``low_open`` and
+    ``high_open``, are passed to)."""
     if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
         return f"expected a number, got {shown(value)}"
     if not isinstance(value, numbers.Integral) and not math.isfinite(value):
         return f"must be finite, got {value}"
     if not -COORDINATE_LIMIT <= value <= COORDINATE_LIMIT:  # exact for an int of any size
         return f"must lie within ±{COORDINATE_LIMIT:g} (float32's reach), got {shown(value)}"
-    return range_problem(value, low, high, low_open=low_open, high_open=high_open)
+    return range_problem(value, low, high, **open_bounds)
 
 
 def vector_problem(
