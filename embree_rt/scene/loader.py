@@ -54,7 +54,19 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-NUMBER_FIELDS = ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency")
+# A material's keys in a file, by what they hold (``Material`` checks their values).
+MATERIAL_COLORS = ("color", "emission", "attenuation_color")
+MATERIAL_NUMBERS = (
+    "ambient",
+    "diffuse",
+    "specular",
+    "shininess",
+    "reflectivity",
+    "transparency",
+    "ior",
+    "attenuation_distance",
+)
+MATERIAL_FLAGS = ("metallic", "unlit")
 
 
 def read_document(path: Path) -> dict:
@@ -384,13 +396,13 @@ class SceneReader:
         """``base`` with the material keys ``table`` holds, checked by ``Material`` (its ranges)
         and ``model.material_limits_problem`` (a scene's limits)."""
         fields = {}
-        for name in ("color", "emission", "attenuation_color"):
+        for name in MATERIAL_COLORS:
             if table.has(name):
                 fields[name] = table.color(name)
-        for name in (*NUMBER_FIELDS, "ior", "attenuation_distance"):
+        for name in MATERIAL_NUMBERS:
             if table.has(name):
                 fields[name] = table.number(name)
-        for name in ("metallic", "unlit"):
+        for name in MATERIAL_FLAGS:
             if table.has(name):
                 fields[name] = table.boolean(name, False)
         material = self._build(table, Material, **{**base.__dict__, **fields})
