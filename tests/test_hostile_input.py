@@ -355,6 +355,34 @@ def test_a_python_built_value_and_the_same_value_in_a_file_are_refused_alike(
     assert in_python.value.problem == in_file.value.problem
 
 
+@pytest.mark.parametrize(
+    ("field", "value", "problem"),
+    [
+        ("reflectivity", 1.5, "must be <= 1, got 1.5"),
+        ("ambient", -0.25, "must be >= 0, got -0.25"),
+        ("shininess", 0.0, "must be > 0, got 0"),
+        ("ior", 0.5, "must be >= 1, got 0.5"),
+        ("attenuation_distance", 0.0, "must be > 0, got 0"),
+    ],
+)
+def test_a_materials_ranges_are_checked_by_the_material_and_named_by_a_file(
+    tmp_path: Path, field: str, value: float, problem: str
+) -> None:
+    """``Material`` is the one place its ranges are checked: in Python a ``FieldError`` (a
+    ValueError) naming the field, in a file the same words under the file's key, for a
+    material and for the floor's (whose keys the floor's table holds)."""
+    from embree_rt.errors import FieldError
+
+    with pytest.raises(FieldError) as caught:
+        Material(**{field: value})
+    assert isinstance(caught.value, ValueError)
+    assert (caught.value.field, caught.value.problem) == (field, problem)
+    assert str(caught.value) == f"{field}: {problem}"
+    for table, key in (("materials.odd", f"materials.odd.{field}"), ("floor", f"floor.{field}")):
+        error = _load_error(tmp_path / "s.toml", f"[{table}]\n{field} = {value}\n")
+        assert (error.key, error.problem) == (key, problem)
+
+
 def test_python_built_values_at_the_limits_render_without_nan() -> None:
     from embree_rt.scene.limits import RADIANCE_LIMIT
 
