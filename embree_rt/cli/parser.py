@@ -9,7 +9,7 @@ import sys
 from embree_rt.cli.errors import EXIT_BAD_INPUT
 from embree_rt.scene.limits import INTEGER_LIMIT
 
-# sphere_modes.SPHERE_MODES, spelled out so that --help does not load Embree and numba.
+# geometry.SPHERE_MODES, spelled out so that --help does not load Embree and numba.
 SPHERE_CHOICES = ("analytic", "point", "mesh")
 SCENE_HELP = (
     "scene or mesh file: a .toml or .json scene, or a mesh (.obj, .ply, .stl, .off, .glb, "
