@@ -111,13 +111,13 @@ class Renderer(Integrator):
         frame = camera_frame(
             self.scene.camera if camera is None else camera, settings.width, settings.height
         )
-        with progress_bar(settings, quiet, progress) as show:
+        with progress_bar(settings.width * settings.height * settings.spp, quiet) as bar:
             image, stats = self.render_image(
                 frame,
                 spp=settings.spp,
                 max_depth=settings.max_depth,
                 seed=settings.seed,
-                progress=show,
+                progress=integrator_progress(bar, progress),
             )
         look = settings.look()
         if not names:
@@ -210,28 +210,52 @@ def require_memory(
     )
 
 
+@dataclass
+class Progress:
+    """Where a render stands: camera samples ``done`` of ``total``, ``stats`` (rays traced and
+    seconds spent so far), and ``workers``, the Dask workers present (None: a local render)."""
+
+    done: int = 0
+    total: int = 0
+    stats: RenderStats = field(default_factory=RenderStats)
+    workers: int | None = None
+
+
 @contextmanager
-def progress_bar(
-    settings: RenderSettings, quiet: bool, progress: Callable[[int, int], None] | None
-) -> Iterator[Callable[[int, int, RenderStats], None]]:
-    """The integrator's progress callback: a tqdm bar on stderr (unless ``quiet``, and only on
-    a terminal) counting samples and showing rays/s, and the caller's ``progress(done, total)``."""
-    bar = None
-    if not quiet and sys.stderr.isatty():
-        from tqdm import tqdm
+def progress_bar(total: int, quiet: bool) -> Iterator[Callable[[Progress], None] | None]:
+    """The progress bar of every render, local or on a cluster: a tqdm bar on stderr counting
+    ``total`` samples and showing rays/s (and the workers present, for a cluster); None when
+    ``quiet`` or stderr is not a terminal."""
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
 
-        total = settings.width * settings.height * settings.spp
-        bar = tqdm(total=total, unit="sample", unit_scale=True, file=sys.stderr)
+    bar = tqdm(total=total, unit="sample", unit_scale=True, file=sys.stderr)
 
-    def show(done: int, total: int, stats: RenderStats) -> None:
-        if bar is not None:
-            bar.update(done - bar.n)
-            bar.set_postfix_str(f"{stats.rays_per_s / 1e6:.1f} Mrays/s", refresh=False)
-        if progress is not None:
-            progress(done, total)
+    def show(state: Progress) -> None:
+        bar.update(state.done - bar.n)
+        text = f"{state.stats.rays_per_s / 1e6:.1f} Mrays/s"
+        if state.workers is not None:
+            text += f", {state.workers} workers"
+        bar.set_postfix_str(text, refresh=False)
 
     try:
         yield show
     finally:
+        bar.close()
+
+
+def integrator_progress(
+    bar: Callable[[Progress], None] | None, progress: Callable[[int, int], None] | None
+) -> Callable[[int, int, RenderStats], None]:
+    """The integrator's progress callback ``(done, total, stats)``: it moves ``bar``
+    (``progress_bar``'s, or None) and calls the caller's ``progress(done, total)``."""
+
+    def show(done: int, total: int, stats: RenderStats) -> None:
         if bar is not None:
-            bar.close()
+            bar(Progress(done, total, stats))
+        if progress is not None:
+            progress(done, total)
+
+    return show

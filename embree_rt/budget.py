@@ -12,13 +12,11 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from embree_rt.batches import worker_count
 from embree_rt.errors import InputError
-
-if TYPE_CHECKING:
-    from embree_rt.scene.model import RenderSettings
+from embree_rt.sphere_modes import sphere_kind
 
 # The scene model's sphere arrays: (3,) float32 centre, float32 radius, int32 material.
 SCENE_BYTES_PER_SPHERE = 20
@@ -51,6 +49,15 @@ FILM_BYTES_PER_PIXEL = 76
 # the batch's camera samples (benchmarks/depth_memory.py: the same peak at depth 6, 60, 600).
 BYTES_PER_SAMPLE_IN_FLIGHT = 72
 BATCHES_IN_FLIGHT_PER_WORKER = 3
+
+
+class ImageSettings(Protocol):
+    """What a budget reads of a render's settings (a scene's ``RenderSettings``): the image's
+    ``width`` and ``height`` in pixels and its ``spp`` samples per pixel."""
+
+    width: int
+    height: int
+    spp: int
 
 
 class MemoryBudgetError(InputError, ValueError):
@@ -105,7 +112,7 @@ def field_bytes(count: int) -> int:
 
 def geometry_bytes(count: int, kind: str) -> int:
     """What building the BVH of ``count`` spheres needs beyond the scene's own arrays, the
-    spheres going in as ``kind`` ("user", "point" or "mesh": ``geometry.sphere_kind``)."""
+    spheres going in as ``kind`` ("user", "point" or "mesh": ``sphere_modes.sphere_kind``)."""
     return count * GEOMETRY_BYTES_PER_SPHERE[kind]
 
 
@@ -143,8 +150,6 @@ def bvh_needs(sphere_count: int, spheres: str) -> dict[str, tuple[int, str]]:
     """What building the BVH of ``sphere_count`` spheres in mode ``spheres`` ("analytic",
     "point", "mesh") needs, for ``require`` (a Dask worker's whole need: the film stays with
     the client)."""
-    from embree_rt.geometry import sphere_kind
-
     kind = sphere_kind(sphere_count, spheres)
     return {"spheres": (geometry_bytes(sphere_count, kind), f"the BVH of {sphere_count:,} spheres")}
 
@@ -152,7 +157,7 @@ def bvh_needs(sphere_count: int, spheres: str) -> dict[str, tuple[int, str]]:
 def render_needs(
     sphere_count: int,
     spheres: str,
-    settings: RenderSettings,
+    settings: ImageSettings,
     *,
     batch_size: int,
     threads: int | None,

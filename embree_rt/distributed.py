@@ -25,12 +25,11 @@ import logging
 import os
 import pickle
 import signal
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -39,7 +38,7 @@ import distributed
 import numpy as np
 
 from embree_rt import budget
-from embree_rt.api import RenderResult
+from embree_rt.api import Progress, RenderResult, progress_bar
 from embree_rt.batches import batch_ranges
 from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.errors import InputError
@@ -51,7 +50,8 @@ from embree_rt.scene.random_field import FieldPlan
 if TYPE_CHECKING:
     from typing_extensions import Unpack
 
-# How long a render waits with no worker at all (lost, or not yet joined) before giving up.
+# How long a render (a brick too) waits with no worker at all (lost, or not yet joined) before
+# giving up.
 NO_WORKERS_TIMEOUT_S = 30.0
 # How long ``--scheduler`` may take to answer as a Dask scheduler (``--scheduler-timeout``).
 SCHEDULER_TIMEOUT_S = 10.0
@@ -250,15 +250,12 @@ def render_batch(
 
 
 @dataclass
-class ClusterProgress:
-    """What the client knows mid-render: samples done of ``total``, frames done, the workers
-    present, and ``stats``, the rays traced and seconds spent since the start."""
+class ClusterProgress(Progress):
+    """What the client knows mid-render (``api.Progress``: samples done of ``total``, the
+    workers present, ``stats``), and the frames done."""
 
-    done: int = 0
-    total: int = 0
     workers: int = 0
     frames_done: int = 0
-    stats: RenderStats = field(default_factory=RenderStats)
 
 
 @dataclass
@@ -520,28 +517,6 @@ def _local_view(source: SceneSource | str | os.PathLike) -> Scene:
     if isinstance(source, FieldRecipe):
         return field_scene(source.plan)
     return load_scene(source.path if isinstance(source, SceneFile) else source)
-
-
-@contextmanager
-def progress_bar(total: int, quiet: bool) -> Iterator[Callable[[ClusterProgress], None] | None]:
-    """A tqdm bar on stderr (a terminal, not quiet) showing samples, rays/s and workers."""
-    if quiet or not sys.stderr.isatty():
-        yield None
-        return
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, unit="sample", unit_scale=True, file=sys.stderr)
-
-    def show(state: ClusterProgress) -> None:
-        bar.update(state.done - bar.n)
-        bar.set_postfix_str(
-            f"{state.stats.rays_per_s / 1e6:.1f} Mrays/s, {state.workers} workers", refresh=False
-        )
-
-    try:
-        yield show
-    finally:
-        bar.close()
 
 
 # -- clusters for the command ----------------------------------------------------------------

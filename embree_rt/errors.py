@@ -19,3 +19,32 @@ def install_hint(extra: str, packages: str) -> str:
     is installed (from a checkout, not from a package index): the packages themselves, or the
     checkout's ``extra``."""
     return f"pip install {packages} (or, from the embree_rt checkout: pip install '.[{extra}]')"
+
+
+class FieldError(ValueError):
+    """A value a dataclass refuses for one of its fields: ``field`` names it, ``problem`` says
+    what is wrong (``str()`` is ``"field: problem"``), so that a scene file's reader can report
+    it under the file's key."""
+
+    def __init__(self, field: str, problem: str) -> None:
+        self.field = field
+        self.problem = problem
+        super().__init__(f"{field}: {problem}")
+
+
+def range_problem(
+    value: float,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+) -> str | None:
+    """What keeps the number ``value`` out of [``low``, ``high``] (either bound None: open;
+    ``low_open``/``high_open``: the bound itself excluded), in the one wording every check of a
+    range uses ("must be >= 0, got -1"), or None. NaN lies in no range."""
+    if low is not None and not (value > low if low_open else value >= low):
+        return f"must be {'>' if low_open else '>='} {low:g}, got {value:g}"
+    if high is not None and not (value < high if high_open else value <= high):
+        return f"must be {'<' if high_open else '<='} {high:g}, got {value:g}"
+    return None

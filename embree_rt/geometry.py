@@ -1,7 +1,7 @@
 """Scene geometry: every object of a ``Scene`` in one Embree BVH, and what each hit is.
 
 Spheres go in as analytic spheres: by default Embree user geometry with compiled callbacks
-(Embree's own point spheres beyond ``USER_GEOMETRY_MAX_SPHERES``), ``spheres="point"`` Embree's
+(Embree's own point spheres beyond ``sphere_modes``' limit), ``spheres="point"`` Embree's
 own point spheres, ``spheres="mesh"`` one tessellated icosphere placed once per sphere through
 one Embree instance array. Each distinct triangle mesh is built once and instanced per
 placement; a scene's ``instances`` (meshes placed by the thousand) go in as one instance array
@@ -30,6 +30,7 @@ from embree_rt.mesh_attributes import (
     unit_vertex_normals,
 )
 from embree_rt.scene.model import MeshObject, Scene
+from embree_rt.sphere_modes import SPHERE_MODES, sphere_kind
 from embree_rt.tracing import segments
 from embree_rt.tracing.camera_query import intersect_camera_records
 from embree_rt.tracing.records import HitLabels, HitRecords, intersect_records
@@ -37,25 +38,7 @@ from embree_rt.tracing.records import HitLabels, HitRecords, intersect_records
 if TYPE_CHECKING:
     import trimesh
 
-SPHERE_MODES = ("analytic", "point", "mesh")
-# Above this many spheres, "analytic" spheres are Embree's own point spheres. Measured on the
-# 1e7-sphere random field (2 threads, benchmarks/build_quality.py): they trace as fast as user
-# geometry there (primary 9.3-9.6 against 10.3-13.7 Mrays/s, shadow 12.3-14.4 against 12.4-12.9),
-# build in 2.9 s instead of 5.0-5.4 s, and take 49 bytes a sphere in Embree instead of 93 (the
-# whole command: 71 against 148), so 1e8 spheres fit in 8 GB. Below it user geometry traces up to
-# 1.5x faster.
-USER_GEOMETRY_MAX_SPHERES = 1 << 23
 ICOSPHERE_SUBDIVISIONS = 3
-
-
-def sphere_kind(count: int, spheres: str = "analytic") -> str:
-    """How ``count`` spheres of mode ``spheres`` (``SPHERE_MODES``) enter the BVH: "user" or
-    "point" (the ``BVH.add_spheres`` kinds), or "mesh" (instanced icospheres)."""
-    if spheres == "mesh":
-        return "mesh"
-    if spheres == "point" or count > USER_GEOMETRY_MAX_SPHERES:
-        return "point"
-    return "user"
 
 
 @dataclass

@@ -28,7 +28,6 @@ from embree_rt.compiled import retain_freed_memory
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.materials import HitMaterials, MaterialTable
-from embree_rt.scene.loader import check_scene_values
 from embree_rt.scene.model import Scene
 from embree_rt.tracer import Tracer
 
@@ -134,14 +133,14 @@ class Integrator(Closing):
     of camera samples (``render_image``, ``trace_batch``, ``trace_pixels``). ``embree_rt.Renderer``
     adds the public ``render`` to it; Dask workers and the browser preview use it as it is.
 
-    ``spheres``: how spheres enter the BVH (``geometry.SPHERE_MODES``); ``threads``: the worker
+    ``spheres``: how spheres enter the BVH (``sphere_modes.SPHERE_MODES``); ``threads``: the worker
     threads (None: every core, ``batches.worker_count``); ``batch_size``: camera samples a batch
     traces at most.
 
     ``tracer`` replaces the BVH: intersection and occlusion come from it (closed with the
     integrator), shading stays here; ``spheres`` is then unused.
 
-    The scene is first held to a scene file's limits (``scene.loader.check_scene_values``): a
+    The scene is first held to a scene file's limits (``Scene.check``): a
     value no file could hold, a light of intensity 1e39 say, raises the ``SceneError`` the file
     would (a ValueError) instead of putting NaN in float32 shading and the image."""
 
@@ -154,7 +153,7 @@ class Integrator(Closing):
         batch_size: int = DEFAULT_BATCH_SIZE,
         tracer: Tracer | None = None,
     ) -> None:
-        check_scene_values(scene)
+        scene.check()
         if batch_size < 1:
             raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
         self.scene = scene

@@ -7,6 +7,8 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+from embree_rt.errors import FieldError, range_problem
+
 RGB = tuple[float, float, float]
 
 
@@ -44,27 +46,29 @@ class Material:
     unlit: bool = False
 
     def __post_init__(self) -> None:
+        """The one place a material's ranges are checked (a scene file's reader reports these
+        under its keys): raises ``FieldError`` naming the field."""
         if len(self.color) != 3 or any(float(c) < 0.0 for c in self.color):
-            raise ValueError(f"color: expected three non-negative numbers, got {self.color!r}")
+            raise FieldError("color", f"expected three non-negative numbers, got {self.color!r}")
         for name in ("ambient", "diffuse", "specular", "reflectivity", "transparency"):
-            value = float(getattr(self, name))
-            if not 0.0 <= value <= 1.0:
-                raise ValueError(f"{name}: must lie in [0, 1], got {value}")
-        if not self.shininess > 0.0:
-            raise ValueError(f"shininess: must be > 0, got {self.shininess}")
-        if not self.ior >= 1.0:
-            raise ValueError(f"ior: must be >= 1, got {self.ior}")
+            if (problem := range_problem(float(getattr(self, name)), 0.0, 1.0)) is not None:
+                raise FieldError(name, problem)
+        if (problem := range_problem(self.shininess, 0.0, low_open=True)) is not None:
+            raise FieldError("shininess", problem)
+        if (problem := range_problem(self.ior, 1.0)) is not None:
+            raise FieldError("ior", problem)
         for name in ("emission", "attenuation_color"):
             value = getattr(self, name)
             if len(value) != 3 or not all(math.isfinite(float(c)) and float(c) >= 0 for c in value):
-                raise ValueError(f"{name}: expected three finite numbers >= 0, got {value!r}")
+                raise FieldError(name, f"expected three finite numbers >= 0, got {value!r}")
             object.__setattr__(self, name, tuple(float(c) for c in value))
         if any(c > 1.0 for c in self.attenuation_color):
-            raise ValueError(
-                f"attenuation_color: each must lie in [0, 1], got {list(self.attenuation_color)}"
+            raise FieldError(
+                "attenuation_color", f"each must lie in [0, 1], got {list(self.attenuation_color)}"
             )
-        if not self.attenuation_distance > 0.0:
-            raise ValueError(f"attenuation_distance: must be > 0, got {self.attenuation_distance}")
+        problem = range_problem(self.attenuation_distance, 0.0, low_open=True)
+        if problem is not None:
+            raise FieldError("attenuation_distance", problem)
         object.__setattr__(self, "color", tuple(float(c) for c in self.color))
 
     @property
@@ -125,15 +129,12 @@ def shading_shares(
 
 @dataclass(frozen=True)
 class Checker:
-    """A procedural checkerboard in the xz-plane: squares of side ``size`` alternate two colors."""
+    """A procedural checkerboard in the xz-plane: squares of side ``size`` alternate two colors
+    (a scene holds them to its limits: ``scene.model.floor_problem``)."""
 
     color_a: RGB = (0.9, 0.9, 0.9)
     color_b: RGB = (0.15, 0.15, 0.15)
     size: float = 1.0
-
-    def __post_init__(self) -> None:
-        if not self.size > 0.0:
-            raise ValueError(f"size: must be > 0, got {self.size}")
 
 
 @dataclass(frozen=True)

@@ -147,3 +147,45 @@ def test_results_and_scenes_show_themselves_in_a_notebook() -> None:
         pixels = np.asarray(preview)
     expected = rt.render(scene, width=256, height=144, spp=1, max_depth=2)
     np.testing.assert_array_equal(pixels, expected.to_srgb8())
+
+
+class _Terminal:
+    """A stderr that says it is a terminal and keeps what is written to it."""
+
+    def __init__(self) -> None:
+        self.text = ""
+
+    def isatty(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        self.text += text
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+def test_one_progress_bar_counts_samples_and_names_workers_only_on_a_cluster(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from embree_rt.api import Progress, progress_bar
+    from embree_rt.integrator import RenderStats
+
+    terminal = _Terminal()
+    monkeypatch.setattr("sys.stderr", terminal)
+    with progress_bar(100, quiet=True) as show:
+        assert show is None
+    stats = RenderStats(rays={"primary": 4_000_000}, render_s=2.0)
+    for workers in (None, 3):
+        terminal.text = ""
+        with progress_bar(100, quiet=False) as show:
+            show(Progress(done=40, total=100, stats=stats, workers=workers))
+        assert "40.0/100" in terminal.text and "2.0 Mrays/s" in terminal.text, terminal.text
+        assert ("3 workers" in terminal.text) == (workers == 3), terminal.text
+    # A render's own callback reaches the caller's progress(done, total) with no bar too.
+    seen = []
+    with rt.Renderer(small_scene(), threads=1) as renderer:
+        renderer.render(quiet=True, progress=lambda d, t: seen.append((d, t)), **SIZE)
+    total = SIZE["width"] * SIZE["height"] * SIZE["spp"]
+    assert seen and seen[-1] == (total, total)

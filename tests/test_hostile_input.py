@@ -318,9 +318,10 @@ PYTHON_VALUES = {
 
 @pytest.mark.parametrize("case", sorted(PYTHON_VALUES))
 def test_python_built_values_are_held_to_a_files_limits_before_rendering(case: str) -> None:
-    """``PointLight(intensity=1e39)`` made an image with NaN at exit 0: the renderer now reads
-    a scene built in Python back through the scene-file readers, so it is refused as the same
-    value in a file is, naming the key a file would use."""
+    """``PointLight(intensity=1e39)`` made an image with NaN at exit 0: the renderer now holds
+    a scene built in Python to a file's limits (``Scene.check``, the rules the file's reader
+    applies too), so it is refused as the same value in a file is, naming the key a file would
+    use."""
     change, key = PYTHON_VALUES[case]
     scene = _lit_sphere()
     change(scene)
@@ -331,6 +332,55 @@ def test_python_built_values_are_held_to_a_files_limits_before_rendering(case: s
     with pytest.raises(SceneError) as caught:
         Integrator(scene, threads=1)
     assert caught.value.key == key, str(caught.value)
+
+
+@pytest.mark.parametrize("case", sorted(set(PYTHON_VALUES) - {"sphere centres set to 1e39"}))
+def test_a_python_built_value_and_the_same_value_in_a_file_are_refused_alike(
+    tmp_path: Path, case: str
+) -> None:
+    """The same key and the same words whether the value was set in Python (``Scene.check``)
+    or written to a file and read (the writer does not check; the reader does). The sphere
+    case is left out: the writer stores centres as float32, where 1e39 is already inf."""
+    from embree_rt.scene.writer import save_scene
+
+    change, key = PYTHON_VALUES[case]
+    scene = _lit_sphere()
+    change(scene)
+    with pytest.raises(SceneError) as in_python:
+        scene.check()
+    save_scene(scene, tmp_path / "s.toml")
+    with pytest.raises(SceneError) as in_file:
+        load_scene(tmp_path / "s.toml")
+    assert in_python.value.key == in_file.value.key == key
+    assert in_python.value.problem == in_file.value.problem
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "problem"),
+    [
+        ("reflectivity", 1.5, "must be <= 1, got 1.5"),
+        ("ambient", -0.25, "must be >= 0, got -0.25"),
+        ("shininess", 0.0, "must be > 0, got 0"),
+        ("ior", 0.5, "must be >= 1, got 0.5"),
+        ("attenuation_distance", 0.0, "must be > 0, got 0"),
+    ],
+)
+def test_a_materials_ranges_are_checked_by_the_material_and_named_by_a_file(
+    tmp_path: Path, field: str, value: float, problem: str
+) -> None:
+    """``Material`` is the one place its ranges are checked: in Python a ``FieldError`` (a
+    ValueError) naming the field, in a file the same words under the file's key, for a
+    material and for the floor's (whose keys the floor's table holds)."""
+    from embree_rt.errors import FieldError
+
+    with pytest.raises(FieldError) as caught:
+        Material(**{field: value})
+    assert isinstance(caught.value, ValueError)
+    assert (caught.value.field, caught.value.problem) == (field, problem)
+    assert str(caught.value) == f"{field}: {problem}"
+    for table, key in (("materials.odd", f"materials.odd.{field}"), ("floor", f"floor.{field}")):
+        error = _load_error(tmp_path / "s.toml", f"[{table}]\n{field} = {value}\n")
+        assert (error.key, error.problem) == (key, problem)
 
 
 def test_python_built_values_at_the_limits_render_without_nan() -> None:

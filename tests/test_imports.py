@@ -1,4 +1,5 @@
-"""The package's modules import each other without a circle.
+"""The package's modules import each other without a circle, and only downward through the
+layers of docs/architecture.md.
 
 Read from the source with ``ast``: every ``import`` counts, a deferred one inside a function too
 (it is the same circle, only hidden until the call), and one under ``if TYPE_CHECKING:`` too:
@@ -9,6 +10,7 @@ split in two, whatever the interpreter does.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import embree_rt
@@ -88,6 +90,135 @@ def test_no_module_imports_itself_through_others() -> None:
     assert "embree_rt.api" in graph["embree_rt.cli.render"]
     cycles = import_cycles(graph)
     assert not cycles, "import circles: " + "; ".join(" -> ".join(cycle) for cycle in cycles)
+
+
+# The layers of docs/architecture.md ("Layers and their rules"), bottom up: each layer's modules
+# (a package's name stands for every module in it; the longest name that fits a module places
+# it), and the layers it stands on. A module imports only from its own layer and those its layer
+# stands on. A new module or package must be placed here (the test names it until it is), and
+# named in the layer's paragraph of docs/architecture.md.
+LAYERS: dict[str, tuple[str, ...]] = {
+    "leaves": (
+        "batches",
+        "budget",
+        "camera",
+        "closing",
+        "columns",
+        "compiled",
+        "errors",
+        "film",
+        "materials",
+        "sampling",
+        "shading",
+        "sphere_modes",
+        "textures",
+        "transforms",
+        "version",
+    ),
+    "embree": ("embree",),
+    "scene": ("scene",),
+    "renderer": (
+        "aovs",
+        "bricks",
+        "geometry",
+        "integrator",
+        "mesh_attributes",
+        "tracer",
+        "tracing",
+    ),
+    "trimesh_ray": ("trimesh_ray",),
+    "front ends": ("", "__main__", "api", "bricks.cluster", "cli", "distributed", "web"),
+}
+STANDS_ON: dict[str, tuple[str, ...]] = {
+    "leaves": (),
+    "embree": ("leaves",),
+    # The scene knows nothing of Embree or of rendering.
+    "scene": ("leaves",),
+    "renderer": ("leaves", "embree", "scene"),
+    # trimesh's ray API stands on the Embree layer alone, beside the renderer.
+    "trimesh_ray": ("leaves", "embree"),
+    "front ends": ("leaves", "embree", "scene", "renderer", "trimesh_ray"),
+}
+
+
+def layer_of(module: str, layers: dict[str, tuple[str, ...]] = LAYERS) -> str | None:
+    """The layer whose longest entry holds dotted ``module`` ("embree_rt.x.y"), or None."""
+    relative = module.removeprefix("embree_rt").removeprefix(".")
+    best, best_length = None, -1
+    for layer, entries in layers.items():
+        for entry in entries:
+            holds = relative == entry or (entry and relative.startswith(entry + "."))
+            if holds and len(entry) > best_length:
+                best, best_length = layer, len(entry)
+    return best
+
+
+def upward_imports(
+    graph: dict[str, set[str]],
+    layers: dict[str, tuple[str, ...]] = LAYERS,
+    stands_on: dict[str, tuple[str, ...]] = STANDS_ON,
+) -> list[str]:
+    """Each import of ``graph`` (module -> modules it imports) that leaves its module's layer
+    for one it does not stand on, as "a (layer) imports b (layer)"."""
+    found = []
+    for module, targets in sorted(graph.items()):
+        layer = layer_of(module, layers)
+        for target in sorted(targets):
+            target_layer = layer_of(target, layers)
+            if target_layer != layer and target_layer not in stands_on[layer]:
+                found.append(f"{module} ({layer}) imports {target} ({target_layer})")
+    return found
+
+
+def test_the_layer_rule_finds_an_upward_import() -> None:
+    layers = {"low": ("a",), "high": ("b", "b.c"), "side": ("d",)}
+    stands_on = {"low": (), "high": ("low",), "side": ("low",)}
+    assert layer_of("embree_rt.b.c.e", layers) == "high"  # the longest entry that fits
+    assert layer_of("embree_rt.bc", layers) is None  # a name's prefix is not its package
+    graph = {
+        "embree_rt.a": {"embree_rt.b"},
+        "embree_rt.b": {"embree_rt.a", "embree_rt.b.c"},
+        "embree_rt.d": {"embree_rt.b.c"},
+        "embree_rt.b.c": {"embree_rt.d"},
+    }
+    assert upward_imports(graph, layers, stands_on) == [
+        "embree_rt.a (low) imports embree_rt.b (high)",
+        "embree_rt.b.c (high) imports embree_rt.d (side)",
+        "embree_rt.d (side) imports embree_rt.b.c (high)",
+    ]
+
+
+def test_every_module_has_a_layer_and_imports_only_downward() -> None:
+    files = module_files()
+    assert LAYERS.keys() == STANDS_ON.keys()
+    unplaced = sorted(name for name in files if layer_of(name) is None)
+    assert not unplaced, f"modules in no layer of LAYERS (place them): {unplaced}"
+    stale = [
+        entry
+        for entries in LAYERS.values()
+        for entry in entries
+        if not any(name == f"embree_rt.{entry}".rstrip(".") for name in files)
+    ]
+    assert not stale, f"LAYERS names modules that do not exist: {stale}"
+    graph = {name: imported_modules(name, path, set(files)) for name, path in files.items()}
+    upward = upward_imports(graph)
+    assert not upward, "imports against the layers:\n" + "\n".join(upward)
+
+
+def test_the_architecture_document_names_each_module_in_its_layer() -> None:
+    """docs/architecture.md's paragraph of each layer (numbered, in ``LAYERS``' order) names
+    every entry of it, as `name`, `name.py`, `name/` or `embree_rt/name/`."""
+    text = (PACKAGE.parent / "docs" / "architecture.md").read_text(encoding="utf-8")
+    section = text.split("## Layers and their rules", 1)[1].split("\n## ", 1)[0]
+    paragraphs = re.split(r"\n(?=\d+\. )", section)[1:]
+    assert len(paragraphs) == len(LAYERS), "one numbered paragraph a layer"
+    for (layer, entries), paragraph in zip(LAYERS.items(), paragraphs, strict=True):
+        named = set()
+        for quoted in re.findall(r"`([^`]+)`", paragraph):
+            name = quoted.removeprefix("embree_rt").strip("./").removesuffix(".py")
+            named.add(name.replace("/", "."))
+        missing = [entry for entry in entries if entry and entry not in named]
+        assert not missing, f"docs/architecture.md's {layer} paragraph does not name {missing}"
 
 
 def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path) -> None:

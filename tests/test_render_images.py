@@ -211,11 +211,13 @@ def test_batches_tile_the_samples_in_whole_pixels(total, batch_size, spp, worker
 def test_spheres_beyond_the_user_geometry_limit_go_in_as_point_spheres(monkeypatch) -> None:
     """``sphere_kind`` below, at and above the limit, and SceneGeometry following it (the limit
     lowered to 10 so that a 20-sphere scene crosses it)."""
-    limit = geometry_module.USER_GEOMETRY_MAX_SPHERES
-    assert geometry_module.sphere_kind(limit) == "user"
-    assert geometry_module.sphere_kind(limit + 1) == "point"
-    assert geometry_module.sphere_kind(5, "point") == "point"
-    assert geometry_module.sphere_kind(limit + 1, "mesh") == "mesh"
+    from embree_rt import sphere_modes
+
+    limit = sphere_modes.USER_GEOMETRY_MAX_SPHERES
+    assert sphere_modes.sphere_kind(limit) == "user"
+    assert sphere_modes.sphere_kind(limit + 1) == "point"
+    assert sphere_modes.sphere_kind(5, "point") == "point"
+    assert sphere_modes.sphere_kind(limit + 1, "mesh") == "mesh"
     kinds = []
     add_spheres = BVH.add_spheres
 
@@ -226,6 +228,6 @@ def test_spheres_beyond_the_user_geometry_limit_go_in_as_point_spheres(monkeypat
     monkeypatch.setattr(BVH, "add_spheres", recording_add_spheres)
     scene = random_field(20, seed=3)
     for limit, expected in ((100, "user"), (10, "point")):
-        monkeypatch.setattr(geometry_module, "USER_GEOMETRY_MAX_SPHERES", limit)
+        monkeypatch.setattr(sphere_modes, "USER_GEOMETRY_MAX_SPHERES", limit)
         with geometry_module.SceneGeometry(scene):
             assert kinds[-1] == expected

@@ -16,7 +16,8 @@ import numpy as np
 
 from embree_rt.aovs import hit_object_ids
 from embree_rt.bricks.contents import BrickContents
-from embree_rt.geometry import SceneGeometry, SurfaceHits, sphere_kind
+from embree_rt.geometry import SceneGeometry, SurfaceHits
+from embree_rt.sphere_modes import sphere_kind
 
 # The hit records' groups (tracing.GROUPS) an object hit falls in: the top-level sphere set, or
 # any other object (instances, instance arrays: meshes and tessellated spheres).
@@ -41,7 +42,7 @@ class BrickHits:
 
 def brick_sphere_mode(total_spheres: int, spheres: str) -> str:
     """The ``spheres`` mode a brick builds with, so that its spheres enter its BVH as the
-    whole scene's ``total_spheres`` would enter one BVH (``geometry.sphere_kind``: beyond
+    whole scene's ``total_spheres`` would enter one BVH (``sphere_modes.sphere_kind``: beyond
     ``USER_GEOMETRY_MAX_SPHERES`` analytic spheres are Embree's point spheres, another
     intersection routine, whose t may differ in the last bit)."""
     return "point" if sphere_kind(total_spheres, spheres) == "point" else spheres

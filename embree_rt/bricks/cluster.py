@@ -47,6 +47,7 @@ from embree_rt.bricks.partition import (
 )
 from embree_rt.camera import Camera, camera_frame
 from embree_rt.distributed import (
+    NO_WORKERS_TIMEOUT_S,
     POLL_S,
     ClusterError,
     ClusterProgress,
@@ -57,9 +58,9 @@ from embree_rt.distributed import (
     WorkerSceneError,
 )
 from embree_rt.errors import InputError
-from embree_rt.geometry import sphere_kind
 from embree_rt.integrator import Integrator, RenderStats
 from embree_rt.scene.model import RenderSettings, Scene, SettingOverrides
+from embree_rt.sphere_modes import sphere_kind
 
 if TYPE_CHECKING:
     from typing_extensions import Unpack
@@ -73,8 +74,6 @@ DATA_PARALLEL_BATCH_SIZE = 1 << 17
 # Batches the client keeps in flight (its shading threads); each waits on the workers most of
 # the time, so more than the client's cores.
 DEFAULT_CLIENT_THREADS = 4
-# How long a brick may wait with no worker at all before the render gives up.
-NO_WORKERS_TIMEOUT_S = 30.0
 
 
 @dataclass(frozen=True)

@@ -7,12 +7,17 @@ always checked, so a JSON ``null`` is an error, not a silent default.
 from __future__ import annotations
 
 import difflib
-import math
 from collections.abc import Mapping
 from typing import Any
 
 from embree_rt.scene.errors import SceneError, unknown_key_message
-from embree_rt.scene.limits import COORDINATE_LIMIT, INTEGER_LIMIT, RADIANCE_LIMIT
+from embree_rt.scene.limits import (
+    INTEGER_LIMIT,
+    color_problem,
+    number_problem,
+    shown,
+    vector_problem,
+)
 
 _ABSENT = object()
 
@@ -88,11 +93,11 @@ class Table:
         if value is _ABSENT:
             return default
         if isinstance(value, bool) or not isinstance(value, int):
-            raise self.error(name, f"expected an integer, got {_show(value)}")
+            raise self.error(name, f"expected an integer, got {shown(value)}")
         if low is not None and value < low:
-            raise self.error(name, f"must be >= {low}, got {_show(value)}")
+            raise self.error(name, f"must be >= {low}, got {shown(value)}")
         if value > high:
-            raise self.error(name, f"must be <= {high}, got {_show(value)}")
+            raise self.error(name, f"must be <= {high}, got {shown(value)}")
         return value
 
     def boolean(self, name: str, default: bool) -> bool:
@@ -100,7 +105,7 @@ class Table:
         if value is _ABSENT:
             return default
         if not isinstance(value, bool):
-            raise self.error(name, f"expected true or false, got {_show(value)}")
+            raise self.error(name, f"expected true or false, got {shown(value)}")
         return value
 
     def string(self, name: str, default: str | None = None, *, required: bool = False) -> str:
@@ -108,14 +113,14 @@ class Table:
         if value is _ABSENT:
             return default
         if not isinstance(value, str) or not value:
-            raise self.error(name, f"expected a non-empty string, got {_show(value)}")
+            raise self.error(name, f"expected a non-empty string, got {shown(value)}")
         return value
 
     def file_name(self, name: str) -> str:
         """A required file name: a non-empty string the operating system can take (no NUL)."""
         value = self.string(name, required=True)
         if "\0" in value:
-            raise self.error(name, f"a file name cannot hold a NUL character, got {_show(value)}")
+            raise self.error(name, f"a file name cannot hold a NUL character, got {shown(value)}")
         return value
 
     def vector(
@@ -131,19 +136,9 @@ class Table:
         value = self._value(name, required)
         if value is _ABSENT:
             return default
-        if not isinstance(value, list | tuple) or len(value) != 3:
-            raise self.error(name, f"expected a list of three numbers, got {_show(value)}")
-        numbers = []
-        for item in value:
-            if isinstance(item, bool) or not isinstance(item, int | float):
-                raise self.error(name, f"expected numbers, got {_show(item)}")
-            item = _finite_float(self, name, item)
-            if non_negative and item < 0:
-                raise self.error(name, f"must not be negative, got {item}")
-            if high is not None and item > high:
-                raise self.error(name, f"must be <= {high:g} a component, got {item:g}")
-            numbers.append(item)
-        return tuple(numbers)
+        if (problem := vector_problem(value, non_negative=non_negative, high=high)) is not None:
+            raise self.error(name, problem)
+        return tuple(float(item) for item in value)
 
     def pair(
         self, name: str, *, low: float | None = None, low_open: bool = False
@@ -151,17 +146,22 @@ class Table:
         """A required ``[min, max]`` with ``min <= max``, both checked against ``low``."""
         value = self.require(name)
         if not isinstance(value, list | tuple) or len(value) != 2:
-            raise self.error(name, f"expected [min, max], got {_show(value)}")
+            raise self.error(name, f"expected [min, max], got {shown(value)}")
         low_value, high_value = (
             check_number(self, name, item, low, None, low_open, False) for item in value
         )
         if low_value > high_value:
-            raise self.error(name, f"expected min <= max, got {_show(value)}")
+            raise self.error(name, f"expected min <= max, got {shown(value)}")
         return low_value, high_value
 
     def color(self, name: str, default=None):
-        """Three numbers from 0 to ``RADIANCE_LIMIT``."""
-        return self.vector(name, default, non_negative=True, high=RADIANCE_LIMIT)
+        """A colour: three numbers from 0 to ``RADIANCE_LIMIT`` (``limits.color_problem``)."""
+        value = self._value(name, required=False)
+        if value is _ABSENT:
+            return default
+        if (problem := color_problem(value)) is not None:
+            raise self.error(name, problem)
+        return tuple(float(item) for item in value)
 
     def table(self, name: str) -> Table | None:
         """The sub-table at ``name``, or None when absent."""
@@ -184,32 +184,13 @@ class Table:
 
 
 def check_number(table, name, value, low, high, low_open, high_open) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise table.error(name, f"expected a number, got {_show(value)}")
-    value = _finite_float(table, name, value)
-    if low is not None and (value <= low if low_open else value < low):
-        raise table.error(name, f"must be {'>' if low_open else '>='} {low:g}, got {value:g}")
-    if high is not None and (value >= high if high_open else value > high):
-        raise table.error(name, f"must be {'<' if high_open else '<='} {high:g}, got {value:g}")
-    return value
-
-
-def _finite_float(table: Table, name: str, value: int | float) -> float:
-    """``value`` as a float within ``COORDINATE_LIMIT`` (every number of a scene file is: see
-    ``scene.limits``); an int beyond float range is an error, not OverflowError."""
-    if isinstance(value, float) and not math.isfinite(value):
-        raise table.error(name, f"must be finite, got {value}")
-    if not -COORDINATE_LIMIT <= value <= COORDINATE_LIMIT:  # exact for an int of any size
-        raise table.error(
-            name, f"must lie within ±{COORDINATE_LIMIT:g} (float32's reach), got {_show(value)}"
-        )
+    """``value`` at ``table``'s key ``name`` as a float, or its ``limits.number_problem`` as a
+    ``SceneError``."""
+    problem = number_problem(value, low, high, low_open=low_open, high_open=high_open)
+    if problem is not None:
+        raise table.error(name, problem)
     return float(value)
 
 
 def _kind(value: object) -> str:
-    return {list: "a list", dict: "a table", str: "a string"}.get(type(value), _show(value))
-
-
-def _show(value: object) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
+    return {list: "a list", dict: "a table", str: "a string"}.get(type(value), shown(value))

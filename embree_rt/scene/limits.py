@@ -9,7 +9,13 @@ a kernel: no overflow to inf, no inf · 0 = NaN in an image.
 
 from __future__ import annotations
 
+import math
+import numbers
+from collections.abc import Sequence
+
 import numpy as np
+
+from embree_rt.errors import range_problem
 
 # Every coordinate (a position, a centre, a placed mesh's vertex, a radius) within 1e10 of the
 # origin, and, so that one rule covers a file, every other number too (no ior, shininess,
@@ -31,6 +37,58 @@ RADIANCE_LIMIT = 1e6
 INTEGER_LIMIT = 2**63 - 1
 # Seeds are hashed as uint64 (``sampling``): a larger one would alias a smaller one silently.
 SEED_LIMIT = 2**64 - 1
+
+
+def shown(value: object) -> str:
+    """``value``'s repr, cut to 40 characters: how a message quotes what it refuses."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def number_problem(
+    value: object, low: float | None = None, high: float | None = None, **open_bounds: bool
+) -> str | None:
+    """What keeps ``value`` from being a number of a scene, or None: not a real number, not
+    finite, beyond ``COORDINATE_LIMIT`` (every number of a scene lies within it), or out of
+    [``low``, ``high``] (``errors.range_problem``, which ``open_bounds``, ``low_open`` and
+    ``high_open``, are passed to)."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
+        return f"expected a number, got {shown(value)}"
+    if not isinstance(value, numbers.Integral) and not math.isfinite(value):
+        return f"must be finite, got {value}"
+    if not -COORDINATE_LIMIT <= value <= COORDINATE_LIMIT:  # exact for an int of any size
+        return f"must lie within ±{COORDINATE_LIMIT:g} (float32's reach), got {shown(value)}"
+    return range_problem(value, low, high, **open_bounds)
+
+
+def vector_problem(
+    value: object, *, non_negative: bool = False, high: float | None = None
+) -> str | None:
+    """What keeps ``value`` from being three numbers of a scene (``number_problem``), each not
+    negative if ``non_negative`` and at most ``high`` if given, or None."""
+    if (
+        isinstance(value, str | bytes)
+        or not isinstance(value, Sequence | np.ndarray)
+        or (isinstance(value, np.ndarray) and value.ndim != 1)
+        or len(value) != 3
+    ):
+        return f"expected a list of three numbers, got {shown(value)}"
+    for item in value:
+        if isinstance(item, bool | np.bool_) or not isinstance(item, numbers.Real):
+            return f"expected numbers, got {shown(item)}"
+        if (problem := number_problem(item)) is not None:
+            return problem
+        if non_negative and item < 0:
+            return f"must not be negative, got {float(item)}"
+        if high is not None and item > high:
+            return f"must be <= {high:g} a component, got {item:g}"
+    return None
+
+
+def color_problem(value: object) -> str | None:
+    """What keeps ``value`` from being a colour of a scene (linear RGB, three numbers from 0 to
+    ``RADIANCE_LIMIT``), or None."""
+    return vector_problem(value, non_negative=True, high=RADIANCE_LIMIT)
 
 
 def spheres_problem(centers: np.ndarray, radii: np.ndarray) -> str | None:

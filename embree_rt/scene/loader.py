@@ -18,26 +18,26 @@ from pathlib import Path
 import numpy as np
 
 from embree_rt import budget
-from embree_rt.camera import Camera, camera_problem
+from embree_rt.camera import Camera
+from embree_rt.errors import FieldError
 from embree_rt.film import TONEMAPS, TRANSFERS
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.archives import Headers, array_headers, read_archive, unpacked_bytes
 from embree_rt.scene.errors import SceneError, unknown_key_message
 from embree_rt.scene.fields import Table
-from embree_rt.scene.limits import (
-    MIN_LENGTH,
-    RADIANCE_LIMIT,
-    SEED_LIMIT,
-    placed_mesh_problem,
-    spheres_problem,
-)
+from embree_rt.scene.limits import MIN_LENGTH, SEED_LIMIT, placed_mesh_problem, spheres_problem
 from embree_rt.scene.model import (
     Background,
     Floor,
     PointLight,
     RenderSettings,
     Scene,
+    background_problem,
+    camera_limits_problem,
+    floor_problem,
+    light_problem,
+    material_limits_problem,
     render_problem,
 )
 from embree_rt.scene.random_field import (
@@ -54,7 +54,19 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-UNIT_FIELDS = ("ambient", "diffuse", "specular", "reflectivity", "transparency")
+# A material's keys in a file, by what they hold (``Material`` checks their values).
+MATERIAL_COLORS = ("color", "emission", "attenuation_color")
+MATERIAL_NUMBERS = (
+    "ambient",
+    "diffuse",
+    "specular",
+    "shininess",
+    "reflectivity",
+    "transparency",
+    "ior",
+    "attenuation_distance",
+)
+MATERIAL_FLAGS = ("metallic", "unlit")
 
 
 def read_document(path: Path) -> dict:
@@ -119,19 +131,6 @@ def load_scene(path: str | Path) -> Scene:
     return SceneReader(path, read_document(path)).build()
 
 
-def check_scene_values(scene: Scene, name: str = "scene") -> None:
-    """Hold a scene built in Python to a scene file's limits (``scene.limits``): its camera,
-    sky, lights, materials and floor are written out as a file would hold them and read back by
-    this module's readers, and its sphere arrays checked as a file's are. A value a file could
-    not hold (a light of intensity 1e39, which float32 shading turns into inf and then NaN)
-    raises the ``SceneError`` a file's would, ``name`` standing for the file."""
-    from embree_rt.scene.writer import look_document, plain_values
-
-    SceneReader(Path(name), plain_values(look_document(scene)))
-    if (problem := spheres_problem(scene.sphere_centers, scene.sphere_radii)) is not None:
-        raise SceneError(name, "spheres", problem)
-
-
 def _check_unpacking(
     path: Path, fail: Callable[[str], Exception], cost: Callable[[Headers], tuple[int, str]]
 ) -> None:
@@ -145,13 +144,10 @@ def _check_unpacking(
         return
     if headers is None:
         return
-    needed, what = cost(headers)
-    available = budget.available_memory()
-    if available is not None and needed > available:
-        raise fail(
-            f"{what} would need ~{budget.format_bytes(needed)} of memory, this machine has "
-            f"{budget.format_bytes(available)} available"
-        )
+    try:
+        budget.require({"archive": cost(headers)})
+    except budget.MemoryBudgetError as error:
+        raise fail(str(error)) from None
 
 
 def _sphere_array_cost(headers: Headers) -> tuple[int, str]:
@@ -212,6 +208,7 @@ class SceneReader:
                 horizon=table.color("horizon", scene.background.horizon),
                 zenith=table.color("zenith", scene.background.zenith),
             )
+            self._check(table, background_problem(scene.background))
             table.finish()
         lights = root.tables("lights")
         if lights:
@@ -356,8 +353,7 @@ class SceneReader:
             transfer=self._choice(table, "transfer", TRANSFERS, current.transfer),
         )
         table.finish()
-        if (problem := render_problem(settings)) is not None:
-            raise table.error(*problem)
+        self._check(table, render_problem(settings))
         return settings
 
     def _choice(self, table: Table, name: str, choices: tuple[str, ...], default: str) -> str:
@@ -375,16 +371,16 @@ class SceneReader:
         )
         table.finish()
         # The rule the renderer's camera follows, so that a scene which loads also renders.
-        if (problem := camera_problem(camera)) is not None:
-            raise table.error(*problem)
+        self._check(table, camera_limits_problem(camera))
         return camera
 
     def _light(self, table: Table) -> PointLight:
         light = PointLight(
             position=table.vector("position", required=True),
             color=table.color("color", (1.0, 1.0, 1.0)),
-            intensity=table.number("intensity", 1.0, low=0, high=RADIANCE_LIMIT),
+            intensity=table.number("intensity", 1.0),
         )
+        self._check(table, light_problem(light))
         table.finish()
         return light
 
@@ -397,34 +393,21 @@ class SceneReader:
         return PRESETS[name]
 
     def _material_fields(self, table: Table, base: Material) -> Material:
+        """``base`` with the material keys ``table`` holds, checked by ``Material`` (its ranges)
+        and ``model.material_limits_problem`` (a scene's limits)."""
         fields = {}
-        if table.has("color"):
-            fields["color"] = table.color("color")
-        for name in UNIT_FIELDS:
+        for name in MATERIAL_COLORS:
             if table.has(name):
-                fields[name] = table.number(name, low=0, high=1)
-        if table.has("shininess"):
-            fields["shininess"] = table.number("shininess", low=0, low_open=True)
-        if table.has("ior"):
-            fields["ior"] = table.number("ior", low=1)
-        if table.has("metallic"):
-            fields["metallic"] = table.boolean("metallic", False)
-        if table.has("emission"):
-            fields["emission"] = table.color("emission")
-        if table.has("attenuation_color"):
-            fields["attenuation_color"] = table.color("attenuation_color")
-            if max(fields["attenuation_color"]) > 1.0:
-                raise table.error(
-                    "attenuation_color",
-                    f"each must lie in [0, 1], got {list(fields['attenuation_color'])}",
-                )
-        if table.has("attenuation_distance"):
-            fields["attenuation_distance"] = table.number(
-                "attenuation_distance", low=0, low_open=True
-            )
-        if table.has("unlit"):
-            fields["unlit"] = table.boolean("unlit", False)
-        return Material(**{**base.__dict__, **fields})
+                fields[name] = table.color(name)
+        for name in MATERIAL_NUMBERS:
+            if table.has(name):
+                fields[name] = table.number(name)
+        for name in MATERIAL_FLAGS:
+            if table.has(name):
+                fields[name] = table.boolean(name, False)
+        material = self._build(table, Material, **{**base.__dict__, **fields})
+        self._check(table, material_limits_problem(material))
+        return material
 
     def _material(self, table: Table) -> Material:
         material = self._material_fields(table, self._preset(table, PRESETS["matte"]))
@@ -444,12 +427,27 @@ class SceneReader:
             checker=Checker(
                 color_a=table.color("color_a", default.checker.color_a),
                 color_b=table.color("color_b", default.checker.color_b),
-                size=table.number("size", default.checker.size, low=MIN_LENGTH),
+                size=table.number("size", default.checker.size),
             ),
             material=self._material_fields(table, self._preset(table, default.material)),
         )
+        self._check(table, floor_problem(floor))
         table.finish()
         return floor
+
+    @staticmethod
+    def _build(table: Table, kind: type, **values):
+        """``kind(**values)``, a ``FieldError`` it raises reported under ``table``'s key."""
+        try:
+            return kind(**values)
+        except FieldError as error:
+            raise table.error(error.field, error.problem) from None
+
+    @staticmethod
+    def _check(table: Table, problem: tuple[str, str] | None) -> None:
+        """Raise a model check's (field, problem) under ``table``'s key; nothing for None."""
+        if problem is not None:
+            raise table.error(*problem)
 
     def _material_name(self, table: Table, default: str | None = "matte") -> str | None:
         name = table.string("material", default)

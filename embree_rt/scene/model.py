@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, TypedDict
 
@@ -12,8 +13,18 @@ from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.film import Look
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
+from embree_rt.scene.errors import SceneError
 from embree_rt.scene.instances import MeshInstances
-from embree_rt.scene.limits import INTEGER_LIMIT, placed_mesh_problem, spheres_problem
+from embree_rt.scene.limits import (
+    INTEGER_LIMIT,
+    MIN_LENGTH,
+    RADIANCE_LIMIT,
+    color_problem,
+    number_problem,
+    placed_mesh_problem,
+    spheres_problem,
+    vector_problem,
+)
 from embree_rt.transforms import as_affine
 
 if TYPE_CHECKING:  # trimesh (and SciPy behind it) loads in ~1 s: only scenes with meshes pay
@@ -101,6 +112,68 @@ def render_problem(settings: RenderSettings) -> tuple[str, str] | None:
             f"samples, more than the {INTEGER_LIMIT:.3g} int64 can number"
         )
     return None
+
+
+Problem = tuple[str, str]  # (key, problem): the key as a scene file's table names it
+
+
+def first_problem(*checks: tuple[str, str | None]) -> Problem | None:
+    """The first of the (key, problem or None) ``checks`` with a problem, or None."""
+    return next(((key, problem) for key, problem in checks if problem is not None), None)
+
+
+def camera_limits_problem(camera: Camera) -> Problem | None:
+    """What keeps ``camera`` from a scene: its vectors three numbers within the scene's reach,
+    then the camera's own rule (``camera.camera_problem``)."""
+    return first_problem(
+        *((name, vector_problem(getattr(camera, name))) for name in ("position", "look_at", "up"))
+    ) or camera_problem(camera)
+
+
+def light_problem(light: PointLight) -> Problem | None:
+    """What keeps ``light`` from a scene: a position within reach, a colour
+    (``limits.color_problem``), an intensity from 0 to ``RADIANCE_LIMIT``."""
+    return first_problem(
+        ("position", vector_problem(light.position)),
+        ("color", color_problem(light.color)),
+        ("intensity", number_problem(light.intensity, 0.0, RADIANCE_LIMIT)),
+    )
+
+
+def background_problem(background: Background) -> Problem | None:
+    """What keeps ``background``'s two colours from a scene."""
+    return first_problem(
+        ("horizon", color_problem(background.horizon)),
+        ("zenith", color_problem(background.zenith)),
+    )
+
+
+def material_limits_problem(material: Material) -> Problem | None:
+    """What keeps ``material`` from a scene beyond its own ranges (which ``Material`` checks):
+    colours (``limits.color_problem``) and numbers within reach; an infinite
+    ``attenuation_distance`` is the default, absorbing nothing."""
+    distance = material.attenuation_distance
+    return first_problem(
+        ("color", color_problem(material.color)),
+        ("shininess", number_problem(material.shininess)),
+        ("ior", number_problem(material.ior)),
+        ("emission", color_problem(material.emission)),
+        ("attenuation_color", color_problem(material.attenuation_color)),
+        ("attenuation_distance", None if distance == math.inf else number_problem(distance)),
+    )
+
+
+def floor_problem(floor: Floor) -> Problem | None:
+    """What keeps ``floor`` from a scene, under the keys of a file's ``floor`` table (which
+    holds its checker's and its material's keys too): a height within reach, two colours, a
+    square of at least ``MIN_LENGTH``, its material's limits."""
+    checker = floor.checker
+    return first_problem(
+        ("height", number_problem(floor.height)),
+        ("color_a", color_problem(checker.color_a)),
+        ("color_b", color_problem(checker.color_b)),
+        ("size", number_problem(checker.size, MIN_LENGTH)),
+    ) or material_limits_problem(floor.material)
 
 
 @dataclass
@@ -236,6 +309,27 @@ class Scene:
     # ``_repr_png_``, the quick preview Jupyter shows for a scene, is given to the class by
     # ``embree_rt.api`` (``preview_png``): rendering stands above the scene model, which
     # imports none of it.
+
+    def check(self, file: str = "scene") -> None:
+        """Hold the scene to the limits a scene file is held to (``scene.limits``): its camera,
+        sky, lights, materials, floor and spheres, by the rules the file's reader applies to
+        the same values. A value a file could not hold (a light of intensity 1e39, which
+        float32 shading turns into inf and then NaN) raises the ``SceneError`` the file's
+        would, ``file`` standing for the file."""
+        checks = [(("camera",), camera_limits_problem(self.camera))]
+        checks.append((("background",), background_problem(self.background)))
+        checks += [((f"lights[{i}]",), light_problem(light)) for i, light in enumerate(self.lights)]
+        checks += [
+            (("materials", name), material_limits_problem(material))
+            for name, material in self.materials.items()
+        ]
+        if self.floor is not None:
+            checks.append((("floor",), floor_problem(self.floor)))
+        for prefix, problem in checks:
+            if problem is not None:
+                raise SceneError(file, ".".join([*prefix, problem[0]]), problem[1])
+        if (problem := spheres_problem(self.sphere_centers, self.sphere_radii)) is not None:
+            raise SceneError(file, "spheres", problem)
 
     @property
     def material_names(self) -> list[str]:
