@@ -50,12 +50,16 @@ from trimesh import caching, util
 from trimesh.constants import tol
 
 from embree_rt.compiled.work_split import parallel_region
-from embree_rt.embree.multihit import crossing_parity
-from embree_rt.embree.validation import as_points
+from embree_rt.embree.multihit import HitBuffers, crossing_parity
 from embree_rt.trimesh_ray.decided_hits import decided_hits
 from embree_rt.trimesh_ray.finished_hits import finished_hits
 from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
-from embree_rt.trimesh_ray.local_frame import boxed_local_points, local_rays, ordered_local_rays
+from embree_rt.trimesh_ray.local_frame import (
+    boxed_local_points,
+    local_rays,
+    ordered_local_rays,
+    refuse_rays,
+)
 from embree_rt.trimesh_ray.local_scene import BAND_ULPS, EDGE_BAND_SCALE, EPS32, LocalScene
 from embree_rt.trimesh_ray.plane_distances import plane_distances
 from embree_rt.trimesh_ray.screened_nearest import screened_nearest
@@ -78,6 +82,12 @@ _GRAZE_COS = 1e-3
 # Embree's float32 distances err by a few ulps of the largest coordinate involved: hits within
 # this many of the origin are decided in float64.
 _TNEAR_ULPS = 16.0
+# Embree counts no hit behind a ray's origin, so a surface through the origin, which its float32
+# rounding may put a little behind it, can go unseen: rays whose origin lies within this many
+# float32 ulps of the mesh's extent of its box are also traced backwards that far, and the
+# triangles found there join their float64 decision.
+_BEHIND_ULPS = 16.0
+_BEHIND_ROOM = 8  # triangles recorded behind an origin (their fans are tested: a vertex's worth)
 # Rays traced per call, and rays x room for hits: bounded memory, reused from block to block.
 _BLOCK_RAYS = 1 << 17  # 21 MB of hit buffers at 8 hits a ray, kept by the scene
 FIRST_ROOM = 8  # hits of room a ray on the first trace (rays that overflow it are traced again)
@@ -96,12 +106,14 @@ def _ray_arrays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
     return origins.reshape(-1, 3), directions.reshape(-1, 3)
 
 
-def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 3) float64 origins and unit directions (trimesh's ``unitize``)."""
+def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(n, 3) float64 origins, unit directions (trimesh's ``unitize``) and the directions as
+    given (to name a bad row as the caller wrote it)."""
     origins, directions = _ray_arrays(ray_origins, ray_directions)
-    # A non-finite direction is refused by the BVH, naming its row; unitize would only warn.
+    # A non-finite direction is refused when the rays are traced, naming its row; unitize
+    # would only warn.
     with np.errstate(invalid="ignore", over="ignore"):
-        return origins, util.unitize(directions)
+        return origins, util.unitize(directions), directions
 
 
 def _plane_distance(scene, origins, directions, rays, tris):
@@ -128,6 +140,69 @@ def _spliced(hits, rows, again):
     if locations is not None:
         locations = np.concatenate([locations[keep], again[2]])[placed]
     return rays[placed], tris[placed], locations
+
+
+def _surfaces_behind(scene: LocalScene, origins, directions, near):
+    """The rays whose origin may lie on a surface Embree's forward trace cannot see (within
+    float32 reach behind it): ``origins``, ``directions`` (n, 3) float64 world rays
+    (directions need not be unit), ``near`` (n,) float64 world distances from which hits count
+    (at or beyond). Returns their rows (k,) int64, ascending, and the triangles behind each
+    whose planes pass within ``_BEHIND_ULPS`` float32 ulps of the mesh's extent of its origin
+    (``HitBuffers`` of k rays, traced backwards from the float32 origins the forward trace
+    uses)."""
+    band = _BEHIND_ULPS * EPS32 * scene.extent
+    if not scene.face_count:
+        return np.zeros(0, np.int64), None
+    lower, upper = scene.vertices.min(axis=0), scene.vertices.max(axis=0)
+    reach = band / scene.scale
+    widened = np.array([lower - reach, upper + reach])
+    rows, local = boxed_local_points(origins, widened, scene.origin, scene.scale)
+    close = near[rows] * scene.scale < band  # else no hit that near counts anyway
+    rows, local = rows[close], local[close]
+    if not len(rows):
+        return rows, None
+    with np.errstate(invalid="ignore", over="ignore"):
+        backwards = -util.unitize(directions[rows]).astype(np.float32)
+    # a surface at float32 reach of the origin lies that far behind it across its plane, and
+    # up to 1 / |cos| times that along a ray near its plane (down to the |cos| at which a ray
+    # no longer meets a plane)
+    reach = np.float32(band / _PARALLEL_COS)
+    behind = scene.bvh.all_hits(local, backwards, 0.0, reach, _BEHIND_ROOM)
+    with np.errstate(invalid="ignore", over="ignore"):  # slots past a ray's count are unset
+        close = (np.arange(_BEHIND_ROOM)[None, :] < behind.count[:, None]) & (
+            behind.t.astype(np.float64) * behind.cos <= band
+        )
+    found = close.any(axis=1)
+    first = np.argsort(~close[found], axis=1, kind="stable")  # the close ones, in order
+    return rows[found], HitBuffers(
+        *(np.take_along_axis(field[found], first, axis=1) for field in behind[:5]),
+        close[found].sum(axis=1),
+        np.asarray(behind.more[found]),
+    )
+
+
+def _with_surfaces_behind(forward: HitBuffers, behind: HitBuffers) -> HitBuffers:
+    """``forward``'s hits of k rays followed by the triangles ``behind`` them, marked for the
+    float64 test (barycentric 0: as if on an edge, so the triangles around each are tested)."""
+    k, room = forward.prim.shape
+    extra = behind.prim.shape[1]
+    shape = (k, room + extra)
+    t = np.zeros(shape, np.float32)
+    prim = np.full(shape, -1, np.int32)
+    u = np.zeros(shape, np.float32)
+    v = np.zeros(shape, np.float32)
+    cos = np.ones(shape, np.float32)
+    for target, source in ((t, forward.t), (prim, forward.prim), (u, forward.u), (v, forward.v)):
+        target[:, :room] = source
+    cos[:, :room] = forward.cos
+    count = np.minimum(forward.count, room)
+    columns = count[:, None] + np.arange(extra)[None, :]
+    valid = np.arange(extra)[None, :] < np.minimum(behind.count, extra)[:, None]
+    ray = np.broadcast_to(np.arange(k)[:, None], valid.shape)
+    prim[ray[valid], columns[valid]] = behind.prim[valid]
+    return HitBuffers(
+        t, prim, u, v, cos, count + np.minimum(behind.count, extra), np.asarray(forward.more)
+    )
 
 
 class _HitList:
@@ -206,7 +281,15 @@ class RayMeshIntersector:
         return near, True
 
     def _hits(
-        self, origins, directions, max_hits, tnear, reorder=False, with_locations=False, room=None
+        self,
+        origins,
+        directions,
+        max_hits,
+        tnear,
+        reorder=False,
+        with_locations=False,
+        room=None,
+        as_given=None,
     ):
         """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
         ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
@@ -221,7 +304,8 @@ class RayMeshIntersector:
         ``room``: Embree hits recorded a ray (default ``max_hits`` + 4). Hits at one point
         become one crossing, so a ray whose recorded hits overflowed it and gave fewer than
         ``max_hits`` crossings (a ray through a vertex many triangles share) may have more:
-        such rays are traced again with four times the room."""
+        such rays are traced again with four times the room. ``as_given``: the directions as
+        the caller gave them (before ``unitize``), to name a bad row as written."""
         scene = self._scene
         n = len(origins)
         given_origins, given_directions, given_tnear = origins, directions, tnear
@@ -244,18 +328,15 @@ class RayMeshIntersector:
                 scene.bounds,
                 scene.bvh.threads,
             )
-            if not finite:  # named by its row as given
-                given = local_rays(
-                    given_origins, given_directions, scene.origin, scene.scale, scene.extent
-                )
-                as_points(given[0], "origins")
-                as_points(given[1], "directions")
             if tnear is not None and np.ndim(tnear):
                 tnear = np.broadcast_to(np.asarray(tnear, np.float64), (n,))[traced_order]
         else:
-            local_origins, local_directions, magnitude = local_rays(
+            local_origins, local_directions, magnitude, finite = local_rays(
                 origins, directions, scene.origin, scene.scale, scene.extent
             )
+        if not finite:  # named by its row as given
+            written = given_directions if as_given is None else as_given
+            refuse_rays(given_origins, written, scene.origin, scene.scale)
         near, inclusive = self._resolve_tnear(scene, magnitude, tnear)
         capacity = max(1, int(max_hits))
         # room for hits the float64 rules below drop (at the origin, along a face) and for edge
@@ -323,6 +404,31 @@ class RayMeshIntersector:
             hits.append(self._decided(np.arange(len(which)), which, result, world, rules))
             truncated.append(which[result[6]])
         rays, tris, distance = hits.arrays()
+        if inclusive:
+            # rays starting on a surface Embree's forward trace may have missed: decided again
+            # in float64 with the triangles just behind their origins
+            surface_rows, behind = _surfaces_behind(scene, origins, directions, near)
+            if len(surface_rows):
+                forward = scene.bvh.all_hits(
+                    local_origins[surface_rows],
+                    local_directions[surface_rows],
+                    (near[surface_rows] * scene.scale * 0.5).astype(np.float32),
+                    np.inf,
+                    room,
+                )
+                again = self._decided(
+                    np.arange(len(surface_rows)),
+                    surface_rows,
+                    _with_surfaces_behind(forward, behind),
+                    world,
+                    rules,
+                )
+                keep = ~np.isin(rays, surface_rows)
+                rays, tris, distance = (
+                    np.concatenate([part[keep], new])
+                    for part, new in zip((rays, tris, distance), again, strict=True)
+                )
+                truncated.append(surface_rows[forward.more])
         finished = finished_hits(
             rays,
             tris,
@@ -398,6 +504,8 @@ class RayMeshIntersector:
             graze=_GRAZE_COS,
             near_factor=4.0,
         )
+        if near is not None:
+            suspect[_surfaces_behind(scene, origins, directions, near)[0]] = True
         first = prim.astype(np.int64)
         again = np.flatnonzero(suspect)
         if len(again):
@@ -446,9 +554,15 @@ class RayMeshIntersector:
                 self._scene, origins[rays], directions, np.arange(len(rays)), tris
             )[0]
             return tris, rays, origins[rays] + directions * distance[:, None]
-        origins, directions = _as_rays(ray_origins, ray_directions)
+        origins, directions, given_directions = _as_rays(ray_origins, ray_directions)
         rays, tris, locations = self._hits(
-            origins, directions, max_hits, tnear, reorder=True, with_locations=return_locations
+            origins,
+            directions,
+            max_hits,
+            tnear,
+            reorder=True,
+            with_locations=return_locations,
+            as_given=given_directions,
         )
         if return_locations:
             return tris, rays, locations

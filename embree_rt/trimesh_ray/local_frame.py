@@ -14,7 +14,7 @@ still in cache for the next. Each output row is the same arithmetic on the same 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, NoReturn
 
 import numba
 import numpy as np
@@ -124,28 +124,77 @@ def _to_local(origins, directions, i, frame, local, j):
 
 @njit(nogil=True, cache=True)
 def _local_rays(origins, directions, frame, local):
+    finite = True
     for i in range(origins.shape[0]):
-        _to_local(origins, directions, i, frame, local, i)
+        finite = _to_local(origins, directions, i, frame, local, i) and finite
+    return finite
 
 
 def local_rays(
     origins: np.ndarray, directions: np.ndarray, shift: np.ndarray, scale: float, extent: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """``origins``, ``directions`` (n, 3) float64 in the frame ``(p - shift) * scale``:
-    local origins and directions (n, 3) float32 (directions only rounded), and each ray's
-    ``magnitude`` (n,) float64, the largest |coordinate| of its local origin or ``extent``."""
+    local origins and directions (n, 3) float32 (directions only rounded), each ray's
+    ``magnitude`` (n,) float64, the largest |coordinate| of its local origin or ``extent``, and
+    whether every local row is finite (if not, ``refuse_rays`` names the first bad one)."""
     n = len(origins)
     local_origins = np.empty((n, 3), np.float32)
     local_directions = np.empty((n, 3), np.float32)
     magnitude = np.empty(n, np.float64)
+    finite = True
     if n:
-        _local_rays(
+        finite = _local_rays(
             np.ascontiguousarray(origins, np.float64),
             np.ascontiguousarray(directions, np.float64),
             frame(shift, scale, extent),
             (local_origins, local_directions, magnitude),
         )
-    return local_origins, local_directions, magnitude
+    return local_origins, local_directions, magnitude, bool(finite)
+
+
+def refuse_rays(
+    origins: np.ndarray,
+    directions: np.ndarray,
+    shift: np.ndarray,
+    scale: float,
+    near: np.ndarray | None = None,
+) -> NoReturn:
+    """Raise the ``ValueError`` that names the first ray of ``origins``, ``directions`` (n, 3)
+    float64, as the caller gave them, that Embree cannot trace in the frame ``(p - shift) *
+    scale``: not finite, an origin beyond float32's range there (Embree works in float32), or
+    a direction too long to make unit in float64, or a ``near`` (n,) float64 (world tnear)
+    beyond float64's range in that frame. The row is printed as given."""
+    for name, values in (("origins", origins), ("directions", directions)):
+        bad = ~np.isfinite(values).all(axis=1)
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise ValueError(f"{name}: row {row} is not finite: {values[row].tolist()}")
+    with np.errstate(over="ignore", invalid="ignore"):
+        local = (origins - np.asarray(shift, np.float64)) * float(scale)
+        bad = ~np.isfinite(local.astype(np.float32)).all(axis=1)
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise ValueError(
+                f"origins: row {row} is {origins[row].tolist()}: beyond float32's range "
+                f"(+-{float(np.finfo(np.float32).max):.3g}) in the mesh's frame (moved to its box "
+                f"corner, scaled by {float(scale):.3g}), and Embree works in float32"
+            )
+        bad = ~np.isfinite(np.sqrt(np.einsum("ij,ij->i", directions, directions)))
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise ValueError(
+                f"directions: row {row} is {directions[row].tolist()}: too long to make unit "
+                "in float64"
+            )
+        if near is not None:
+            bad = ~np.isfinite(np.asarray(near, np.float64) * float(scale))
+            if bad.any():
+                row = int(np.argmax(bad))
+                raise ValueError(
+                    f"tnear: row {row} is {float(near[row])}: too large for the mesh's frame"
+                )
+    # every row traceable, yet a pass flagged one: ours, not the caller's
+    raise RuntimeError("rays: a row the frame pass refused is traceable")
 
 
 @njit(nogil=True, cache=True)

@@ -47,8 +47,7 @@ from embree_rt.embree.kernels import (
     Rays,
     intersect_chunk,
 )
-from embree_rt.embree.validation import as_points
-from embree_rt.trimesh_ray.local_frame import frame, local_coordinate
+from embree_rt.trimesh_ray.local_frame import frame, local_coordinate, refuse_rays
 from embree_rt.trimesh_ray.ray_order import box, entry_key
 
 _EPS32 = np.float64(np.finfo(np.float32).eps)
@@ -296,7 +295,5 @@ def screened_nearest(
                 bad,
             )
     if bad[0]:
-        as_points(origins, "origins")  # raises, naming the first bad row
-        as_points(directions, "directions")
-        raise ValueError("rays: not finite in the BVH's frame (coordinates too large)")
+        refuse_rays(origins, directions, shift, scale, near)
     return prim, suspect
