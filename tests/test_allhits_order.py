@@ -11,7 +11,7 @@ import trimesh
 from numba import njit
 from trimesh.constants import tol
 
-from embree_rt.trimesh_ray import RayMeshIntersector, intersector, local_scene
+from embree_rt.trimesh_ray import RayMeshIntersector, exact_hits, local_scene
 from embree_rt.trimesh_ray.decided_hits import decided_hits
 from embree_rt.trimesh_ray.finished_hits import finished_hits
 from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
@@ -112,7 +112,7 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
     monkeypatch.setattr(local_scene, "REORDER_FACES", 1 << 40)
     given = RayMeshIntersector(mesh)
     assert given._scene.bounds is None
-    monkeypatch.setattr(intersector, "FIRST_ROOM", 2)  # overflowing rays traced again
+    monkeypatch.setattr(exact_hits, "FIRST_ROOM", 2)  # overflowing rays traced again
     for kwargs in ({}, {"max_hits": 3}, {"tnear": 0.0}, {"return_locations": True}):
         a = ordered.intersects_id(origins, directions, **kwargs)
         b = given.intersects_id(origins, directions, **kwargs)

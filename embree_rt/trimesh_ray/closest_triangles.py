@@ -270,8 +270,10 @@ class _Found(NamedTuple):
 
 @njit(nogil=True, cache=True, error_model="numpy")
 def _closest_chunk(query, first, stop, points, scratch, user, found):
-    scene, callback, shift, scale, extent, tolerance, table, capacity = query
-    closest, distance, triangle, interior, overflow = found
+    scene, callback, shift, scale = query.scene, query.callback, query.shift, query.scale
+    extent, tolerance, table, capacity = query.extent, query.tolerance, query.table, query.capacity
+    closest, distance, triangle = found.closest, found.distance, found.triangle
+    interior, overflow = found.interior, found.overflow
     b = point_query.init_scratch(scratch)
     words = user.view(np.uint64)
     entries = user[_HEADER:]

@@ -90,6 +90,26 @@ def boxed_local_points(
     return candidates[:m], local[:m]
 
 
+class LocalRays(NamedTuple):
+    """Rays in the local frame: ``origins``, ``directions`` (n, 3) float32 and ``magnitude``
+    (n,) float64, each ray's largest |local coordinate| (or the mesh's extent)."""
+
+    origins: np.ndarray
+    directions: np.ndarray
+    magnitude: np.ndarray
+
+
+class OrderedRays(NamedTuple):
+    """Rays moved to their tracing order: the world ``origins``, ``directions`` (n, 3) float64
+    and their ``LocalRays`` columns (flat: numba's parallel loops take no nested tuples)."""
+
+    origins: np.ndarray
+    directions: np.ndarray
+    local_origins: np.ndarray
+    local_directions: np.ndarray
+    magnitude: np.ndarray
+
+
 class Frame(NamedTuple):
     """The BVH's local frame: a point p is at ``(p - shift) * scale`` there (``shift`` (3,)
     float64), and ``extent`` is the mesh's largest local coordinate."""
@@ -108,8 +128,8 @@ def frame(shift: np.ndarray, scale: float, extent: float) -> Frame:
 def _to_local(origins, directions, i, frame, local, j):
     """Row i of the float64 rays into row j of the ``local`` arrays (origins, directions (n, 3)
     float32, magnitude (n,) float64). Returns whether the local row is finite."""
-    shift, scale, extent = frame
-    local_origins, local_directions, magnitude = local
+    shift, scale, extent = frame.shift, frame.scale, frame.extent
+    local_origins, local_directions, magnitude = local.origins, local.directions, local.magnitude
     largest = extent
     finite = True
     for k in range(3):
@@ -147,7 +167,7 @@ def local_rays(
             np.ascontiguousarray(origins, np.float64),
             np.ascontiguousarray(directions, np.float64),
             frame(shift, scale, extent),
-            (local_origins, local_directions, magnitude),
+            LocalRays(local_origins, local_directions, magnitude),
         )
     return local_origins, local_directions, magnitude, bool(finite)
 
@@ -199,9 +219,8 @@ def refuse_rays(
 
 @njit(nogil=True, cache=True)
 def _key_chunk(first, stop, origins, directions, box, keys):
-    lower, upper, cells_per_unit = box
     for i in range(first, stop):
-        keys[i] = segment_key(origins[i], directions[i], lower, upper, cells_per_unit)
+        keys[i] = segment_key(origins[i], directions[i], box.lower, box.upper, box.cells_per_unit)
 
 
 @njit(nogil=True, cache=True)
@@ -213,10 +232,10 @@ def _inverse_chunk(first, stop, order, position):
 @njit(nogil=True, cache=True)
 def _scatter_chunk(first, stop, position, origins, directions, frame, out, bad):
     # rows read in the given order and written to their places: scattered stores, which do not
-    # stall the loop as scattered loads (a gather by `order`) do. out: (ordered origins,
-    # ordered directions, local origins, local directions, magnitude)
-    ordered_origins, ordered_directions, local_origins, local_directions, magnitude = out
-    local = (local_origins, local_directions, magnitude)
+    # stall the loop as scattered loads (a gather by `order`) do (out: OrderedRays)
+    ordered_origins, ordered_directions = out.origins, out.directions
+    local_origins, local_directions = out.local_origins, out.local_directions
+    local = LocalRays(local_origins, local_directions, out.magnitude)
     for i in range(first, stop):
         if i + _AHEAD < stop:  # the rows written _AHEAD rays on, fetched now: overlapping
             ahead = position[i + _AHEAD]
@@ -224,7 +243,7 @@ def _scatter_chunk(first, stop, position, origins, directions, frame, out, bad):
             prefetch(ordered_directions.ctypes.data + 24 * ahead)
             prefetch(local_origins.ctypes.data + 12 * ahead)
             prefetch(local_directions.ctypes.data + 12 * ahead)
-            prefetch(magnitude.ctypes.data + 8 * ahead)
+            prefetch(out.magnitude.ctypes.data + 8 * ahead)
         j = position[i]
         for k in range(3):
             ordered_origins[j, k] = origins[i, k]
@@ -270,7 +289,7 @@ def ordered_local_rays(
     ``local_rays`` of the rays as given names the first bad one).
     """
     n = len(origins)
-    out = (
+    out = OrderedRays(
         np.empty((n, 3), np.float64),
         np.empty((n, 3), np.float64),
         np.empty((n, 3), np.float32),

@@ -65,6 +65,16 @@ class Near(NamedTuple):
     factor: float
 
 
+class Staged(NamedTuple):
+    """The frame pass's output: ``rays`` (n, 6) float32 local origin and unit direction,
+    ``limits`` (n, 2) float64 Embree's tnear and the screening's origin limit (local), and
+    ``keys`` (n,) uint32 tracing-order keys (0 rows: the given order)."""
+
+    rays: np.ndarray
+    limits: np.ndarray
+    keys: np.ndarray
+
+
 class Screen(NamedTuple):
     """What makes a hit suspect: ``altitude`` (primitives,) float64 smallest local altitude of
     each triangle (0: degenerate, always suspect) and ``floor_altitude`` its smallest value; a
@@ -81,14 +91,11 @@ class Screen(NamedTuple):
 
 @njit(nogil=True, cache=True)
 def _frame_chunk(first, stop, origins, directions, frame, near_rule, box, staged, bad):
-    # the local frame (local_frame.local_coordinate) and trimesh.util.unitize's unit direction:
-    # staged = (rays, limits, keys): rays[i] = local origin, unit direction (float32),
-    # limits[i] = Embree's tnear, the screening's origin limit; and with keys, ray i's
-    # tracing-order key
-    shift, scale, extent = frame
-    near_world, near_ulps, near_factor = near_rule
-    lower, upper, cells_per_unit = box
-    rays, limits, keys = staged
+    # the local frame (local_frame.local_coordinate) and trimesh.util.unitize's unit direction
+    # into `staged` (Staged)
+    shift, scale, extent = frame.shift, frame.scale, frame.extent
+    near_world, near_ulps, near_factor = near_rule.world, near_rule.ulps, near_rule.factor
+    rays, limits, keys = staged.rays, staged.limits, staged.keys
     given = near_world.shape[0] > 0
     for i in range(first, stop):
         magnitude = extent
@@ -114,7 +121,7 @@ def _frame_chunk(first, stop, origins, directions, frame, near_rule, box, staged
             for k in range(6):  # a harmless ray: the caller raises
                 rays[i, k] = 0.0
         if keys.shape[0]:
-            keys[i] = entry_key(origins[i], directions[i], lower, upper, cells_per_unit)
+            keys[i] = entry_key(origins[i], directions[i], box.lower, box.upper, box.cells_per_unit)
 
 
 @njit(nogil=True, cache=True)
@@ -134,9 +141,10 @@ def _gather_chunk(first, stop, order, rays, limits, ordered_rays, ordered_limits
 def _trace_chunk(query, words, first, stop, rays, limits, screen, hits, suspect):
     # local rays first .. stop of `rays` (kernels.Rays; tnear and tfar written here from
     # limits (n, 2) float64), their nearest hits into `hits` (kernels.NearestHits)
-    origins, directions, tnear, tfar = rays
-    altitude, floor_altitude, band_ulps, graze, extent = screen
-    t, normal, u, v, prim, _geom, _inst = hits
+    origins, directions, tnear, tfar = rays.origins, rays.directions, rays.tnear, rays.tfar
+    altitude, floor_altitude = screen.altitude, screen.floor_altitude
+    band_ulps, graze, extent = screen.band_ulps, screen.graze, screen.extent
+    t, normal, u, v, prim = hits.t, hits.normal, hits.u, hits.v, hits.prim
     for i in range(first, stop):
         tnear[i] = np.float32(limits[i, 0])
         tfar[i] = np.inf
@@ -181,7 +189,7 @@ def _screened(
     rays = np.empty((n, 6), np.float32)
     limits = np.empty((n, 2), np.float64)
     keys = np.empty(n if reorder else 0, np.uint32)
-    staged = (rays, limits, keys)
+    staged = Staged(rays, limits, keys)
     for c in prange(n_chunks):
         first, stop = chunk_span(c, CHUNK, n)
         _frame_chunk(first, stop, origins, directions, frame, near_rule, box, staged, bad)
