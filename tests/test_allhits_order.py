@@ -1,5 +1,5 @@
 """The all-hits query's coherent tracing order and its parallel passes change no answer: rays
-traced sorted (embree_rt.trimesh_ray.local_frame, ray_order.segment_key) against rays traced as
+traced sorted (embree_rt.trimesh_ray.local_frame, its segment_key) against rays traced as
 given, the settling, float64 and finishing passes on one thread against two, and the keys
 against their definition."""
 
@@ -15,8 +15,7 @@ from embree_rt.trimesh_ray import RayMeshIntersector, exact_hits, local_scene
 from embree_rt.trimesh_ray.decided_hits import decided_hits
 from embree_rt.trimesh_ray.finished_hits import finished_hits
 from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
-from embree_rt.trimesh_ray.local_frame import local_rays, ordered_local_rays
-from embree_rt.trimesh_ray.ray_order import box_cells, segment_key
+from embree_rt.trimesh_ray.local_frame import box_cells, local_rays, ordered_local_rays, segment_key
 from embree_rt.trimesh_ray.settled_hits import settled_hits
 
 

@@ -36,7 +36,7 @@ class LocalScene:
         self.scale = float(scale)
         local = local_points(vertices, self.origin, self.scale)
         self.extent = float(np.abs(local).max()) if len(local) else 0.0
-        # Rays are traced in the order of where they enter the mesh's box (ray_order) on meshes
+        # Rays are traced in the order of where they enter the mesh's box (local_frame) on meshes
         # whose BVH outgrows the caches: 1.4-1.6x the rate on 1e5 and 1.3e6 triangles; on a
         # small mesh (2,304 triangles) the sort cost more than the order saved.
         self.bounds = (

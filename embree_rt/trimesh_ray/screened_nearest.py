@@ -9,9 +9,9 @@ around them). Doing the frame change, the query and the screening in one pass sp
 NumPy temporaries of each step, which cost more than the query itself for small meshes.
 
 Given the mesh's box, the rays are traced in the order of where they enter it
-(``ray_order``): the frame pass also keys each ray, a radix sort orders the keys, a gather
-pass copies the local rays into that order, the trace and screening run over them, and a last
-pass puts the answers back in the caller's order.
+(``local_frame.entry_key``): the frame pass also keys each ray, a radix sort orders the keys, a
+gather pass copies the local rays into that order, the trace and screening run over them, and a
+last pass puts the answers back in the caller's order.
 
 The band: Embree's float32 barycentrics err by a few ulps of the largest coordinate involved
 (``magnitude``: the ray's origin's or the mesh's) over the triangle's smallest altitude, so a hit
@@ -47,8 +47,7 @@ from embree_rt.embree.kernels import (
     Rays,
     intersect_chunk,
 )
-from embree_rt.trimesh_ray.local_frame import frame, local_coordinate, refuse_rays
-from embree_rt.trimesh_ray.ray_order import box, entry_key
+from embree_rt.trimesh_ray.local_frame import box, entry_key, frame, local_coordinate, refuse_rays
 
 _EPS32 = np.float64(np.finfo(np.float32).eps)
 # trimesh.util.unitize leaves vectors no longer than this as they are
@@ -253,7 +252,7 @@ def screened_nearest(
     ``shift`` (3,) float64 and ``scale``: the local frame is ``(p - shift) * scale`` in float64,
     rounded to float32; ``extent``: the mesh's largest local coordinate; ``bounds``: (2, 3)
     float64 world box (the mesh's) to trace the rays in the order of where they enter it
-    (``ray_order``; the answers are the same, see below), or None for the given order;
+    (``local_frame.entry_key``; the answers are the same, see below), or None for the given order;
     ``near`` (n,) float64 world distances, or None for ``near_ulps`` float32 ulps of each ray's
     magnitude: Embree looks from half of it, and a hit within ``near_factor`` times it is
     suspect; ``altitude``
