@@ -92,7 +92,7 @@ def timed(function, *args) -> float:
 def entry_order(origins: np.ndarray, directions: np.ndarray, box: np.ndarray) -> np.ndarray:
     """(n,) order of rays (n, 3) by a Morton code of where each enters the box [0, box]: NumPy's
     version of the order ``RayMeshIntersector`` traces first hits in on big meshes
-    (``embree_rt.trimesh_ray.ray_order``), to time the bare query on rays so ordered."""
+    (``embree_rt.trimesh_ray.local_frame``), to time the bare query on rays so ordered."""
     o, d = origins.astype(np.float64), directions.astype(np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         t0, t1 = (0.0 - o) / d, (box - o) / d

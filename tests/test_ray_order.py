@@ -1,7 +1,7 @@
-"""Rays traced in a coherent order (embree_rt.trimesh_ray.ray_order) get the answers they get in the
-order given: the radix sort (embree_rt.compiled.morton) against NumPy's stable argsort, and first
-hits traced sorted against first hits traced as given, on meshes where many hits are suspect
-(edges, grazing)."""
+"""Rays traced in a coherent order (embree_rt.trimesh_ray.local_frame.entry_key) get the answers
+they get in the order given: the radix sort (embree_rt.compiled.morton) against NumPy's stable
+argsort, and first hits traced sorted against first hits traced as given, on meshes where many
+hits are suspect (edges, grazing)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from numba import njit
 
 from embree_rt.compiled.morton import radix_order
 from embree_rt.trimesh_ray import RayMeshIntersector, local_scene
-from embree_rt.trimesh_ray.ray_order import box_cells, entry_key
+from embree_rt.trimesh_ray.local_frame import box_cells, entry_key
 from embree_rt.trimesh_ray.screened_nearest import screened_nearest
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import pickle
+import warnings
 
 import numpy as np
 import pytest
@@ -49,11 +50,12 @@ def _pairs(index_tri, index_ray) -> set[tuple[int, int]]:
     return set(zip(np.asarray(index_ray).tolist(), np.asarray(index_tri).tolist(), strict=True))
 
 
-def _narrow_phase(mesh: trimesh.Trimesh, origins, directions):
+def _narrow_phase(mesh: trimesh.Trimesh, origins, directions, at_origin: bool = False):
     """ray_triangle's own float64 test (trimesh.intersections.planes_lines, then barycentrics
     within tol.zero) of every ray against every triangle, with no broad phase: ray_triangle's
     r-tree query pads and clips ray boxes by 1e-5 *absolute*, which drops grazing hits on a
-    mesh 1e-4 across. Returns (index_tri, index_ray, distance) of hits ahead of the origin."""
+    mesh 1e-4 across. Returns (index_tri, index_ray, distance) of hits ahead of the origin
+    (``at_origin``: at or ahead, distance >= 0, as tnear 0 counts them)."""
     directions = directions / np.linalg.norm(directions, axis=1)[:, None]
     ray, tri = np.meshgrid(np.arange(len(origins)), np.arange(len(mesh.faces)), indexing="ij")
     ray, tri = ray.ravel(), tri.ravel()
@@ -66,7 +68,8 @@ def _narrow_phase(mesh: trimesh.Trimesh, origins, directions):
     )
     ray, tri = ray[valid], tri[valid]
     barycentric = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], location)
-    hit = ((barycentric > -tol.zero) & (barycentric < 1 + tol.zero)).all(axis=1) & (distance > 0)
+    ahead = distance >= 0 if at_origin else distance > 0
+    hit = ((barycentric > -tol.zero) & (barycentric < 1 + tol.zero)).all(axis=1) & ahead
     return tri[hit], ray[hit], distance[hit]
 
 
@@ -309,6 +312,57 @@ def test_a_ray_from_exactly_on_a_face_hits_it_by_default(scale):
     assert mesh.face_normals[skipped_tri, 2].tolist() == [-1.0]
 
 
+def _slanted_prism(size: float) -> trimesh.Trimesh:
+    """A square prism turned 45 degrees (|x| + |z| <= size, |y| <= size), subdivided twice:
+    its slanted faces lie on planes z = +-x +- size, so a point (a, y, size - a) with dyadic
+    coordinates is on one exactly in float64 (its planes_lines distance is 0), while its
+    float32 image in the intersector's frame (scaled by 100 / the mesh's diagonal) is not, so
+    Embree's own answer for a ray starting there depends on rounding."""
+    corners = [(1, -1, 0), (0, -1, 1), (-1, -1, 0), (0, -1, -1)]
+    corners += [(x, 1, z) for x, _, z in corners]
+    mesh = trimesh.convex.convex_hull(np.array(corners, float)).subdivide().subdivide()
+    mesh.apply_scale(size)
+    return mesh
+
+
+def _rays_on_the_prism(size: float, n: int, seed: int, on_edges: bool):
+    """n rays in random directions from points exactly on the slanted faces of
+    ``_slanted_prism(size)`` (dyadic, 20 bits), or on its ridges (x = 0 or z = 0)."""
+    rng = np.random.default_rng(seed)
+    across = rng.integers(0, 2**20, n) / 2**20 * size
+    if on_edges:
+        across = np.where(rng.random(n) < 0.5, 0.0, size)
+    x_sign, z_sign = rng.choice([-1.0, 1.0], (2, n))
+    along = rng.integers(-(2**20), 2**20, n) / 2**20 * size
+    origins = np.stack([x_sign * across, along, z_sign * (size - across)], axis=1)
+    return origins, rng.normal(size=(n, 3))
+
+
+# powers of two, so that the points on the faces stay exactly on them when scaled
+@pytest.mark.parametrize("size", [2.0**-13, 1.0, 2.0**27])
+@pytest.mark.parametrize("on_edges", [False, True])
+@pytest.mark.parametrize("scale_to_box", [True, False])
+def test_rays_starting_on_faces_and_edges_match_ray_triangle_with_tnear_0(
+    size, on_edges, scale_to_box
+):
+    """With tnear 0 a ray starting exactly on a face (or an edge) hits it, by ray_triangle's
+    float64 rule, even where the float32 origin Embree traces from lies behind the face:
+    first hits and all hits, one per crossing, equal the brute force's."""
+    mesh = _slanted_prism(size)
+    origins, directions = _rays_on_the_prism(size, 400, 7, on_edges)
+    ref_tri, ref_ray, ref_distance = _narrow_phase(mesh, origins, directions, at_origin=True)
+    assert (ref_distance == 0).sum() >= len(origins)  # every ray meets a face at its origin
+    ours = RayMeshIntersector(mesh, scale_to_box=scale_to_box)
+    index_tri, index_ray = ours.intersects_id(origins, directions)
+    assert _pairs(index_tri, index_ray) == _pairs(*_crossings(mesh, ref_tri, ref_ray, ref_distance))
+    expected = np.full(len(origins), -1)
+    for r in np.unique(ref_ray):
+        rows = np.flatnonzero(ref_ray == r)
+        nearest = ref_distance[rows] <= ref_distance[rows].min() + 1e-9 * size
+        expected[r] = ref_tri[rows][nearest].min()
+    np.testing.assert_array_equal(ours.intersects_first(origins, directions), expected)
+
+
 def test_max_hits_keeps_the_nearest_hits_in_trimesh_order():
     """Ten parallel sheets (2 triangles each): 10 hits; max_hits keeps the nearest, and hits
     come depth by depth (every ray's first, then every ray's second ...), as trimesh's embree
@@ -544,6 +598,31 @@ def test_non_finite_rays_are_refused_naming_the_row():
     origins = np.array([[-2.0, 0.1, 0.2], [np.nan, 0.0, 0.0]])
     with pytest.raises(ValueError, match="origins: row 1 is not finite"):
         ours.intersects_first(origins, np.array([[1.0, 0, 0], [1.0, 0, 0]]))
+
+
+@pytest.mark.parametrize("subdivisions", [2, 6])  # 6: 81,920 faces, traced in ray order
+@pytest.mark.parametrize(
+    "query", ["intersects_first", "intersects_location", "intersects_id_first"]
+)
+def test_rays_beyond_float32_are_refused_with_the_row_as_given(subdivisions, query):
+    """Finite in float64 but beyond float32's range in the mesh's frame: the message prints
+    the row the caller gave and says why; not finite: says so; no warning either way."""
+    ours = RayMeshIntersector(trimesh.creation.icosphere(subdivisions=subdivisions))
+    run = {
+        "intersects_first": ours.intersects_first,
+        "intersects_location": ours.intersects_location,
+        "intersects_id_first": lambda o, d: ours.intersects_id(o, d, multiple_hits=False),
+    }[query]
+    along = np.array([[1.0, 0, 0], [-1.0, 0, 0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError) as refused:
+            run(np.array([[-3.0, 0.1, 0.2], [1e39, 2.0, -3.0]]), along)
+        with pytest.raises(ValueError, match=r"directions: row 1 is not finite: \[inf, 0.0, 0.0\]"):
+            run(np.zeros((2, 3)), np.array([[1.0, 0, 0], [np.inf, 0, 0]]))
+    message = str(refused.value)
+    assert message.startswith("origins: row 1 is [1e+39, 2.0, -3.0]: beyond float32's range")
+    assert "Embree works in float32" in message
 
 
 def test_vertex_positions_are_grouped_as_numpy_unique_groups_them() -> None:

@@ -18,6 +18,8 @@ output is the same on any number of threads.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 from numba import njit, prange
@@ -25,10 +27,31 @@ from numba import njit, prange
 from embree_rt.compiled.pointers import prefetch
 from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
 from embree_rt.embree.multihit import HitBuffers
-from embree_rt.trimesh_ray.hit_inputs import MeshTables, Tolerances, WorldRays
+from embree_rt.trimesh_ray.hit_inputs import Fans, Hits, MeshTables, Tolerances, WorldRays
 from embree_rt.trimesh_ray.plane_distances import insert_by_distance, plane_distance
 
 CHUNK = 16  # rays per parallel iteration
+
+
+class Chosen(NamedTuple):
+    """The rays decided: ``rows`` (m,) int64 in the hit buffers, ``positions`` (m,) int64 in
+    the world rays."""
+
+    rows: np.ndarray
+    positions: np.ndarray
+
+
+class DecideWork(NamedTuple):
+    """Each ray's range of candidates (``bound`` (m + 1,) int64), the candidates (int64) and
+    whether each is ``tested`` in float64 (else Embree's hit stands), the kept hits' ``tris``
+    (int64) and ``distance`` (float64), and how many each ray ``kept`` (m,) int64."""
+
+    bound: np.ndarray
+    candidates: np.ndarray
+    tested: np.ndarray
+    tris: np.ndarray
+    distance: np.ndarray
+    kept: np.ndarray
 
 
 @njit(inline="always")
@@ -62,12 +85,12 @@ def _barycentric_hit(triangles, f, px, py, pz, zero):
 
 @njit(nogil=True, cache=True, error_model="numpy")
 def _bounds_chunk(first, stop, chosen, hits, rays, mesh, tolerances, fans, totals):
-    rows, positions = chosen
-    _t, prim, u, v, cos, count, _more = hits
+    rows, positions = chosen.rows, chosen.positions
+    prim, u, v, cos, count = hits.prim, hits.u, hits.v, hits.cos, hits.count
     magnitude = rays.magnitude
     altitude = mesh.altitude
-    band_scale, graze, _parallel_cos, _zero = tolerances
-    canonical, fan_starts, _fan_faces = fans
+    band_scale, graze = tolerances.band_scale, tolerances.graze
+    canonical, fan_starts = fans.canonical, fans.starts
     for a in range(first, stop):  # candidates of each ray, at most
         r, q = rows[a], positions[a]
         total = 0
@@ -87,13 +110,16 @@ def _bounds_chunk(first, stop, chosen, hits, rays, mesh, tolerances, fans, total
 def _decide_chunk(first, stop, chosen, hits, rays, mesh, tolerances, fans, work):
     # rays first .. stop; ray a's candidates and hits in bound[a] .. bound[a + 1] of `work`'s
     # arrays, kept[a] hits
-    rows, positions = chosen
-    _t, prim, u, v, cos, count, _more = hits
-    origins, directions, magnitude, near, inclusive = rays
-    planes, triangles, altitude, _floor_altitude = mesh
-    band_scale, graze, parallel_cos, zero = tolerances
-    canonical, fan_starts, fan_faces = fans
-    bound, candidates, tested, out_tris, out_distance, kept = work
+    rows, positions = chosen.rows, chosen.positions
+    prim, u, v, cos, count = hits.prim, hits.u, hits.v, hits.cos, hits.count
+    origins, directions, magnitude = rays.origins, rays.directions, rays.magnitude
+    near, inclusive = rays.near, rays.inclusive
+    planes, triangles, altitude = mesh.planes, mesh.triangles, mesh.altitude
+    band_scale, graze = tolerances.band_scale, tolerances.graze
+    parallel_cos, zero = tolerances.parallel_cos, tolerances.zero
+    canonical, fan_starts, fan_faces = fans.canonical, fans.starts, fans.faces
+    bound, candidates, tested = work.bound, work.candidates, work.tested
+    out_tris, out_distance, kept = work.tris, work.distance, work.kept
     for a in range(first, stop):
         r, q = rows[a], positions[a]
         stop_a = bound[a]
@@ -157,13 +183,12 @@ def _decide_chunk(first, stop, chosen, hits, rays, mesh, tolerances, fans, work)
 
 @njit(nogil=True, cache=True)
 def _gather_chunk(first, stop, positions, work, places, out):
-    bound, _candidates, _tested, tris, distance, kept = work
-    out_rays, out_tris, out_distance = out
+    bound, tris, distance, kept = work.bound, work.tris, work.distance, work.kept
     for a in range(first, stop):
         for i in range(kept[a]):
-            out_rays[places[a] + i] = positions[a]
-            out_tris[places[a] + i] = tris[bound[a] + i]
-            out_distance[places[a] + i] = distance[bound[a] + i]
+            out.rays[places[a] + i] = positions[a]
+            out.tris[places[a] + i] = tris[bound[a] + i]
+            out.distance[places[a] + i] = distance[bound[a] + i]
 
 
 @njit(inline="always")
@@ -181,7 +206,7 @@ def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
     # kept hits): the same output on any number of threads
     m = rows.shape[0]
     n_chunks = chunk_count(m, CHUNK)
-    chosen = (rows, positions)
+    chosen = Chosen(rows, positions)
     totals = np.empty(m, np.int64)
     for c in prange(n_chunks):
         first, stop = chunk_span(c, CHUNK, m)
@@ -190,7 +215,7 @@ def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
     kept = np.empty(m, np.int64)
     # each ray's range of candidates, then candidates, tested (decided in float64, else
     # Embree's hit stands), tris, distance, and how many of its hits each ray keeps
-    work = (
+    work = DecideWork(
         bound,
         np.empty(bound[m], np.int64),
         np.empty(bound[m], np.bool_),
@@ -202,7 +227,7 @@ def _decide(rows, positions, hits, rays, mesh, tolerances, fans):
         first, stop = chunk_span(c, CHUNK, m)
         _decide_chunk(first, stop, chosen, hits, rays, mesh, tolerances, fans, work)
     places = _offsets(kept)
-    out = (
+    out = Hits(
         np.empty(places[m], np.int64),
         np.empty(places[m], np.int64),
         np.empty(places[m], np.float64),
@@ -220,7 +245,7 @@ def decided_hits(
     rays: WorldRays,
     mesh: MeshTables,
     tolerances: Tolerances,
-    fans: tuple[np.ndarray, np.ndarray, np.ndarray],
+    fans: Fans,
     threads: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Final hits of the rays in rows ``rows`` (m,) int64 of ``multihit.all_hits``' buffers
@@ -247,5 +272,5 @@ def decided_hits(
             rays,
             mesh,
             tolerances,
-            tuple(fans),
+            Fans(*fans),
         )

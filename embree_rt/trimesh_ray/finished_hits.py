@@ -25,17 +25,67 @@ would *load* from scattered places, which stalls (measured 12-14 ms for 150k hit
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 from numba import njit, prange
 
 from embree_rt.compiled.pointers import prefetch
 from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
+from embree_rt.trimesh_ray.hit_inputs import Hits
 
 _EPS64 = np.finfo(np.float64).eps
 _SAME_POINT_ULPS = 1e4
 _AHEAD = 16
 CHUNK = 4096  # rays per parallel iteration
+
+
+class CrossingRule(NamedTuple):
+    """What makes hits one crossing: ``canonical`` (triangles, 3) int64 corner position ids,
+    ``planes`` (triangles, 6) float64 (first vertex, unit normal), the mesh's ``size`` and
+    ``parallel_cos`` (the |cos| below which no hit was kept)."""
+
+    canonical: np.ndarray
+    planes: np.ndarray
+    size: float
+    parallel_cos: float
+
+
+class Grouped(NamedTuple):
+    """Hits grouped by ray: ``tris`` (k,) int64, ``distance`` (k,) float64."""
+
+    tris: np.ndarray
+    distance: np.ndarray
+
+
+class HitPoints(NamedTuple):
+    """The world rays ``origins``, ``directions`` (n, 3) float64 (unit) and whether to make
+    hit points (``with_locations``)."""
+
+    origins: np.ndarray
+    directions: np.ndarray
+    with_locations: bool
+
+
+class Placed(NamedTuple):
+    """The answer in trimesh's order: ``rays``, ``tris`` (m,) int64, ``locations`` (m, 3)
+    float64 (0 rows without locations)."""
+
+    rays: np.ndarray
+    tris: np.ndarray
+    locations: np.ndarray
+
+
+class FinishScratch(NamedTuple):
+    """Working arrays: per-ray ``starts`` (n + 1,), ``cursor`` and ``kept`` (n,) int64; the
+    hits grouped by ray, ``grouped_tris`` (k,) int64 and ``grouped_distance`` (k,) float64."""
+
+    starts: np.ndarray
+    cursor: np.ndarray
+    kept: np.ndarray
+    grouped_tris: np.ndarray
+    grouped_distance: np.ndarray
 
 
 @njit(inline="always")
@@ -123,11 +173,11 @@ def _one_hit_per_crossing(tris, distance, canonical, crossing_tris, crossing_dis
 @njit(nogil=True, cache=True)
 def _merge_chunk(first_ray, stop_ray, starts, capacity, merge, directions, grouped, kept):
     # each ray's hits at one point made one hit per crossing (``_one_hit_per_crossing``, in
-    # the run's place), then cut to `capacity`, in place; `kept` hits per ray. merge:
-    # (canonical, planes, size, parallel_cos); grouped: (tris, distance) of the hits grouped by
-    # ray
-    canonical, planes, size, parallel_cos = merge
-    grouped_tris, grouped_distance = grouped
+    # the run's place), then cut to `capacity`, in place; `kept` hits per ray (merge:
+    # CrossingRule; grouped: Grouped, the hits grouped by ray)
+    canonical, planes = merge.canonical, merge.planes
+    size, parallel_cos = merge.size, merge.parallel_cos
+    grouped_tris, grouped_distance = grouped.tris, grouped.distance
     for r in range(first_ray, stop_ray):
         first, stop = starts[r], starts[r + 1]
         out = first
@@ -171,10 +221,10 @@ def _merge_chunk(first_ray, stop_ray, starts, capacity, merge, directions, group
 @njit(nogil=True, cache=True)
 def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped, points, out):
     # rays first_ray .. stop_ray; slots[d]: where this chunk's next hit of depth d goes.
-    # points: (origins, directions, with_locations); out: (rays, tris, locations)
-    grouped_tris, grouped_distance = grouped
-    origins, directions, _with_locations = points
-    out_rays, out_tris, locations = out
+    # points: HitPoints; out: Placed
+    grouped_tris, grouped_distance = grouped.tris, grouped.distance
+    origins, directions = points.origins, points.directions
+    out_rays, out_tris, locations = out.rays, out.tris, out.locations
     with_locations = locations.shape[0] > 0
     for r in range(first_ray, stop_ray):
         first = starts[r]
@@ -192,13 +242,12 @@ def _place_chunk(first_ray, stop_ray, slots, starts, kept, grouped, points, out)
 
 @njit(parallel=True, nogil=True, cache=True)
 def _finish(parts, order, ray_count, capacity, merge, points, scratch):
-    # parts: (rays, tris, distance); merge: (canonical, planes, size, parallel_cos); points:
-    # (origins, directions, with_locations); scratch: (starts, cursor, kept, grouped_tris,
-    # grouped_distance)
-    rays, tris, distance = parts
-    with_locations = points[2]
-    starts, cursor, kept, grouped_tris, grouped_distance = scratch
-    grouped = (grouped_tris, grouped_distance)
+    # parts: Hits; merge: CrossingRule; points: HitPoints; scratch: FinishScratch
+    rays, tris, distance = parts.rays, parts.tris, parts.distance
+    with_locations = points.with_locations
+    starts, cursor, kept = scratch.starts, scratch.cursor, scratch.kept
+    grouped = Grouped(scratch.grouped_tris, scratch.grouped_distance)
+    grouped_tris, grouped_distance = grouped.tris, grouped.distance
     reordered = order.shape[0] > 0
     # 1. counting sort by ray; in traced order, the counters of each hit's ray are scattered:
     # fetched _AHEAD hits early, so that their loads overlap
@@ -224,7 +273,7 @@ def _finish(parts, order, ray_count, capacity, merge, points, scratch):
     n_chunks = chunk_count(ray_count, CHUNK)
     for c in prange(n_chunks):
         first, stop = chunk_span(c, CHUNK, ray_count)
-        _merge_chunk(first, stop, starts, capacity, merge, points[1], grouped, kept)
+        _merge_chunk(first, stop, starts, capacity, merge, points.directions, grouped, kept)
     # 3. depth-major: rays with more than d hits, ascending, for each depth d; each chunk's
     # hits of depth d follow the earlier chunks' (a prefix sum over chunks, depth by depth), so
     # the placement is the serial one on any number of threads
@@ -246,7 +295,7 @@ def _finish(parts, order, ray_count, capacity, merge, points, scratch):
     out_rays = np.empty(total, np.int64)
     out_tris = np.empty(total, np.int64)
     locations = np.empty((total if with_locations else 0, 3), np.float64)
-    out = (out_rays, out_tris, locations)
+    out = Placed(out_rays, out_tris, locations)
     for c in prange(n_chunks):
         first, stop = chunk_span(c, CHUNK, ray_count)
         _place_chunk(first, stop, slots[c], starts, kept, grouped, points, out)
@@ -294,23 +343,23 @@ def finished_hits(
             return np.empty(size, dtype)
 
     k = len(rays)
-    parts = (
+    parts = Hits(
         np.ascontiguousarray(rays, np.int64),
         np.ascontiguousarray(tris, np.int64),
         np.ascontiguousarray(distance, np.float64),
     )
-    merge = (
+    merge = CrossingRule(
         np.ascontiguousarray(canonical, np.int64),
         np.ascontiguousarray(planes, np.float64),
         float(size),
         float(parallel_cos),
     )
-    points = (
+    points = HitPoints(
         np.ascontiguousarray(origins, np.float64),
         np.ascontiguousarray(directions, np.float64),
         bool(with_locations),
     )
-    work = (
+    work = FinishScratch(
         scratch("starts", ray_count + 1, np.int64),
         scratch("cursor", ray_count, np.int64),
         scratch("kept", ray_count, np.int64),
@@ -320,7 +369,5 @@ def finished_hits(
     order = np.zeros(0, np.int64) if order is None else np.ascontiguousarray(order, np.int64)
     with parallel_region:
         numba.set_num_threads(threads_for(int(ray_count), threads))
-        out_rays, out_tris, locations = _finish(
-            parts, order, int(ray_count), max(1, int(capacity)), merge, points, work
-        )
-    return out_rays, out_tris, locations if with_locations else None
+        placed = _finish(parts, order, int(ray_count), max(1, int(capacity)), merge, points, work)
+    return placed.rays, placed.tris, placed.locations if with_locations else None

@@ -34,6 +34,24 @@ class MeshTables(NamedTuple):
     floor_altitude: float
 
 
+class Fans(NamedTuple):
+    """The faces around each vertex position, CSR: ``canonical`` (triangles, 3) int64 each
+    triangle's corners as position ids, ``starts`` (positions + 1,) int64 and ``faces``
+    (3 triangles,) int64: the faces around position p are ``faces[starts[p]:starts[p + 1]]``."""
+
+    canonical: np.ndarray
+    starts: np.ndarray
+    faces: np.ndarray
+
+
+class Hits(NamedTuple):
+    """Hits as columns: ``rays``, ``tris`` (k,) int64 and ``distance`` (k,) float64."""
+
+    rays: np.ndarray
+    tris: np.ndarray
+    distance: np.ndarray
+
+
 class Tolerances(NamedTuple):
     """trimesh's rules as numbers: ``band_scale`` the edge band per unit of magnitude / altitude
     (a hit nearer its triangle's edge, barycentric, is decided in float64); ``graze`` (float32)

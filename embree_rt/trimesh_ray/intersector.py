@@ -47,19 +47,13 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 from trimesh import caching, util
-from trimesh.constants import tol
 
 from embree_rt.compiled.work_split import parallel_region
 from embree_rt.embree.multihit import crossing_parity
-from embree_rt.embree.validation import as_points
-from embree_rt.trimesh_ray.decided_hits import decided_hits
-from embree_rt.trimesh_ray.finished_hits import finished_hits
-from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
-from embree_rt.trimesh_ray.local_frame import boxed_local_points, local_rays, ordered_local_rays
-from embree_rt.trimesh_ray.local_scene import BAND_ULPS, EDGE_BAND_SCALE, EPS32, LocalScene
+from embree_rt.trimesh_ray.exact_hits import GRAZE_COS, all_hits, first_hits
+from embree_rt.trimesh_ray.local_frame import boxed_local_points
+from embree_rt.trimesh_ray.local_scene import LocalScene
 from embree_rt.trimesh_ray.plane_distances import plane_distances
-from embree_rt.trimesh_ray.screened_nearest import screened_nearest
-from embree_rt.trimesh_ray.settled_hits import settled_hits
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
 # near an edge or along a face to trust their parity.
@@ -70,18 +64,6 @@ _CONTAINS_DIRECTIONS = np.array(
         [0.8017837257372732, -0.2672612419124244, -0.5345224838248488],
     ]
 )
-# trimesh.intersections.planes_lines: a ray and a plane with |cos| at most this do not meet.
-_PARALLEL_COS = 1e-5
-# Hits at a smaller |cos| (float32) are decided again in float64: near _PARALLEL_COS, Embree's
-# float32 cosine may fall on either side.
-_GRAZE_COS = 1e-3
-# Embree's float32 distances err by a few ulps of the largest coordinate involved: hits within
-# this many of the origin are decided in float64.
-_TNEAR_ULPS = 16.0
-# Rays traced per call, and rays x room for hits: bounded memory, reused from block to block.
-_BLOCK_RAYS = 1 << 17  # 21 MB of hit buffers at 8 hits a ray, kept by the scene
-FIRST_ROOM = 8  # hits of room a ray on the first trace (rays that overflow it are traced again)
-_BLOCK_HITS = 1 << 21
 
 
 def _ray_arrays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
@@ -96,77 +78,20 @@ def _ray_arrays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
     return origins.reshape(-1, 3), directions.reshape(-1, 3)
 
 
-def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 3) float64 origins and unit directions (trimesh's ``unitize``)."""
+def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(n, 3) float64 origins, unit directions (trimesh's ``unitize``) and the directions as
+    given (to name a bad row as the caller wrote it)."""
     origins, directions = _ray_arrays(ray_origins, ray_directions)
-    # A non-finite direction is refused by the BVH, naming its row; unitize would only warn.
+    # A non-finite direction is refused when the rays are traced, naming its row; unitize
+    # would only warn.
     with np.errstate(invalid="ignore", over="ignore"):
-        return origins, util.unitize(directions)
+        return origins, util.unitize(directions), directions
 
 
 def _plane_distance(scene, origins, directions, rays, tris):
     """float64 distance along each ray to its triangle's plane, and |cos| of the angle between
     ray and normal, trimesh's planes_lines formula (compiled: ``plane_distances``)."""
     return plane_distances(scene.planes, origins, directions, rays, tris)
-
-
-def _spliced(hits, rows, again):
-    """``hits``: a multi-hit answer ``(rays (m,) int64, tris (m,) int64, locations (m, 3)
-    float64 or None)`` in trimesh's order (every ray's first hit, rays ascending, then every
-    ray's second ...), with the hits of rays ``rows`` (k,) int64 replaced by ``again``, the
-    answer for those rays alone (its rays index ``rows``), in the same order."""
-    rays, tris, locations = hits
-    keep = ~np.isin(rays, rows)
-    rays = np.concatenate([rays[keep], rows[again[0]]])
-    tris = np.concatenate([tris[keep], again[1]])
-    # a hit's depth: how many hits of its ray come before it (each ray's hits are in order)
-    order = np.argsort(rays, kind="stable")
-    starts = np.searchsorted(rays[order], rays[order])
-    depth = np.empty(len(rays), np.int64)
-    depth[order] = np.arange(len(rays)) - starts
-    placed = np.lexsort((rays, depth))
-    if locations is not None:
-        locations = np.concatenate([locations[keep], again[2]])[placed]
-    return rays[placed], tris[placed], locations
-
-
-class _HitList:
-    """The multi-hit query's hits, part after part, in arrays lent by the scene (grown as
-    needed): (rays, tris) int64 and distance float64, so that no part is copied twice."""
-
-    def __init__(self, scene: LocalScene, size: int) -> None:
-        self._scene = scene
-        self._arrays = self._lent(max(size, 1))
-        self._count = 0
-
-    def _lent(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return tuple(
-            self._scene.scratch(f"hits_{k}", size, dtype)
-            for k, dtype in enumerate((np.int64, np.int64, np.float64))
-        )
-
-    def room(self, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Views of the next ``size`` places, to write a part into (then ``filled``)."""
-        if self._count + size > len(self._arrays[0]):
-            grown = tuple(np.empty(2 * (self._count + size), array.dtype) for array in self._arrays)
-            for old, new in zip(self._arrays, grown, strict=True):
-                new[: self._count] = old[: self._count]
-            self._arrays = grown
-        return tuple(array[self._count : self._count + size] for array in self._arrays)
-
-    def filled(self, size: int) -> None:
-        """The next ``size`` places now hold a part."""
-        self._count += size
-
-    def append(self, part: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
-        """Copy a part (rays, tris, distance) in."""
-        for target, source in zip(self.room(len(part[0])), part, strict=True):
-            target[:] = source
-        self.filled(len(part[0]))
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(rays, tris, distance) of every part so far."""
-        return tuple(array[: self._count] for array in self._arrays)
 
 
 class RayMeshIntersector:
@@ -193,224 +118,6 @@ class RayMeshIntersector:
 
     # -- queries ------------------------------------------------------------------------------
 
-    @staticmethod
-    def _resolve_tnear(scene, magnitude, tnear):
-        """(near (n,) float64 world distance, inclusive): hits count at distance > near (>=
-        when ``tnear`` is given, ``inclusive``); by default near is a few float32 ulps of
-        ``magnitude`` (n,), each ray's largest local coordinate (its origin's or the mesh's)."""
-        if tnear is None:
-            return _TNEAR_ULPS * EPS32 * magnitude / scene.scale, False
-        near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(magnitude),))
-        if not np.isfinite(near).all() or (near < 0).any():
-            raise ValueError("tnear: must be finite and >= 0")
-        return near, True
-
-    def _hits(
-        self, origins, directions, max_hits, tnear, reorder=False, with_locations=False, room=None
-    ):
-        """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
-        ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
-        ``with_locations``, the points (k, 3) float64 (else None); each ray's hits by distance,
-        then triangle, one hit per crossing of the surface (at an edge or a vertex, the
-        lowest-index triangle there: ``finished_hits``).
-
-        With ``reorder`` (and a big mesh: ``scene.bounds``) the rays are traced, and every step
-        but the last run, in a coherent order (``local_frame.ordered_local_rays``); each ray's
-        hits are computed from its own row alone, so they are the same in any order.
-
-        ``room``: Embree hits recorded a ray (default ``max_hits`` + 4). Hits at one point
-        become one crossing, so a ray whose recorded hits overflowed it and gave fewer than
-        ``max_hits`` crossings (a ray through a vertex many triangles share) may have more:
-        such rays are traced again with four times the room."""
-        scene = self._scene
-        n = len(origins)
-        given_origins, given_directions, given_tnear = origins, directions, tnear
-        traced_order = None
-        if reorder and scene.bounds is not None:
-            (
-                traced_order,
-                origins,
-                directions,
-                local_origins,
-                local_directions,
-                magnitude,
-                finite,
-            ) = ordered_local_rays(
-                origins,
-                directions,
-                scene.origin,
-                scene.scale,
-                scene.extent,
-                scene.bounds,
-                scene.bvh.threads,
-            )
-            if not finite:  # named by its row as given
-                given = local_rays(
-                    given_origins, given_directions, scene.origin, scene.scale, scene.extent
-                )
-                as_points(given[0], "origins")
-                as_points(given[1], "directions")
-            if tnear is not None and np.ndim(tnear):
-                tnear = np.broadcast_to(np.asarray(tnear, np.float64), (n,))[traced_order]
-        else:
-            local_origins, local_directions, magnitude = local_rays(
-                origins, directions, scene.origin, scene.scale, scene.extent
-            )
-        near, inclusive = self._resolve_tnear(scene, magnitude, tnear)
-        capacity = max(1, int(max_hits))
-        # room for hits the float64 rules below drop (at the origin, along a face) and for edge
-        # pairs, so that the nearest `capacity` survive
-        room = capacity + 4 if room is None else room
-        truncated = []  # positions of rays whose final trace had more hits than its room
-        # Most rays hit a few triangles: trace with a little room first and again, with all of
-        # it, only the rays that overflowed (so the hit arrays stay small).
-        first_room = min(room, FIRST_ROOM)
-        block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // first_room))
-        buffers = scene.hit_buffers(first_room)
-        hits, pending_parts = _HitList(scene, 2 * n), []
-        rules = tolerances(EDGE_BAND_SCALE, _GRAZE_COS, _PARALLEL_COS, tol.zero)
-        world = world_rays(origins, directions, magnitude, near, inclusive)
-        for first in range(0, n, block):
-            rows = slice(first, min(n, first + block))
-            # Embree from the local frame's tnear (inclusive, a little short of ours): which
-            # hits count as at the origin is decided below in float64.
-            block_near = (near[rows] * scene.scale * 0.5).astype(np.float32)
-            result = scene.bvh.all_hits(
-                local_origins[rows],
-                local_directions[rows],
-                block_near,
-                np.inf,
-                first_room,
-                out=buffers,
-            )
-            scene.keep_hit_buffers(first_room, result)
-            buffers = result
-            # rays clear of edges and grazing settled in one compiled pass; the others go to the
-            # float64 path below, those that overflowed `first_room` traced again first
-            recorded = int(result[5].sum())
-            rays, tris, distance, messy = settled_hits(
-                result,
-                room > first_room,
-                world_rays(origins[rows], directions[rows], magnitude[rows], near[rows], inclusive),
-                scene.tables,
-                rules,
-                scene.bvh.threads,
-                tuple(
-                    scene.scratch(f"settle_{k}", recorded, dtype)
-                    for k, dtype in enumerate((np.int64, np.int64, np.float64))
-                ),
-                hits.room(recorded),
-                first,
-            )
-            hits.filled(len(rays))
-            # Messy rays whose hits all fit are complete: decided in float64 now, from the
-            # buffers as traced (a second trace with more room records the same hits in the same
-            # order); the others are traced again first.
-            overflowed = result[6] if room > first_room else np.zeros(len(messy), bool)
-            if room <= first_room:
-                truncated.append(first + np.flatnonzero(messy & result[6]))
-            complete_rows = np.flatnonzero(messy & ~overflowed)
-            hits.append(self._decided(complete_rows, first + complete_rows, result, world, rules))
-            pending_parts.append(first + np.flatnonzero(messy & overflowed))
-        pending = np.concatenate(pending_parts) if pending_parts else np.zeros(0, np.int64)
-        block = max(1, min(_BLOCK_RAYS, _BLOCK_HITS // room))
-        for first in range(0, len(pending), block):
-            which = pending[first : first + block]
-            block_near = (near[which] * scene.scale * 0.5).astype(np.float32)
-            result = scene.bvh.all_hits(
-                local_origins[which], local_directions[which], block_near, np.inf, room
-            )
-            hits.append(self._decided(np.arange(len(which)), which, result, world, rules))
-            truncated.append(which[result[6]])
-        rays, tris, distance = hits.arrays()
-        finished = finished_hits(
-            rays,
-            tris,
-            distance,
-            traced_order,
-            n,
-            capacity,
-            scene.fans()[0],
-            scene.planes,
-            scene.extent / scene.scale,
-            _PARALLEL_COS,
-            given_origins,
-            given_directions,
-            with_locations,
-            scene.scratch,
-            scene.bvh.threads,
-        )
-        truncated = np.concatenate(truncated) if truncated else np.zeros(0, np.int64)
-        if traced_order is not None:
-            truncated = traced_order[truncated]
-        short = truncated[np.bincount(finished[0], minlength=n)[truncated] < capacity]
-        if not len(short):
-            return finished
-        if given_tnear is not None and np.ndim(given_tnear):
-            given_tnear = np.broadcast_to(given_tnear, (n,))[short]
-        again = self._hits(
-            given_origins[short],
-            given_directions[short],
-            capacity,
-            given_tnear,
-            with_locations=with_locations,
-            room=4 * room,
-        )
-        return _spliced(finished, short, again)
-
-    def _decided(self, rows, positions, result, world, rules):
-        """Hits near an edge, a vertex or along a face decided in float64 as ray_triangle
-        decides them, against all the triangles around them (``decided_hits``)."""
-        scene = self._scene
-        if not len(rows):
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-        return decided_hits(
-            rows, positions, result, world, scene.tables, rules, scene.fans(), scene.bvh.threads
-        )
-
-    def _first_hits(self, origins, directions, tnear) -> np.ndarray:
-        """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
-        float64 (directions not necessarily unit) hits, -1 for none. Embree's nearest-hit query
-        answers, in one compiled pass with the frame change, every ray whose hit lies clear of
-        edges, of grazing and of the origin (``screened_nearest``; on big meshes in the order
-        of where the rays enter the mesh's box, which changes no answer, see
-        ``embree_rt.trimesh_ray.screened_nearest``); the others (under 1% on the benchmark's meshes)
-        go through ``_hits``, which decides them in float64."""
-        scene = self._scene
-        near = None
-        if tnear is not None:
-            near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(origins),))
-            if not np.isfinite(near).all() or (near < 0).any():
-                raise ValueError("tnear: must be finite and >= 0")
-        prim, suspect = screened_nearest(
-            scene.bvh,
-            origins,
-            directions,
-            shift=scene.origin,
-            scale=scene.scale,
-            extent=scene.extent,
-            bounds=scene.bounds,
-            near=near,
-            near_ulps=_TNEAR_ULPS,
-            altitude=scene.min_altitude,
-            floor_altitude=scene.floor_altitude,
-            band_ulps=BAND_ULPS,
-            graze=_GRAZE_COS,
-            near_factor=4.0,
-        )
-        first = prim.astype(np.int64)
-        again = np.flatnonzero(suspect)
-        if len(again):
-            more = self._hits(
-                origins[again],
-                util.unitize(directions[again]),
-                1,
-                None if near is None else near[again],
-            )
-            first[again] = -1
-            first[again[more[0]]] = more[1]
-        return first
-
     def intersects_id(
         self,
         ray_origins,
@@ -436,7 +143,7 @@ class RayMeshIntersector:
         """
         if not multiple_hits:
             origins, given_directions = _ray_arrays(ray_origins, ray_directions)
-            first = self._first_hits(origins, given_directions, tnear)
+            first = first_hits(self._scene, origins, given_directions, tnear)
             rays = np.flatnonzero(first >= 0)
             tris = first[rays]
             if not return_locations:
@@ -446,9 +153,16 @@ class RayMeshIntersector:
                 self._scene, origins[rays], directions, np.arange(len(rays)), tris
             )[0]
             return tris, rays, origins[rays] + directions * distance[:, None]
-        origins, directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, locations = self._hits(
-            origins, directions, max_hits, tnear, reorder=True, with_locations=return_locations
+        origins, directions, given_directions = _as_rays(ray_origins, ray_directions)
+        rays, tris, locations = all_hits(
+            self._scene,
+            origins,
+            directions,
+            max_hits,
+            tnear,
+            reorder=True,
+            with_locations=return_locations,
+            as_given=given_directions,
         )
         if return_locations:
             return tris, rays, locations
@@ -472,7 +186,7 @@ class RayMeshIntersector:
         """(n,) int32 (as trimesh's embree backend): the first triangle each ray hits, -1 for
         none (on an edge, the lowest index of the triangles there)."""
         origins, directions = _ray_arrays(ray_origins, ray_directions)
-        return self._first_hits(origins, directions, tnear).astype(np.int32)
+        return first_hits(self._scene, origins, directions, tnear).astype(np.int32)
 
     def intersects_any(self, ray_origins, ray_directions, *, tnear=0.0) -> np.ndarray:
         """(n,) bool: whether each ray hits the mesh."""
@@ -511,7 +225,7 @@ class RayMeshIntersector:
                     origins,
                     directions,
                     band,
-                    _GRAZE_COS,
+                    GRAZE_COS,
                     scene.bvh.threads,
                 )
             last = k == len(_CONTAINS_DIRECTIONS) - 1

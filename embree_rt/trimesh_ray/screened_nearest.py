@@ -9,9 +9,9 @@ around them). Doing the frame change, the query and the screening in one pass sp
 NumPy temporaries of each step, which cost more than the query itself for small meshes.
 
 Given the mesh's box, the rays are traced in the order of where they enter it
-(``ray_order``): the frame pass also keys each ray, a radix sort orders the keys, a gather
-pass copies the local rays into that order, the trace and screening run over them, and a last
-pass puts the answers back in the caller's order.
+(``local_frame.entry_key``): the frame pass also keys each ray, a radix sort orders the keys, a
+gather pass copies the local rays into that order, the trace and screening run over them, and a
+last pass puts the answers back in the caller's order.
 
 The band: Embree's float32 barycentrics err by a few ulps of the largest coordinate involved
 (``magnitude``: the ray's origin's or the mesh's) over the triangle's smallest altitude, so a hit
@@ -47,9 +47,7 @@ from embree_rt.embree.kernels import (
     Rays,
     intersect_chunk,
 )
-from embree_rt.embree.validation import as_points
-from embree_rt.trimesh_ray.local_frame import frame, local_coordinate
-from embree_rt.trimesh_ray.ray_order import box, entry_key
+from embree_rt.trimesh_ray.local_frame import box, entry_key, frame, local_coordinate, refuse_rays
 
 _EPS32 = np.float64(np.finfo(np.float32).eps)
 # trimesh.util.unitize leaves vectors no longer than this as they are
@@ -64,6 +62,16 @@ class Near(NamedTuple):
     world: np.ndarray
     ulps: float
     factor: float
+
+
+class Staged(NamedTuple):
+    """The frame pass's output: ``rays`` (n, 6) float32 local origin and unit direction,
+    ``limits`` (n, 2) float64 Embree's tnear and the screening's origin limit (local), and
+    ``keys`` (n,) uint32 tracing-order keys (0 rows: the given order)."""
+
+    rays: np.ndarray
+    limits: np.ndarray
+    keys: np.ndarray
 
 
 class Screen(NamedTuple):
@@ -82,14 +90,11 @@ class Screen(NamedTuple):
 
 @njit(nogil=True, cache=True)
 def _frame_chunk(first, stop, origins, directions, frame, near_rule, box, staged, bad):
-    # the local frame (local_frame.local_coordinate) and trimesh.util.unitize's unit direction:
-    # staged = (rays, limits, keys): rays[i] = local origin, unit direction (float32),
-    # limits[i] = Embree's tnear, the screening's origin limit; and with keys, ray i's
-    # tracing-order key
-    shift, scale, extent = frame
-    near_world, near_ulps, near_factor = near_rule
-    lower, upper, cells_per_unit = box
-    rays, limits, keys = staged
+    # the local frame (local_frame.local_coordinate) and trimesh.util.unitize's unit direction
+    # into `staged` (Staged)
+    shift, scale, extent = frame.shift, frame.scale, frame.extent
+    near_world, near_ulps, near_factor = near_rule.world, near_rule.ulps, near_rule.factor
+    rays, limits, keys = staged.rays, staged.limits, staged.keys
     given = near_world.shape[0] > 0
     for i in range(first, stop):
         magnitude = extent
@@ -115,7 +120,7 @@ def _frame_chunk(first, stop, origins, directions, frame, near_rule, box, staged
             for k in range(6):  # a harmless ray: the caller raises
                 rays[i, k] = 0.0
         if keys.shape[0]:
-            keys[i] = entry_key(origins[i], directions[i], lower, upper, cells_per_unit)
+            keys[i] = entry_key(origins[i], directions[i], box.lower, box.upper, box.cells_per_unit)
 
 
 @njit(nogil=True, cache=True)
@@ -135,9 +140,10 @@ def _gather_chunk(first, stop, order, rays, limits, ordered_rays, ordered_limits
 def _trace_chunk(query, words, first, stop, rays, limits, screen, hits, suspect):
     # local rays first .. stop of `rays` (kernels.Rays; tnear and tfar written here from
     # limits (n, 2) float64), their nearest hits into `hits` (kernels.NearestHits)
-    origins, directions, tnear, tfar = rays
-    altitude, floor_altitude, band_ulps, graze, extent = screen
-    t, normal, u, v, prim, _geom, _inst = hits
+    origins, directions, tnear, tfar = rays.origins, rays.directions, rays.tnear, rays.tfar
+    altitude, floor_altitude = screen.altitude, screen.floor_altitude
+    band_ulps, graze, extent = screen.band_ulps, screen.graze, screen.extent
+    t, normal, u, v, prim = hits.t, hits.normal, hits.u, hits.v, hits.prim
     for i in range(first, stop):
         tnear[i] = np.float32(limits[i, 0])
         tfar[i] = np.inf
@@ -182,7 +188,7 @@ def _screened(
     rays = np.empty((n, 6), np.float32)
     limits = np.empty((n, 2), np.float64)
     keys = np.empty(n if reorder else 0, np.uint32)
-    staged = (rays, limits, keys)
+    staged = Staged(rays, limits, keys)
     for c in prange(n_chunks):
         first, stop = chunk_span(c, CHUNK, n)
         _frame_chunk(first, stop, origins, directions, frame, near_rule, box, staged, bad)
@@ -246,7 +252,7 @@ def screened_nearest(
     ``shift`` (3,) float64 and ``scale``: the local frame is ``(p - shift) * scale`` in float64,
     rounded to float32; ``extent``: the mesh's largest local coordinate; ``bounds``: (2, 3)
     float64 world box (the mesh's) to trace the rays in the order of where they enter it
-    (``ray_order``; the answers are the same, see below), or None for the given order;
+    (``local_frame.entry_key``; the answers are the same, see below), or None for the given order;
     ``near`` (n,) float64 world distances, or None for ``near_ulps`` float32 ulps of each ray's
     magnitude: Embree looks from half of it, and a hit within ``near_factor`` times it is
     suspect; ``altitude``
@@ -296,7 +302,5 @@ def screened_nearest(
                 bad,
             )
     if bad[0]:
-        as_points(origins, "origins")  # raises, naming the first bad row
-        as_points(directions, "directions")
-        raise ValueError("rays: not finite in the BVH's frame (coordinates too large)")
+        refuse_rays(origins, directions, shift, scale, near)
     return prim, suspect

@@ -25,7 +25,7 @@ from numba import njit, prange
 from embree_rt.compiled.pointers import prefetch
 from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
 from embree_rt.embree.multihit import HitBuffers
-from embree_rt.trimesh_ray.hit_inputs import MeshTables, Tolerances, WorldRays
+from embree_rt.trimesh_ray.hit_inputs import Hits, MeshTables, Tolerances, WorldRays
 from embree_rt.trimesh_ray.plane_distances import insert_by_distance, plane_distance
 
 CHUNK = 512  # rays per parallel iteration
@@ -36,11 +36,17 @@ _AHEAD = 8  # rays whose triangles' rows are fetched ahead (4: 4.7 ms, 8: 4.0, 1
 def _settle_chunk(first, stop, k, hits, retrace_more, rays, mesh, tolerances, messy, out):
     # rays first .. stop, their kept hits written from index k of `out` (rays, tris, distance)
     # on; returns the index past them
-    _t, prim, u, v, cos, count, more = hits
-    origins, directions, magnitude, near, inclusive = rays
-    planes, _triangles, altitude, floor_altitude = mesh
-    band_scale, graze, parallel_cos, _zero = tolerances
-    out_rays, out_tris, out_distance = out
+    prim, u, v, cos = hits.prim, hits.u, hits.v, hits.cos
+    count, more = hits.count, hits.more
+    origins, directions, magnitude = rays.origins, rays.directions, rays.magnitude
+    near, inclusive = rays.near, rays.inclusive
+    planes, altitude, floor_altitude = mesh.planes, mesh.altitude, mesh.floor_altitude
+    band_scale, graze, parallel_cos = (
+        tolerances.band_scale,
+        tolerances.graze,
+        tolerances.parallel_cos,
+    )
+    out_rays, out_tris, out_distance = out.rays, out.tris, out.distance
     one = np.float32(1.0)
     floor_scale = band_scale / floor_altitude if floor_altitude > 0 else np.inf
     rows = planes.ctypes.data
@@ -85,12 +91,10 @@ def _settle_chunk(first, stop, k, hits, retrace_more, rays, mesh, tolerances, me
 
 @njit(nogil=True, cache=True)
 def _copy_chunk(source, stop, target, kept, ray_offset, out):
-    rays, tris, distance = kept
-    out_rays, out_tris, out_distance = out
     for k in range(source, stop):
-        out_rays[target] = rays[k] + ray_offset
-        out_tris[target] = tris[k]
-        out_distance[target] = distance[k]
+        out.rays[target] = kept.rays[k] + ray_offset
+        out.tris[target] = kept.tris[k]
+        out.distance[target] = kept.distance[k]
         target += 1
 
 
@@ -127,6 +131,10 @@ def _settle(hits, retrace_more, rays, mesh, tolerances, messy, scratch, ray_offs
     return places[n_chunks]
 
 
+def _new_hits(size: int) -> Hits:
+    return Hits(np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size))
+
+
 def settled_hits(
     hits: HitBuffers,
     retrace_more: bool,
@@ -156,10 +164,8 @@ def settled_hits(
     if not n:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), messy
     total = int(hits.count.sum())
-    if scratch is None:
-        scratch = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
-    if out is None:
-        out = (np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total))
+    scratch = Hits(*scratch) if scratch is not None else _new_hits(total)
+    out = Hits(*out) if out is not None else _new_hits(total)
     with parallel_region:
         numba.set_num_threads(threads_for(n, threads))
         kept = _settle(
@@ -169,8 +175,8 @@ def settled_hits(
             mesh,
             tolerances,
             messy,
-            tuple(scratch),
+            scratch,
             int(ray_offset),
-            tuple(out),
+            out,
         )
-    return out[0][:kept], out[1][:kept], out[2][:kept], messy
+    return out.rays[:kept], out.tris[:kept], out.distance[:kept], messy
