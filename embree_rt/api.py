@@ -133,10 +133,8 @@ def png_bytes(pixels: np.ndarray) -> bytes:
     """(h, w, 3) uint8 ``pixels`` as the bytes of a PNG file."""
     import io
 
-    from PIL import Image
-
     buffer = io.BytesIO()
-    Image.fromarray(pixels).save(buffer, format="PNG")
+    film.write_pixels(pixels, buffer, ".png")
     return buffer.getvalue()
 
 
