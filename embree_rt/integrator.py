@@ -163,6 +163,7 @@ class Integrator(Closing):
         threads: int | None = None,
         batch_size: int = DEFAULT_BATCH_SIZE,
         tracer: Tracer | None = None,
+        movable: bool = False,
     ) -> None:
         check_scene_values(scene)
         if batch_size < 1:
@@ -177,7 +178,7 @@ class Integrator(Closing):
         self.geometry: Tracer = tracer
         self._own_geometry = tracer is None
         if tracer is None:
-            self.geometry = SceneGeometry(scene, spheres=spheres, threads=1)
+            self.geometry = SceneGeometry(scene, spheres=spheres, threads=1, movable=movable)
         self.build_s = time.perf_counter() - start
         # Material ids are the scene's materials in order, then the floor's.
         self.materials = table = MaterialTable.from_materials(
