@@ -140,7 +140,13 @@ class Renderer(Integrator):
         spheres (the caller's scene is left as it was)."""
         centers = np.asarray(centers, np.float32)
         radii = np.asarray(radii, np.float32)
-        self.geometry.move_spheres(centers, radii)
+        move = getattr(self.geometry, "move_spheres", None)
+        if move is None:
+            raise TypeError(
+                f"update_spheres: a {type(self.geometry).__name__} cannot move spheres; "
+                "use a Renderer of one BVH"
+            )
+        move(centers, radii)
         moved = copy.copy(self.scene)
         moved.sphere_centers, moved.sphere_radii = centers, radii
         self.scene = moved
