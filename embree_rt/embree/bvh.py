@@ -317,14 +317,18 @@ class BVH(Closing):
         """Give the committed spheres of ``geom_id`` (``add_spheres``) new ``centers`` (n, 3) and
         ``radii`` (n,), n as before, and refit the BVH to them: the buffer Embree reads is
         rewritten in place (each sphere in the slot it was given) and the geometry and scene
-        committed again, which refits the geometry's tree (the bounds callback called for
-        every sphere) instead of building it. A ``movable`` BVH only; not while a query runs.
+        committed again: Embree refits the geometry's tree (the bounds callback called for
+        every sphere) where it has a refit builder for user geometry; the Embree 4.4 embreex
+        ships rebuilds it (docs/performance.md, "Spheres moved between frames"), so what this
+        saves there is the set-up around the build. A ``movable`` BVH only; not while a query
+        runs.
 
         Queries then answer as a BVH freshly built on the moved spheres does, bit for bit: the
         callbacks compute the same hit from the same sphere whatever the tree, and an exact tie
         (two spheres at one float32 distance) goes the same way in any tree
         (``user_spheres``). A tree refitted over large motion answers more slowly: rebuild it
-        (a new BVH) when ``move_spheres`` has moved the spheres far (docs/performance.md)."""
+        (a new BVH) when its rays trace 1.2x slower than a fresh tree's
+        (docs/performance.md)."""
         if not self.movable:
             raise RuntimeError("move_spheres needs a BVH made with movable=True")
         self._ready_to_query()
