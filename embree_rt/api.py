@@ -9,10 +9,11 @@ gathers what a render made into one value.
 
 from __future__ import annotations
 
+import copy
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -78,10 +79,12 @@ class Renderer(Integrator):
     """Renders many views of one scene on one BVH, built once when it is made: the way to
     render the frames of a camera path, or an image and then its AOVs at another size.
 
-    ``Renderer(scene, *, spheres="analytic", threads=None, batch_size=DEFAULT_BATCH_SIZE)``:
+    ``Renderer(scene, *, spheres="analytic", threads=None, batch_size=DEFAULT_BATCH_SIZE,
+    movable=False)``:
     ``spheres`` is how spheres enter the BVH, "analytic" (compiled user geometry, exact),
     "point" (Embree's own point spheres) or "mesh" (instanced icospheres); ``threads`` the
-    worker threads (None: every core); ``batch_size`` the camera samples a batch traces. The
+    worker threads (None: every core); ``batch_size`` the camera samples a batch traces;
+    ``movable`` lets ``update_spheres`` move the spheres between frames. The
     image is bitwise the same for any ``threads`` and ``batch_size``. Close it (or use it as a
     context manager) to free the BVH.
 
@@ -128,15 +131,80 @@ class Renderer(Integrator):
         stats.render_s += time.perf_counter() - began
         return RenderResult(image, layers, stats, look, frame)
 
+    def update_spheres(self, centers: np.ndarray, radii: np.ndarray) -> None:
+        """Move the scene's spheres to ``centers`` (n, 3) and ``radii`` (n,) (the same n and
+        materials: the next frame of a trajectory) and refit the BVH instead of building a new
+        one (``SceneGeometry.move_spheres``); the next ``render`` sees them bit for bit as a
+        ``Renderer`` built on the moved scene would. The renderer must be made with
+        ``movable=True`` and analytic spheres; its ``scene`` becomes a copy holding the new
+        spheres (the caller's scene is left as it was)."""
+        centers = np.asarray(centers, np.float32)
+        radii = np.asarray(radii, np.float32)
+        move = getattr(self.geometry, "move_spheres", None)
+        if move is None:
+            raise TypeError(
+                f"update_spheres: a {type(self.geometry).__name__} cannot move spheres; "
+                "use a Renderer of one BVH"
+            )
+        move(centers, radii)
+        moved = copy.copy(self.scene)
+        moved.sphere_centers, moved.sphere_radii = centers, radii
+        self.scene = moved
+
+    def render_views(
+        self,
+        cameras: Iterable[Camera],
+        pattern: str,
+        *,
+        aovs: Sequence[str] = (),
+        encoding: film.Encoding | None = None,
+        quiet: bool = True,
+        **overrides: Unpack[SettingOverrides],
+    ) -> list[Path]:
+        """Render the scene seen by each of ``cameras`` in turn (``render``, with ``aovs`` and
+        ``overrides``) and write view k as soon as it is done to ``pattern.format(k)`` (e.g.
+        ``"views/view_{:04d}.png"``) with its AOVs and camera data (``aovs.save_with_aovs``:
+        the camera as npz keys or a JSON sidecar, even with no AOVs), so memory stays that of
+        one view whatever their number. ``encoding`` as ``save``'s (None: the scene's look,
+        8 bits). With ``quiet=False`` a bar on stderr counts the
+        views. Every path is checked before the first view is rendered: one that cannot be
+        written, or two views given one name, raise ValueError, and nothing is written. An
+        existing file is replaced (as ``save`` does). Returns the paths of the views' images,
+        in order."""
+        names = check_aov_names(aovs)
+        cameras = list(cameras)
+        paths = [Path(pattern.format(k)) for k in range(len(cameras))]
+        if len(set(paths)) != len(paths):
+            raise ValueError(f"pattern: {pattern!r} gives two views one file name")
+        for path in paths:
+            film.check_output_path(path, encoding or film.DEFAULT_ENCODING)
+        bar = None
+        if not quiet and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(cameras), unit="view", file=sys.stderr)
+        try:
+            for camera, path in zip(cameras, paths, strict=True):
+                result = self.render(camera=camera, aovs=names, **overrides)
+                chosen = encoding or film.DEFAULT_ENCODING
+                if chosen.look is None:
+                    chosen = chosen._replace(look=result.look)
+                save_with_aovs(result.image, result.aovs, path, chosen, camera=result.camera)
+                del result  # one view in memory at a time
+                if bar is not None:
+                    bar.update(1)
+        finally:
+            if bar is not None:
+                bar.close()
+        return paths
+
 
 def png_bytes(pixels: np.ndarray) -> bytes:
     """(h, w, 3) uint8 ``pixels`` as the bytes of a PNG file."""
     import io
 
-    from PIL import Image
-
     buffer = io.BytesIO()
-    Image.fromarray(pixels).save(buffer, format="PNG")
+    film.write_pixels(pixels, buffer, ".png")
     return buffer.getvalue()
 
 

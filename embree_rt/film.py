@@ -11,15 +11,27 @@ from __future__ import annotations
 import os
 import secrets
 from collections.abc import Callable
-from functools import partial
+from concurrent.futures import ThreadPoolExecutor
+from functools import cache, partial
 from pathlib import Path
 from typing import BinaryIO, NamedTuple
 
 import numpy as np
 
-from embree_rt.compiled import film_sums
+from embree_rt.batches import worker_count
+from embree_rt.compiled import display_codes, film_sums
 
 GAMMA = 2.2
+# zlib level of 8-bit PNGs (Pillow's default is 6). Measured with Pillow 13 on zlib-ng 2.3 on a
+# 1080p render of the 1e6-sphere field (docs/performance.md, "The output stage"): level 2 wrote
+# in 0.43x level 6's time a file 10% larger; 1 was no faster and larger still, 3 slower.
+PNG_COMPRESS_LEVEL = 2
+# The compiled tone map runs spans of this many rows on Python threads, each taking the next
+# span as it comes free, below ``DISPLAY_SERIAL_CHANNELS`` on the calling thread alone. Not a
+# numba parallel loop: its static halves waited on the busy core (2 cores, other processes
+# running: a 320x180 image took 48 ms in a prange, 0.7 ms on one thread; 1080p 90 ms, 46 ms).
+DISPLAY_ROWS_PER_TASK = 32
+DISPLAY_SERIAL_CHANNELS = 1 << 20
 # Display formats: Pillow's name for each extension.
 PILLOW_FORMATS = {
     ".png": "PNG",
@@ -183,12 +195,80 @@ class Look(NamedTuple):
 
 
 DEFAULT_LOOK = Look()
+_TONEMAP_IDS = {
+    "reinhard": display_codes.TONEMAP_REINHARD,
+    "aces": display_codes.TONEMAP_ACES,
+    "none": display_codes.TONEMAP_NONE,
+}
 
 
 def tonemap(image: np.ndarray, look: Look = DEFAULT_LOOK) -> np.ndarray:
-    """(h, w, 3) linear radiance → (h, w, 3) uint8 display values (``display_values``
-    quantized to 8 bits). NaN is a bug upstream and raises ValueError."""
-    return quantize(display_values(image, look), 8)
+    """(h, w, 3) linear radiance → (h, w, 3) uint8 display values: ``display_values``
+    quantized to 8 bits, bit for bit, in one compiled pass (``compiled.display_codes``, which
+    reads the transfer curve's code thresholds, ``code_thresholds``), spans of rows taken by
+    a thread each as it comes free. NaN is a bug upstream and raises ValueError."""
+    check_look(look)
+    image = np.ascontiguousarray(image, np.float32)
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise ValueError(f"expected an (h, w, 3) image, got shape {image.shape}")
+    out = np.empty(image.shape, np.uint8)
+    scale = np.float32(2.0**look.exposure) if look.exposure else np.float32(1.0)
+    tables = code_table(look.transfer)
+    tonemap_id = _TONEMAP_IDS[look.tonemap]
+
+    def convert(first: int) -> int:
+        stop = min(first + DISPLAY_ROWS_PER_TASK, image.shape[0])
+        return display_codes.display_codes(image, first, stop, scale, tonemap_id, *tables, out)
+
+    starts = range(0, image.shape[0], DISPLAY_ROWS_PER_TASK)
+    workers = min(worker_count(None), len(starts))
+    if workers < 2 or image.size < DISPLAY_SERIAL_CHANNELS:
+        nans = sum(map(convert, starts))
+    else:
+        with ThreadPoolExecutor(workers) as pool:
+            nans = sum(pool.map(convert, starts))
+    if nans:
+        raise ValueError("image contains NaN")
+    return out
+
+
+@cache
+def code_table(transfer: str) -> tuple[np.ndarray, np.ndarray]:
+    """The ``transfer`` curve's (255,) float32 ``code_thresholds`` and their (BUCKETS,) uint8
+    ``display_codes.bucket_codes``: what the compiled pass reads, made once a process."""
+    thresholds = code_thresholds(transfer)
+    return thresholds, display_codes.bucket_codes(thresholds)
+
+
+def code_thresholds(transfer: str) -> np.ndarray:
+    """(255,) float32: element k - 1 is the smallest tone-mapped value m in [0, 1] whose 8-bit
+    code (``quantize`` of the ``transfer`` curve, computed by NumPy as ``display_values`` does)
+    is k or more. Found by bisection over the bit patterns of float32 m, all 255 at once (31
+    steps: non-negative floats order as their bits do)."""
+    low = np.zeros(display_codes.THRESHOLDS, np.uint32)
+    high = np.full(display_codes.THRESHOLDS, np.float32(1.0).view(np.uint32))
+    wanted = np.arange(1, display_codes.THRESHOLDS + 1)
+    while (low < high).any():
+        middle = low + (high - low) // 2
+        reached = _transfer_codes(middle.view(np.float32), transfer) >= wanted
+        high = np.where(reached, middle, high)
+        low = np.where(reached, low, middle + 1)
+    return low.view(np.float32)
+
+
+def _transfer_codes(mapped: np.ndarray, transfer: str) -> np.ndarray:
+    """(n,) uint8 codes of contiguous float32 tone-mapped values, by ``display_values``' curve."""
+    curve = srgb_encode(mapped) if transfer == "srgb" else mapped ** np.float32(1.0 / GAMMA)
+    return quantize(curve, 8)
+
+
+def check_look(look: Look) -> None:
+    """Raise ValueError unless ``look`` names a known tone map and transfer curve."""
+    if look.tonemap not in TONEMAPS or look.transfer not in TRANSFERS:
+        raise ValueError(
+            f"look: tonemap must be one of {TONEMAPS} and transfer one of "
+            f"{TRANSFERS}, got {look.tonemap!r} and {look.transfer!r}"
+        )
 
 
 def display_values(image: np.ndarray, look: Look = DEFAULT_LOOK) -> np.ndarray:
@@ -197,11 +277,7 @@ def display_values(image: np.ndarray, look: Look = DEFAULT_LOOK) -> np.ndarray:
     curve. The default (Reinhard, gamma 1/2.2) is computed as it always was. NaN is a bug
     upstream and raises ValueError.
     """
-    if look.tonemap not in TONEMAPS or look.transfer not in TRANSFERS:
-        raise ValueError(
-            f"look: tonemap must be one of {TONEMAPS} and transfer one of "
-            f"{TRANSFERS}, got {look.tonemap!r} and {look.transfer!r}"
-        )
+    check_look(look)
     image = np.asarray(image, np.float32)
     if np.isnan(image).any():
         raise ValueError("image contains NaN")
@@ -327,13 +403,19 @@ def write_pixels(
 
     name = PILLOW_FORMATS[suffix]
     options = {"quality": quality or DEFAULT_QUALITY} if suffix in QUALITY_SUFFIXES else {}
+    if suffix == ".png":
+        options = {"compress_level": PNG_COMPRESS_LEVEL}
     Image.fromarray(pixels).save(handle, format=name, **options)
 
 
 def _write_display(
     suffix: str, image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING
 ) -> None:
-    pixels = quantize(display_values(image, encoding.look or DEFAULT_LOOK), encoding.bit_depth)
+    look = encoding.look or DEFAULT_LOOK
+    if encoding.bit_depth == 8:
+        pixels = tonemap(image, look)
+    else:
+        pixels = quantize(display_values(image, look), encoding.bit_depth)
     write_pixels(pixels, handle, suffix, encoding.quality)
 
 

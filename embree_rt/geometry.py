@@ -135,13 +135,15 @@ class SceneGeometry(Closing):
         spheres: str = "analytic",
         threads: int | None = None,
         take_spheres: bool = False,
+        movable: bool = False,
     ):
         """``take_spheres``: once the BVH holds its own copy of the spheres, before it is built,
         they are taken out of ``scene`` (left with none): a caller that owns the scene (a
-        brick) then does not hold them twice while the BVH is built."""
+        brick) then does not hold them twice while the BVH is built. ``movable``: the spheres
+        can be moved afterwards (``move_spheres``)."""
         if spheres not in SPHERE_MODES:
             raise ValueError(f"spheres: expected one of {SPHERE_MODES}, got {spheres!r}")
-        self.bvh = BVH(threads=threads)
+        self.bvh = BVH(threads=threads, movable=movable)
         self._meshes: list[BuiltMesh] = []
         self._placements: list[Placement] = []
         self.sphere_centers = np.asarray(scene.sphere_centers, np.float32)
@@ -271,6 +273,19 @@ class SceneGeometry(Closing):
             if not in_order:
                 self.sphere_index, self._sphere_labels = order, labels
         self.sphere_geom_id = self.bvh.add_spheres(centers, radii, kind=kind)
+
+    def move_spheres(self, centers: np.ndarray, radii: np.ndarray) -> None:
+        """Give the scene's spheres new ``centers`` (n, 3) and ``radii`` (n,) float, in the
+        scene's order, n and materials as before, and refit the BVH (``BVH.move_spheres``; a
+        ``movable`` geometry of analytic spheres). They stay in the order the first spheres
+        put them in, so the material tables stand."""
+        if self.sphere_geom_id < 0:
+            raise ValueError("move_spheres: this geometry holds no analytic spheres to move")
+        centers = np.asarray(centers, np.float32)
+        radii = np.asarray(radii, np.float32)
+        if self.sphere_index is not None and len(centers) == len(self.sphere_index):
+            centers, radii = centers[self.sphere_index], radii[self.sphere_index]
+        self.bvh.move_spheres(self.sphere_geom_id, centers, radii)
 
     def scene_sphere(self, prim_id: np.ndarray) -> np.ndarray:
         """(k,) int32 the scene's index of each of the BVH's spheres ``prim_id`` (k,) int."""

@@ -152,6 +152,7 @@ class Integrator(Closing):
         threads: int | None = None,
         batch_size: int = DEFAULT_BATCH_SIZE,
         tracer: Tracer | None = None,
+        movable: bool = False,
     ) -> None:
         scene.check()
         if batch_size < 1:
@@ -164,7 +165,9 @@ class Integrator(Closing):
         retain_freed_memory()
         start = time.perf_counter()
         self.geometry: Tracer = (
-            SceneGeometry(scene, spheres=spheres, threads=1) if tracer is None else tracer
+            SceneGeometry(scene, spheres=spheres, threads=1, movable=movable)
+            if tracer is None
+            else tracer
         )
         self.build_s = time.perf_counter() - start
         # Material ids are the scene's materials in order, then the floor's.

@@ -116,8 +116,9 @@ class BVH(Closing):
     "medium" (Embree's default) or "high"; ``compact`` asks Embree for its compact (less memory)
     structures. ``robust`` selects Embree's watertight triangle test (no ray slips between two
     triangles sharing an edge); ``filters`` enables ``all_hits`` (every hit along a ray,
-    ``multihit``). Release the Embree objects with ``close()`` or a ``with``
-    block; a finalizer does it otherwise.
+    ``multihit``); ``movable`` lets ``move_spheres`` move committed spheres
+    and refit the BVH (Embree's dynamic scene, the spheres' geometry refitted). Release the
+    Embree objects with ``close()`` or a ``with`` block; a finalizer does it otherwise.
     """
 
     def __init__(
@@ -129,6 +130,7 @@ class BVH(Closing):
         compact: bool = False,
         robust: bool = False,
         filters: bool = False,
+        movable: bool = False,
     ) -> None:
         if threads is not None and (int(threads) != threads or threads < 1):
             raise ValueError(f"threads: must be a positive integer, got {threads!r}")
@@ -147,15 +149,21 @@ class BVH(Closing):
             self, _release_handles, self._lib, self._scene, self._device
         )
         self._build_quality = library.BUILD_QUALITY[build_quality]
-        self._lib.rtcSetSceneBuildQuality(self._scene, self._build_quality)
+        # Embree builds user geometry in two levels, each geometry's own tree by that geometry's
+        # quality (which can be "refit"), only in a scene of quality "low"
+        # (Scene::createUserGeometryAccel, BVH8Factory::BVH8UserGeometry's DYNAMIC variant).
+        scene_quality = library.BUILD_QUALITY["low"] if movable else self._build_quality
+        self._lib.rtcSetSceneBuildQuality(self._scene, scene_quality)
         flags = (
             library.SCENE_FLAG_COMPACT * compact
             | library.SCENE_FLAG_ROBUST * robust
             | library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS * filters
+            | library.SCENE_FLAG_DYNAMIC * movable
         )
         if flags:
             self._lib.rtcSetSceneFlags(self._scene, flags)
         self.filters = bool(filters)
+        self.movable = bool(movable)
         self._device.check("setting the scene's build quality and flags")
         self._committed = False
         self._children: list[BVH] = []
@@ -165,6 +173,12 @@ class BVH(Closing):
         # The user-geometry spheres' user data (two addresses) and storage order, kept alive
         # here for as long as Embree may call the callbacks.
         self._sphere_user_data: list[tuple[np.ndarray, np.ndarray]] = []
+        # Each sphere set by geometry id: the (n,) int32 sphere stored in each slot (empty: the
+        # given order) and how far from the origin it reaches; what ``move_spheres`` rewrites.
+        self._sphere_orders: dict[int, np.ndarray] = {}
+        self._sphere_reach: dict[int, float] = {}
+        self._point_spheres: set[int] = set()
+        self._bound_without_spheres = 0.0
         self._hit_filters: list[TriangleFilter] = []
         # Inverse-transpose of each single instance's linear part, by geometry id: one
         # (g, 3, 3) table at commit (world_normals).
@@ -250,6 +264,9 @@ class BVH(Closing):
                 centers, radii, sphere_buffers.IN_GIVEN_ORDER, packed
             )
             slot = _IDENTITY_SLOTS
+            order_kept = sphere_buffers.IN_GIVEN_ORDER
+            if self.movable:
+                self._lib.rtcSetGeometryBuildQuality(geometry, library.BUILD_QUALITY_REFIT)
         else:
             geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_USER)
             self._device.check("rtcNewGeometry(USER)")
@@ -260,6 +277,9 @@ class BVH(Closing):
             )
             if in_order:
                 slot = _IDENTITY_SLOTS
+                order_kept = sphere_buffers.IN_GIVEN_ORDER
+            else:
+                order_kept = order
             # Embree reads these through the user pointer for as long as the BVH lives.
             user_data = np.array([packed.ctypes.data, order.ctypes.data], np.uint64)
             self._sphere_user_data.append((user_data, order))
@@ -270,14 +290,60 @@ class BVH(Closing):
             lib.rtcSetGeometryIntersectFunction(geometry, user_spheres.INTERSECT_CALLBACK)
             lib.rtcSetGeometryOccludedFunction(geometry, user_spheres.OCCLUDED_CALLBACK)
             # A "low" scene builds each geometry on its own with the geometry's quality: the
-            # same "low" makes that Embree's Morton builder.
-            lib.rtcSetGeometryBuildQuality(geometry, self._build_quality)
+            # same "low" makes that Embree's Morton builder. A movable one is built once (SAH)
+            # and refitted on each commit of the geometry after.
+            quality = library.BUILD_QUALITY_REFIT if self.movable else self._build_quality
+            lib.rtcSetGeometryBuildQuality(geometry, quality)
             self._device.check("setting up user-geometry spheres")
         self.primitive_count += count
         self.coordinate_bound = max(self.coordinate_bound, float(reach))
         geom_id = self._attach(geometry, "adding spheres")
         self._sphere_buffers[geom_id] = (packed, slot)
+        self._sphere_orders[geom_id] = order_kept
+        self._sphere_reach[geom_id] = float(reach)
+        if kind == "point":
+            self._point_spheres.add(geom_id)
         return geom_id
+
+    def move_spheres(self, geom_id: int, centers: np.ndarray, radii: np.ndarray) -> None:
+        """Give the committed spheres of ``geom_id`` (``add_spheres``) new ``centers`` (n, 3) and
+        ``radii`` (n,), n as before, and refit the BVH to them: the buffer Embree reads is
+        rewritten in place (each sphere in the slot it was given) and the geometry and scene
+        committed again: Embree refits the geometry's tree (the bounds callback called for
+        every sphere) where it has a refit builder for user geometry; the Embree 4.4 embreex
+        ships rebuilds it (docs/performance.md, "Spheres moved between frames"), so what this
+        saves there is the set-up around the build. A ``movable`` BVH only; not while a query
+        runs.
+
+        Queries then answer as a BVH freshly built on the moved spheres does, bit for bit: the
+        callbacks compute the same hit from the same sphere whatever the tree, and an exact tie
+        (two spheres at one float32 distance) goes the same way in any tree
+        (``user_spheres``). A tree refitted over large motion answers more slowly: rebuild it
+        (a new BVH) when its rays trace 1.2x slower than a fresh tree's
+        (docs/performance.md)."""
+        if not self.movable:
+            raise RuntimeError("move_spheres needs a BVH made with movable=True")
+        self._ready_to_query()
+        if geom_id not in self._sphere_buffers:
+            raise ValueError(f"geom_id: geometry {geom_id!r} is not a set of spheres")
+        packed, _ = self._sphere_buffers[geom_id]
+        centers = as_points(centers, "centers")
+        radii = as_positive(radii, "radii", len(centers))
+        if len(centers) != len(packed):
+            raise ValueError(
+                f"centers: geometry {geom_id} holds {len(packed)} spheres, got {len(centers)}"
+            )
+        reach = sphere_buffers.pack_spheres(centers, radii, self._sphere_orders[geom_id], packed)
+        self._sphere_reach[geom_id] = float(reach)
+        self.coordinate_bound = max(self._bound_without_spheres, *self._sphere_reach.values())
+        lib = self._lib
+        scene = self._live_scene()
+        geometry = lib.rtcGetGeometry(scene, geom_id)
+        if geom_id in self._point_spheres:  # Embree's own buffer: it is told it changed
+            lib.rtcUpdateGeometryBuffer(geometry, library.BUFFER_TYPE_VERTEX, 0)
+        lib.rtcCommitGeometry(geometry)
+        lib.rtcCommitScene(scene)
+        self._device.check("refitting the moved spheres")
 
     def add_triangles(
         self, vertices: np.ndarray, faces: np.ndarray, hit_filter: TriangleFilter | None = None
@@ -303,7 +369,9 @@ class BVH(Closing):
             np.ctypeslib.as_array(target)[:] = faces.reshape(-1)
         self.primitive_count += len(faces)
         if len(vertices):
-            self.coordinate_bound = max(self.coordinate_bound, float(np.abs(vertices).max()))
+            bound = float(np.abs(vertices).max())
+            self.coordinate_bound = max(self.coordinate_bound, bound)
+            self._bound_without_spheres = max(self._bound_without_spheres, bound)
         if hit_filter is not None:
             hit_filter.install(self._lib, geometry)
             self._hit_filters.append(hit_filter)  # Embree reads its data while the BVH lives

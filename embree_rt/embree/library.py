@@ -35,6 +35,8 @@ DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED = 34
 INVALID_ID = 0xFFFFFFFF
 # RTCBuildQuality (rtcore_common.h) by name, and RTCSceneFlags (rtcore_scene.h).
 BUILD_QUALITY = {"low": 0, "medium": 1, "high": 2}
+BUILD_QUALITY_REFIT = 3  # a geometry's BVH refitted, not rebuilt, when it is committed again
+SCENE_FLAG_DYNAMIC = 1 << 0
 SCENE_FLAG_COMPACT = 1 << 1
 SCENE_FLAG_ROBUST = 1 << 2
 SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS = 1 << 3
@@ -109,6 +111,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "rtcSetGeometryBoundsFunction": (None, [p, p, p]),
         "rtcSetGeometryIntersectFunction": (None, [p, p]),
         "rtcSetGeometryOccludedFunction": (None, [p, p]),
+        "rtcGetGeometry": (p, [p, u]),
+        "rtcUpdateGeometryBuffer": (None, [p, i, u]),
     }
     for name, (restype, argtypes) in signatures.items():
         function = getattr(lib, name)

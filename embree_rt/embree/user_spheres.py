@@ -26,9 +26,17 @@ storage order never shows outside the callbacks.
 The quadratic is the numerically robust form of Ray Tracing Gems, chapter 7, evaluated in
 float64: the discriminant comes from the ray's perpendicular offset from the centre (no
 cancellation of |o − c|² against r² far from small spheres), the near root is c/q and the far
-root q/a with q = b + sign(b)·√disc. Hits obey Embree's own rule ``tnear <= t <= tfar``; a ray
-that starts inside a sphere gets the exit point. The normal written is o + t·d − c, outward
-(unnormalised), and u = v = 0.
+root q/a with q = b + sign(b)·√disc. Hits obey Embree's own rule ``tnear <= t <= tfar``, the
+nearest hit with t as recorded (rounded to float32) held to tfar; a ray that starts inside a
+sphere gets the exit point.
+
+Ties: where two spheres are hit at one float32 distance, the hit goes to the lower (instance
+id, geometry id, primitive id), compared as unsigned 32-bit words, whichever the traversal
+meets first: the nearest hit is then the least (float32 t, ids) over the spheres the ray
+meets, a function of the spheres alone, not of the tree (a refitted BVH and a fresh one give
+the same bits). A tie with a triangle or an instance is Embree's own rule, the later hit.
+
+The normal written is o + t·d − c, outward (unnormalised), and u = v = 0.
 """
 
 from __future__ import annotations
@@ -47,6 +55,7 @@ from embree_rt.embree.kernels import (
     HIT_PRIM_ID,
     HIT_U,
     HIT_V,
+    INVALID_ID,
     RAY_DIR,
     RAY_ORG,
     RAY_TFAR,
@@ -72,9 +81,9 @@ def _bounds(address):
 
 
 @njit(inline="always")
-def _nearest_root(floats, n, lane, cx, cy, cz, r):
+def _nearest_root(floats, n, lane, cx, cy, cz, r, rounded):
     """t of the first crossing of lane ``lane``'s ray with the sphere inside [tnear, tfar], or
-    NaN."""
+    NaN; with ``rounded``, t's float32 rounding (what the hit records) is held to tfar."""
     ox = np.float64(floats[RAY_ORG * n + lane]) - cx
     oy = np.float64(floats[(RAY_ORG + 1) * n + lane]) - cy
     oz = np.float64(floats[(RAY_ORG + 2) * n + lane]) - cz
@@ -103,11 +112,33 @@ def _nearest_root(floats, n, lane, cx, cy, cz, r):
         t0, t1 = t1, t0
     tnear = floats[RAY_TNEAR * n + lane]
     tfar = floats[RAY_TFAR * n + lane]
+    if rounded:
+        if tnear <= t0 and np.float32(t0) <= tfar:
+            return t0
+        if tnear <= t1 and np.float32(t1) <= tfar:
+            return t1
+        return np.nan
     if tnear <= t0 and t0 <= tfar:
         return t0
     if tnear <= t1 and t1 <= tfar:
         return t1
     return np.nan
+
+
+@njit(inline="always")
+def _loses_tie(words, n, lane, inst_id, geom_id, prim_id):
+    """Whether a hit of (``inst_id``, ``geom_id``, ``prim_id``) at the distance of the hit lane
+    ``lane`` holds already loses to it: only a lower triple, compared as unsigned words, takes
+    a tie from a recorded hit (none recorded: nothing to lose to)."""
+    held_geom = words[HIT_GEOM_ID * n + lane]
+    if held_geom == INVALID_ID:
+        return False
+    held_inst = words[HIT_INST_ID * n + lane]
+    if inst_id != held_inst:
+        return inst_id > held_inst
+    if geom_id != held_geom:
+        return geom_id > held_geom
+    return prim_id >= words[HIT_PRIM_ID * n + lane]
 
 
 @njit(inline="always")
@@ -144,8 +175,15 @@ def _intersect(address):
     for lane in range(n):
         if valid[lane] == 0:
             continue
-        t = _nearest_root(floats, n, lane, cx, cy, cz, r)
+        t = _nearest_root(floats, n, lane, cx, cy, cz, r, True)
         if math.isnan(t):
+            continue
+        # the sphere's id is read only on a hit: most calls are misses, and it is one more
+        # cache line
+        prim_id = np.uint32(carray(pointers.ints(user[1] + 4 * slot), 1)[0])
+        if np.float32(t) == floats[RAY_TFAR * n + lane] and _loses_tie(
+            words, n, lane, np.uint32(context[0]), np.uint32(geom_id), prim_id
+        ):
             continue
         floats[RAY_TFAR * n + lane] = t
         floats[HIT_NG * n + lane] = floats[RAY_ORG * n + lane] + t * floats[RAY_DIR * n + lane] - cx
@@ -157,8 +195,7 @@ def _intersect(address):
         )
         floats[HIT_U * n + lane] = 0.0
         floats[HIT_V * n + lane] = 0.0
-        # read only on a hit: most calls are misses, and this is one more cache line
-        words[HIT_PRIM_ID * n + lane] = carray(pointers.ints(user[1] + 4 * slot), 1)[0]
+        words[HIT_PRIM_ID * n + lane] = prim_id
         words[HIT_GEOM_ID * n + lane] = geom_id
         words[HIT_INST_ID * n + lane] = context[0]
         words[HIT_INST_PRIM_ID * n + lane] = context[1]
@@ -171,7 +208,7 @@ def _occluded(address):
     for lane in range(n):
         if valid[lane] == 0:
             continue
-        t = _nearest_root(floats, n, lane, cx, cy, cz, r)
+        t = _nearest_root(floats, n, lane, cx, cy, cz, r, False)
         if not math.isnan(t):
             floats[RAY_TFAR * n + lane] = -np.inf
 
