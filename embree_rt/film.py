@@ -17,6 +17,7 @@ from typing import BinaryIO, NamedTuple
 
 import numpy as np
 
+from embree_rt.choices import TONEMAPS, TRANSFERS
 from embree_rt.compiled import film_sums
 
 GAMMA = 2.2
@@ -165,10 +166,6 @@ class FilmBlock:
     def sums(self) -> np.ndarray:
         """(3, count) float64 per-pixel sums of everything added so far."""
         return self._sums
-
-
-TONEMAPS = ("reinhard", "aces", "none")
-TRANSFERS = ("gamma2.2", "srgb")
 
 
 class Look(NamedTuple):

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from embree_rt.choices import SPHERE_MODES
 from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.embree import BVH, HitLabels, HitRecords, spheres_in_spatial_order
@@ -33,7 +34,6 @@ from embree_rt.scene.model import MeshObject, Scene
 if TYPE_CHECKING:
     import trimesh
 
-SPHERE_MODES = ("analytic", "point", "mesh")
 # Above this many spheres, "analytic" spheres are Embree's own point spheres. Measured on the
 # 1e7-sphere random field (2 threads, benchmarks/build_quality.py): they trace as fast as user
 # geometry there (primary 9.3-9.6 against 10.3-13.7 Mrays/s, shadow 12.3-14.4 against 12.4-12.9),

@@ -232,16 +232,30 @@ def subcommands() -> dict:
     return commands.choices
 
 
-def test_help_explains_every_flag_and_offers_only_what_applies() -> None:
-    for name, parser in subcommands().items():
+def flags_of(parser) -> set[str]:
+    return {flag for action in parser._actions for flag in action.option_strings}
+
+
+def test_help_explains_every_flag_and_random_takes_every_rendering_flag() -> None:
+    commands = subcommands()
+    for name, parser in commands.items():
         for action in parser._actions:
             assert action.help, f"{name} {action.option_strings or action.dest}: no help text"
     render_help = " ".join(run_cli("render", "--help").stdout.split())  # lines unwrapped
     assert "(default: analytic)" in render_help  # --spheres
     assert "--frames" in render_help and "--overwrite" in render_help
     random_help = " ".join(run_cli("random", "--help").stdout.split())
-    assert "--frames" not in random_help and "--overwrite" not in random_help
     assert "--count N" in random_help and "spheres in the field" in random_help
+    # random renders as render does: every flag of render's, and its own for the field
+    assert flags_of(commands["render"]) <= flags_of(commands["random"])
+    assert flags_of(commands["random"]) - flags_of(commands["render"]) == {
+        "--count",
+        "--save-scene",
+        "--instance",
+    }
+    for name, parser in commands.items():  # each default said once, by the formatter
+        for line in parser.format_help().split("\n  -"):
+            assert " ".join(line.split()).count("(default:") <= 1, (name, line)
 
 
 def test_threads_takes_the_spellings_of_pbrt_and_mitsuba() -> None:

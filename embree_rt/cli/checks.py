@@ -3,16 +3,15 @@ library, writes of the user's files, and the input to blame when memory cannot h
 
 from __future__ import annotations
 
-import argparse
-
 from embree_rt.cli.errors import UsageError
 
 
-def output_encoding(args: argparse.Namespace):
-    """The ``film.Encoding`` of ``--bit-depth`` and ``--quality``."""
+def output_encoding(output):
+    """The ``film.Encoding`` of ``--bit-depth`` and ``--quality`` (``output``: a
+    ``cli.job.Output``)."""
     from embree_rt.film import Encoding
 
-    return Encoding(bit_depth=args.bit_depth, quality=args.quality)
+    return Encoding(bit_depth=output.bit_depth, quality=output.quality)
 
 
 def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) -> None:
@@ -56,17 +55,18 @@ def writing(path: str, write) -> None:
         raise UsageError(f"{path}: cannot write: {error.strerror or error}") from None
 
 
-def memory_key(error, args: argparse.Namespace) -> str:
-    """The input to blame for a ``MemoryBudgetError``: the flags or the scene file's keys."""
-    scene_file = getattr(args, "scene", None)
+def memory_key(error, job) -> str:
+    """The input to blame for a ``MemoryBudgetError`` of ``job`` (a ``cli.job.Job``): the
+    flags or the scene file's keys."""
+    scene_file = getattr(job.source, "path", None)  # a random field has none
     if error.largest == "samples":  # at least one pixel's samples in a batch
-        flags = [setting.origin for setting in args.settings if setting.key == "render.spp"]
+        flags = [setting.origin for setting in job.settings if setting.key == "render.spp"]
         if flags:
             return ", ".join(flags)
         return "--spp" if scene_file is None else f"{scene_file}: render.spp"
     if error.largest == "image":
         size = ("render.width", "render.height")
-        flags = [setting.origin for setting in args.settings if setting.key in size]
+        flags = [setting.origin for setting in job.settings if setting.key in size]
         if flags:
             return ", ".join(flags)
         if scene_file is None:
