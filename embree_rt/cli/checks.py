@@ -19,17 +19,23 @@ def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) 
     those of the AOV files beside it, as bad input: every ValueError it raises is about the
     path, its RuntimeError about OpenEXR missing for ``.exr``."""
     from embree_rt.film import Encoding, check_image_name, check_output_path
+    from embree_rt.scene.paths import not_a_file_problem
 
     try:
         if "{frame" in path:  # its directories are made, and checked, once the frames are known
             check_image_name(path, encoding or Encoding())
             return
         check_output_path(path, encoding or Encoding())
+        sides = []
         if aovs:
             from embree_rt.aovs import aov_paths
 
-            for side in aov_paths(path, aovs).values():
+            sides = list(aov_paths(path, aovs).values())
+            for side in sides:
                 check_output_path(side)
+        for target in (path, *sides):  # a FIFO, a device, a loop of links is not replaced
+            if (problem := not_a_file_problem(target)) is not None:
+                raise ValueError(f"{target}: {problem}")
     except (ValueError, RuntimeError) as error:
         raise UsageError(str(error)) from None
 

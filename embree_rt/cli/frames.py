@@ -18,10 +18,10 @@ import numpy as np
 
 from embree_rt.aovs import nerf_transforms
 from embree_rt.camera import camera_frame
-from embree_rt.cli.checks import output_encoding
+from embree_rt.cli.checks import check_output, output_encoding
 from embree_rt.cli.job import Job, frames_of, output_paths
 from embree_rt.errors import InputError
-from embree_rt.film import Encoding, check_output_path, save_image, write_atomically
+from embree_rt.film import Encoding, save_image, write_atomically
 from embree_rt.scene.animation import camera_at
 from embree_rt.scene.model import Scene
 
@@ -58,10 +58,7 @@ def plan_frames(job: Job, scene: Scene) -> FramePlan:
                     f"{error.strerror or error}"
                 ) from None
     for path in paths.values():
-        try:
-            check_output_path(path, encoding)
-        except (ValueError, RuntimeError) as error:
-            raise InputError(str(error)) from None
+        check_output(path, None, encoding)
     redo = job.output.overwrite or frames is None
     cameras = [
         (f, scene.camera if f is None else camera_at(scene.camera, animation, f))

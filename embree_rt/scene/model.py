@@ -12,6 +12,7 @@ from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.film import Look
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
+from embree_rt.scene.errors import SceneError
 from embree_rt.scene.instances import MeshInstances
 from embree_rt.scene.limits import INTEGER_LIMIT, placed_mesh_problem, spheres_problem
 from embree_rt.transforms import as_affine
@@ -162,10 +163,13 @@ class Scene:
         path = Path(path)
         model = load_model(path)
         scene = cls()
-        for mesh, transform in model.parts:
-            scene.add_mesh(mesh, transform=transform)
-        for mesh, transforms in model.instanced:
-            scene.add_instances(mesh, transforms)
+        try:
+            for mesh, transform in model.parts:
+                scene.add_mesh(mesh, transform=transform)
+            for mesh, transforms in model.instanced:
+                scene.add_instances(mesh, transforms)
+        except ValueError as error:  # the file's own numbers, refused as a Python caller's are
+            raise SceneError(path, "(file)", str(error)) from None
         scene._stage(stage_model(path, model), floor)
         return scene
 
