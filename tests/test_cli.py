@@ -321,6 +321,60 @@ def test_info_counts_what_the_file_holds() -> None:
     assert info["triangles"] == f"{expected['stored']:,} stored, {expected['placed']:,} placed"
     assert info["lights"] == str(expected["lights"])
     assert info["floor"] == "y = 0"
+    # a count agrees with the list it heads: the scene's materials and the floor's
+    listed = [line for line in result.stdout.splitlines() if line.startswith("  material ")]
+    assert info["materials"] == str(len(listed))
+    assert any(line.endswith(": floor") for line in listed)
+    assert re.fullmatch(
+        r"BVH ~[\d.]+ MiB \(estimate\), [\d.]+ MiB measured \(resident set growth while "
+        r"building, compiling left out\); scene [\d.]+ MiB \(its arrays\)",
+        info["memory"],
+    ), info["memory"]
+
+
+def test_the_compile_clock_hears_each_compile_once_and_says_so_once(capsys) -> None:
+    from numba import njit
+
+    from embree_rt.cli.clock import CompileClock
+
+    clock = CompileClock(notice="compiling")
+    with clock.listening():
+        add = njit(lambda x: x + 1)  # no cache: compiled at its first call, for each type
+        assert add(1) == 2 and add(2) == 3
+        assert add(1.5) == 2.5
+    assert add(True) == 2  # compiled after listening: not heard
+    assert len(clock.intervals) == 2  # int, then float: a call of a compiled type is not one
+    assert all(end > start for start, end in clock.intervals)
+    assert clock.seconds() == pytest.approx(sum(end - start for start, end in clock.intervals))
+    start, end = clock.intervals[0]
+    assert clock.seconds(start, (start + end) / 2) == pytest.approx((end - start) / 2)
+    assert capsys.readouterr().err == "compiling\n"  # once, at the first
+
+
+def test_info_says_compile_time_apart_from_the_build(
+    monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    """A build that compiles a kernel (as a fresh install's first does): the compile is its
+    own line, and the build's time is the rest."""
+    from numba import njit
+
+    from embree_rt import cli
+    from embree_rt.cli import info
+
+    real = info.SceneGeometry
+
+    def compiling_first(*args, **kwargs):
+        assert njit(lambda x: x * 3)(2) == 6  # compiled here, inside the build
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(info, "SceneGeometry", compiling_first)
+    started = time.perf_counter()
+    assert cli.main(["info", str(ROOT / "scenes" / "three_spheres.toml")]) == 0
+    elapsed = time.perf_counter() - started
+    lines = dict(line.split(":", 1) for line in capsys.readouterr().out.splitlines())
+    compile_s = float(lines["compile"].split()[0])
+    build_s = float(lines["BVH build"].split()[0])
+    assert compile_s > 0 and compile_s + build_s < elapsed
 
 
 def test_a_million_sphere_field_renders(tmp_path: Path) -> None:
