@@ -3,14 +3,17 @@ library, writes of the user's files, and the input to blame when memory cannot h
 
 from __future__ import annotations
 
+from embree_rt.aovs import aov_paths
 from embree_rt.cli.errors import UsageError
+from embree_rt.embree import EmbreeError
+from embree_rt.embree.library import load_library
+from embree_rt.film import Encoding, check_image_name, check_output_path
+from embree_rt.scene.paths import not_a_file_problem
 
 
 def output_encoding(output):
     """The ``film.Encoding`` of ``--bit-depth`` and ``--quality`` (``output``: a
     ``cli.job.Output``)."""
-    from embree_rt.film import Encoding
-
     return Encoding(bit_depth=output.bit_depth, quality=output.quality)
 
 
@@ -18,9 +21,6 @@ def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) 
     """The image path's checks (``film.check_output_path``, with the ``film.Encoding``), and
     those of the AOV files beside it, as bad input: every ValueError it raises is about the
     path, its RuntimeError about OpenEXR missing for ``.exr``."""
-    from embree_rt.film import Encoding, check_image_name, check_output_path
-    from embree_rt.scene.paths import not_a_file_problem
-
     try:
         if "{frame" in path:  # its directories are made, and checked, once the frames are known
             check_image_name(path, encoding or Encoding())
@@ -28,8 +28,6 @@ def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) 
         check_output_path(path, encoding or Encoding())
         sides = []
         if aovs:
-            from embree_rt.aovs import aov_paths
-
             sides = list(aov_paths(path, aovs).values())
             for side in sides:
                 check_output_path(side)
@@ -43,9 +41,6 @@ def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) 
 def check_library() -> None:
     """Load Embree before any work: a library that is missing, or that ``EMBREE_RT_LIBRARY``
     names wrongly, is the installation's problem, not a bug (later Embree errors are bugs)."""
-    from embree_rt.embree import EmbreeError
-    from embree_rt.embree.library import load_library
-
     try:
         load_library()
     except EmbreeError as error:

@@ -16,6 +16,8 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from numba.core import event
+
 # A fresh install's kernels, compiled once on the project's 2-core machine: 20-30 s in all.
 FIRST_COMPILE_NOTICE = (
     "embree-rt: compiling the renderer's kernels, once after installing (about half a minute); "
@@ -65,8 +67,6 @@ class CompileClock:
 
     @contextmanager
     def listening(self) -> Iterator[CompileClock]:
-        from numba.core import event
-
         clock = self
 
         class Listener(event.Listener):

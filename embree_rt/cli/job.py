@@ -19,8 +19,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
+from embree_rt.cli.checks import check_output, output_encoding
 from embree_rt.cli.errors import UsageError
 from embree_rt.errors import InputError
+from embree_rt.scene.errors import SceneError
 
 SCENE_SUFFIXES = (".toml", ".json")
 AOVS_ONLY_STILLS_HERE = (
@@ -135,8 +137,6 @@ def source_of(args: argparse.Namespace) -> Source:
 
     if suffix in MESH_SUFFIXES:
         return MeshFile(path)
-    from embree_rt.scene.errors import SceneError
-
     raise SceneError(
         path,
         "(file)",
@@ -164,8 +164,6 @@ def where_of(args: argparse.Namespace) -> Where:
 def job_from_args(args: argparse.Namespace) -> Job:
     """The ``Job`` of ``render`` or ``random``'s flags, with everything checked that needs no
     scene: the combinations of flags, the output path (before any work), ``--save-scene``."""
-    from embree_rt.cli.checks import check_output, output_encoding
-
     source = source_of(args)
     where = where_of(args)
     output = Output(

@@ -10,11 +10,23 @@ from typing import NamedTuple
 
 import numpy as np
 
+from embree_rt import budget
 from embree_rt.cli.checks import check_library, memory_key, writing
 from embree_rt.cli.errors import UsageError
 from embree_rt.cli.job import Job, MeshFile, RandomField, SceneFile
+from embree_rt.integrator import DEFAULT_BATCH_SIZE
+from embree_rt.scene.errors import SceneError, warn_input
+from embree_rt.scene.instances import mesh_from_parts, spheres_to_instances
 from embree_rt.scene.model import Scene
+from embree_rt.scene.random_field import (
+    FieldParameterError,
+    add_field_spheres,
+    field_scene,
+    plan_field,
+)
 from embree_rt.scene.settings import Setting, apply_to_scene, load_scene_with
+from embree_rt.scene.writer import save_scene
+from embree_rt.transforms import affine_problem
 
 
 class MadeScene(NamedTuple):
@@ -37,8 +49,6 @@ def prepare_scene(job: Job, timeline) -> MadeScene:
     made = make_scene(job)
     timeline.mark_scene_made()
     if not made.scene.lights:
-        from embree_rt.scene.errors import warn_input
-
         warn_input(f"{job.scene_name}: lights: none: only the sky and ambient light show it")
     check_library()
     return made
@@ -73,13 +83,6 @@ def only_render_settings(settings) -> bool:
 
 def generate_field(job: Job, field: RandomField, started: float) -> MadeScene:
     """The random field of ``field``, refused before a sphere is made when it cannot fit."""
-    from embree_rt.scene.random_field import (
-        FieldParameterError,
-        add_field_spheres,
-        field_scene,
-        plan_field,
-    )
-
     made_from = "the random field"
     # The field's seed is the render's (--seed, --set render.seed), checked as the scene's is.
     seeds = [setting for setting in job.settings if setting.key == "render.seed"]
@@ -103,13 +106,9 @@ def generate_field(job: Job, field: RandomField, started: float) -> MadeScene:
     if not on_workers:
         add_field_spheres(scene, plan)
     if mesh is not None:
-        from embree_rt.scene.instances import spheres_to_instances
-
         spheres_to_instances(scene, mesh, keep=plan.heroes, seed=plan.seed)
     seconds = time.perf_counter() - started
     if field.save_scene is not None:
-        from embree_rt.scene.writer import save_scene
-
         writing(field.save_scene, lambda: save_scene(scene, field.save_scene))
     return MadeScene(scene, "generate", seconds, plan if from_plan else scene)
 
@@ -117,9 +116,6 @@ def generate_field(job: Job, field: RandomField, started: float) -> MadeScene:
 def require_memory_for_field(count: int, settings, job: Job, *, instanced: bool) -> None:
     """Refuse, before a sphere is made, a field whose render cannot fit: the field's arrays,
     its BVH and the image (``render`` checks the last two again once the field exists)."""
-    from embree_rt import budget
-    from embree_rt.integrator import DEFAULT_BATCH_SIZE
-
     # --instance: the small spheres become an instance array, as --spheres mesh makes them
     spheres = "mesh" if instanced else job.spheres
     threads = getattr(job.where, "threads", None)
@@ -136,10 +132,7 @@ def require_memory_for_field(count: int, settings, job: Job, *, instanced: bool)
 
 def instance_mesh(path: str):
     """The mesh file of ``--instance`` as one Trimesh (a multi-node file baked into one)."""
-    from embree_rt.scene import SceneError
-    from embree_rt.scene.instances import mesh_from_parts
-    from embree_rt.scene.meshes import load_mesh_parts
-    from embree_rt.transforms import affine_problem
+    from embree_rt.scene.meshes import load_mesh_parts  # trimesh: ~1 s to import
 
     try:
         parts = load_mesh_parts(Path(path), "--instance", "mesh")
