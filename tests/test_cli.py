@@ -483,14 +483,14 @@ BUGS = {
     "KeyError": KeyError("pixel"),
     "TypeError": TypeError("unsupported operand"),
 }
-# Where each command meets the bug: (command line, (module, attribute) to break). The field's
-# module is named in full: ``embree_rt.scene.random_field`` as an attribute is the function.
+# Where each command meets the bug: (command line, (module, attribute) to break), the attribute
+# broken in the module that calls it.
 BROKEN_STAGES = {
     "render": (["render", "{scene}", "-o", "{out}"], ("embree_rt.cli.render", "render")),
     "random": (["random", "--count", "5", "-o", "{out}"], ("embree_rt.cli.render", "render")),
     "random field": (
         ["random", "--count", "5", "-o", "{out}"],
-        ("embree_rt.scene.random_field", "add_field_spheres"),
+        ("embree_rt.cli.sources", "add_field_spheres"),
     ),
     "info": (["info", "{scene}"], ("embree_rt.cli.info", "SceneGeometry")),
 }
