@@ -537,9 +537,10 @@ def test_a_failed_write_of_the_saved_scene_is_bad_input(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
 ) -> None:
     from embree_rt import cli
-    from embree_rt.scene import writer
+    from embree_rt.cli import sources
 
-    monkeypatch.setattr(writer, "save_scene", _fail_with(PermissionError(13, "Permission denied")))
+    # where the command calls it
+    monkeypatch.setattr(sources, "save_scene", _fail_with(PermissionError(13, "Permission denied")))
     saved, out = tmp_path / "field.toml", tmp_path / "out.png"
     code = cli.main(
         ["random", "--count", "5", "--save-scene", str(saved), "-o", str(out), *TINY, "--quiet"]
@@ -558,8 +559,8 @@ def test_a_field_the_flags_ask_for_but_cannot_have_is_bad_input(
     from embree_rt.scene.random_field import FieldParameterError
 
     refusal = FieldParameterError("count", "needs 80 GB, the machine has 8")
-    field = importlib.import_module("embree_rt.scene.random_field")
-    monkeypatch.setattr(field, "plan_field", _fail_with(refusal))  # where the command plans it
+    sources = importlib.import_module("embree_rt.cli.sources")
+    monkeypatch.setattr(sources, "plan_field", _fail_with(refusal))  # where the command plans it
     out = tmp_path / "out.png"
     code = cli.main(["random", "--count", "5", "-o", str(out), *TINY, "--quiet"])
     assert code == cli.EXIT_BAD_INPUT
