@@ -46,6 +46,7 @@ from embree_rt.camera import (
     world_to_camera_opencv,
     world_to_camera_opengl,
 )
+from embree_rt.choices import AOV_NAMES
 from embree_rt.columns import scatter
 
 if TYPE_CHECKING:
@@ -54,7 +55,6 @@ if TYPE_CHECKING:
     from embree_rt.integrator import Integrator
     from embree_rt.scene.model import Scene
 
-AOV_NAMES = ("depth", "z_depth", "position", "uv", "normal", "albedo", "object_id", "material_id")
 NOTHING_ID = -1
 FLOOR_ID = -2
 # Bytes a pixel of every AOV holds (float32 depths, positions, UVs, normals and albedo, int32 ids),

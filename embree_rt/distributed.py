@@ -578,7 +578,9 @@ def local_client(workers: int) -> Iterator[distributed.Client]:
             raise KeyboardInterrupt
 
     try:
-        cluster = local_cluster(workers, silence_logs=logging.ERROR)
+        # Not even errors: as a signal ends the command, workers log their peers' lost
+        # connections; a failure that matters reaches the client as an exception.
+        cluster = local_cluster(workers, silence_logs=logging.CRITICAL + 1)
     except BaseException:
         take_held()
         raise

@@ -19,6 +19,7 @@ from typing import BinaryIO, NamedTuple
 import numpy as np
 
 from embree_rt.batches import worker_count
+from embree_rt.choices import TONEMAPS, TRANSFERS
 from embree_rt.compiled import display_codes, film_sums
 
 GAMMA = 2.2
@@ -177,10 +178,6 @@ class FilmBlock:
     def sums(self) -> np.ndarray:
         """(3, count) float64 per-pixel sums of everything added so far."""
         return self._sums
-
-
-TONEMAPS = ("reinhard", "aces", "none")
-TRANSFERS = ("gamma2.2", "srgb")
 
 
 class Look(NamedTuple):

@@ -4,7 +4,10 @@ memory budget prices."""
 
 from __future__ import annotations
 
-SPHERE_MODES = ("analytic", "point", "mesh")
+from embree_rt.choices import SPHERE_MODES
+
+__all__ = ["SPHERE_MODES", "USER_GEOMETRY_MAX_SPHERES", "sphere_kind"]
+
 # Above this many spheres, "analytic" spheres are Embree's own point spheres. Measured on the
 # 1e7-sphere random field (2 threads, benchmarks/build_quality.py): they trace as fast as user
 # geometry there (primary 9.3-9.6 against 10.3-13.7 Mrays/s, shadow 12.3-14.4 against 12.4-12.9),

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import tomli_w
 import trimesh
 from PIL import Image
@@ -232,16 +233,30 @@ def subcommands() -> dict:
     return commands.choices
 
 
-def test_help_explains_every_flag_and_offers_only_what_applies() -> None:
-    for name, parser in subcommands().items():
+def flags_of(parser) -> set[str]:
+    return {flag for action in parser._actions for flag in action.option_strings}
+
+
+def test_help_explains_every_flag_and_random_takes_every_rendering_flag() -> None:
+    commands = subcommands()
+    for name, parser in commands.items():
         for action in parser._actions:
             assert action.help, f"{name} {action.option_strings or action.dest}: no help text"
     render_help = " ".join(run_cli("render", "--help").stdout.split())  # lines unwrapped
     assert "(default: analytic)" in render_help  # --spheres
     assert "--frames" in render_help and "--overwrite" in render_help
     random_help = " ".join(run_cli("random", "--help").stdout.split())
-    assert "--frames" not in random_help and "--overwrite" not in random_help
     assert "--count N" in random_help and "spheres in the field" in random_help
+    # random renders as render does: every flag of render's, and its own for the field
+    assert flags_of(commands["render"]) <= flags_of(commands["random"])
+    assert flags_of(commands["random"]) - flags_of(commands["render"]) == {
+        "--count",
+        "--save-scene",
+        "--instance",
+    }
+    for name, parser in commands.items():  # each default said once, by the formatter
+        for line in parser.format_help().split("\n  -"):
+            assert " ".join(line.split()).count("(default:") <= 1, (name, line)
 
 
 def test_threads_takes_the_spellings_of_pbrt_and_mitsuba() -> None:
@@ -393,3 +408,84 @@ def test_a_frame_pattern_makes_its_directories(tmp_path: Path) -> None:
         "f_0001.png",
         "transforms.json",
     ]
+
+
+# -- start-up, prefixes, the flags random shares ------------------------------------------------
+
+
+@pytest.mark.parametrize("line", [["--version"], ["--help"], ["render", "--help"]])
+def test_version_and_help_load_neither_numpy_nor_numba(line: list[str]) -> None:
+    """What ``python -X importtime`` lists, and what ``sys.modules`` holds after ``main``."""
+    result = subprocess.run(
+        [sys.executable, "-X", "importtime", "-m", "embree_rt", *line],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
+    )
+    assert result.returncode == 0, result.stderr
+    imported = {
+        row.rsplit("|", 1)[-1].strip()
+        for row in result.stderr.splitlines()
+        if row.startswith("import time:")
+    }
+    assert "embree_rt.cli.parser" in imported  # the listing does see the command's imports
+    heavy = {"numpy", "numba", "trimesh", "distributed", "llvmlite"}
+    assert {name for name in imported if name.split(".")[0] in heavy} == set()
+    probe = (
+        "import sys\nfrom embree_rt.cli import main\n"
+        f"code = main({line!r})\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'numpy', 'numba'}))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, cwd=ROOT
+    )
+    assert result.stdout.splitlines()[-1] == "[]", result.stdout + result.stderr
+
+
+@pytest.mark.parametrize(
+    ("line", "flag", "meant"),
+    [
+        (["render", "s.toml", "-o", "x.png", "--ao", "depth"], "--ao", "--aov"),
+        (["random", "--count", "5", "-o", "x.png", "--inst", "m.obj"], "--inst", "--instance"),
+        (["info", "s.toml", "--sphere", "mesh"], "--sphere", "--spheres"),
+        (["serve", "--po", "0"], "--po", "--port"),
+        (
+            ["render", "s.toml", "-o", "x.png", "--scheduler-time", "3"],
+            "--scheduler-time",
+            "--scheduler-timeout",
+        ),
+    ],
+)
+def test_a_flag_is_never_read_from_its_prefix(
+    capsys: pytest.CaptureFixture, line: list[str], flag: str, meant: str
+) -> None:
+    """``--ao`` is not taken for ``--aov``: a prefix that names one flag today could name
+    another tomorrow. It is refused, with the flag it may have meant."""
+    from embree_rt.cli import main
+
+    assert main(line) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"unrecognized arguments: {flag}" in err, err
+    assert f"(did you mean {meant!r}?)" in err
+
+
+def test_random_takes_render_flags_no_floor_overwrite_and_frames(tmp_path: Path) -> None:
+    """``--no-floor`` leaves out the field's floor (the bottom rows see the sky, as a field
+    rendered bare does), ``--overwrite`` is taken, ``--frames`` is refused as for any still."""
+    import embree_rt as rt
+    from embree_rt.cli import main
+
+    tiny = ["--width", "24", "--height", "12", "--spp", "1", "--quiet"]
+    bare, floored = tmp_path / "bare.npy", tmp_path / "floored.npy"
+    flags = ["random", "--count", "30", *tiny]
+    assert main([*flags, "-o", str(bare), "--no-floor", "--overwrite"]) == 0
+    assert main([*flags, "-o", str(floored)]) == 0
+    field = rt.random_field(30, seed=0)
+    field.render = field.render.with_overrides(width=24, height=12, spp=1)
+    field.floor = None
+    expected = rt.render(field).image  # the same field built in Python, without its floor
+    assert np.array_equal(np.load(bare), expected)
+    assert not np.array_equal(np.load(floored), expected)
+    assert main([*flags, "-o", str(tmp_path / "x.png"), "--frames", "0:1"]) == 2
+    assert not (tmp_path / "x.png").exists()

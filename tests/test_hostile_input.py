@@ -8,6 +8,7 @@ numbers float64 holds and float32 does not, names with NUL or newline characters
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -22,6 +23,7 @@ from embree_rt.scene import SceneError
 
 SPHERE = "[[spheres]]\ncenter = [0, 1, 0]\nradius = 1\n"
 DIGITS_400 = "1" + "0" * 400
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def _load_error(path: Path, text: str) -> SceneError:
@@ -572,3 +574,149 @@ def test_no_warning_is_printed_before_the_one_line_error(tmp_path: Path) -> None
         assert result.returncode == 2
         assert result.stderr.startswith("embree-rt: error: ") and result.stderr.count("\n") == 1
         assert key in result.stderr
+
+
+# -- paths the operating system refuses ---------------------------------------------------------
+
+
+def _mesh_scene(folder: Path, name: str) -> Path:
+    """A scene whose seventh mesh names ``name`` (the six before it fine)."""
+    (folder / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    lines = ["[[lights]]\nposition = [0, 5, 0]\n"]
+    lines += ['[[meshes]]\nfile = "tri.obj"\n'] * 6
+    lines.append(f"[[meshes]]\nfile = {json.dumps(name)}\n")
+    scene = folder / "scene.toml"
+    scene.write_text("".join(lines))
+    return scene
+
+
+def _main(folder: Path, *args: str) -> tuple[int, str]:
+    """The command run in this process from ``folder`` (as a subprocess would, quicker): its
+    exit code and stderr."""
+    import contextlib
+    import io
+
+    from embree_rt.cli import main
+
+    stderr = io.StringIO()
+    previous = Path.cwd()
+    os.chdir(folder)
+    try:
+        with contextlib.redirect_stderr(stderr):
+            code = main(list(args))
+    finally:
+        os.chdir(previous)
+    return code, stderr.getvalue()
+
+
+def _make_fifo(folder: Path, name: str) -> str:
+    os.mkfifo(folder / name)
+    return name
+
+
+def _make_directory(folder: Path, name: str) -> str:
+    (folder / name).mkdir()
+    return name
+
+
+def _make_symlink_loop(folder: Path, name: str) -> str:
+    (folder / name).symlink_to(name)
+    return name
+
+
+# case: (what makes the path in a folder and returns the name the scene gives, the problem)
+UNREADABLE_PATHS = {
+    "over-long name": (lambda folder, name: "m" * 300 + ".obj", "the name is too long"),
+    "directory": (_make_directory, "is a directory, not a file"),
+    "FIFO": (_make_fifo, "is a FIFO (named pipe), not a file"),
+    "symlink loop": (_make_symlink_loop, "a loop of symbolic links"),
+    "a file in the path": (lambda folder, name: "tri.obj/x.obj", "not a directory"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(UNREADABLE_PATHS))
+def test_an_unreadable_mesh_path_is_one_line_naming_its_key(tmp_path: Path, case: str) -> None:
+    make, problem = UNREADABLE_PATHS[case]
+    name = make(tmp_path, "bad.obj")
+    scene = _mesh_scene(tmp_path, name)
+    result = _run(
+        "render", scene.name, "-o", "out.png", "--width", "8", "--height", "8", cwd=tmp_path
+    )
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr, result.stderr
+    assert result.stderr.startswith("embree-rt: error: scene.toml: meshes[6].file: ")
+    assert problem in result.stderr
+    assert not (tmp_path / "out.png").exists()
+
+
+@pytest.mark.parametrize("case", ["directory", "FIFO", "symlink loop"])
+def test_a_scene_or_mesh_file_argument_that_is_no_file_is_one_line(
+    tmp_path: Path, case: str
+) -> None:
+    make, problem = UNREADABLE_PATHS[case]
+    for suffix in (".toml", ".obj"):
+        name = make(tmp_path, "given" + suffix)
+        code, stderr = _main(tmp_path, "render", name, "-o", "out.png")
+        assert code == 2, stderr
+        assert stderr == f"embree-rt: error: {name}: (file): {problem}\n"
+
+
+def test_a_file_without_read_permission_is_said_so(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The tests may run as root, whom no mode bit stops: the permission is taken from
+    ``os.access``, as the check asks it."""
+    from embree_rt.scene import paths
+
+    scene = _mesh_scene(tmp_path, "locked.obj")
+    (tmp_path / "locked.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    real_access = os.access
+    monkeypatch.setattr(
+        paths.os, "access", lambda path, mode: "locked" not in str(path) and real_access(path, mode)
+    )
+    error = _load_error(scene, scene.read_text())
+    assert error.key == "meshes[6].file"
+    assert error.problem == f"{tmp_path / 'locked.obj'}: no permission to read it"
+
+
+@pytest.mark.parametrize("case", ["FIFO", "symlink loop"])
+def test_an_output_that_is_no_file_is_refused_and_left_alone(tmp_path: Path, case: str) -> None:
+    make, problem = UNREADABLE_PATHS[case]
+    name = make(tmp_path, "out.png")
+    scene = ROOT / "scenes" / "three_spheres.toml"
+    code, stderr = _main(tmp_path, "render", str(scene), "-o", name, "--width", "8")
+    assert code == 2, stderr
+    assert stderr == f"embree-rt: error: {name}: {problem}\n"
+    assert not (tmp_path / name).is_file()  # the FIFO or the link is still there, not replaced
+    assert (tmp_path / name).is_symlink() or (tmp_path / name).is_fifo()
+
+
+def test_a_ply_whose_vertices_overflow_its_float_type_is_one_line(tmp_path: Path) -> None:
+    """trimesh casts a PLY's 1e308 to the float32 the file declares: NumPy's overflow warning
+    is caught where it happens, and the one error line says what it meant."""
+    (tmp_path / "far.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0\n1e308 0 0\n0 1 0\n3 0 1 2\n"
+    )
+    (tmp_path / "scene.toml").write_text('[[meshes]]\nfile = "far.ply"\n')
+    for name, key in (("scene.toml", "scene.toml: meshes[0].file: "), ("far.ply", "far.ply: ")):
+        result = _run("render", name, "-o", "out.png", cwd=tmp_path)
+        assert result.returncode == 2, result.stderr
+        assert result.stderr.count("\n") == 1, result.stderr  # no RuntimeWarning before it
+        assert result.stderr.startswith(f"embree-rt: error: {key}")
+        assert "values beyond the range of the file's number type" in result.stderr
+        assert not (tmp_path / "out.png").exists()
+
+
+def test_a_mesh_file_placed_beyond_float32_geometry_is_bad_input_not_a_bug(tmp_path: Path) -> None:
+    """A mesh file rendered on its own is held to the limits a scene file's mesh is."""
+    (tmp_path / "far.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
+        "property double z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0\n1e308 0 0\n0 1 0\n3 0 1 2\n"
+    )
+    result = _run("render", "far.ply", "-o", "out.png", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("embree-rt: error: far.ply: (file): ")
+    assert "beyond the" in result.stderr and result.stderr.count("\n") == 1

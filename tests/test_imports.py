@@ -102,6 +102,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
         "batches",
         "budget",
         "camera",
+        "choices",
         "closing",
         "columns",
         "compiled",

@@ -475,7 +475,7 @@ IDENTITY = "[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]"
 # case: (file name, text, key, words the problem must contain)
 BAD = {
     "missing file": ("absent.toml", None, "(file)", "no such file"),
-    "a directory": ("folder.toml", None, "(file)", "cannot read"),
+    "a directory": ("folder.toml", None, "(file)", "is a directory, not a file"),
     "not utf-8": ("latin1.toml", None, "(file)", "cannot read"),
     "other suffix": ("scene.yaml", "a: 1", "(file)", ".toml or .json"),
     "malformed toml": ("s.toml", "[render]\nwidth = = 3", "(syntax)", "line 2"),

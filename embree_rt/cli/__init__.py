@@ -1,6 +1,12 @@
 """The ``embree-rt`` command: render a scene file, render a random field, describe a scene,
-serve the browser demo. ``main`` runs it; each command lives in a module of its own
-(``render``, ``animate`` for animations and clusters, ``info``, ``serve``)."""
+serve the browser demo.
+
+``main`` parses the command line (``parser``), turns a render's flags into a ``Job`` (``job``:
+the one place that decides what the command asks for and refuses bad combinations), and runs
+it with the runner it needs: ``render`` on this machine, ``cluster`` on Dask; ``info`` and
+``serve`` are commands of their own. Only the parser is imported up front, so that ``--help``
+and ``--version`` load neither NumPy nor numba.
+"""
 
 from __future__ import annotations
 
@@ -19,10 +25,7 @@ from embree_rt.cli.errors import (
     Terminated,
     sigterm_as_interrupt,
 )
-from embree_rt.cli.info import command_info
 from embree_rt.cli.parser import SPHERE_CHOICES, build_parser
-from embree_rt.cli.render import command_random, command_render
-from embree_rt.cli.serve import command_serve
 from embree_rt.errors import InputError
 
 __all__ = [
@@ -38,12 +41,6 @@ __all__ = [
 
 # What a process killed by SIGPIPE exits with (128 + 13), as `yes | head` does.
 EXIT_BROKEN_PIPE = 141
-COMMANDS = {
-    "render": command_render,
-    "random": command_random,
-    "info": command_info,
-    "serve": command_serve,
-}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(exit_.code or 0)
     try:
         with sigterm_as_interrupt(), one_line_warnings():
-            COMMANDS[args.command](args)
+            run_command(args)
         sys.stdout.flush()  # here, where a closed pipe is caught, not at the interpreter's exit
     except Terminated:
         print("embree-rt: terminated", file=sys.stderr)
@@ -80,20 +77,63 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def run_command(args) -> None:
+    """Run the parsed command, importing only the runner it needs."""
+    if args.command == "serve":
+        from embree_rt.cli.serve import command_serve
+
+        command_serve(args)
+        return
+    from embree_rt.cli.clock import FIRST_COMPILE_NOTICE, CompileClock
+    from embree_rt.cli.summary import Timeline
+
+    # Like the progress bar, the notice is for someone watching a terminal, not for scripts.
+    watched = sys.stderr.isatty() and not getattr(args, "quiet", False)
+    clock = CompileClock(notice=FIRST_COMPILE_NOTICE if watched else None)
+    with clock.listening():
+        timeline = Timeline(clock)
+        if args.command == "info":
+            from embree_rt.cli.info import command_info
+
+            command_info(args, clock, timeline)
+            return
+        from embree_rt.cli.job import job_from_args
+
+        job = job_from_args(args)
+        if job.on_dask:
+            from embree_rt.cli import cluster as runner
+        else:
+            from embree_rt.cli import render as runner
+        runner.run(job, timeline)
+
+
 @contextmanager
 def one_line_warnings():
     """Print each ``InputWarning`` (what a file asks for that is rendered differently or left
-    out) as one line, ``embree-rt: warning: MESSAGE``; other warnings as Python prints them."""
+    out) as one line, ``embree-rt: warning: MESSAGE``; a warning of a library we call (trimesh,
+    NumPy, Pillow, Dask) that its caller did not silence as one line too, naming the library,
+    never Python's two-line form with the source line."""
     from embree_rt.scene.errors import InputWarning
 
     with warnings.catch_warnings():
-        shown = warnings.showwarning
 
         def show(message, category, filename, lineno, file=None, line=None):
             if issubclass(category, InputWarning):
                 print(f"embree-rt: warning: {message}", file=sys.stderr)
             else:
-                shown(message, category, filename, lineno, file, line)
+                where = library_of(filename)
+                text = " ".join(str(message).split())
+                print(f"embree-rt: warning: {where}: {category.__name__}: {text}", file=sys.stderr)
 
         warnings.showwarning = show
         yield
+
+
+def library_of(filename: str) -> str:
+    """The top-level package a warning's ``filename`` belongs to ("trimesh", "numpy"), or the
+    file's name outside site-packages."""
+    parts = os.path.normpath(filename).split(os.sep)
+    for marker in ("site-packages", "dist-packages"):
+        if marker in parts[:-1]:
+            return parts[parts.index(marker) + 1].removesuffix(".py")
+    return os.path.basename(filename)

@@ -3,34 +3,37 @@ library, writes of the user's files, and the input to blame when memory cannot h
 
 from __future__ import annotations
 
-import argparse
-
+from embree_rt.aovs import aov_paths
 from embree_rt.cli.errors import UsageError
+from embree_rt.embree import EmbreeError
+from embree_rt.embree.library import load_library
+from embree_rt.film import Encoding, check_image_name, check_output_path
+from embree_rt.scene.paths import not_a_file_problem
 
 
-def output_encoding(args: argparse.Namespace):
-    """The ``film.Encoding`` of ``--bit-depth`` and ``--quality``."""
-    from embree_rt.film import Encoding
-
-    return Encoding(bit_depth=args.bit_depth, quality=args.quality)
+def output_encoding(output):
+    """The ``film.Encoding`` of ``--bit-depth`` and ``--quality`` (``output``: a
+    ``cli.job.Output``)."""
+    return Encoding(bit_depth=output.bit_depth, quality=output.quality)
 
 
 def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) -> None:
     """The image path's checks (``film.check_output_path``, with the ``film.Encoding``), and
     those of the AOV files beside it, as bad input: every ValueError it raises is about the
     path, its RuntimeError about OpenEXR missing for ``.exr``."""
-    from embree_rt.film import Encoding, check_image_name, check_output_path
-
     try:
         if "{frame" in path:  # its directories are made, and checked, once the frames are known
             check_image_name(path, encoding or Encoding())
             return
         check_output_path(path, encoding or Encoding())
+        sides = []
         if aovs:
-            from embree_rt.aovs import aov_paths
-
-            for side in aov_paths(path, aovs).values():
+            sides = list(aov_paths(path, aovs).values())
+            for side in sides:
                 check_output_path(side)
+        for target in (path, *sides):  # a FIFO, a device, a loop of links is not replaced
+            if (problem := not_a_file_problem(target)) is not None:
+                raise ValueError(f"{target}: {problem}")
     except (ValueError, RuntimeError) as error:
         raise UsageError(str(error)) from None
 
@@ -38,9 +41,6 @@ def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) 
 def check_library() -> None:
     """Load Embree before any work: a library that is missing, or that ``EMBREE_RT_LIBRARY``
     names wrongly, is the installation's problem, not a bug (later Embree errors are bugs)."""
-    from embree_rt.embree import EmbreeError
-    from embree_rt.embree.library import load_library
-
     try:
         load_library()
     except EmbreeError as error:
@@ -56,17 +56,18 @@ def writing(path: str, write) -> None:
         raise UsageError(f"{path}: cannot write: {error.strerror or error}") from None
 
 
-def memory_key(error, args: argparse.Namespace) -> str:
-    """The input to blame for a ``MemoryBudgetError``: the flags or the scene file's keys."""
-    scene_file = getattr(args, "scene", None)
+def memory_key(error, job) -> str:
+    """The input to blame for a ``MemoryBudgetError`` of ``job`` (a ``cli.job.Job``): the
+    flags or the scene file's keys."""
+    scene_file = getattr(job.source, "path", None)  # a random field has none
     if error.largest == "samples":  # at least one pixel's samples in a batch
-        flags = [setting.origin for setting in args.settings if setting.key == "render.spp"]
+        flags = [setting.origin for setting in job.settings if setting.key == "render.spp"]
         if flags:
             return ", ".join(flags)
         return "--spp" if scene_file is None else f"{scene_file}: render.spp"
     if error.largest == "image":
         size = ("render.width", "render.height")
-        flags = [setting.origin for setting in args.settings if setting.key in size]
+        flags = [setting.origin for setting in job.settings if setting.key in size]
         if flags:
             return ", ".join(flags)
         if scene_file is None:

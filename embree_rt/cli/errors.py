@@ -47,3 +47,38 @@ def sigterm_as_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+class HeldSignals:
+    """The signals (SIGINT, SIGTERM) that arrived while ``signals_held`` held them."""
+
+    def __init__(self) -> None:
+        self.received: list[int] = []
+
+    def raise_held(self) -> None:
+        """Raise what the first held signal stands for: ``Terminated`` or KeyboardInterrupt."""
+        if not self.received:
+            return
+        self.received, first = [], self.received[0]
+        raise Terminated if first == signal.SIGTERM else KeyboardInterrupt
+
+
+@contextmanager
+def signals_held() -> Iterator[HeldSignals]:
+    """While inside, SIGINT and SIGTERM are noted instead of raised (for what must not be cut
+    half-way, such as a cluster starting); ``raise_held`` raises the first afterwards. Off the
+    main thread nothing changes."""
+    held = HeldSignals()
+    if threading.current_thread() is not threading.main_thread():
+        yield held
+        return
+
+    def note(signum, frame) -> None:
+        held.received.append(signum)
+
+    previous = {number: signal.signal(number, note) for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield held
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)

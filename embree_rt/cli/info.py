@@ -8,27 +8,34 @@ import time
 
 import numpy as np
 
-from embree_rt.cli.checks import check_library
+from embree_rt import budget
+from embree_rt.aovs import id_listing
+from embree_rt.cli.clock import CompileClock, resident_bytes
+from embree_rt.cli.job import info_job
+from embree_rt.cli.sources import prepare_scene
+from embree_rt.cli.summary import Timeline
+from embree_rt.geometry import SceneGeometry, sphere_kind
 
 
-def command_info(args: argparse.Namespace) -> None:
-    from embree_rt import budget
-    from embree_rt.aovs import id_listing
-    from embree_rt.cli.scene_input import read_scene
-    from embree_rt.geometry import SceneGeometry, sphere_kind
-
-    scene, _ = read_scene(args)
-    check_library()
+def command_info(args: argparse.Namespace, clock: CompileClock, timeline: Timeline) -> None:
+    """Print what ``args.scene`` holds, its bounds, the BVH's build and compile times and
+    memory, and the AOVs' ids."""
+    job = info_job(args)
+    scene = prepare_scene(job, timeline).scene
     resident_before = resident_bytes()
+    compile_growth_before = clock.resident_growth
     started = time.perf_counter()
-    with SceneGeometry(scene, spheres=args.spheres) as geometry:
-        build_s = time.perf_counter() - started
-        resident_growth = resident_bytes() - resident_before
+    with SceneGeometry(scene, spheres=job.spheres) as geometry:
+        ended = time.perf_counter()
+        # numba's compiling on a fresh install (LLVM's memory) is no part of the BVH's
+        compile_growth = clock.resident_growth - compile_growth_before
+        build_growth = resident_bytes() - resident_before - compile_growth
         floor_material = geometry.floor_material
         triangles = geometry.triangle_count
         instances = geometry.instance_count
         in_arrays = geometry.bvh.instance_count
         arrays = geometry.bvh.array_count
+    compile_s = clock.seconds(started, ended)
     objects = [*scene.meshes, *scene.instances]
     distinct = {id(o.mesh): o.mesh for o in objects}.values()
     unique_triangles = sum(len(mesh.faces) for mesh in distinct)
@@ -37,7 +44,7 @@ def command_info(args: argparse.Namespace) -> None:
     bounds = scene_bounds(scene)
     # Embree's own footprint is not exposed: estimated by the budget's figures, the spheres'
     # own instances (--spheres mesh) counted among the spheres.
-    kind = sphere_kind(spheres, args.spheres)
+    kind = sphere_kind(spheres, job.spheres)
     sphere_instances = spheres if kind == "mesh" else 0
     estimate = budget.bvh_bytes(
         spheres,
@@ -46,6 +53,7 @@ def command_info(args: argparse.Namespace) -> None:
         instances=instances - in_arrays,
         arrayed=in_arrays - sphere_instances,
     )
+    listing = id_listing(scene, floor_material)
     print(f"scene:      {args.scene}")
     for note in scene.notes:  # what was chosen for a mesh file rendered on its own
         print(f"note:       {note}")
@@ -56,7 +64,8 @@ def command_info(args: argparse.Namespace) -> None:
     print(f"instances:  {instances:,}")
     print(f"arrays:     {count(arrays, 'instance array')} holding {count(in_arrays, 'instance')}")
     print(f"lights:     {len(scene.lights)}")
-    print(f"materials:  {len(scene.materials)}")
+    # as many as the material ids listed below: the scene's and, with a floor, the floor's
+    print(f"materials:  {sum(line.startswith('  material ') for line in listing)}")
     floor = f"y = {scene.floor.height:g}" if scene.floor else "none"
     print(f"floor:      {floor}")
     if bounds is None:
@@ -64,14 +73,16 @@ def command_info(args: argparse.Namespace) -> None:
     else:
         low, high = bounds
         print(f"bounds:     {point(low)} .. {point(high)}")
-    print(f"BVH build:  {build_s:.3f} s")
+    print(f"BVH build:  {ended - started - compile_s:.3f} s")
+    if compile_s > 0:
+        print(f"compile:    {compile_s:.3f} s (numba, once after installing; not in the build)")
     print(
-        f"memory:     ~{estimate / 2**20:.1f} MiB (estimate), "
+        f"memory:     BVH ~{estimate / 2**20:.1f} MiB (estimate), "
         # (the resident set can shrink meanwhile, as freed pages go back: growth is >= 0)
-        f"{max(resident_growth, 0) / 2**20:.1f} MiB measured (resident set growth while "
-        "building)"
+        f"{max(build_growth, 0) / 2**20:.1f} MiB measured (resident set growth while "
+        f"building, compiling left out); scene {scene_bytes(scene) / 2**20:.1f} MiB (its arrays)"
     )
-    for line in id_listing(scene, floor_material):
+    for line in listing:
         print(line)
 
 
@@ -87,15 +98,17 @@ def point(values: np.ndarray) -> str:
     return "[" + ", ".join(f"{float(v):.6g}" for v in values) + "]"
 
 
-def resident_bytes() -> int:
-    """This process's resident set in bytes (Linux), or 0 where /proc is missing."""
-    import resource
-
-    try:
-        with open("/proc/self/statm") as statm:
-            return int(statm.read().split()[1]) * resource.getpagesize()
-    except OSError:
-        return 0
+def scene_bytes(scene) -> int:
+    """Bytes of the scene's arrays: its spheres, each distinct mesh's vertices and faces, and
+    the instances' transforms and materials."""
+    total = sum(
+        a.nbytes for a in (scene.sphere_centers, scene.sphere_radii, scene.sphere_materials)
+    )
+    distinct = {id(o.mesh): o.mesh for o in [*scene.meshes, *scene.instances]}.values()
+    for mesh in distinct:
+        total += mesh.vertices.nbytes + mesh.faces.nbytes
+    total += sum(entry.transforms.nbytes + entry.materials.nbytes for entry in scene.instances)
+    return total
 
 
 def scene_bounds(scene) -> tuple[np.ndarray, np.ndarray] | None:

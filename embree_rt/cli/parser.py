@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 import math
+import re
 import sys
 
+from embree_rt.choices import AOV_NAMES, SPHERE_MODES, TONEMAPS, TRANSFERS
 from embree_rt.cli.errors import EXIT_BAD_INPUT
-from embree_rt.scene.limits import INTEGER_LIMIT
+from embree_rt.version import __version__
 
-# geometry.SPHERE_MODES, spelled out so that --help does not load Embree and numba.
-SPHERE_CHOICES = ("analytic", "point", "mesh")
+SPHERE_CHOICES = SPHERE_MODES
 SCENE_HELP = (
     "scene or mesh file: a .toml or .json scene, or a mesh (.obj, .ply, .stl, .off, .glb, "
     ".gltf) shown on its own, from its own camera and lights or framed and lit by default"
@@ -31,11 +33,13 @@ class HelpFormatter(argparse.HelpFormatter):
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line on stderr and exit code 2, and a mistyped flag
-    or command gets a "did you mean"."""
+    """argparse, but a usage error is one line on stderr and exit code 2, a mistyped flag or
+    command gets a "did you mean", and a flag is never read from its prefix (``--ao`` is not
+    ``--aov``: a prefix that names one flag today would name another once a flag is added)."""
 
     def __init__(self, *args, **kwargs) -> None:
         kwargs.setdefault("formatter_class", HelpFormatter)
+        kwargs["allow_abbrev"] = False
         super().__init__(*args, **kwargs)
         self.argv: list[str] = []
 
@@ -51,9 +55,6 @@ class Parser(argparse.ArgumentParser):
     def suggestion(self, message: str) -> str:
         """ " (did you mean ...?)" for the first unrecognized flag close to one the command
         takes, or an invalid command close to one; "" otherwise."""
-        import difflib
-        import re
-
         commands = next(
             (
                 action.choices
@@ -82,19 +83,23 @@ class Parser(argparse.ArgumentParser):
         return ""
 
 
-def int_at_least(low: int, high: int = INTEGER_LIMIT):
-    """An argparse type: an integer in [``low``, ``high``] (by default what int64 holds)."""
+def int_at_least(low: int, high: int | None = None):
+    """An argparse type: an integer in [``low``, ``high``] (by default ``INTEGER_LIMIT``, what
+    int64 holds; read when a value is parsed, as scene.limits imports NumPy)."""
 
     # argparse prefixes the message with the flag ("argument --width: ..."), so it is not repeated.
     def parse(text: str) -> int:
+        from embree_rt.scene.limits import INTEGER_LIMIT
+
+        most = INTEGER_LIMIT if high is None else high
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if value < low:
             raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
-        if value > high:
-            raise argparse.ArgumentTypeError(f"must be <= {high}, got {value}")
+        if value > most:
+            raise argparse.ArgumentTypeError(f"must be <= {most}, got {value}")
         return value
 
     return parse
@@ -184,8 +189,6 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
         parser.add_argument(
             flag, action=SetKey, key=key, metavar=metavar, help=text + SCENE_DEFAULT
         )
-    from embree_rt.film import TONEMAPS, TRANSFERS
-
     parser.add_argument(
         "--tonemap",
         action=SetKey,
@@ -213,8 +216,9 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
 
 
 def add_render_flags(parser: argparse.ArgumentParser) -> None:
-    from embree_rt.aovs import AOV_NAMES
-
+    """The flags of every command that renders and writes images (``render``, ``random``): one
+    set, so that what one takes the other takes too."""
+    parser.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
     positive = int_at_least(1)
     parser.add_argument(
         "-o",
@@ -273,7 +277,7 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         type=positive_seconds,
         default=10.0,
         metavar="SECONDS",
-        help="how long --scheduler may take to answer (default: 10)",
+        help="how long --scheduler may take to answer",
     )
     parser.add_argument(
         "--partition",
@@ -282,28 +286,22 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         help="with --cluster or --scheduler: cut the scene into K spatial bricks, each held by "
         "one worker (scenes bigger than one machine's memory; shading on this machine)",
     )
-
-
-def add_animation_flags(parser: argparse.ArgumentParser) -> None:
-    """The flags of a scene file's [animation] (not of a random field, which has none)."""
     parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
     parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``embree-rt`` parser: its commands and their flags. Builds without NumPy or numba
+    (``--help`` and ``--version`` stay light); flag values are checked as they are parsed."""
     parser = Parser(
         prog="embree-rt",
         description="Whitted-style ray tracing of scenes with very many objects, on Embree.",
     )
-    from embree_rt.version import __version__
-
     parser.add_argument("--version", action="version", version=f"embree-rt {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
     render = commands.add_parser("render", help="render a scene file or a mesh file")
     render.add_argument("scene", help=SCENE_HELP)
-    render.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)
     add_render_flags(render)
-    add_animation_flags(render)
     random = commands.add_parser("random", help="render a random sphere field of N spheres")
     random.add_argument(
         "--count", type=int_at_least(1), required=True, metavar="N", help="spheres in the field"
@@ -316,7 +314,6 @@ def build_parser() -> argparse.ArgumentParser:
         "floor, turned at random about y), all through one Embree instance array",
     )
     add_render_flags(random)
-    random.set_defaults(frames=None, overwrite=False)
     info = commands.add_parser("info", help="describe a scene: objects, bounds, build time")
     info.add_argument("scene", help=SCENE_HELP)
     info.add_argument("--no-floor", action="store_true", help=NO_FLOOR_HELP)

@@ -3,18 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 
 from embree_rt.cli.checks import check_library
 from embree_rt.cli.errors import UsageError
+from embree_rt.errors import install_hint
 
 
 def command_serve(args: argparse.Namespace) -> None:
-    import importlib.util
-
     needed = ("starlette", "uvicorn", "websockets")
     if any(importlib.util.find_spec(name) is None for name in needed):
-        from embree_rt.errors import install_hint
-
         raise UsageError(f"serve needs the web extra: {install_hint('web', ' '.join(needed))}")
     check_library()
     from embree_rt.web.serve import serve

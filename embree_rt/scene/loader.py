@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -40,6 +41,7 @@ from embree_rt.scene.model import (
     material_limits_problem,
     render_problem,
 )
+from embree_rt.scene.paths import unreadable_problem
 from embree_rt.scene.random_field import (
     FieldParameterError,
     FieldPlan,
@@ -74,6 +76,8 @@ def read_document(path: Path) -> dict:
     suffix = path.suffix.lower()
     if suffix not in (".toml", ".json"):
         raise SceneError(path, "(file)", "expected a .toml or .json scene file")
+    if (problem := unreadable_problem(path)) is not None:
+        raise SceneError(path, "(file)", problem)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -462,8 +466,14 @@ class SceneReader:
         table.finish()
         return center, radius, material
 
-    def _file(self, table: Table) -> Path:
-        return (self.base / table.file_name("file")).resolve()
+    def _file(self, table: Table, key: str = "file") -> Path:
+        """The file ``key`` names, relative to the scene file's folder; refused, naming the
+        key, when it is there but cannot be read (a missing one its reader reports)."""
+        # realpath, not Path.resolve, which raises RuntimeError for a loop of symbolic links
+        path = Path(os.path.realpath(self.base / table.file_name(key)))
+        if (problem := unreadable_problem(path)) is not None:
+            raise table.error(key, f"{path}: {problem}")
+        return path
 
     def _sphere_array(self, table: Table) -> _SphereArrayEntry:
         entry = _SphereArrayEntry(table.key("file"), self._file(table), self._material_name(table))
@@ -485,9 +495,9 @@ class SceneReader:
     def _instances(self, table: Table) -> _InstancesEntry:
         entry = _InstancesEntry(
             key=table.key("mesh"),
-            path=(self.base / table.file_name("mesh")).resolve(),
+            path=self._file(table, "mesh"),
             placements_key=table.key("transforms"),
-            placements_path=(self.base / table.file_name("transforms")).resolve(),
+            placements_path=self._file(table, "transforms"),
             material=self._material_name(table, None),
             smooth=table.boolean("smooth", True),
         )

@@ -5,6 +5,7 @@ and its per-point colours (base-colour texture, vertex or face colours)."""
 from __future__ import annotations
 
 import io
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from embree_rt.scene.gltf_materials import (
 )
 from embree_rt.scene.mesh_companions import candidate_paths
 from embree_rt.scene.obj import check_obj_files
+from embree_rt.scene.paths import unreadable_problem
 from embree_rt.scene.ply import with_strips
 from embree_rt.textures import DEFAULT_SAMPLER, Sampler, texels_from_image
 
@@ -80,7 +82,7 @@ class _NamesAsWritten(trimesh.resolvers.FilePathResolver):
 
     def get(self, name: str) -> bytes:
         for path in candidate_paths(Path(self.parent), name):
-            if path.is_file():
+            if unreadable_problem(path) is None and path.exists():
                 return path.read_bytes()
         raise FileNotFoundError(name)
 
@@ -94,21 +96,38 @@ def read_model(path: Path) -> LoadedModel:
         raise MeshFileError(
             "(file)", f"unsupported mesh format; use one of {', '.join(MESH_SUFFIXES)}"
         )
-    if not path.is_file():
+    if (problem := unreadable_problem(path)) is not None:
+        raise MeshFileError("(file)", problem)
+    if not path.exists():
         raise MeshFileError("(file)", "no such file")
     prepared = prepare_gltf(path) if suffix in (".glb", ".gltf") else PreparedGltf()
     if suffix == ".obj":
         check_obj_files(path)
     resolver = _NamesAsWritten(str(path), allow_anywhere=True)
-    try:
-        if prepared.data is not None:
-            loaded = trimesh.load(
-                io.BytesIO(prepared.data), file_type=suffix[1:], resolver=resolver, process=False
+    # NumPy's RuntimeWarnings inside trimesh (a value beyond the file's float32, cast to inf)
+    # are caught here: the vertices are checked below, and the error says what it meant.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        try:
+            if prepared.data is not None:
+                loaded = trimesh.load(
+                    io.BytesIO(prepared.data),
+                    file_type=suffix[1:],
+                    resolver=resolver,
+                    process=False,
+                )
+            else:
+                loaded = trimesh.load(str(path), resolver=resolver, process=False)
+        except Exception as error:  # trimesh raises many kinds for a file it cannot parse
+            raise MeshFileError("(file)", f"cannot read mesh: {error}") from None
+    overflowed = False
+    for warning in caught:
+        if issubclass(warning.category, RuntimeWarning):
+            overflowed |= "overflow" in str(warning.message)
+        else:  # trimesh's own warnings, as they were
+            warnings.warn_explicit(
+                warning.message, warning.category, warning.filename, warning.lineno
             )
-        else:
-            loaded = trimesh.load(str(path), resolver=resolver, process=False)
-    except Exception as error:  # trimesh raises many kinds for a file it cannot parse
-        raise MeshFileError("(file)", f"cannot read mesh: {error}") from None
     if suffix == ".ply":
         loaded = with_strips(loaded)
     if suffix in (".glb", ".gltf"):
@@ -128,7 +147,8 @@ def read_model(path: Path) -> LoadedModel:
         raise MeshFileError("(file)", "the mesh has no triangles")
     for mesh in model.meshes():
         if not np.isfinite(mesh.vertices).all():
-            raise MeshFileError("(file)", "vertices contain NaN or inf")
+            beyond = " (values beyond the range of the file's number type)" if overflowed else ""
+            raise MeshFileError("(file)", f"vertices contain NaN or inf{beyond}")
         # trimesh loads a face naming a missing vertex without complaint (PLY); catch it here,
         # where the message can name the file, not later in the BVH build.
         faces = np.asarray(mesh.faces)

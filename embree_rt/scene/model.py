@@ -235,10 +235,13 @@ class Scene:
         path = Path(path)
         model = load_model(path)
         scene = cls()
-        for mesh, transform in model.parts:
-            scene.add_mesh(mesh, transform=transform)
-        for mesh, transforms in model.instanced:
-            scene.add_instances(mesh, transforms)
+        try:
+            for mesh, transform in model.parts:
+                scene.add_mesh(mesh, transform=transform)
+            for mesh, transforms in model.instanced:
+                scene.add_instances(mesh, transforms)
+        except ValueError as error:  # the file's own numbers, refused as a Python caller's are
+            raise SceneError(path, "(file)", str(error)) from None
         scene._stage(stage_model(path, model), floor)
         return scene
 

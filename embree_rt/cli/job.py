@@ -1,0 +1,259 @@
+"""What a command line asks for, decided once: where the scene comes from, where it renders
+(this machine, a Dask cluster's tasks, bricks held by Dask workers), what is written (a still
+or an animation's frames), and which combinations of flags are refused.
+
+``job_from_args`` turns the parsed flags into a ``Job`` and refuses, before any work, what no
+scene could make sense of; ``frames_of`` decides, once the scene is read, whether it is a
+still or frames. The runners (``cli.render``, ``cli.cluster``) do what the job says and decide
+nothing of it again.
+
+A new kind of input (a particle file, say) is a new ``Source`` kind here, chosen in
+``source_of``, and its reading in ``cli.sources.make_scene``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import string
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+from embree_rt.cli.checks import check_output, output_encoding
+from embree_rt.cli.errors import UsageError
+from embree_rt.errors import InputError
+from embree_rt.scene.errors import SceneError
+
+SCENE_SUFFIXES = (".toml", ".json")
+AOVS_ONLY_STILLS_HERE = (
+    "--aov: AOVs are written for still images rendered on this machine; not with [animation] "
+    "frames, --cluster or --scheduler"
+)
+
+
+class SceneFile(NamedTuple):
+    """A scene file (.toml or .json)."""
+
+    path: Path
+
+
+class MeshFile(NamedTuple):
+    """A mesh file rendered on its own, from its own camera and lights or framed by default."""
+
+    path: Path
+
+
+class RandomField(NamedTuple):
+    """``embree-rt random``: a field of ``count`` spheres, their small ones replaced by the mesh
+    file ``instance`` when given, the generated scene also written to ``save_scene``."""
+
+    count: int
+    instance: str | None
+    save_scene: str | None
+
+
+Source = SceneFile | MeshFile | RandomField
+
+
+class OnThisMachine(NamedTuple):
+    """Rendered here, on ``threads`` worker threads (None: all cores)."""
+
+    threads: int | None
+
+
+class OnDask(NamedTuple):
+    """Rendered on ``--cluster local:N`` or the ``--scheduler`` at an address (one of them set),
+    as tasks, or, with ``partition`` K, by K spatial bricks each held by one worker."""
+
+    cluster: str | None
+    scheduler: str | None
+    timeout_s: float
+    partition: int | None
+
+    @property
+    def flag(self) -> str:
+        """The flag that named the cluster, for messages."""
+        return "--cluster" if self.cluster is not None else "--scheduler"
+
+
+Where = OnThisMachine | OnDask
+
+
+class Output(NamedTuple):
+    """What is written: ``pattern`` (a file, or an animation's ``{frame}`` pattern), the AOVs
+    beside it, the bits and quality of its encoding, the frames asked for (``--frames``) and
+    whether frames on disk are rendered again."""
+
+    pattern: str
+    aovs: tuple[str, ...] | None
+    bit_depth: int
+    quality: int | None
+    frames: str | None
+    overwrite: bool
+
+    @property
+    def framed(self) -> bool:
+        """Whether the flags alone ask for frames (a ``{frame}`` pattern or ``--frames``)."""
+        return self.frames is not None or "{frame" in self.pattern
+
+
+@dataclass(frozen=True)
+class Job:
+    """One command line's request: ``source`` made into a scene with ``settings`` (and without
+    its floor if ``no_floor``), rendered ``where``, written as ``output`` (None: ``info``,
+    which writes nothing); ``spheres`` how
+    spheres enter the BVH; ``quiet`` no progress bar or summary; ``scene_name`` what messages
+    call the scene ("the random field" for one)."""
+
+    source: Source
+    settings: tuple
+    no_floor: bool
+    where: Where
+    output: Output | None
+    spheres: str
+    quiet: bool
+
+    @property
+    def scene_name(self) -> str:
+        if isinstance(self.source, RandomField):
+            return "the random field"
+        return str(self.source.path)
+
+    @property
+    def on_dask(self) -> bool:
+        return isinstance(self.where, OnDask)
+
+
+def source_of(args: argparse.Namespace) -> Source:
+    """The scene the flags name: the ``random`` field, or a scene or mesh file by its
+    extension (an extension that is neither's is refused naming both lists)."""
+    if args.command == "random":
+        return RandomField(args.count, args.instance, args.save_scene)
+    path = Path(args.scene)
+    suffix = path.suffix.lower()
+    if suffix in SCENE_SUFFIXES:
+        return SceneFile(path)
+    from embree_rt.scene.meshes import MESH_SUFFIXES  # trimesh: ~1 s to import
+
+    if suffix in MESH_SUFFIXES:
+        return MeshFile(path)
+    raise SceneError(
+        path,
+        "(file)",
+        f"expected a scene file ({', '.join(SCENE_SUFFIXES)}) or "
+        f"a mesh file ({', '.join(MESH_SUFFIXES)})",
+    )
+
+
+def where_of(args: argparse.Namespace) -> Where:
+    """Where the flags ask the render to happen; refuses what only one place takes."""
+    if args.cluster is None and args.scheduler is None:
+        if args.partition is not None:
+            raise UsageError(
+                "--partition: bricks are held by Dask workers: add --cluster local:N or "
+                "--scheduler ADDRESS"
+            )
+        return OnThisMachine(args.threads)
+    if args.threads is not None:
+        raise UsageError("--threads: sets local threads; a Dask worker has its own (--nthreads)")
+    if args.aov is not None:
+        raise UsageError(AOVS_ONLY_STILLS_HERE)
+    return OnDask(args.cluster, args.scheduler, args.scheduler_timeout, args.partition)
+
+
+def job_from_args(args: argparse.Namespace) -> Job:
+    """The ``Job`` of ``render`` or ``random``'s flags, with everything checked that needs no
+    scene: the combinations of flags, the output path (before any work), ``--save-scene``."""
+    source = source_of(args)
+    where = where_of(args)
+    output = Output(
+        args.output, args.aov, args.bit_depth, args.quality, args.frames, args.overwrite
+    )
+    if output.aovs is not None and output.framed:
+        raise UsageError(AOVS_ONLY_STILLS_HERE)
+    check_output(output.pattern, output.aovs, output_encoding(output))
+    if isinstance(source, RandomField) and source.save_scene is not None:
+        target = Path(source.save_scene)
+        if target.suffix.lower() not in SCENE_SUFFIXES:
+            raise UsageError(f"--save-scene: {target}: expected a .toml or .json file name")
+        if not target.parent.is_dir():
+            raise UsageError(f"--save-scene: {target}: directory {target.parent} does not exist")
+    return Job(
+        source=source,
+        settings=tuple(args.settings),
+        no_floor=args.no_floor,
+        where=where,
+        output=output,
+        spheres=args.spheres,
+        quiet=args.quiet,
+    )
+
+
+def info_job(args: argparse.Namespace) -> Job:
+    """The ``Job`` of ``info``'s flags: a scene made as a render's would be, written nowhere."""
+    return Job(
+        source=source_of(args),
+        settings=tuple(args.settings),
+        no_floor=args.no_floor,
+        where=OnThisMachine(None),
+        output=None,
+        spheres=args.spheres,
+        quiet=True,
+    )
+
+
+def frames_of(job: Job, animation) -> range | None:
+    """The frames to render of a scene whose ``[animation]`` is ``animation`` (None: a still),
+    as ``--frames`` asks; None for a still. Refuses frames of a still."""
+    if animation is None:
+        if job.output.frames is not None:
+            raise UsageError("--frames: the scene has no [animation]")
+        return None
+    if job.output.aovs is not None:
+        raise UsageError(AOVS_ONLY_STILLS_HERE)
+    return frame_range(job.output.frames, animation.frames)
+
+
+def output_paths(pattern: str, frames: range | None) -> dict[int | None, str]:
+    """The file of each frame: ``pattern.format(frame=f)`` for an animation (``frames``), the
+    pattern itself for a still (``frames`` None). Raises InputError naming ``-o``."""
+    try:
+        fields = {name for _, name, _, _ in string.Formatter().parse(pattern) if name is not None}
+    except ValueError as error:
+        raise InputError(f"-o: {pattern}: not a valid pattern: {error}") from None
+    if frames is None:
+        if fields:
+            raise InputError(
+                f"-o: {pattern}: a pattern with {{frame}} needs a scene with an [animation]"
+            )
+        return {None: pattern}
+    if fields != {"frame"}:
+        raise InputError(
+            f"-o: {pattern}: the scene is animated: name the file with {{frame}} and nothing "
+            "else in braces (e.g. shots/f_{frame:04d}.png), or every frame would overwrite one file"
+        )
+    try:
+        paths = {f: pattern.format(frame=f) for f in frames}
+    except (ValueError, TypeError) as error:
+        raise InputError(f"-o: {pattern}: cannot format a frame number: {error}") from None
+    if len(set(paths.values())) < len(paths):
+        raise InputError(f"-o: {pattern}: gives two frames the same file name")
+    return paths
+
+
+def frame_range(text: str | None, count: int) -> range:
+    """Frames ``A:B`` (``A`` to ``B - 1``, as a Python slice; either end may be left out) or
+    ``A`` (one frame) of an animation of ``count`` frames. Raises InputError naming --frames."""
+    if text is None:
+        return range(count)
+    first, colon, last = text.partition(":")
+    try:
+        start = int(first) if first.strip() else 0
+        stop = (int(last) if last.strip() else count) if colon else start + 1
+    except ValueError:
+        raise InputError(f"--frames: expected A:B (frame numbers), got {text!r}") from None
+    if not 0 <= start < stop <= count:
+        raise InputError(
+            f"--frames: {text!r} is not a non-empty range within the animation's frames 0:{count}"
+        )
+    return range(start, stop)
