@@ -192,7 +192,7 @@ def render_aovs(
             fill_vectors("position", batch, hit, surfaces.position)
         if "uv" in flat and surfaces.looks is not None and surfaces.looks.uv is not None:
             # The coordinates the texture lookup used (inf on the untextured among them).
-            fill_vectors("uv", batch, hit[surfaces.colored], surfaces.looks.uv)
+            fill_vectors("uv", batch, hit[surfaces.looks.rows], surfaces.looks.uv)
         # The integrator's own stages, not copies of them: the normal it shades with, turned
         # to the side the ray came from, and the colour it lights.
         if "normal" in flat:

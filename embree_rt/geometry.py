@@ -29,6 +29,7 @@ from embree_rt.mesh_attributes import (
     unit_vertex_normals,
 )
 from embree_rt.scene.model import MeshObject, Scene
+from embree_rt.textures import SRGB8_TO_LINEAR
 
 if TYPE_CHECKING:
     import trimesh
@@ -102,6 +103,12 @@ class SurfaceHits:
         return mask
 
 
+def sphere_hit_colors(colors: np.ndarray, spheres: np.ndarray) -> np.ndarray:
+    """(3, k) float32 linear base colours of the hits on spheres ``spheres`` (k,) int (the
+    scene's order), from their (n, 3) uint8 sRGB ``colors``."""
+    return SRGB8_TO_LINEAR[colors[spheres].T]
+
+
 def _unit(vectors: np.ndarray) -> np.ndarray:
     """(3, n) float32 unit vectors along the columns of (3, n) ``vectors``."""
     x, y, z = vectors
@@ -131,6 +138,8 @@ class SceneGeometry(Closing):
         # int32 as the scene holds them: no N-sized copies (1e8 spheres are 0.4 GB of them)
         self.sphere_materials = np.asarray(scene.sphere_materials, np.int32)
         self.sphere_geom_id = -1
+        # (n, 3) uint8 sRGB per sphere in the scene's order, or None (``Scene.sphere_colors``)
+        self.sphere_colors = scene.sphere_colors
         # The scene's index of each sphere the BVH holds, None when they are in the scene's
         # order; and the BVH's spheres' materials, in the BVH's order.
         self.sphere_index: np.ndarray | None = None
@@ -337,6 +346,8 @@ class SceneGeometry(Closing):
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
         self.has_meshes = self.instance_count > 0
+        # Mesh looks and sphere colours are found by each hit's Embree ids.
+        self.needs_ids = self.has_meshes or self.sphere_colors is not None
         self.object_start = np.full(size, -1, np.int64)
         for geom_id, start in self._object_start.items():
             self.object_start[geom_id] = start
@@ -388,7 +399,7 @@ class SceneGeometry(Closing):
         the surfaces carry Embree's ids of each hit (``prim_id``, ``inst_id``,
         ``inst_prim_id``; None without them, unless the scene has meshes, which need them)."""
         records = self.bvh.intersect_records(
-            origins, directions, self.labels, coherent=coherent, ids=ids or self.has_meshes
+            origins, directions, self.labels, coherent=coherent, ids=ids or self.needs_ids
         )
         return records.rays, self._surfaces(records)
 
@@ -399,7 +410,7 @@ class SceneGeometry(Closing):
         inside the query (``BVH.intersect_camera_records``): the (k,) ray numbers that hit,
         their ``SurfaceHits``, and the (3, n) float32 directions of all n rays."""
         records, directions = self.bvh.intersect_camera_records(
-            camera, index, self.labels, ids or self.has_meshes
+            camera, index, self.labels, ids or self.needs_ids
         )
         return records.rays, self._surfaces(records), directions
 
@@ -433,6 +444,12 @@ class SceneGeometry(Closing):
             inst_id=records.inst_id,
             inst_prim_id=records.inst_prim_id,
         )
+        spheres = records.group("spheres")
+        if self.sphere_colors is not None and spheres.stop > spheres.start:
+            surfaces.colored = np.arange(spheres.start, spheres.stop, dtype=np.int64)
+            surfaces.color = sphere_hit_colors(
+                self.sphere_colors, self.scene_sphere(records.prim_id[spheres])
+            )
         if self.mesh_colors and meshes.stop > meshes.start:  # mesh looks: textures, colours
             looks = self.mesh_colors.hit_looks(
                 records.inst_id[meshes],
@@ -442,7 +459,12 @@ class SceneGeometry(Closing):
                 meshes.start,
             )
             if looks is not None:
-                surfaces.colored, surfaces.color, surfaces.looks = looks.rows, looks.color, looks
+                if surfaces.colored is None:
+                    surfaces.colored, surfaces.color = looks.rows, looks.color
+                else:  # sphere colours' columns come first, as the spheres' hits do
+                    surfaces.colored = np.concatenate([surfaces.colored, looks.rows])
+                    surfaces.color = np.concatenate([surfaces.color, looks.color], axis=1)
+                surfaces.looks = looks
                 if looks.normal is not None:
                     self._apply_normal_maps(surfaces, records, looks)
         return surfaces
