@@ -16,7 +16,13 @@ def command_info(args: argparse.Namespace) -> None:
     from embree_rt.aovs import id_listing
     from embree_rt.cli.scene_input import read_scene
     from embree_rt.geometry import SceneGeometry, sphere_kind
+    from embree_rt.scene.particles.read import is_particle_file
 
+    if is_particle_file(args.scene):
+        from embree_rt.cli.particles import command_particle_info
+
+        command_particle_info(args)
+        return
     scene, _ = read_scene(args)
     check_library()
     resident_before = resident_bytes()

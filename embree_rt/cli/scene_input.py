@@ -40,6 +40,14 @@ def read_scene(args: argparse.Namespace) -> tuple[Scene, Path | Scene]:
 
     settings = list(args.settings)
     path = Path(args.scene)
+    from embree_rt.scene.particles.read import is_particle_file
+
+    if is_particle_file(path):
+        from embree_rt.cli.particles import particle_scene
+
+        scene = particle_scene(args)
+        apply_to_scene(scene, settings, str(path))
+        return scene, scene
     if is_mesh_file(path):
         scene = Scene.from_file(path, floor=not args.no_floor)
         apply_to_scene(scene, settings, str(path))

@@ -1,0 +1,119 @@
+"""Particle files on the command line: the flags that say how particles are drawn, the scene
+``render`` and ``info`` make of a particle file, and ``info``'s summary of one."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+
+def color_triple(text: str) -> tuple[float, float, float]:
+    """``R,G,B`` in 0..1 (sRGB)."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(0.0 <= v <= 1.0 for v in values):
+        raise argparse.ArgumentTypeError(f"expected R,G,B with each in 0..1, got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def add_particle_flags(parser: argparse.ArgumentParser) -> None:
+    """The flags of a particle file (ignored for scene and mesh files)."""
+    group = parser.add_argument_group("particle files (XYZ, LAMMPS, PDB, GRO, GSD, ...)")
+    group.add_argument("--topology", metavar="FILE", help="topology of a DCD/XTC/TRR trajectory")
+    group.add_argument("--frame", type=int, default=0, metavar="N", help="which frame (from 0)")
+    group.add_argument("--up", choices=("x", "y", "z"), default="z", help="the file's up axis")
+    group.add_argument(
+        "--select", metavar="EXPR", help="keep a subset (MDAnalysis selection: 'type 1 2')"
+    )
+    group.add_argument("--wrap", action="store_true", help="put positions into the periodic box")
+    group.add_argument(
+        "--color-by",
+        metavar="WHAT",
+        help="element, type, or a property (default: element, else type)",
+    )
+    group.add_argument("--colormap", default="viridis", help="matplotlib colormap for a property")
+    group.add_argument(
+        "--range", nargs=2, type=float, metavar=("MIN", "MAX"), help="property range of --colormap"
+    )
+    group.add_argument(
+        "--color", type=color_triple, metavar="R,G,B", help="one sRGB colour for all"
+    )
+    group.add_argument("--radius", type=float, metavar="R", help="one radius for all particles")
+    group.add_argument("--radius-scale", type=float, default=1.0, metavar="S", help="radii times S")
+
+
+def particle_scene(args: argparse.Namespace):
+    """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say."""
+    from embree_rt.errors import InputError
+    from embree_rt.scene.model import Scene
+    from embree_rt.scene.particles.look import ParticleLook
+
+    for flag, value in (("--radius", args.radius), ("--radius-scale", args.radius_scale)):
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise InputError(f"{flag}: expected a positive number, got {value:g}")
+    look = ParticleLook(
+        color_by=args.color_by,
+        color=args.color,
+        colormap=args.colormap,
+        value_range=tuple(args.range) if args.range else None,
+        radius=args.radius,
+        radius_scale=args.radius_scale,
+    )
+    try:
+        return Scene.from_particles(
+            args.scene,
+            frame=args.frame,
+            topology=args.topology,
+            look=look,
+            up=args.up,
+            select=args.select,
+            wrap=args.wrap,
+            floor=not args.no_floor,
+        )
+    except ValueError as error:
+        if isinstance(error, InputError):
+            raise
+        raise InputError(f"{args.scene}: {error}") from None
+
+
+def particle_summary(frame) -> dict:
+    """What ``info`` says of a ``ParticleFrame``: count, kinds with their counts, bounds,
+    frames, box."""
+    kind, labels = frame.labels()
+    names, counts = np.unique(labels, return_counts=True)
+    summary = {
+        "file": frame.path,
+        "particles": len(frame),
+        "frames": frame.frame_count,
+        "frame": frame.frame,
+        "labelled_by": kind,
+        kind + "s": {str(n): int(c) for n, c in zip(names, counts, strict=True)},
+        "bounds": [frame.positions.min(axis=0).tolist(), frame.positions.max(axis=0).tolist()],
+        "box": None if frame.box is None else frame.box.tolist(),
+        "box_origin": None if frame.box is None else frame.origin.tolist(),
+        "radii": None
+        if frame.radii is None
+        else [float(frame.radii.min()), float(frame.radii.max())],
+        "properties": sorted(frame.properties),
+    }
+    if kind == "element" and frame.types is not None:
+        names, counts = np.unique(frame.types, return_counts=True)
+        summary["types"] = {str(n): int(c) for n, c in zip(names, counts, strict=True)}
+    return summary
+
+
+def command_particle_info(args: argparse.Namespace) -> None:
+    """``embree-rt info FILE [--json]`` of a particle file."""
+    from embree_rt.scene.particles import read_particles
+
+    frame = read_particles(args.scene, frame=args.frame, topology=args.topology)
+    summary = particle_summary(frame)
+    if args.json:
+        print(json.dumps(summary))
+        return
+    for key, value in summary.items():
+        print(f"{key + ':':<12}{value}")
