@@ -352,7 +352,9 @@ class Scene:
         if colors is not None or self.sphere_colors is not None:
             from embree_rt.scene.sphere_colors import joined_colors
 
-            self.sphere_colors = joined_colors(self, ids, colors)
+            self.sphere_colors = joined_colors(
+                self.sphere_colors, self.sphere_materials, self.materials, ids, colors
+            )
         if not copy and len(self.sphere_radii) == 0:
             self.sphere_centers, self.sphere_radii, self.sphere_materials = centers, radii, ids
             return

@@ -1,17 +1,14 @@
-"""Per-sphere base colours, stored as (n, 3) uint8 sRGB: 3 bytes a sphere, so 1e8 coloured
-spheres add 0.3 GB (float32 linear would add 1.2 GB), and 8 bits are what colour tables and
-colormaps are given in."""
+"""Per-sphere base colours, stored as (n, 3) uint8 sRGB (``budget.SPHERE_COLOR_BYTES``): 1e8
+coloured spheres add 0.3 GB (float32 linear would add 1.2 GB), and 8 bits are what colour
+tables and colormaps are given in."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from embree_rt.scene.model import Scene
-
-BYTES_PER_SPHERE_COLOR = 3
+from embree_rt.materials import Material
 
 
 def as_srgb8(colors: np.ndarray, count: int) -> np.ndarray:
@@ -32,20 +29,26 @@ def as_srgb8(colors: np.ndarray, count: int) -> np.ndarray:
     return np.rint(values * 255.0).astype(np.uint8)
 
 
-def material_srgb8(scene: Scene, ids: np.ndarray) -> np.ndarray:
-    """(n, 3) uint8 sRGB of the (linear) colours of the materials ``ids`` (n,) int32."""
-    linear = np.array([m.color for m in scene.materials.values()], np.float64).reshape(-1, 3)
+def material_srgb8(materials: Mapping[str, Material], ids: np.ndarray) -> np.ndarray:
+    """(n, 3) uint8 sRGB of the (linear) colours of ``materials`` (a scene's table) ``ids``
+    (n,) int32."""
+    linear = np.array([m.color for m in materials.values()], np.float64).reshape(-1, 3)
     linear = np.clip(linear, 0.0, 1.0)
     encoded = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
     return np.rint(encoded * 255.0).astype(np.uint8)[ids]
 
 
-def joined_colors(scene: Scene, ids: np.ndarray, colors: np.ndarray | None) -> np.ndarray:
-    """The scene's sphere colours with those of (n,) new spheres of materials ``ids`` appended:
-    ``colors`` (n, 3) or, None, their materials'; the scene's own spheres take their
-    materials' when they had none."""
-    old = scene.sphere_colors
+def joined_colors(
+    old: np.ndarray | None,
+    old_ids: np.ndarray,
+    materials: Mapping[str, Material],
+    ids: np.ndarray,
+    colors: np.ndarray | None,
+) -> np.ndarray:
+    """(m + n, 3) uint8: a scene's sphere colours ``old`` (m, 3) uint8, or None for the colours
+    of their materials ``old_ids`` (m,), followed by those of n new spheres of materials ``ids``
+    (n,): ``colors`` (n, 3) (``as_srgb8``) or, None, their materials'."""
     if old is None:
-        old = material_srgb8(scene, scene.sphere_materials)
-    new = material_srgb8(scene, ids) if colors is None else as_srgb8(colors, len(ids))
+        old = material_srgb8(materials, old_ids)
+    new = material_srgb8(materials, ids) if colors is None else as_srgb8(colors, len(ids))
     return new if len(old) == 0 else np.concatenate([old, new])

@@ -3,7 +3,7 @@ it, and the problem) and the refusal of a count that would not fit in memory."""
 
 from __future__ import annotations
 
-from embree_rt.budget import available_memory, format_bytes
+from embree_rt.memory import available_memory, format_bytes
 from embree_rt.scene.errors import SceneError
 
 # Reading a particle: its float64 position and the text or arrays it is parsed from (a dump row

@@ -216,6 +216,14 @@ def _read_ase(path: Path, plain: Path, file_format: str, frame: int) -> Particle
         _xyz_headers(path, plain)
     try:
         frames = ase_io.read(str(plain), index=":", format=file_format)
+    except KeyError:
+        if file_format != "extxyz":
+            raise
+        # A symbol ASE does not know: MDAnalysis's XYZ reader keeps it as a name, drawn in the
+        # unknown element's colour (with a warning) rather than refused.
+        result = _read_mdanalysis(path, plain, frame, None, file_format="XYZ")
+        result.elements = np.asarray(result.source.atoms.names, dtype=str)
+        return result
     except Exception as error:  # ASE's readers raise whatever their parsing meets
         raise ParticleFileError(path, "(file)", _one_line(error)) from None
     if not frames:
@@ -248,7 +256,9 @@ def _read_ase(path: Path, plain: Path, file_format: str, frame: int) -> Particle
     return result
 
 
-def _read_mdanalysis(path: Path, plain: Path, frame: int, topology: Path | None) -> ParticleFrame:
+def _read_mdanalysis(
+    path: Path, plain: Path, frame: int, topology: Path | None, file_format: str | None = None
+) -> ParticleFrame:
     mda = _require("MDAnalysis")
     import warnings
 
@@ -258,8 +268,11 @@ def _read_mdanalysis(path: Path, plain: Path, frame: int, topology: Path | None)
             if topology is not None:
                 universe = mda.Universe(str(topology), str(plain))
             else:
-                suffix = plain.suffix.lower()
-                universe = mda.Universe(str(plain), format=MDA_FORMATS.get(suffix))
+                file_format = file_format or MDA_FORMATS.get(plain.suffix.lower())
+                options = {}
+                if file_format == "DATA":
+                    options["atom_style"] = data_atom_style(path, plain)
+                universe = mda.Universe(str(plain), format=file_format, **options)
     except Exception as error:  # MDAnalysis's parsers raise ValueError, OSError, EOFError...
         raise ParticleFileError(path, "(file)", _one_line(error)) from None
     count = len(universe.trajectory)
@@ -282,15 +295,91 @@ def _read_mdanalysis(path: Path, plain: Path, frame: int, topology: Path | None)
         result.elements = elements
     if hasattr(atoms, "radii"):
         result.radii = np.asarray(atoms.radii, np.float64)
-    for name in ("charges", "masses", "tempfactors", "occupancies", "resids"):
+    for name, key in MDA_PROPERTIES.items():
         if hasattr(atoms, name):
-            result.properties[name.rstrip("s")] = np.asarray(getattr(atoms, name), np.float64)
+            result.properties[key] = np.asarray(getattr(atoms, name), np.float64)
+    if topology is None and MDA_FORMATS.get(plain.suffix.lower()) == "DATA":
+        diameters = sphere_diameters(plain, atoms.ids)
+        if diameters is not None:
+            result.radii = diameters / 2.0
     if universe.dimensions is not None and np.all(universe.dimensions[:3] > 0):
         from MDAnalysis.lib.mdamath import triclinic_vectors
 
         result.box = np.asarray(triclinic_vectors(universe.dimensions), np.float64)
     result.source = universe
     return result
+
+
+# MDAnalysis's per-atom attributes kept as properties, by the names they take.
+MDA_PROPERTIES = {
+    "charges": "charge",
+    "masses": "mass",
+    "tempfactors": "tempfactor",
+    "occupancies": "occupancy",
+    "resids": "resid",
+}
+# LAMMPS data files' atom styles as MDAnalysis's ``atom_style`` (the columns before image flags)
+DATA_STYLES = {
+    "atomic": "id type x y z",
+    "charge": "id type charge x y z",
+    "molecular": "id resid type x y z",
+    "bond": "id resid type x y z",
+    "angle": "id resid type x y z",
+    "full": "id resid type charge x y z",
+    "sphere": "id type diameter density x y z",
+}
+# Without an ``Atoms # style`` comment, by the count of columns (image flags add 3).
+DATA_STYLE_BY_COLUMNS = {5: "atomic", 6: "molecular", 7: "full"}
+
+
+def data_atom_style(path: Path, plain: Path) -> str:
+    """MDAnalysis's ``atom_style`` of a LAMMPS data file: from its ``Atoms # style`` comment,
+    else from the number of columns of its first atom line."""
+    lines = iter(plain.read_text(errors="replace").splitlines())
+    for line in lines:
+        words = line.split()
+        if words[:1] != ["Atoms"]:
+            continue
+        comment = line.partition("#")[2].split()
+        if comment:
+            if comment[0] not in DATA_STYLES:
+                raise ParticleFileError(
+                    path,
+                    "Atoms",
+                    f"atom style {comment[0]!r} is not one of {', '.join(DATA_STYLES)}",
+                )
+            return DATA_STYLES[comment[0]]
+        for row in lines:
+            columns = len(row.partition("#")[0].split())
+            if columns:
+                style = DATA_STYLE_BY_COLUMNS.get(columns) or DATA_STYLE_BY_COLUMNS.get(columns - 3)
+                if style is None:
+                    raise ParticleFileError(
+                        path, "Atoms", f"{columns} columns match no atom style; add '# STYLE'"
+                    )
+                return DATA_STYLES[style]
+    raise ParticleFileError(path, "Atoms", "no Atoms section")
+
+
+def sphere_diameters(plain: Path, ids: np.ndarray) -> np.ndarray | None:
+    """(n,) float64 diameters of the atoms ``ids`` (n,) of a LAMMPS data file of atom style
+    ``sphere`` (its third column; MDAnalysis keeps no diameter), None for another style."""
+    lines = plain.read_text(errors="replace").splitlines()
+    start = next((i for i, line in enumerate(lines) if line.split()[:1] == ["Atoms"]), None)
+    if start is None or lines[start].partition("#")[2].split()[:1] != ["sphere"]:
+        return None
+    rows = []
+    for line in lines[start + 1 :]:
+        words = line.partition("#")[0].split()
+        if not words:
+            if rows:
+                break
+            continue
+        if not words[0].lstrip("-").isdigit():
+            break
+        rows.append((int(words[0]), float(words[2])))
+    by_id = dict(rows)
+    return np.array([by_id[int(i)] for i in ids], np.float64)
 
 
 def _mda_elements(universe) -> np.ndarray | None:
