@@ -140,6 +140,8 @@ class SceneGeometry(Closing):
         self.sphere_geom_id = -1
         # (n, 3) uint8 sRGB per sphere in the scene's order, or None (``Scene.sphere_colors``)
         self.sphere_colors = scene.sphere_colors
+        # The instance array of tessellated spheres (``spheres="mesh"``), or -1.
+        self.sphere_array_geom_id = -1
         # The scene's index of each sphere the BVH holds, None when they are in the scene's
         # order; and the BVH's spheres' materials, in the BVH's order.
         self.sphere_index: np.ndarray | None = None
@@ -273,6 +275,7 @@ class SceneGeometry(Closing):
         transforms[:, 3, 3] = 1.0
         geom_id = self._place_array([child], transforms, None, self.sphere_materials, smooth=True)
         self._object_start[geom_id] = 0  # copy j is sphere j
+        self.sphere_array_geom_id = geom_id
 
     def _add_meshes(self, scene: Scene) -> None:
         children: dict[int, int] = {}
@@ -444,12 +447,8 @@ class SceneGeometry(Closing):
             inst_id=records.inst_id,
             inst_prim_id=records.inst_prim_id,
         )
-        spheres = records.group("spheres")
-        if self.sphere_colors is not None and spheres.stop > spheres.start:
-            surfaces.colored = np.arange(spheres.start, spheres.stop, dtype=np.int64)
-            surfaces.color = sphere_hit_colors(
-                self.sphere_colors, self.scene_sphere(records.prim_id[spheres])
-            )
+        if self.sphere_colors is not None:
+            self._color_sphere_hits(surfaces, records)
         if self.mesh_colors and meshes.stop > meshes.start:  # mesh looks: textures, colours
             looks = self.mesh_colors.hit_looks(
                 records.inst_id[meshes],
@@ -468,6 +467,22 @@ class SceneGeometry(Closing):
                 if looks.normal is not None:
                     self._apply_normal_maps(surfaces, records, looks)
         return surfaces
+
+    def _color_sphere_hits(self, surfaces: SurfaceHits, records: HitRecords) -> None:
+        """Give the hits on spheres their spheres' own colours (``Scene.sphere_colors``): the
+        sphere group's by primitive, tessellated spheres' by instance-array copy."""
+        spheres = records.group("spheres")
+        if self.sphere_array_geom_id >= 0:
+            meshes = records.group("other")
+            on = np.flatnonzero(records.inst_id[meshes] == self.sphere_array_geom_id)
+            rows = (meshes.start + on).astype(np.int64)
+            index = records.inst_prim_id[rows]
+        else:
+            rows = np.arange(spheres.start, spheres.stop, dtype=np.int64)
+            index = self.scene_sphere(records.prim_id[spheres])
+        if len(rows):
+            surfaces.colored = rows
+            surfaces.color = sphere_hit_colors(self.sphere_colors, index)
 
     def _apply_normal_maps(self, surfaces: SurfaceHits, records, looks: HitLooks) -> None:
         """Replace the shading normals of the hits a normal map turns (``looks.normal``, in

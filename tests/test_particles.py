@@ -269,7 +269,8 @@ def test_unknown_element_warns_once(tmp_path):
     assert len(scene.sphere_radii) == 3
 
 
-def test_hits_on_spheres_of_stated_radii_take_their_colors(tmp_path):
+@pytest.mark.parametrize("spheres", ["analytic", "point", "mesh"])
+def test_hits_on_spheres_of_stated_radii_take_their_colors(tmp_path, spheres):
     """Rays down the renderer's -y onto each particle: the nearest hit of each (float64 brute
     force over all spheres, z up: file z is world y) and its colour."""
     frames = dump_frames(count=40)
@@ -290,13 +291,14 @@ def test_hits_on_spheres_of_stated_radii_take_their_colors(tmp_path):
     t = np.where(disc >= 0, -b - np.sqrt(np.maximum(disc, 0)), np.inf)
     nearest = np.argmin(t, axis=1)
     t_ref = t[np.arange(len(world)), nearest]
-    with SceneGeometry(scene) as geometry:
+    with SceneGeometry(scene, spheres=spheres) as geometry:
         hits = geometry.intersect(
             np.ascontiguousarray(origins.T, np.float32),
             np.ascontiguousarray(directions.T, np.float32),
         )
     assert hits.hit.all()
-    np.testing.assert_allclose(hits.t, t_ref, rtol=0, atol=position_atol(60.0))
+    if spheres != "mesh":  # icospheres only approximate the spheres
+        np.testing.assert_allclose(hits.t, t_ref, rtol=0, atol=position_atol(60.0))
     colors = np.full((3, len(world)), np.nan, np.float32)
     colors[:, hits.colored] = hits.color
     expected = SRGB8_TO_LINEAR[scene.sphere_colors[nearest]].T
@@ -313,6 +315,22 @@ def test_add_spheres_colors_and_add_particles_from_ase():
     assert scene.sphere_colors.shape == (3 + len(molecule()), 3)
     with pytest.raises(ValueError, match="colors"):
         scene.add_spheres([[0, 0, 0]], [1.0], "matte", colors=[[2.0, 0, 0]])
+
+
+def test_sphere_array_colors_in_a_scene_file_and_written_back(tmp_path):
+    from embree_rt.scene.loader import load_scene
+    from embree_rt.scene.writer import save_scene
+
+    colors = np.array([[255, 0, 0], [0, 128, 255]], np.uint8)
+    np.savez(tmp_path / "s.npz", centers=[[0, 0, 0], [3, 0, 0]], radii=[1, 1], colors=colors)
+    (tmp_path / "scene.toml").write_text('[[sphere_arrays]]\nfile = "s.npz"\n')
+    scene = load_scene(tmp_path / "scene.toml")
+    np.testing.assert_array_equal(scene.sphere_colors, colors)
+    save_scene(scene, tmp_path / "again.toml")
+    np.testing.assert_array_equal(load_scene(tmp_path / "again.toml").sphere_colors, colors)
+    np.savez(tmp_path / "s.npz", centers=[[0, 0, 0], [3, 0, 0]], radii=[1, 1], colors=[[2, 0, 0]])
+    with pytest.raises(ParticleFileError.__mro__[1], match="colors"):
+        load_scene(tmp_path / "scene.toml")
 
 
 # -- the command line and bad input ------------------------------------------------------------

@@ -295,8 +295,8 @@ class SceneReader:
         if self.spheres:
             centers, radii, names = zip(*self.spheres, strict=True)
             scene.add_spheres(np.array(centers), np.array(radii), list(names))
-        for centers, radii, materials in arrays:
-            scene.add_spheres(centers, radii, materials)
+        for centers, radii, materials, colors in arrays:
+            scene.add_spheres(centers, radii, materials, colors=colors)
         for entry in self.meshes:
             model = models[entry.path]
             for mesh, node_transform in model.parts:
@@ -528,7 +528,8 @@ class SceneReader:
     # -- files --------------------------------------------------------------------------------
 
     def _read_sphere_array(self, entry: _SphereArrayEntry):
-        """(centers (n, 3), radii (n,), materials: one name or (n,) names or ids) of a .npz."""
+        """(centers (n, 3), radii (n,), materials: one name or (n,) names or ids, colors: None
+        or (n, 3) uint8 sRGB) of a .npz."""
         path = entry.path
 
         def fail(problem: str) -> SceneError:
@@ -547,14 +548,22 @@ class SceneReader:
             raise fail(f"radii must be ({n},) numbers, got {radii.shape} {radii.dtype}")
         if (problem := spheres_problem(centers, radii)) is not None:
             raise fail(problem)
+        colors = arrays.get("colors")
+        if colors is not None:
+            from embree_rt.scene.sphere_colors import as_srgb8
+
+            try:
+                colors = as_srgb8(colors, n)
+            except ValueError as error:
+                raise fail(str(error)) from None
         materials = arrays.get("materials")
         if materials is None:
-            return centers, radii, entry.material
+            return centers, radii, entry.material, colors
         if materials.dtype.kind == "S":
             materials = materials.astype(str)
         if (problem := self._materials_problem(materials, n)) is not None:
             raise fail(problem)
-        return centers, radii, materials
+        return centers, radii, materials, colors
 
     def _materials_problem(self, materials: np.ndarray, n: int) -> str | None:
         """What is wrong with a file's (n,) ``materials`` array of names or ids, or None."""
