@@ -1,11 +1,10 @@
 """LAMMPS text dumps (``dump atom`` / ``dump custom``), read column-wise by NumPy: the frames
 are found by their ``ITEM: TIMESTEP`` lines and one frame's rows parsed in one C pass
-(``np.fromstring``), since the libraries' readers go row by row in Python (minutes for 1e7
-rows; ``benchmarks/particles_read.py`` measures both)."""
+(``np.fromstring``), keeping every column (``element``, ``radius``/``diameter``, the rest as
+properties). On 1e5 rows (loaded machine, ``benchmarks/particles_read.py``) ASE's reader took
+0.8x its time and MDAnalysis's 2.5x: parsing the floats dominates all three."""
 
 from __future__ import annotations
-
-import re
 
 import numpy as np
 
@@ -20,8 +19,15 @@ STRING_COLUMNS = {"element", "type"}
 
 
 def frame_offsets(data: bytes) -> list[int]:
-    """Byte offsets of each frame's ``ITEM: TIMESTEP`` line in a dump's ``data``."""
-    return [match.start() for match in re.finditer(rb"^ITEM: TIMESTEP", data, re.MULTILINE)]
+    """Byte offsets of each frame's ``ITEM: TIMESTEP`` line in a dump's ``data`` (found by
+    ``bytes.find``: a multi-line regular expression took 0.3 s over 1e5 rows)."""
+    offsets = []
+    at = data.find(TIMESTEP)
+    while at >= 0:
+        if at == 0 or data[at - 1 : at] == b"\n":
+            offsets.append(at)
+        at = data.find(TIMESTEP, at + len(TIMESTEP))
+    return offsets
 
 
 def read_dump_frame(path: str, data: bytes, offsets: list[int], index: int) -> ParticleFrame:
