@@ -333,6 +333,32 @@ def test_sphere_array_colors_in_a_scene_file_and_written_back(tmp_path):
         load_scene(tmp_path / "scene.toml")
 
 
+def test_particles_entry_in_a_scene_file(tmp_path):
+    from embree_rt.errors import InputError
+    from embree_rt.scene.loader import load_scene
+
+    frames = dump_frames(count=20)
+    write_dump(tmp_path / "d.lammpstrj", frames, ["id", "type", "x", "y", "z", "vx", "radius"])
+    (tmp_path / "scene.toml").write_text(
+        "[[spheres]]\ncenter = [0, 0, 0]\nradius = 1\n\n"
+        '[[particles]]\nfile = "d.lammpstrj"\nframe = 1\nup = "y"\ncolor_by = "vx"\n'
+        'range = [-1, 1]\nradius_scale = 2.0\nmaterial = "mirror"\n'
+    )
+    scene = load_scene(tmp_path / "scene.toml")
+    assert len(scene.sphere_radii) == 21
+    np.testing.assert_allclose(scene.sphere_centers[1:], frame_positions(frames[1]), rtol=1e-7)
+    np.testing.assert_allclose(scene.sphere_radii[1:], 2.0 * frames[1]["radius"], rtol=1e-7)
+    assert set(scene.sphere_materials[1:]) == {scene.material_index("mirror")}
+    expected = particle_look(
+        read_particles(tmp_path / "d.lammpstrj", frame=1),
+        ParticleLook(color_by="vx", value_range=(-1.0, 1.0)),
+    )[0]
+    np.testing.assert_array_equal(scene.sphere_colors[1:], expected)
+    (tmp_path / "scene.toml").write_text('[[particles]]\nfile = "d.lammpstrj"\nframe = 5\n')
+    with pytest.raises(InputError, match=r"scene\.toml: particles\[0\]\.file: .*past the end"):
+        load_scene(tmp_path / "scene.toml")
+
+
 # -- the command line and bad input ------------------------------------------------------------
 
 
