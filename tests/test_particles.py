@@ -305,6 +305,26 @@ def test_hits_on_spheres_of_stated_radii_take_their_colors(tmp_path, spheres):
     np.testing.assert_array_equal(colors, expected)
 
 
+def test_wrap_up_axis_and_select_on_a_dump(tmp_path):
+    frames = dump_frames(count=30)
+    frames[0]["x"][:3] = [12.5, -0.5, 25.0]  # outside the 0..10 box
+    write_dump(tmp_path / "d.lammpstrj", frames, ["id", "type", "x", "y", "z"])
+    frame = read_particles(tmp_path / "d.lammpstrj")
+    from embree_rt.scene.particles.to_scene import particle_spheres
+
+    centers, _, _, _ = particle_spheres(frame, up="x", wrap=True)
+    wrapped = frame_positions(frames[0]) % 10.0  # float64 reference of the periodic image
+    # x up: file (x, y, z) is world (y, x, -z)
+    expected = np.stack([wrapped[:, 1], wrapped[:, 0], -wrapped[:, 2]], axis=1)
+    np.testing.assert_allclose(centers, expected, rtol=0, atol=1e-12)
+    assert np.all((wrapped >= 0) & (wrapped < 10))
+    kept, _, _, _ = particle_spheres(frame, up="y", select="type 2 3")
+    mask = frames[0]["type"] != 1
+    np.testing.assert_array_equal(kept, frame_positions(frames[0])[mask])
+    with pytest.raises(ParticleFileError, match="keeps no particles"):
+        particle_spheres(frame, select="type 7")
+
+
 def test_add_spheres_colors_and_add_particles_from_ase():
     scene = Scene()
     scene.add_spheres([[0, 0, 0]], [1.0], "matte")
