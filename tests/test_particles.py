@@ -485,6 +485,15 @@ def test_bad_input_one_line_exit_2_nothing_written(tmp_path, kind):
     assert not (tmp_path / "o.png").exists()
 
 
+def test_particle_flags_refused_for_a_scene_file(tmp_path):
+    scene = ROOT / "scenes" / "three_spheres.toml"
+    done = run("info", str(scene), "--color-by", "vx", cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"embree-rt: error: --color-by: only for particle files, and {scene} is not one"
+    ]
+
+
 def test_without_the_extra_one_line_naming_it(tmp_path):
     ase_io.write(tmp_path / "m.pdb", molecule())
     code = (

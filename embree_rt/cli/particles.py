@@ -46,6 +46,33 @@ def add_particle_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--radius-scale", type=float, default=1.0, metavar="S", help="radii times S")
 
 
+# The particle flags and their defaults: given for another kind of file, they are refused.
+PARTICLE_FLAG_DEFAULTS = {
+    "topology": None,
+    "frame": 0,
+    "up": "z",
+    "select": None,
+    "wrap": False,
+    "color_by": None,
+    "colormap": "viridis",
+    "range": None,
+    "color": None,
+    "radius": None,
+    "radius_scale": 1.0,
+    "json": False,
+}
+
+
+def refuse_particle_flags(args: argparse.Namespace) -> None:
+    """Refuse a particle flag given for a scene or mesh file (it would change nothing)."""
+    from embree_rt.cli.errors import UsageError
+
+    for name, default in PARTICLE_FLAG_DEFAULTS.items():
+        if getattr(args, name, default) != default:
+            flag = "--" + name.replace("_", "-")
+            raise UsageError(f"{flag}: only for particle files, and {args.scene} is not one")
+
+
 def particle_scene(args: argparse.Namespace):
     """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say."""
     from embree_rt.errors import InputError

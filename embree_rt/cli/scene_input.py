@@ -48,6 +48,9 @@ def read_scene(args: argparse.Namespace) -> tuple[Scene, Path | Scene]:
         scene = particle_scene(args)
         apply_to_scene(scene, settings, str(path))
         return scene, scene
+    from embree_rt.cli.particles import refuse_particle_flags
+
+    refuse_particle_flags(args)
     if is_mesh_file(path):
         scene = Scene.from_file(path, floor=not args.no_floor)
         apply_to_scene(scene, settings, str(path))
