@@ -485,6 +485,34 @@ def test_bad_input_one_line_exit_2_nothing_written(tmp_path, kind):
     assert not (tmp_path / "o.png").exists()
 
 
+def test_trajectory_frames_each_an_image_on_disk_skipped(tmp_path):
+    write_dump(
+        tmp_path / "d.lammpstrj", dump_frames(count=40, frames=3), ["id", "type", "x", "y", "z"]
+    )
+    flags = ["--width", "48", "--height", "32", "--spp", "1", "--quiet"]
+    done = run(
+        "render", "d.lammpstrj", "-o", "s/f_{frame}.png", "--frames", "0:3:2", *flags, cwd=tmp_path
+    )
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in (tmp_path / "s").iterdir()) == ["f_0.png", "f_2.png"]
+    from PIL import Image
+
+    first, last = (np.asarray(Image.open(tmp_path / "s" / f"f_{k}.png")) for k in (0, 2))
+    assert np.any(first != last)  # the particles moved; the camera stayed
+    before = (tmp_path / "s" / "f_0.png").stat().st_mtime_ns
+    done = run(
+        "render", "d.lammpstrj", "-o", "s/f_{frame}.png", "--frames", "0:2", *flags, cwd=tmp_path
+    )
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "s" / "f_0.png").stat().st_mtime_ns == before  # on disk: skipped
+    assert (tmp_path / "s" / "f_1.png").exists()
+    done = run(
+        "render", "d.lammpstrj", "-o", "t/f_{frame}.png", "--frames", "1:9", *flags, cwd=tmp_path
+    )
+    assert done.returncode == 2
+    assert "d.lammpstrj: --frames: '1:9'" in done.stderr and not (tmp_path / "t").exists()
+
+
 def test_particle_flags_refused_for_a_scene_file(tmp_path):
     scene = ROOT / "scenes" / "three_spheres.toml"
     done = run("info", str(scene), "--color-by", "vx", cwd=tmp_path)

@@ -22,7 +22,13 @@ from embree_rt.cli.errors import UsageError
 
 def command_render(args: argparse.Namespace) -> None:
     from embree_rt.cli.scene_input import read_scene
+    from embree_rt.scene.particles.read import is_particle_file
 
+    if is_particle_file(args.scene) and (args.frames or "{frame" in args.output):
+        from embree_rt.cli.particles import render_particle_frames
+
+        render_particle_frames(args)
+        return
     check_output(args.output, args.aov, output_encoding(args))
     started = time.perf_counter()
     scene, source = read_scene(args)
