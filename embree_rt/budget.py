@@ -9,17 +9,20 @@ or Embree. The constants are peak resident memory measured on this project's own
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Protocol
 
 from embree_rt.batches import worker_count
 from embree_rt.errors import InputError
+from embree_rt.memory import available_memory, format_bytes
 from embree_rt.sphere_modes import sphere_kind
 
 # The scene model's sphere arrays: (3,) float32 centre, float32 radius, int32 material.
 SCENE_BYTES_PER_SPHERE = 20
+# A sphere's own colour (``Scene.sphere_colors``, particle files): (3,) uint8 sRGB, read where a
+# hit is shaded through the scene's index of the sphere, never copied per sphere. 1e8 coloured
+# spheres as point spheres: (20 + 3 + 51) bytes, 7.4 GB.
+SPHERE_COLOR_BYTES = 3
 # Generating a random field: one ring of cells in flight a thread (candidates, sort, random
 # draws). On 2 threads, 2e6 spheres added 80 MB and 6e6 160 MB: 20 bytes a sphere and ~40 MB.
 FIELD_RING_BYTES = 20 << 20
@@ -80,28 +83,6 @@ class MemoryBudgetError(InputError, ValueError):
             f"{' and '.join(named)} would need ~{format_bytes(self.needed)} of memory, "
             f"this machine has {format_bytes(available)} available"
         )
-
-
-def format_bytes(size: float) -> str:
-    """``size`` bytes as GB with three significant digits (``"0.512 GB"``, ``"800 GB"``)."""
-    gigabytes = size / 1e9
-    return f"{gigabytes:,.0f} GB" if gigabytes >= 100 else f"{gigabytes:.3g} GB"
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation now: ``MemAvailable`` from /proc/meminfo
-    (what the kernel can hand out without swapping), else the free physical pages, else None
-    (unknown: nothing is refused)."""
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, OSError, ValueError):
-        return None
 
 
 def field_bytes(count: int) -> int:

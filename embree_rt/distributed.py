@@ -134,7 +134,8 @@ def scene_digest(scene: Scene) -> bytes:
     """A digest of everything in ``scene``: its sphere arrays hashed in place (no copy of a
     hundred million spheres), the rest pickled."""
     digest = hashlib.sha256()
-    for array in (scene.sphere_centers, scene.sphere_radii, scene.sphere_materials):
+    arrays = [scene.sphere_centers, scene.sphere_radii, scene.sphere_materials]
+    for array in [*arrays, *([] if scene.sphere_colors is None else [scene.sphere_colors])]:
         array = np.ascontiguousarray(array)
         digest.update(f"{array.dtype.str}{array.shape}".encode())
         digest.update(memoryview(array).cast("B"))
@@ -143,6 +144,7 @@ def scene_digest(scene: Scene) -> bytes:
         sphere_centers=scene.sphere_centers[:0],
         sphere_radii=scene.sphere_radii[:0],
         sphere_materials=scene.sphere_materials[:0],
+        sphere_colors=None,
     )
     digest.update(pickle.dumps(empty, protocol=pickle.HIGHEST_PROTOCOL))
     return digest.digest()

@@ -31,6 +31,7 @@ from embree_rt.mesh_attributes import (
 )
 from embree_rt.scene.model import MeshObject, Scene
 from embree_rt.sphere_modes import SPHERE_MODES, sphere_kind
+from embree_rt.textures import SRGB8_TO_LINEAR
 from embree_rt.tracing import segments
 from embree_rt.tracing.camera_query import intersect_camera_records
 from embree_rt.tracing.records import HitLabels, HitRecords, intersect_records
@@ -55,7 +56,9 @@ class SurfaceHits:
     error scales with it; ``incoming`` (3, k) float32, the direction of the ray that made it.
     ``looks`` what the hits on meshes with per-point looks show of their own
     (``mesh_attributes.HitLooks``: their colours from textures and vertex colours, and more),
-    at its ``rows`` (j,) int64 (none when no hit has looks).
+    at its ``rows`` (j,) int64 (none when no hit has looks). ``painted`` (p,) int64 the columns
+    that hit spheres with colours of their own (``Scene.sphere_colors``), ``paint`` (3, p)
+    float32 those linear colours.
     ``prim_id``, ``inst_id``, ``inst_prim_id`` (k,) int32: Embree's primitive, top-level
     instance and instance-array copy ids of each hit (-1 on the floor; ``inst_id`` -1 on the
     sphere set; ``inst_prim_id`` -1 outside instance arrays), which name the object hit
@@ -72,6 +75,8 @@ class SurfaceHits:
     scale: np.ndarray
     incoming: np.ndarray
     looks: HitLooks = field(default_factory=no_looks)
+    painted: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
+    paint: np.ndarray = field(default_factory=lambda: np.empty((3, 0), np.float32))
     prim_id: np.ndarray | None = None
     inst_id: np.ndarray | None = None
     inst_prim_id: np.ndarray | None = None
@@ -119,6 +124,12 @@ class Placement:
     in_array: bool = False
 
 
+def sphere_hit_colors(colors: np.ndarray, spheres: np.ndarray) -> np.ndarray:
+    """(3, k) float32 linear base colours of the hits on spheres ``spheres`` (k,) int (the
+    scene's order), from their (n, 3) uint8 sRGB ``colors``."""
+    return SRGB8_TO_LINEAR[colors[spheres].T]
+
+
 def _unit(vectors: np.ndarray) -> np.ndarray:
     """(3, n) float32 unit vectors along the columns of (3, n) ``vectors``."""
     x, y, z = vectors
@@ -151,6 +162,10 @@ class SceneGeometry(Closing):
         # int32 as the scene holds them: no N-sized copies (1e8 spheres are 0.4 GB of them)
         self.sphere_materials = np.asarray(scene.sphere_materials, np.int32)
         self.sphere_geom_id = -1
+        # (n, 3) uint8 sRGB per sphere in the scene's order, or None (``Scene.sphere_colors``)
+        self.sphere_colors = scene.sphere_colors
+        # The instance array of tessellated spheres (``spheres="mesh"``), or -1.
+        self.sphere_array_geom_id = -1
         # The scene's index of each sphere the BVH holds, None when they are in the scene's
         # order; and the BVH's spheres' materials, in the BVH's order.
         self.sphere_index: np.ndarray | None = None
@@ -301,8 +316,10 @@ class SceneGeometry(Closing):
             transforms[:, axis, axis] = self.sphere_radii
         transforms[:, :3, 3] = self.sphere_centers
         transforms[:, 3, 3] = 1.0
-        # copy j is sphere j: object j
-        self._place_array([child], transforms, None, self.sphere_materials, True, first_object=0)
+        geom_id = self._place_array(
+            [child], transforms, None, self.sphere_materials, True, first_object=0
+        )  # copy j is sphere j: object j
+        self.sphere_array_geom_id = geom_id
 
     def _add_meshes(self, scene: Scene) -> None:
         children: dict[int, int] = {}
@@ -385,6 +402,8 @@ class SceneGeometry(Closing):
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
         self.has_meshes = self.instance_count > 0
+        # Mesh looks and sphere colours are found by each hit's Embree ids.
+        self.needs_ids = self.has_meshes or self.sphere_colors is not None
 
     def close(self) -> None:
         self.bvh.close()
@@ -438,7 +457,7 @@ class SceneGeometry(Closing):
             directions,
             self.labels,
             coherent=coherent,
-            ids=ids or self.has_meshes,
+            ids=ids or self.needs_ids,
         )
         return records.rays, self._surfaces(records)
 
@@ -449,7 +468,7 @@ class SceneGeometry(Closing):
         inside the query (``tracing.camera_query``): the (k,) ray numbers that hit, their
         ``SurfaceHits``, and the (3, n) float32 directions of all n rays."""
         records, directions = intersect_camera_records(
-            self.bvh, camera, index, self.labels, ids or self.has_meshes
+            self.bvh, camera, index, self.labels, ids or self.needs_ids
         )
         return records.rays, self._surfaces(records), directions
 
@@ -483,6 +502,8 @@ class SceneGeometry(Closing):
             inst_id=records.inst_id,
             inst_prim_id=records.inst_prim_id,
         )
+        if self.sphere_colors is not None:
+            self._color_sphere_hits(surfaces, records)
         if self.mesh_colors and meshes.stop > meshes.start:  # mesh looks: textures, colours
             looks = self.mesh_colors.hit_looks(
                 records.inst_id[meshes],
@@ -496,6 +517,22 @@ class SceneGeometry(Closing):
                 if looks.normal is not None:
                     self._apply_normal_maps(surfaces, records, looks)
         return surfaces
+
+    def _color_sphere_hits(self, surfaces: SurfaceHits, records: HitRecords) -> None:
+        """Give the hits on spheres their spheres' own colours (``Scene.sphere_colors``): the
+        sphere group's by primitive, tessellated spheres' by instance-array copy."""
+        spheres = records.group("spheres")
+        if self.sphere_array_geom_id >= 0:
+            meshes = records.group("other")
+            on = np.flatnonzero(records.inst_id[meshes] == self.sphere_array_geom_id)
+            rows = (meshes.start + on).astype(np.int64)
+            index = records.inst_prim_id[rows]
+        else:
+            rows = np.arange(spheres.start, spheres.stop, dtype=np.int64)
+            index = self.scene_sphere(records.prim_id[spheres])
+        if len(rows):
+            surfaces.painted = rows
+            surfaces.paint = sphere_hit_colors(self.sphere_colors, index)
 
     def _apply_normal_maps(self, surfaces: SurfaceHits, records, looks: HitLooks) -> None:
         """Replace the shading normals of the hits a normal map turns (``looks.normal``, in

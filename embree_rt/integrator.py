@@ -345,11 +345,13 @@ class Integrator(Closing):
 
     def hit_materials(self, surfaces: SurfaceHits) -> HitMaterials:
         """The ``HitMaterials`` of the ``surfaces``: their materials' columns, with what the
-        hits show of their own written over them (a mesh's textures and colours, the
-        checker's colour on the floor)."""
+        hits show of their own written over them (a mesh's textures and colours, a sphere's
+        own colour, the checker's colour on the floor)."""
         floor = surfaces.floor_count
         hits = HitMaterials.gather(self.materials, surfaces.material, color_from=floor)
         surfaces.looks.apply_to(hits, self.materials.glows)
+        if len(surfaces.painted):
+            hits.color[:, surfaces.painted] = surfaces.paint
         if floor:
             checker = self.scene.floor.checker
             shading.checker(surfaces.position[:, :floor], checker, hits.color[:, :floor])

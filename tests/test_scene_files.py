@@ -1049,7 +1049,9 @@ def test_assets_are_what_make_assets_makes_one_per_format(tmp_path: Path) -> Non
         "still_life.glb",
         "zero_normals.obj",
     ]
-    assert on_disk == sorted([*expected, *looks])
+    # the particle files of the gallery (tests/test_particles.py checks them)
+    particles = ["helix.pdb", "membrane.gsd", "packing.lammpstrj"]
+    assert on_disk == sorted([*expected, *looks, *particles])
     document = {"floor": False, "meshes": [{"file": str(ROOT / "assets" / n)} for n in expected]}
     (tmp_path / "assets.json").write_text(json.dumps(document))
     scene = load_scene(tmp_path / "assets.json")

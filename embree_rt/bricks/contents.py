@@ -53,6 +53,7 @@ def without_objects(scene: Scene, floor: bool = False) -> Scene:
         sphere_centers=empty[0],
         sphere_radii=empty[1],
         sphere_materials=empty[2],
+        sphere_colors=None,
         meshes=[],
         instances=[],
         animation=None,
@@ -72,6 +73,7 @@ def scene_brick(scene: Scene, partition: Partition, index: int) -> BrickContents
             scene.sphere_centers[mine],
             scene.sphere_radii[mine],
             scene.sphere_materials[mine],
+            colors=None if scene.sphere_colors is None else scene.sphere_colors[mine],
             copy=False,
         )
     mesh_ids, instance_starts = scene.object_id_starts()

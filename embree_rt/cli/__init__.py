@@ -100,6 +100,11 @@ def run_command(args) -> None:
         from embree_rt.cli.job import job_from_args
 
         job = job_from_args(args)
+        if job.reads_trajectory:
+            from embree_rt.cli.particles import render_particle_frames
+
+            render_particle_frames(args)
+            return
         if job.on_dask:
             from embree_rt.cli import cluster as runner
         else:

@@ -19,7 +19,14 @@ from embree_rt.geometry import SceneGeometry, sphere_kind
 
 def command_info(args: argparse.Namespace, clock: CompileClock, timeline: Timeline) -> None:
     """Print what ``args.scene`` holds, its bounds, the BVH's build and compile times and
-    memory, and the AOVs' ids."""
+    memory, and the AOVs' ids; a particle file's own summary (``cli.particles``)."""
+    from embree_rt.scene.particles.read import is_particle_file
+
+    if is_particle_file(args.scene):
+        from embree_rt.cli.particles import command_particle_info
+
+        command_particle_info(args)
+        return
     job = info_job(args)
     scene = prepare_scene(job, timeline).scene
     resident_before = resident_bytes()

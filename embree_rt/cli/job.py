@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 from embree_rt.cli.checks import check_output, output_encoding
 from embree_rt.cli.errors import UsageError
+from embree_rt.cli.particles import refuse_particle_flags
 from embree_rt.errors import InputError
 from embree_rt.scene.errors import SceneError
 
@@ -52,7 +53,15 @@ class RandomField(NamedTuple):
     save_scene: str | None
 
 
-Source = SceneFile | MeshFile | RandomField
+class ParticleFile(NamedTuple):
+    """A simulation's particle file (XYZ, LAMMPS, PDB, GRO, GSD, ...), drawn as the particle
+    flags in ``flags`` say (``cli.particles``)."""
+
+    path: Path
+    flags: argparse.Namespace
+
+
+Source = SceneFile | MeshFile | RandomField | ParticleFile
 
 
 class OnThisMachine(NamedTuple):
@@ -123,25 +132,39 @@ class Job:
     def on_dask(self) -> bool:
         return isinstance(self.where, OnDask)
 
+    @property
+    def reads_trajectory(self) -> bool:
+        """Whether a particle file's frames are each an image (``cli.particles``)."""
+        return (
+            isinstance(self.source, ParticleFile) and self.output is not None and self.output.framed
+        )
+
 
 def source_of(args: argparse.Namespace) -> Source:
-    """The scene the flags name: the ``random`` field, or a scene or mesh file by its
-    extension (an extension that is neither's is refused naming both lists)."""
+    """The scene the flags name: the ``random`` field, or a scene, mesh or particle file by its
+    extension (an extension that is none of theirs is refused naming the lists); particle
+    flags given for another kind of file are refused."""
     if args.command == "random":
         return RandomField(args.count, args.instance, args.save_scene)
     path = Path(args.scene)
     suffix = path.suffix.lower()
     if suffix in SCENE_SUFFIXES:
+        refuse_particle_flags(args)
         return SceneFile(path)
     from embree_rt.scene.meshes import MESH_SUFFIXES  # trimesh: ~1 s to import
+    from embree_rt.scene.particles.read import PARTICLE_SUFFIXES, is_particle_file
 
     if suffix in MESH_SUFFIXES:
+        refuse_particle_flags(args)
         return MeshFile(path)
+    if is_particle_file(path):
+        return ParticleFile(path, args)
     raise SceneError(
         path,
         "(file)",
-        f"expected a scene file ({', '.join(SCENE_SUFFIXES)}) or "
-        f"a mesh file ({', '.join(MESH_SUFFIXES)})",
+        f"expected a scene file ({', '.join(SCENE_SUFFIXES)}), "
+        f"a mesh file ({', '.join(MESH_SUFFIXES)}) or "
+        f"a particle file ({', '.join(PARTICLE_SUFFIXES)})",
     )
 
 

@@ -14,8 +14,9 @@ from embree_rt.version import __version__
 
 SPHERE_CHOICES = SPHERE_MODES
 SCENE_HELP = (
-    "scene or mesh file: a .toml or .json scene, or a mesh (.obj, .ply, .stl, .off, .glb, "
-    ".gltf) shown on its own, from its own camera and lights or framed and lit by default"
+    "scene, mesh or particle file: a .toml or .json scene, a mesh (.obj, .ply, .stl, .off, .glb, "
+    ".gltf) or particles (.xyz, .lammpstrj, .pdb, .gro, .gsd, ...) shown on its own, from its "
+    "own camera and lights or framed and lit by default"
 )
 SCENE_DEFAULT = "; default: the scene's"
 NO_FLOOR_HELP = "leave out the floor (a mesh file's, or the scene file's)"
@@ -293,6 +294,8 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The ``embree-rt`` parser: its commands and their flags. Builds without NumPy or numba
     (``--help`` and ``--version`` stay light); flag values are checked as they are parsed."""
+    from embree_rt.cli.particles import add_particle_flags
+
     parser = Parser(
         prog="embree-rt",
         description="Whitted-style ray tracing of scenes with very many objects, on Embree.",
@@ -302,6 +305,7 @@ def build_parser() -> argparse.ArgumentParser:
     render = commands.add_parser("render", help="render a scene file or a mesh file")
     render.add_argument("scene", help=SCENE_HELP)
     add_render_flags(render)
+    add_particle_flags(render)
     random = commands.add_parser("random", help="render a random sphere field of N spheres")
     random.add_argument(
         "--count", type=int_at_least(1), required=True, metavar="N", help="spheres in the field"
@@ -324,6 +328,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="how spheres enter the BVH, as render's --spheres",
     )
     add_setting_flags(info)
+    add_particle_flags(info)
+    info.add_argument("--json", action="store_true", help="a particle file's summary as JSON")
     serve = commands.add_parser("serve", help="the 2D ray demo and a live preview in a browser")
     serve.add_argument("scene", nargs="?", help="scene file (default: the showcase)")
     serve.add_argument("--host", default="127.0.0.1", help="address to listen on")

@@ -13,7 +13,7 @@ import numpy as np
 from embree_rt import budget
 from embree_rt.cli.checks import check_library, memory_key, writing
 from embree_rt.cli.errors import UsageError
-from embree_rt.cli.job import Job, MeshFile, RandomField, SceneFile
+from embree_rt.cli.job import Job, MeshFile, ParticleFile, RandomField, SceneFile
 from embree_rt.integrator import DEFAULT_BATCH_SIZE
 from embree_rt.scene.errors import SceneError, warn_input
 from embree_rt.scene.instances import mesh_from_parts, spheres_to_instances
@@ -72,6 +72,12 @@ def make_scene(job: Job) -> MadeScene:
         return MadeScene(scene, "load", time.perf_counter() - started, for_workers)
     if isinstance(source, RandomField):
         return generate_field(job, source, started)
+    if isinstance(source, ParticleFile):
+        from embree_rt.cli.particles import particle_scene
+
+        scene = particle_scene(source.flags)
+        apply_to_scene(scene, settings, str(source.path))
+        return MadeScene(scene, "load", time.perf_counter() - started, scene)
     raise TypeError(f"no scene is made from a {type(source).__name__}")
 
 

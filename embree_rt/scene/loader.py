@@ -164,6 +164,19 @@ def _sphere_array_cost(headers: Headers) -> tuple[int, str]:
 
 
 @dataclass
+class _ParticlesEntry:
+    key: str  # the ``file`` key, which errors inside the particle file name
+    path: Path
+    topology: Path | None
+    frame: int
+    up: str
+    select: str | None
+    wrap: bool
+    material: str
+    look: object  # a particles.look.ParticleLook (imported where a scene has particles)
+
+
+@dataclass
 class _SphereArrayEntry:
     key: str  # the ``file`` key, which errors inside the .npz name
     path: Path
@@ -225,14 +238,18 @@ class SceneReader:
             scene.floor = self._floor(root)
         self.spheres = [self._sphere(t) for t in root.tables("spheres")]
         self.sphere_arrays = [self._sphere_array(t) for t in root.tables("sphere_arrays")]
+        self.particles = [self._particles(t) for t in root.tables("particles")]
         self.meshes = [self._mesh(t) for t in root.tables("meshes")]
         self.instances = [self._instances(t) for t in root.tables("instances")]
         root.finish()
 
     def named_files(self) -> list[Path]:
-        """The data files the scene names (sphere arrays, meshes, instance placements), in the
-        order it names them, each once: what step 2 of ``build`` reads."""
+        """The data files the scene names (sphere arrays, particle files and their topologies,
+        meshes, instance placements), in the order it names them, each once: what step 2 of
+        ``build`` reads."""
         paths = [entry.path for entry in self.sphere_arrays]
+        for entry in self.particles:
+            paths += [entry.path] + ([] if entry.topology is None else [entry.topology])
         paths += [entry.path for entry in self.meshes]
         for entry in self.instances:
             paths += [entry.path, entry.placements_path]
@@ -296,8 +313,10 @@ class SceneReader:
         if self.spheres:
             centers, radii, names = zip(*self.spheres, strict=True)
             scene.add_spheres(np.array(centers), np.array(radii), list(names))
-        for centers, radii, materials in arrays:
-            scene.add_spheres(centers, radii, materials)
+        for centers, radii, materials, colors in arrays:
+            scene.add_spheres(centers, radii, materials, colors=colors)
+        for entry in self.particles:
+            self._add_particles(scene, entry)
         for entry in self.meshes:
             model = models[entry.path]
             for mesh, node_transform in model.parts:
@@ -480,6 +499,34 @@ class SceneReader:
         table.finish()
         return entry
 
+    def _particles(self, table: Table) -> _ParticlesEntry:
+        from embree_rt.scene.particles.look import ParticleLook
+
+        topology = table.file_name("topology") if table.has("topology") else None
+        color = table.vector("color", None, non_negative=True, high=1.0)
+        entry = _ParticlesEntry(
+            key=table.key("file"),
+            path=self._file(table),
+            topology=None if topology is None else (self.base / topology).resolve(),
+            frame=table.integer("frame", 0, low=0),
+            up=table.string("up", "z"),
+            select=table.string("select"),
+            wrap=table.boolean("wrap", False),
+            material=self._material_name(table),
+            look=ParticleLook(
+                color_by=table.string("color_by"),
+                color=color,
+                colormap=table.string("colormap", "viridis"),
+                value_range=table.pair("range") if table.has("range") else None,
+                radius=table.number("radius", None, low=0.0, low_open=True),
+                radius_scale=table.number("radius_scale", 1.0, low=0.0, low_open=True),
+            ),
+        )
+        if entry.up not in ("x", "y", "z"):
+            raise table.error("up", f"expected x, y or z, got {entry.up!r}")
+        table.finish()
+        return entry
+
     def _mesh(self, table: Table) -> _MeshEntry:
         entry = _MeshEntry(
             key=table.key("file"),
@@ -536,7 +583,8 @@ class SceneReader:
     # -- files --------------------------------------------------------------------------------
 
     def _read_sphere_array(self, entry: _SphereArrayEntry):
-        """(centers (n, 3), radii (n,), materials: one name or (n,) names or ids) of a .npz."""
+        """(centers (n, 3), radii (n,), materials: one name or (n,) names or ids, colors: None
+        or (n, 3) uint8 sRGB) of a .npz."""
         path = entry.path
 
         def fail(problem: str) -> SceneError:
@@ -555,14 +603,42 @@ class SceneReader:
             raise fail(f"radii must be ({n},) numbers, got {radii.shape} {radii.dtype}")
         if (problem := spheres_problem(centers, radii)) is not None:
             raise fail(problem)
+        colors = arrays.get("colors")
+        if colors is not None:
+            from embree_rt.scene.sphere_colors import as_srgb8
+
+            try:
+                colors = as_srgb8(colors, n)
+            except ValueError as error:
+                raise fail(str(error)) from None
         materials = arrays.get("materials")
         if materials is None:
-            return centers, radii, entry.material
+            return centers, radii, entry.material, colors
         if materials.dtype.kind == "S":
             materials = materials.astype(str)
         if (problem := self._materials_problem(materials, n)) is not None:
             raise fail(problem)
-        return centers, radii, materials
+        return centers, radii, materials, colors
+
+    def _add_particles(self, scene: Scene, entry: _ParticlesEntry) -> None:
+        """A ``[[particles]]`` entry's file read and added as spheres; a problem in the file
+        is reported against the scene file's key."""
+        from embree_rt.scene.particles import read_particles
+
+        try:
+            frame = read_particles(entry.path, frame=entry.frame, topology=entry.topology)
+            scene.add_particles(
+                frame,
+                look=entry.look,
+                up=entry.up,
+                select=entry.select,
+                wrap=entry.wrap,
+                material=entry.material,
+            )
+        except SceneError as error:
+            raise SceneError(self.path, entry.key, str(error)) from None
+        except ValueError as error:
+            raise SceneError(self.path, entry.key, f"{entry.path}: {error}") from None
 
     def _materials_problem(self, materials: np.ndarray, n: int) -> str | None:
         """What is wrong with a file's (n,) ``materials`` array of names or ids, or None."""

@@ -200,7 +200,9 @@ class Scene:
 
     ``materials`` maps names to materials (the presets are always there). Spheres are stored in
     bulk: ``sphere_centers`` (n, 3) float32, ``sphere_radii`` (n,) float32 and
-    ``sphere_materials`` (n,) int32, an index into ``material_names``.
+    ``sphere_materials`` (n,) int32, an index into ``material_names``. ``sphere_colors`` is None
+    (each sphere its material's colour) or (n, 3) uint8 sRGB, each sphere's own base colour in
+    place of its material's (3 bytes a sphere: particle files colour every particle).
     """
 
     camera: Camera = field(default_factory=Camera)
@@ -212,6 +214,7 @@ class Scene:
     sphere_centers: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     sphere_radii: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     sphere_materials: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    sphere_colors: np.ndarray | None = None
     meshes: list[MeshObject] = field(default_factory=list)
     instances: list[MeshInstances] = field(default_factory=list)
     # A camera path (``scene.animation``): None for a still image.
@@ -244,6 +247,56 @@ class Scene:
             raise SceneError(path, "(file)", str(error)) from None
         scene._stage(stage_model(path, model), floor)
         return scene
+
+    @classmethod
+    def from_particles(
+        cls,
+        path,
+        frame: int = 0,
+        topology=None,
+        look=None,
+        up: str = "z",
+        select: str | None = None,
+        wrap: bool = False,
+        floor: bool = True,
+    ) -> Scene:
+        """Frame ``frame`` of the particle file ``path`` (a trajectory over ``topology``)
+        rendered on its own: one sphere a particle, coloured and sized by ``look``
+        (``embree_rt.scene.particles.ParticleLook``; default: by element, else by type), the
+        file's ``up`` axis ("x", "y" or "z") upward, ``select`` keeping a subset (MDAnalysis's
+        selection language), ``wrap`` putting positions into the periodic box; framed from the
+        bounds under the default rig, a floor under it unless ``floor`` is False. Raises
+        ``SceneError`` naming the file and the problem."""
+        from embree_rt.scene.particles import read_particles
+
+        particles = read_particles(path, frame=frame, topology=topology)
+        scene = cls()
+        scene.add_particles(particles, look=look, up=up, select=select, wrap=wrap)
+        scene.stage_particles(floor)
+        return scene
+
+    def add_particles(
+        self,
+        particles,
+        look=None,
+        up: str = "z",
+        select: str | None = None,
+        wrap: bool = False,
+        material: str = "matte",
+    ) -> None:
+        """Add a ``ParticleFrame``, an ``ase.Atoms`` or an MDAnalysis ``AtomGroup`` as
+        spheres of ``material`` (see ``from_particles`` for the rest)."""
+        from embree_rt.scene.particles.to_scene import particle_spheres
+
+        centers, radii, colors, note = particle_spheres(particles, look, up, select, wrap)
+        self.add_spheres(centers, radii, material, colors=colors)
+        self.notes.append(note)
+
+    def stage_particles(self, floor: bool = True) -> None:
+        """Camera, lights and floor framed on the spheres (as a mesh file's are)."""
+        from embree_rt.scene.model_file import stage_spheres
+
+        self._stage(stage_spheres(self.sphere_centers, self.sphere_radii), floor)
 
     @classmethod
     def from_trimesh(cls, loaded: trimesh.Trimesh | trimesh.Scene, floor: bool = True) -> Scene:
@@ -366,12 +419,16 @@ class Scene:
         self,
         centers: np.ndarray,
         radii: np.ndarray,
-        materials: str | np.ndarray | list[str],
+        materials: str | np.ndarray | list[str] = "matte",
         *,
+        colors: np.ndarray | None = None,
         copy: bool = True,
     ) -> None:
         """Append spheres: ``centers`` (n, 3), ``radii`` (n,), one material name for all, or
-        (n,) names, or (n,) int indices into ``material_names``.
+        (n,) names, or (n,) int indices into ``material_names``; ``colors`` None or (n, 3)
+        each sphere's base colour, uint8 sRGB or floats in 0..1 sRGB (kept as uint8: spheres
+        without their own take their material's colour, rounded to 8-bit sRGB, once any
+        sphere has one).
 
         ``copy=False`` hands the arrays over: when the scene holds no spheres yet and they are
         already (n, 3) float32, (n,) float32 and (n,) int32, it keeps them as they are (no copy
@@ -389,6 +446,12 @@ class Scene:
         centers = centers.astype(np.float32, copy=False)
         radii = radii.astype(np.float32, copy=False)
         ids = self.material_ids(materials, len(centers), "centers")
+        if colors is not None or self.sphere_colors is not None:
+            from embree_rt.scene.sphere_colors import joined_colors
+
+            self.sphere_colors = joined_colors(
+                self.sphere_colors, self.sphere_materials, self.materials, ids, colors
+            )
         if not copy and len(self.sphere_radii) == 0:
             self.sphere_centers, self.sphere_radii, self.sphere_materials = centers, radii, ids
             return

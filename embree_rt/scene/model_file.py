@@ -230,3 +230,19 @@ def stage_trimesh(loaded: trimesh.Trimesh | trimesh.Scene) -> Staging:
 def _vec(values: np.ndarray) -> Point:
     x, y, z = (float(v) for v in values)
     return (x, y, z)
+
+
+def stage_spheres(centers: np.ndarray, radii: np.ndarray) -> Staging:
+    """How to show spheres on their own (a particle file): ``centers`` (n, 3), ``radii`` (n,);
+    framed on their bounds, under the default rig."""
+    centers = np.asarray(centers, np.float64)
+    radii = np.asarray(radii, np.float64)
+    low = (centers - radii[:, None]).min(axis=0)
+    high = (centers + radii[:, None]).max(axis=0)
+    return Staging(
+        [framed_view(low, high)],
+        default_lights(low, high),
+        floor_under(low, high),
+        None,
+        ["lights: the default rig of two"],
+    )

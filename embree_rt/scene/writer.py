@@ -27,11 +27,13 @@ def scene_document(scene: Scene, path: Path) -> dict:
     if len(scene.sphere_radii):
         spheres_path = path.with_suffix(".spheres.npz")
         names = np.asarray(scene.material_names)
+        colors = {} if scene.sphere_colors is None else {"colors": scene.sphere_colors}
         np.savez_compressed(
             spheres_path,
             centers=scene.sphere_centers.astype(np.float32),
             radii=scene.sphere_radii.astype(np.float32),
             materials=names[scene.sphere_materials],
+            **colors,
         )
         document["sphere_arrays"] = [{"file": spheres_path.name}]
     files: dict[int, str] = {}  # each distinct mesh written once, for meshes and instances

@@ -58,6 +58,7 @@ class PreviewSession:
             sphere_centers=scene.sphere_centers.copy(),
             sphere_radii=scene.sphere_radii.copy(),
             sphere_materials=scene.sphere_materials.copy(),
+            sphere_colors=None if scene.sphere_colors is None else scene.sphere_colors.copy(),
             render=copy.copy(scene.render),
         )
         self.document = document
@@ -181,10 +182,11 @@ class PreviewSession:
         import tomli_w
 
         document = copy.deepcopy(self.document)
-        for key in ("meshes", "sphere_arrays"):
+        for key in ("meshes", "sphere_arrays", "particles"):
             for entry in document.get(key, []):
-                if "file" in entry:
-                    entry["file"] = str((self.folder / entry["file"]).resolve())
+                for name in ("file", "topology"):
+                    if name in entry:
+                        entry[name] = str((self.folder / entry[name]).resolve())
         camera = self.scene.camera
         document["camera"] = {
             **document.get("camera", {}),

@@ -1,0 +1,240 @@
+"""Particle files on the command line: the flags that say how particles are drawn, the scene
+``render`` and ``info`` make of a particle file, and ``info``'s summary of one."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+
+def color_triple(text: str) -> tuple[float, float, float]:
+    """``R,G,B`` in 0..1 (sRGB)."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(0.0 <= v <= 1.0 for v in values):
+        raise argparse.ArgumentTypeError(f"expected R,G,B with each in 0..1, got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def add_particle_flags(parser: argparse.ArgumentParser) -> None:
+    """The flags of a particle file (ignored for scene and mesh files)."""
+    group = parser.add_argument_group("particle files (XYZ, LAMMPS, PDB, GRO, GSD, ...)")
+    group.add_argument("--topology", metavar="FILE", help="topology of a DCD/XTC/TRR trajectory")
+    group.add_argument("--frame", type=int, default=0, metavar="N", help="which frame (from 0)")
+    group.add_argument("--up", choices=("x", "y", "z"), default="z", help="the file's up axis")
+    group.add_argument(
+        "--select", metavar="EXPR", help="keep a subset (MDAnalysis selection: 'type 1 2')"
+    )
+    group.add_argument("--wrap", action="store_true", help="put positions into the periodic box")
+    group.add_argument(
+        "--color-by",
+        metavar="WHAT",
+        help="element, type, or a property (default: element, else type)",
+    )
+    group.add_argument("--colormap", default="viridis", help="matplotlib colormap for a property")
+    group.add_argument(
+        "--range", nargs=2, type=float, metavar=("MIN", "MAX"), help="property range of --colormap"
+    )
+    group.add_argument(
+        "--color", type=color_triple, metavar="R,G,B", help="one sRGB colour for all"
+    )
+    group.add_argument("--radius", type=float, metavar="R", help="one radius for all particles")
+    group.add_argument("--radius-scale", type=float, default=1.0, metavar="S", help="radii times S")
+    group.add_argument(
+        "--follow",
+        action="store_true",
+        help="with --frames: frame each frame on its own bounds (default: the first frame's)",
+    )
+
+
+# The particle flags and their defaults: given for another kind of file, they are refused.
+PARTICLE_FLAG_DEFAULTS = {
+    "topology": None,
+    "frame": 0,
+    "up": "z",
+    "select": None,
+    "wrap": False,
+    "color_by": None,
+    "colormap": "viridis",
+    "range": None,
+    "color": None,
+    "radius": None,
+    "radius_scale": 1.0,
+    "json": False,
+    "follow": False,
+}
+
+
+def refuse_particle_flags(args: argparse.Namespace) -> None:
+    """Refuse a particle flag given for a scene or mesh file (it would change nothing)."""
+    from embree_rt.cli.errors import UsageError
+
+    for name, default in PARTICLE_FLAG_DEFAULTS.items():
+        if getattr(args, name, default) != default:
+            flag = "--" + name.replace("_", "-")
+            raise UsageError(f"{flag}: only for particle files, and {args.scene} is not one")
+
+
+def particle_scene(args: argparse.Namespace):
+    """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say."""
+    from embree_rt.errors import InputError
+    from embree_rt.scene.model import Scene
+    from embree_rt.scene.particles.look import ParticleLook
+
+    for flag, value in (("--radius", args.radius), ("--radius-scale", args.radius_scale)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise InputError(f"{flag}: expected a positive number, got {value:g}")
+    look = ParticleLook(
+        color_by=args.color_by,
+        color=args.color,
+        colormap=args.colormap,
+        value_range=tuple(args.range) if args.range else None,
+        radius=args.radius,
+        radius_scale=args.radius_scale,
+    )
+    try:
+        return Scene.from_particles(
+            args.scene,
+            frame=args.frame,
+            topology=args.topology,
+            look=look,
+            up=args.up,
+            select=args.select,
+            wrap=args.wrap,
+            floor=not args.no_floor,
+        )
+    except ValueError as error:
+        if isinstance(error, InputError):
+            raise
+        raise InputError(f"{args.scene}: {error}") from None
+
+
+def render_particle_frames(args: argparse.Namespace) -> None:
+    """``embree-rt render TRAJECTORY -o shots/f_{frame:04d}.png [--frames A:B[:STEP]]``: each
+    frame an image, on this machine, the camera, lights and floor of the first frame unless
+    ``--follow``; frames on disk skipped unless ``--overwrite``."""
+    import copy
+    import sys
+    from pathlib import Path
+
+    from embree_rt.api import render
+    from embree_rt.cli.animate import output_paths
+    from embree_rt.cli.checks import check_library, output_encoding, writing
+    from embree_rt.cli.errors import UsageError
+    from embree_rt.film import check_output_path
+    from embree_rt.scene.particles import read_particles
+    from embree_rt.scene.settings import apply_to_scene
+
+    for flag, given in (("--cluster", args.cluster), ("--scheduler", args.scheduler)):
+        if given:
+            raise UsageError(f"{flag}: particle trajectories are rendered on this machine")
+    if args.aov is not None:
+        raise UsageError("--aov: AOVs are written for still images, not trajectory frames")
+    count = read_particles(args.scene, frame=0, topology=args.topology).frame_count
+    frames = trajectory_range(args.scene, args.frames, count)
+    paths = output_paths(args.output, frames)
+    encoding = output_encoding(args)
+    for directory in sorted({Path(path).parent for path in paths.values()}):
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise UsageError(f"-o: cannot make the directory {directory}: {error}") from None
+    for path in paths.values():
+        try:
+            check_output_path(path, encoding)
+        except (ValueError, RuntimeError) as error:
+            raise UsageError(str(error)) from None
+    todo = [f for f, path in paths.items() if args.overwrite or not Path(path).exists()]
+    check_library()
+    staged = None
+    for number in todo:
+        frame_args = copy.copy(args)
+        frame_args.frame = number
+        scene = particle_scene(frame_args)
+        if staged is None:
+            first = copy.copy(args)
+            first.frame = frames[0]
+            staged = scene if number == frames[0] else particle_scene(first)
+        if not args.follow:
+            scene.camera, scene.lights, scene.floor = staged.camera, staged.lights, staged.floor
+        apply_to_scene(scene, list(args.settings), str(args.scene))
+        result = render(scene, threads=args.threads, spheres=args.spheres, quiet=True)
+        path = paths[number]
+        writing(path, lambda result=result, path=path: result.save(path, encoding))
+    if not args.quiet:
+        print(
+            f"embree-rt: {len(todo)} frames ({len(paths) - len(todo)} already on disk) of "
+            f"{args.scene} -> {args.output}",
+            file=sys.stderr,
+        )
+
+
+def trajectory_range(path: str, text: str | None, count: int) -> range:
+    """Frames ``A:B[:STEP]`` (B excluded; either end may be left out) or ``A`` of a file of
+    ``count`` frames; ``ParticleFileError`` naming the file for a range past its end."""
+    from embree_rt.cli.errors import UsageError
+    from embree_rt.scene.particles import ParticleFileError
+
+    if text is None:
+        return range(count)
+    parts = text.split(":")
+    try:
+        numbers = [int(p) if p.strip() else None for p in parts]
+    except ValueError:
+        raise UsageError(f"--frames: expected A:B[:STEP] (frame numbers), got {text!r}") from None
+    if len(numbers) > 3 or (len(numbers) == 3 and (numbers[2] or 1) < 1):
+        raise UsageError(f"--frames: expected A:B[:STEP] with STEP >= 1, got {text!r}")
+    start = numbers[0] or 0
+    stop = (numbers[1] if numbers[1] is not None else count) if len(numbers) > 1 else start + 1
+    step = (numbers[2] or 1) if len(numbers) == 3 else 1
+    if not 0 <= start < stop <= count:
+        raise ParticleFileError(
+            path, "--frames", f"{text!r} is not a non-empty range within its frames 0:{count}"
+        )
+    return range(start, stop, step)
+
+
+def particle_summary(frame) -> dict:
+    """What ``info`` says of a ``ParticleFrame``: count, kinds with their counts, bounds,
+    frames, box."""
+    kind, labels = frame.labels()
+    import numpy as np
+
+    names, counts = np.unique(labels, return_counts=True)
+    summary = {
+        "file": frame.path,
+        "particles": len(frame),
+        "frames": frame.frame_count,
+        "frame": frame.frame,
+        "labelled_by": kind,
+        kind + "s": {str(n): int(c) for n, c in zip(names, counts, strict=True)},
+        "bounds": [frame.positions.min(axis=0).tolist(), frame.positions.max(axis=0).tolist()],
+        "box": None if frame.box is None else frame.box.tolist(),
+        "box_origin": None if frame.box is None else frame.origin.tolist(),
+        "radii": None
+        if frame.radii is None
+        else [float(frame.radii.min()), float(frame.radii.max())],
+        "properties": sorted(frame.properties),
+    }
+    if kind == "element" and frame.types is not None:
+        import numpy as np
+
+        names, counts = np.unique(frame.types, return_counts=True)
+        summary["types"] = {str(n): int(c) for n, c in zip(names, counts, strict=True)}
+    return summary
+
+
+def command_particle_info(args: argparse.Namespace) -> None:
+    """``embree-rt info FILE [--json]`` of a particle file."""
+    from embree_rt.scene.particles import read_particles
+
+    frame = read_particles(args.scene, frame=args.frame, topology=args.topology)
+    summary = particle_summary(frame)
+    if args.json:
+        print(json.dumps(summary))
+        return
+    for key, value in summary.items():
+        print(f"{key + ':':<12}{value}")

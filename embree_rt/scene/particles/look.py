@@ -1,0 +1,148 @@
+"""What each particle is drawn with: a colour (8-bit sRGB, 3 bytes a particle) and a radius,
+by element (Jmol colours, van der Waals radii: ASE's tables), by type (matplotlib's tab10),
+by a property through a matplotlib colormap, or one for all."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from embree_rt.scene.errors import warn_input
+from embree_rt.scene.particles.errors import ParticleFileError
+from embree_rt.scene.particles.frame import ParticleFrame
+
+# A particle whose element is unknown, and a type's radius when nothing else gives one (LAMMPS'
+# reduced units: particles of diameter 1).
+UNKNOWN_COLOR = (0.75, 0.4, 0.75)
+UNKNOWN_ELEMENT_RADIUS = 1.5
+TYPE_RADIUS = 0.5
+TYPE_PALETTE = "tab10"
+
+
+@dataclass(frozen=True)
+class ParticleLook:
+    """How particles are coloured and sized.
+
+    ``color_by``: "element", "type", a property's name, or None for the default (element where
+    the file names elements, else type); ``color``: one sRGB colour (0..1) for all, overriding
+    ``color_by``; ``colormap`` and ``value_range`` (low, high; None: the frame's own) for a
+    property; ``radius`` one radius for all (else the file's radius column, else by element or
+    type), times ``radius_scale``."""
+
+    color_by: str | None = None
+    color: tuple[float, float, float] | None = None
+    colormap: str = "viridis"
+    value_range: tuple[float, float] | None = None
+    radius: float | None = None
+    radius_scale: float = 1.0
+
+
+def to_srgb8(colors: np.ndarray) -> np.ndarray:
+    """(n, 3) uint8 of (n, 3) sRGB values in 0..1."""
+    return np.clip(np.rint(np.asarray(colors, np.float64) * 255.0), 0, 255).astype(np.uint8)
+
+
+def natural_order(labels: np.ndarray) -> np.ndarray:
+    """The distinct ``labels`` (n,) str, numbers in numeric order ("2" before "10")."""
+    names = np.unique(labels)
+    return np.array(sorted(names, key=lambda s: (0, int(s), "") if s.isdigit() else (1, 0, s)))
+
+
+def element_table(symbols: np.ndarray, path: str) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 3) sRGB colours and (k,) radii of the distinct ``symbols`` (k,) str: Jmol's colours
+    and the van der Waals radii (covalent where ASE has no van der Waals), from ASE; an unknown
+    symbol takes ``UNKNOWN_COLOR`` and ``UNKNOWN_ELEMENT_RADIUS``, said in one warning."""
+    from ase.data import atomic_numbers, covalent_radii, vdw_radii
+    from ase.data.colors import jmol_colors
+
+    colors = np.empty((len(symbols), 3))
+    radii = np.empty(len(symbols))
+    unknown = []
+    for i, symbol in enumerate(symbols):
+        number = atomic_numbers.get(symbol.capitalize())
+        if number is None:
+            unknown.append(symbol)
+            colors[i], radii[i] = UNKNOWN_COLOR, UNKNOWN_ELEMENT_RADIUS
+            continue
+        colors[i] = jmol_colors[number]
+        radius = vdw_radii[number]
+        radii[i] = radius if np.isfinite(radius) else covalent_radii[number]
+    if unknown:
+        warn_input(
+            f"{path}: unknown element(s) {', '.join(map(repr, unknown))}: drawn in the default "
+            f"colour {UNKNOWN_COLOR} with radius {UNKNOWN_ELEMENT_RADIUS}"
+        )
+    return colors, radii
+
+
+def particle_look(frame: ParticleFrame, look: ParticleLook) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) uint8 sRGB colours and (n,) float64 radii of ``frame``'s particles by ``look``.
+    Raises ``ParticleFileError`` for a property or label the file does not have."""
+    kind, labels = frame.labels()
+    label_colors, radii = label_look(frame.path, kind, labels)
+    if frame.radii is not None:
+        radii = frame.radii
+    if look.radius is not None:
+        radii = np.full(len(frame), float(look.radius))
+    radii = np.asarray(radii, np.float64) * look.radius_scale
+    by = look.color_by or kind
+    if look.color is not None:
+        colors = np.broadcast_to(to_srgb8(np.asarray(look.color)[None]), (len(frame), 3)).copy()
+    elif by == kind:
+        colors = to_srgb8(label_colors)
+    elif by in ("element", "type"):
+        values = frame.elements if by == "element" else frame.types
+        if values is None:
+            raise ParticleFileError(frame.path, "--color-by", f"the file names no {by}s")
+        colors = to_srgb8(label_look(frame.path, by, values)[0])
+    elif by in frame.properties:
+        colors = colormap_colors(frame.properties[by], look.colormap, look.value_range)
+    else:
+        known = ", ".join(["element", "type", *frame.properties])
+        raise ParticleFileError(
+            frame.path, "--color-by", f"no property {by!r} in the file (it has: {known})"
+        )
+    return colors, radii
+
+
+def label_look(path: str, kind: str, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) float64 sRGB colours and (n,) float64 radii of (n,) ``labels`` of ``kind``
+    ("element": ``element_table``; "type": tab10 in the types' natural order, ``TYPE_RADIUS``)."""
+    names, inverse = np.unique(labels, return_inverse=True)
+    if kind == "element":
+        colors, radii = element_table(names, path)
+    else:
+        position = {name: i for i, name in enumerate(natural_order(labels))}
+        colors = _palette(len(position))[[position[name] for name in names]]
+        radii = np.full(len(names), TYPE_RADIUS)
+    return colors[inverse], radii[inverse]
+
+
+def _palette(count: int) -> np.ndarray:
+    import matplotlib
+
+    base = np.asarray(matplotlib.colormaps[TYPE_PALETTE].colors, np.float64)[:, :3]
+    return base[np.arange(count) % len(base)]
+
+
+def colormap_colors(
+    values: np.ndarray, colormap: str, value_range: tuple[float, float] | None
+) -> np.ndarray:
+    """(n, 3) uint8 sRGB of (n,) ``values`` through matplotlib's ``colormap``, ``value_range``
+    (low, high) mapped to its ends (None: the values' own finite range)."""
+    import matplotlib
+
+    try:
+        cmap = matplotlib.colormaps[colormap]
+    except KeyError:
+        raise ValueError(f"--colormap: unknown colormap {colormap!r}") from None
+    values = np.asarray(values, np.float64)
+    if value_range is None:
+        finite = values[np.isfinite(values)]
+        low, high = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
+    else:
+        low, high = value_range
+    span = high - low
+    scaled = (values - low) / span if span > 0 else np.full(len(values), 0.5)
+    return to_srgb8(cmap(np.clip(scaled, 0.0, 1.0))[:, :3])

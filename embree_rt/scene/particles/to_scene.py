@@ -1,0 +1,117 @@
+"""A particle frame as spheres in the renderer's world: selected, wrapped into its box, turned
+so the file's up axis is the renderer's +y, coloured and sized (``look``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from embree_rt.scene.particles.errors import ParticleFileError
+from embree_rt.scene.particles.frame import ParticleFrame
+from embree_rt.scene.particles.look import ParticleLook, particle_look
+
+# Rotations (det +1) taking a file's up axis to the renderer's +y (its floor is y = height).
+UP_ROTATIONS = {
+    "x": np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]),
+    "y": np.eye(3),
+    "z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
+}
+
+
+def as_frame(particles) -> ParticleFrame:
+    """A ``ParticleFrame`` of a ``ParticleFrame``, an ``ase.Atoms`` or an MDAnalysis
+    ``AtomGroup`` (or ``Universe``). TypeError for anything else."""
+    if isinstance(particles, ParticleFrame):
+        return particles
+    kind = type(particles).__module__.split(".")[0]
+    if kind == "ase":
+        frame = ParticleFrame(
+            path="ase.Atoms",
+            positions=np.asarray(particles.get_positions(), np.float64),
+            elements=np.asarray(particles.get_chemical_symbols(), dtype=str),
+        )
+        if np.any(particles.cell[:]):
+            frame.box = np.asarray(particles.cell[:], np.float64)
+        return frame
+    if kind == "MDAnalysis":
+        atoms = getattr(particles, "atoms", particles)
+        frame = ParticleFrame(
+            path="MDAnalysis.AtomGroup", positions=np.asarray(atoms.positions, np.float64)
+        )
+        if hasattr(atoms, "types"):
+            frame.types = np.asarray(atoms.types, dtype=str)
+        if hasattr(atoms, "elements") and np.all(np.asarray(atoms.elements, str) != ""):
+            frame.elements = np.char.capitalize(np.asarray(atoms.elements, dtype=str))
+        if hasattr(atoms, "radii"):
+            frame.radii = np.asarray(atoms.radii, np.float64)
+        frame.source = atoms.universe
+        return frame
+    raise TypeError(
+        "particles: expected a ParticleFrame, an ase.Atoms or an MDAnalysis AtomGroup, "
+        f"got {type(particles).__name__}"
+    )
+
+
+def selected(frame: ParticleFrame, expression: str) -> ParticleFrame:
+    """The particles MDAnalysis's selection ``expression`` picks ("not resname SOL", "type 1
+    2", "element O"; a frame not read by MDAnalysis is given a Universe of its types,
+    elements and positions). ``ParticleFileError`` for a selection it cannot parse or one
+    that keeps nothing."""
+    import MDAnalysis
+
+    universe = frame.source
+    if not isinstance(universe, MDAnalysis.Universe) or len(universe.atoms) != len(frame):
+        universe = MDAnalysis.Universe.empty(len(frame), trajectory=True)
+        universe.atoms.positions = frame.positions
+        _, labels = frame.labels()
+        universe.add_TopologyAttr("types", frame.types if frame.types is not None else labels)
+        universe.add_TopologyAttr("names", labels)
+        if frame.elements is not None:
+            universe.add_TopologyAttr("elements", frame.elements)
+    try:
+        indices = universe.select_atoms(expression).indices
+    except Exception as error:  # MDAnalysis raises SelectionError, ValueError...
+        raise ParticleFileError(frame.path, "--select", " ".join(str(error).split())) from None
+    if len(indices) == 0:
+        raise ParticleFileError(frame.path, "--select", f"{expression!r} keeps no particles")
+    return frame.subset(np.sort(indices))
+
+
+def wrapped(frame: ParticleFrame) -> np.ndarray:
+    """(n, 3) float64 positions put into the frame's periodic box (fractional coordinates
+    taken modulo 1). ``ParticleFileError`` when the file gives no box."""
+    if frame.box is None or abs(np.linalg.det(frame.box)) == 0:
+        raise ParticleFileError(frame.path, "--wrap", "the file gives no periodic box")
+    fractions = np.linalg.solve(frame.box.T, (frame.positions - frame.origin).T).T
+    return frame.origin + (fractions - np.floor(fractions)) @ frame.box
+
+
+def particle_spheres(
+    particles,
+    look: ParticleLook | None = None,
+    up: str = "z",
+    select: str | None = None,
+    wrap: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """(n, 3) float64 centres in the renderer's world, (n,) float64 radii, (n, 3) uint8 sRGB
+    colours of ``particles`` (``as_frame``), and a note saying what was drawn."""
+    if up not in UP_ROTATIONS:
+        raise ValueError(f"up: expected one of x, y, z, got {up!r}")
+    frame = as_frame(particles)
+    if select:
+        frame = selected(frame, select)
+    positions = wrapped(frame) if wrap else frame.positions
+    colors, radii = particle_look(frame, look or ParticleLook())
+    bad = ~(np.isfinite(radii) & (radii > 0))
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise ParticleFileError(
+            frame.path, "radius", f"particle {row}: {radii[row]:g} is not positive"
+        )
+    centers = positions @ UP_ROTATIONS[up].T
+    kind, _ = frame.labels()
+    by = (look.color_by if look else None) or kind
+    note = (
+        f"particles: {len(frame):,} from {frame.path} (frame {frame.frame} of "
+        f"{frame.frame_count}), coloured by {by}, {up} up"
+    )
+    return centers, radii, colors, note
