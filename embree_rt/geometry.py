@@ -433,8 +433,12 @@ class SceneGeometry(Closing):
             getattr(full, name)[rows] = getattr(compact, name)
         for name in ("position", "normal", "face_normal"):
             getattr(full, name)[:, rows] = getattr(compact, name)
-        if len(compact.looks.rows):
-            full.colored, full.color = rows[compact.looks.rows], compact.looks.color
+        own = [(compact.painted, compact.paint)]  # spheres' own colours, then meshes' looks
+        if len(compact.looks.rows) and compact.looks.color is not None:
+            own.append((compact.looks.rows, compact.looks.color))
+        if any(len(columns) for columns, _ in own):
+            full.colored = rows[np.concatenate([columns for columns, _ in own])]
+            full.color = np.concatenate([color for _, color in own], axis=1)
         return full
 
     def intersect_compact(
