@@ -247,6 +247,12 @@ def camera_data(frame: CameraFrame) -> dict[str, np.ndarray]:
     }
 
 
+def projection_name(frame: CameraFrame) -> str:
+    """How ``frame`` projects, as the camera files name it: "perspective" (K divides by z) or
+    "orthographic" (K affine: pixel = K (x, y, 1), fx and fy in pixels per world unit)."""
+    return "orthographic" if frame.orthographic else "perspective"
+
+
 def camera_json_path(path: str | os.PathLike) -> Path:
     """The camera sidecar of the image ``path``: ``render.camera.json`` beside ``render.png``."""
     target = Path(path)
@@ -259,6 +265,7 @@ def _camera_json(frame: CameraFrame) -> bytes:
     record = {
         "width": frame.width,
         "height": frame.height,
+        "projection": projection_name(frame),
         **{name: matrix.tolist() for name, matrix in camera_data(frame).items()},
     }
     return (json.dumps(record, indent=2) + "\n").encode()
@@ -271,17 +278,17 @@ def nerf_transforms(views: list[tuple[Path, CameraFrame]], folder: Path) -> dict
     ``fl_x``, ``fl_y``, ``cx``, ``cy``, ``w``, ``h`` (pixels, centres at c + 1/2 as those tools
     place them), and ``frames[]`` of ``file_path`` and ``transform_matrix``, camera-to-world in
     OpenGL's convention (``camera.camera_to_world_opengl``); a frame whose field of view
-    differs from the first's carries its own ``camera_angle_x``, ``fl_x`` and ``fl_y``."""
+    differs from the first's carries its own ``camera_angle_x``, ``fl_x`` and ``fl_y``.
+    ``projection`` names how the first frame projects (``projection_name``); an orthographic
+    frame has no angle of view (``camera_angle_x`` left out) and its ``fl_x``, ``fl_y`` are
+    pixels per world unit."""
     import math
     import os
 
     def lens(frame: CameraFrame) -> dict:
         K = intrinsics(frame)
-        return {
-            "camera_angle_x": 2.0 * math.atan(frame.half_width),
-            "fl_x": K[0, 0],
-            "fl_y": K[1, 1],
-        }
+        angle = {} if frame.orthographic else {"camera_angle_x": 2.0 * math.atan(frame.half_width)}
+        return {**angle, "fl_x": K[0, 0], "fl_y": K[1, 1]}
 
     first = views[0][1]
     K = intrinsics(first)
@@ -300,6 +307,7 @@ def nerf_transforms(views: list[tuple[Path, CameraFrame]], folder: Path) -> dict
         "cy": K[1, 2] + 0.5,
         "w": first.width,
         "h": first.height,
+        "projection": projection_name(first),
         "frames": frames,
     }
 

@@ -22,8 +22,9 @@ from embree_rt.batches import batch_ranges, ordered_results, worker_count
 from embree_rt.camera import CameraFrame, camera_rays, sample_rays, tiled_samples
 from embree_rt.closing import Closing
 from embree_rt.columns import column_max, scatter, scatter_add
+from embree_rt.compiled import camera_rays as compiled_rays
 from embree_rt.compiled import retain_freed_memory
-from embree_rt.compiled.camera_rays import CameraRays, sample_directions
+from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.film import Film, FilmBlock
 from embree_rt.geometry import SceneGeometry, SurfaceHits
 from embree_rt.materials import MaterialTable, shading_shares
@@ -349,8 +350,7 @@ class Integrator(Closing):
         intersect_camera = getattr(self.geometry, "intersect_camera", None)
         if intersect_camera is not None:
             return intersect_camera(camera, index, **self._without_ids())
-        directions = sample_directions(camera, index)
-        origins = np.repeat(camera.origin[:, None], len(index), axis=1)
+        origins, directions = compiled_rays.sample_rays(camera, index)
         rows, surfaces = self.geometry.intersect_compact(origins, directions, coherent=True)
         return rows, surfaces, directions
 

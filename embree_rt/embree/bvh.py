@@ -589,7 +589,8 @@ class BVH(Closing):
         index = np.ascontiguousarray(index, np.int64)
         n = len(index)
         directions = np.empty((3, n), np.float32)
-        rays = camera_query.camera_query_rays(camera.origin, directions)
+        origins = np.empty((3, n), np.float32) if camera.orthographic else None
+        rays = camera_query.camera_query_rays(camera.origin, directions, origins)
         hits = self._empty_hits(n)
         if n:
             arguments = (
@@ -597,6 +598,7 @@ class BVH(Closing):
                 camera,
                 index,
                 directions,
+                origins,
                 rays,
                 self._nearest(hits),
                 self._copy_numbers(hits),
@@ -604,7 +606,8 @@ class BVH(Closing):
             self._run_query(
                 camera_query.intersect_camera_chunk, camera_query.intersect_camera, arguments, n
             )
-        origins = np.broadcast_to(camera.origin[:, None], (3, n))
+        if origins is None:
+            origins = np.broadcast_to(camera.origin[:, None], (3, n))
         records = self._records(origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
         return records, directions
 

@@ -367,11 +367,17 @@ class SceneReader:
         return value
 
     def _camera(self, table: Table, current: Camera) -> Camera:
+        if table.has("fov") and table.has("view_height"):
+            raise table.error(
+                "view_height", "an orthographic camera's view_height and fov cannot both be set"
+            )
         camera = Camera(
             position=table.vector("position", current.position),
             look_at=table.vector("look_at", current.look_at),
             up=table.vector("up", current.up),
             fov=table.number("fov", current.fov),
+            projection=table.string("projection", current.projection),
+            view_height=table.number("view_height", current.view_height),
         )
         table.finish()
         # The rule the renderer's camera follows, so that a scene which loads also renders.

@@ -85,6 +85,7 @@ def look_document(scene: Scene) -> dict:
             "look_at": list(scene.camera.look_at),
             "up": list(scene.camera.up),
             "fov": float(scene.camera.fov),
+            "projection": scene.camera.projection,
         },
         "background": {
             "horizon": list(scene.background.horizon),
@@ -95,6 +96,9 @@ def look_document(scene: Scene) -> dict:
             for lt in scene.lights
         ],
     }
+    if scene.camera.view_height is not None:
+        del document["camera"]["fov"]
+        document["camera"]["view_height"] = float(scene.camera.view_height)
     materials = {
         name: _material_dict(material)
         for name, material in scene.materials.items()
