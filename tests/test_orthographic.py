@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from embree_rt.camera import (
 from embree_rt.geometry import SceneGeometry
 from embree_rt.scene.errors import SceneError
 from embree_rt.scene.loader import load_scene
+from embree_rt.scene.views import STANDARD_VIEWS, standard_view
 
 ORTHO = Camera(
     position=(3.0, 4.0, 9.0),
@@ -161,3 +163,64 @@ def test_a_scene_file_sets_the_projection_and_refuses_fov_with_view_height(tmp_p
     for text, problem in bad.items():
         with pytest.raises(SceneError, match=problem):
             load_scene_text(tmp_path, "[camera]\n" + text)
+
+
+@pytest.mark.parametrize("up", [(0.0, 1.0, 0.0), (0.0, 0.0, 1.0)])
+@pytest.mark.parametrize("name", STANDARD_VIEWS)
+@pytest.mark.parametrize("orthographic", [True, False])
+def test_standard_views_look_along_the_up_conventions_axes_and_frame_the_box(
+    up, name: str, orthographic: bool
+) -> None:
+    low, high = np.array([-1.0, 0.5, 2.0]), np.array([3.0, 1.5, 2.5])
+    camera = standard_view(Camera(up=up), low, high, name, 16 / 9, orthographic)
+    frame = camera_frame(camera, 160, 90)
+    up_axis = np.asarray(up)
+    back = np.cross([1.0, 0.0, 0.0], up_axis)  # y-up: +z; z-up: -y (OVITO's front looks down +y)
+    expected = {
+        "front": -back,
+        "back": back,
+        "left": np.array([1.0, 0.0, 0.0]),
+        "right": np.array([-1.0, 0.0, 0.0]),
+        "top": -up_axis,
+        "bottom": up_axis,
+        "iso": -(np.array([1.0, 0.0, 0.0]) + up_axis + back) / math.sqrt(3),
+    }[name]
+    np.testing.assert_allclose(-frame.w, expected, atol=1e-12)
+    assert frame.orthographic == orthographic
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)])
+    corners = low + corners * (high - low)
+    # every corner in front of the camera and inside the image, the box not a speck in it
+    relative = corners - frame.origin
+    depth = relative @ -frame.w
+    assert (depth > 0).all()
+    x, y = relative @ frame.u, relative @ frame.v
+    if not orthographic:
+        x, y = x / depth, y / depth
+    reach = max(np.abs(x).max() / frame.half_width, np.abs(y).max() / frame.half_height)
+    assert reach < 1.0
+    assert reach > (0.85 if orthographic else 0.3)
+
+
+def test_the_command_line_frames_a_standard_view_and_names_its_projection(tmp_path, capsys) -> None:
+    from embree_rt.cli import main
+
+    scene = Path(__file__).resolve().parent.parent / "scenes" / "three_spheres.toml"
+    common = ["render", str(scene), "--width", "24", "--height", "16", "--spp", "1", "--quiet"]
+    for flags, projection in (
+        (["--view", "top"], "orthographic"),
+        (["--view", "top", "--perspective"], "perspective"),
+        (["--ortho"], "orthographic"),
+    ):
+        out = tmp_path / f"{projection}{len(flags)}.npz"
+        assert main([*common, *flags, "-o", str(out), "--aov", "depth"]) == 0
+        record = json.loads(out.with_name(out.stem + ".camera.json").read_text())
+        assert record["projection"] == projection
+        if flags[0] == "--view":  # looking straight down the scene's y
+            np.testing.assert_allclose(
+                np.array(record["world_to_camera_opengl"])[2, :3], [0, 1, 0], atol=1e-12
+            )
+    # fov and view_height together: the scene file's rule, one line, exit 2, nothing written
+    out = tmp_path / "refused.png"
+    code = main([*common, "--ortho", "-D", "camera.view_height=2", "--fov", "30", "-o", str(out)])
+    assert code == 2 and not out.exists()
+    assert "view_height" in capsys.readouterr().err

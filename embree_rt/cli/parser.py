@@ -147,7 +147,12 @@ class SetKey(argparse.Action):
                 raise argparse.ArgumentError(self, str(error)) from None
         else:
             words = values if isinstance(values, list) else [values]
-            value = [parse_value(word) for word in words] if self.nargs else parse_value(values)
+            if self.nargs == 0:  # a flag standing for one value of its key: --ortho
+                value = self.const
+            elif self.nargs:
+                value = [parse_value(word) for word in words]
+            else:
+                value = parse_value(values)
             setting = Setting(self.key, value, " ".join([option_string, *words]))
         namespace.settings = (*namespace.settings, setting)
 
@@ -201,6 +206,20 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
         help="the display curve: a 2.2 power, or sRGB's piecewise curve "
         "(render.transfer)" + SCENE_DEFAULT + ", else gamma2.2",
     )
+    for flag, projection in (("--ortho", "orthographic"), ("--perspective", "perspective")):
+        parser.add_argument(
+            flag,
+            action=SetKey,
+            key="camera.projection",
+            nargs=0,
+            const=projection,
+            help=f'a {projection} camera (camera.projection = "{projection}")'
+            + (
+                ", its view_height from camera.view_height or else what fov sees at look_at"
+                if projection == "orthographic"
+                else ", also with --view"
+            ),
+        )
     for flag, key in (("--camera-position", "camera.position"), ("--look-at", "camera.look_at")):
         parser.add_argument(
             flag,
@@ -245,6 +264,14 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         "file each beside a .png or .npy",
     )
     add_setting_flags(parser)
+    from embree_rt.scene.views import STANDARD_VIEWS
+
+    parser.add_argument(
+        "--view",
+        choices=STANDARD_VIEWS,
+        help="a standard view framing the scene's bounds along an axis of its up convention, "
+        "orthographic unless --perspective",
+    )
     parser.add_argument(
         "-t",
         "--threads",

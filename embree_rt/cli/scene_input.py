@@ -43,11 +43,35 @@ def read_scene(args: argparse.Namespace) -> tuple[Scene, Path | Scene]:
     if is_mesh_file(path):
         scene = Scene.from_file(path, floor=not args.no_floor)
         apply_to_scene(scene, settings, str(path))
-        return scene, scene
+        return with_view(scene, args), scene
     if args.no_floor:
         settings.append(Setting("floor", False, "--no-floor"))
     scene = load_scene_with(path, settings)
+    if getattr(args, "view", None) is not None:
+        return with_view(scene, args), scene
     return scene, (path if only_render_settings(settings) else scene)
+
+
+def with_view(scene: Scene, args: argparse.Namespace) -> Scene:
+    """``scene`` with its camera turned to ``args.view`` (``scene.views.standard_view``) of
+    the scene's bounds, orthographic unless ``--perspective`` came last of the projection
+    flags; the scene as it is without ``--view``."""
+    view = getattr(args, "view", None)
+    if view is None:
+        return scene
+    from embree_rt.cli.info import scene_bounds
+    from embree_rt.scene.errors import SceneError
+    from embree_rt.scene.views import standard_view
+
+    bounds = scene_bounds(scene)
+    if bounds is None:
+        where = getattr(args, "scene", None) or "the scene"
+        raise SceneError(where, "(file)", f"--view {view}: the scene has nothing to frame")
+    projections = [s.value for s in args.settings if s.key == "camera.projection"]
+    orthographic = not projections or projections[-1] == "orthographic"
+    aspect = scene.render.width / scene.render.height
+    scene.camera = standard_view(scene.camera, *bounds, view, aspect, orthographic)
+    return scene
 
 
 def only_render_settings(settings) -> bool:
