@@ -468,6 +468,7 @@ def id_listing(scene: Scene, floor_material: int) -> list[str]:
     lines = [
         f"object ids: spheres {span(0, spheres)} in scene order, mesh placements "
         f"{span(first_mesh, len(placements))}, instances {span(first_copy, copies)}, "
+        f"curve sets {span(first_copy + copies, len(scene.curves))}, "
         f"floor {FLOOR_ID}, nothing {NOTHING_ID}"
     ]
     for index in range(min(spheres, LISTED_PER_KIND)):

@@ -154,6 +154,7 @@ class SceneGeometry(Closing):
         self._arrays: list[tuple[int, list[int], np.ndarray, bool]] = []
         # Object id of each instance geometry's first copy, by geometry id (Scene.object_id_starts)
         self._object_start: dict[int, int] = {}
+        self._curve_geom_ids: list[int] = []
         self.triangle_count = 0
         self.instance_count = 0
         try:
@@ -169,6 +170,7 @@ class SceneGeometry(Closing):
                 scene.sphere_radii = np.zeros(0, np.float32)  # would keep the arrays)
                 scene.sphere_materials = np.zeros(0, np.int32)
             self._add_meshes(scene)
+            self._add_curves(scene)
             self.bvh.commit()
             self._finish_tables()
         except BaseException:
@@ -293,6 +295,26 @@ class SceneGeometry(Closing):
             looks.append(MeshObject(mesh=entry.mesh, mesh_colors=entry.mesh_colors))
         self.mesh_colors = MeshColors(looks, geom_ids)
 
+    def _add_curves(self, scene: Scene) -> None:
+        """Each curve set as a BVH of its own placed once (identity): its hits then carry the
+        instance's id, which names the set, its material and scale as a mesh placement's do;
+        ``instance_child`` stays -1, so no mesh lookup reads them."""
+        self.curve_segment_count = 0
+        for curves, object_id in zip(scene.curves, scene.curve_ids(), strict=True):
+            child = BVH(threads=self.bvh.threads)
+            self._children.append(child)
+            child.add_curves(curves.points, curves.radii, curves.starts)
+            child.commit()
+            geom_id = self.bvh.add_instance(child, np.eye(4))
+            self._curve_geom_ids.append(geom_id)
+            self._instance_geom_ids.append(geom_id)
+            self._instance_child.append(-1)
+            self._instance_material.append(scene.material_index(curves.material))
+            self._instance_smooth.append(False)
+            self._instance_scale.append(child.coordinate_bound)
+            self._object_start[geom_id] = int(object_id)
+            self.curve_segment_count += len(curves)
+
     def _finish_tables(self) -> None:
         size = self.bvh.geometry_count
         self.instance_child = np.full(size, -1, np.int32)
@@ -336,7 +358,8 @@ class SceneGeometry(Closing):
             instance_labels=instance_labels,
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
-        self.has_meshes = self.instance_count > 0
+        # curves' hits carry instance ids too (their object ids and materials read them)
+        self.has_meshes = self.instance_count > 0 or bool(self._curve_geom_ids)
         self.object_start = np.full(size, -1, np.int64)
         for geom_id, start in self._object_start.items():
             self.object_start[geom_id] = start
@@ -464,6 +487,9 @@ class SceneGeometry(Closing):
         (k,) the instance within an instance array (-1 for other hits)."""
         smooth = self.instance_smooth[inst]
         child = self.instance_child[inst]
+        # hits on curves (no mesh: child -1) read mesh 0's face 0, and keep their face normal
+        prim = np.where(child >= 0, prim, 0)
+        child = np.maximum(child, 0)
         if self._arrays:
             position = self.bvh.instance_children(inst, inst_prim)
             in_array = position >= 0

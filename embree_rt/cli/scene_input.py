@@ -59,9 +59,8 @@ def with_view(scene: Scene, args: argparse.Namespace) -> Scene:
     view = getattr(args, "view", None)
     if view is None:
         return scene
-    from embree_rt.cli.info import scene_bounds
     from embree_rt.scene.errors import SceneError
-    from embree_rt.scene.views import standard_view
+    from embree_rt.scene.views import scene_bounds, standard_view
 
     bounds = scene_bounds(scene)
     if bounds is None:

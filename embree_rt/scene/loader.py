@@ -226,6 +226,7 @@ class SceneReader:
         self.sphere_arrays = [self._sphere_array(t) for t in root.tables("sphere_arrays")]
         self.meshes = [self._mesh(t) for t in root.tables("meshes")]
         self.instances = [self._instances(t) for t in root.tables("instances")]
+        self.curves = [self._curves(t) for t in root.tables("curves")]
         root.finish()
 
     def named_files(self) -> list[Path]:
@@ -319,6 +320,8 @@ class SceneReader:
                     entry.material if materials is None else materials,
                     entry.smooth,
                 )
+        for points, radii, material, color in self.curves:
+            scene.add_curves(points, radii, material, color=color)
         return scene
 
     # -- sections -----------------------------------------------------------------------------
@@ -469,6 +472,42 @@ class SceneReader:
         material = self._material_name(table)
         table.finish()
         return center, radius, material
+
+    def _curves(self, table: Table) -> tuple[np.ndarray, np.ndarray, str, tuple | None]:
+        """A polyline of round tubes: ``points`` (at least two [x, y, z]), ``radius`` (one for
+        all) or ``radii`` (one a point), ``material``, and ``color`` (the material in that
+        colour). Checked here by the rules ``Scene.add_curves`` applies."""
+        points = table.raw("points")
+        if points is None:
+            table.require("points")
+        if not isinstance(points, list) or len(points) < 2:
+            raise table.error(
+                "points", f"expected a list of at least two [x, y, z], got {points!r}"
+            )
+        for row, point in enumerate(points):
+            if not (
+                isinstance(point, list)
+                and len(point) == 3
+                and all(isinstance(c, int | float) and not isinstance(c, bool) for c in point)
+            ):
+                raise table.error("points", f"row {row}: expected [x, y, z], got {point!r}")
+        points = np.array(points, np.float64)
+        if table.has("radius") == table.has("radii"):
+            raise table.error("radius", "give radius (one for all points) or radii (one a point)")
+        if table.has("radius"):
+            radii = np.full(len(points), table.number("radius", low=MIN_LENGTH))
+        else:
+            values = table.raw("radii")
+            if not isinstance(values, list) or len(values) != len(points):
+                raise table.error("radii", f"expected {len(points)} numbers, one a point")
+            if not all(isinstance(r, int | float) and not isinstance(r, bool) for r in values):
+                raise table.error("radii", f"expected numbers, got {values!r}")
+            radii = np.array(values, np.float64)
+        if (problem := spheres_problem(points, radii)) is not None:
+            raise table.error("points", problem.replace("centers", "points", 1))
+        entry = (points, radii, self._material_name(table), table.color("color"))
+        table.finish()
+        return entry
 
     def _file(self, table: Table) -> Path:
         return (self.base / table.file_name("file")).resolve()

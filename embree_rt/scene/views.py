@@ -15,10 +15,45 @@ from dataclasses import replace
 import numpy as np
 
 from embree_rt.camera import Camera
+from embree_rt.scene.model import Scene
 
 STANDARD_VIEWS = ("top", "bottom", "front", "back", "left", "right", "iso")
 # The framed box fills this share of the image's height or width, whichever it reaches first.
 FILL = 1.0 / 1.08
+
+
+def scene_bounds(scene: Scene) -> tuple[np.ndarray, np.ndarray] | None:
+    """(3,) float64 low and high corners of everything in ``scene`` but the floor, or None
+    when it is empty."""
+    lows, highs = [], []
+    if len(scene.sphere_radii):
+        radius = scene.sphere_radii[:, None]
+        lows.append((scene.sphere_centers - radius).min(axis=0))
+        highs.append((scene.sphere_centers + radius).max(axis=0))
+    for placement in scene.meshes:
+        corners = placement.mesh.bounds
+        box = np.array(
+            [[x, y, z, 1.0] for x in corners[:, 0] for y in corners[:, 1] for z in corners[:, 2]]
+        )
+        world = box @ placement.transform.T
+        lows.append(world[:, :3].min(axis=0))
+        highs.append(world[:, :3].max(axis=0))
+    for entry in scene.instances:
+        corners = entry.mesh.bounds
+        box = np.array(
+            [[x, y, z] for x in corners[:, 0] for y in corners[:, 1] for z in corners[:, 2]]
+        )
+        world = np.einsum("nij,kj->nki", entry.transforms[:, :3, :3], box)
+        world += entry.transforms[:, None, :3, 3]
+        lows.append(world.min(axis=(0, 1)))
+        highs.append(world.max(axis=(0, 1)))
+    for curves in scene.curves:
+        radius = curves.radii[:, None]
+        lows.append((curves.points - radius).min(axis=0))
+        highs.append((curves.points + radius).max(axis=0))
+    if not lows:
+        return None
+    return np.min(lows, axis=0), np.max(highs, axis=0)
 
 
 def view_axes(up: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -16,7 +16,7 @@ import numpy as np
 
 from embree_rt.materials import PRESETS, Material
 from embree_rt.scene.animation import animation_document
-from embree_rt.scene.model import Scene
+from embree_rt.scene.model import CurveSet, Scene
 
 
 def scene_document(scene: Scene, path: Path) -> dict:
@@ -73,7 +73,31 @@ def scene_document(scene: Scene, path: Path) -> dict:
                 }
             )
         document["instances"] = entries
+    if scene.curves:
+        document["curves"] = [
+            {"points": points, "radii": radii, "material": curves.material}
+            for curves in scene.curves
+            for points, radii in polylines(curves)
+        ]
     return document
+
+
+def polylines(curves: CurveSet) -> list[tuple[list, list]]:
+    """The polylines of a curve set, each (points, radii) as lists: the runs of its segments
+    whose starts follow one another (a file's ``[[curves]]`` entry holds one polyline, so a
+    set of separate segments is written as one entry each)."""
+    starts = np.sort(curves.starts)
+    if not len(starts):
+        return []
+    breaks = np.flatnonzero(np.diff(starts) != 1) + 1
+    runs = np.split(starts, breaks)
+    return [
+        (
+            curves.points[run[0] : run[-1] + 2].astype(float).tolist(),
+            curves.radii[run[0] : run[-1] + 2].astype(float).tolist(),
+        )
+        for run in runs
+    ]
 
 
 def look_document(scene: Scene) -> dict:
