@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from embree_rt.ambient_occlusion import plane_blocks
 from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.embree import BVH, HitLabels, HitRecords, spheres_in_spatial_order
@@ -515,6 +516,15 @@ class SceneGeometry(Closing):
         """(k,) bool: whether any surface, floor included, lies between each of the ``points``
         (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``BVH.occluded_toward``."""
         return self.bvh.occluded_toward(points, rows, target, plane_y=self.labels.plane_y)
+
+    def occluded_rays(
+        self, origins: np.ndarray, directions: np.ndarray, distance: float
+    ) -> np.ndarray:
+        """(n,) bool: whether any surface, floor included, lies on each ray from ``origins``
+        along ``directions`` ((3, n) float32) within ``distance`` (inf: any): one occlusion
+        batch (ambient occlusion's)."""
+        blocked = self.bvh.occluded(origins.T, directions.T, 0.0, np.float32(distance))
+        return blocked | plane_blocks(origins, directions, self.labels.plane_y, distance)
 
     def toward_lights(
         self,

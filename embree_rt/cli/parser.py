@@ -179,13 +179,21 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
         ),
         "--seed": ("render.seed", "the sampler's seed (render.seed); random: the field's too"),
         "--fov": ("camera.fov", "vertical field of view in degrees (camera.fov)"),
+        "--ao": (
+            "render.ao.samples",
+            "ambient occlusion: rays a camera-ray hit, 0 off (render.ao.samples)",
+        ),
+        "--ao-distance": (
+            "render.ao.distance",
+            "how far ambient occlusion looks for occluders, world units (render.ao.distance)",
+        ),
         "--exposure": (
             "render.exposure",
             "stops of exposure before the tone map, e.g. 1 doubles the light (render.exposure)",
         ),
     }
     for flag, (key, text) in shortcuts.items():
-        metavar = "EV" if flag == "--exposure" else "N"
+        metavar = {"--exposure": "EV", "--ao-distance": "D"}.get(flag, "N")
         parser.add_argument(
             flag, action=SetKey, key=key, metavar=metavar, help=text + SCENE_DEFAULT
         )

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from embree_rt import budget
+from embree_rt.ambient_occlusion import AmbientOcclusion, ao_problem
 from embree_rt.camera import Camera, camera_problem
 from embree_rt.film import TONEMAPS, TRANSFERS
 from embree_rt.materials import PRESETS, Checker, Material
@@ -357,11 +358,26 @@ class SceneReader:
             exposure=table.number("exposure", current.exposure, low=-64, high=64),
             tonemap=self._choice(table, "tonemap", TONEMAPS, current.tonemap),
             transfer=self._choice(table, "transfer", TRANSFERS, current.transfer),
+            ao=self._ambient_occlusion(table.table("ao"), current.ao),
         )
         table.finish()
         if (problem := render_problem(settings)) is not None:
             raise table.error(*problem)
         return settings
+
+    def _ambient_occlusion(
+        self, table: Table | None, current: AmbientOcclusion
+    ) -> AmbientOcclusion:
+        if table is None:
+            return current
+        ao = AmbientOcclusion(
+            samples=table.integer("samples", current.samples, low=0, high=4096),
+            distance=table.number("distance", current.distance, low=0, low_open=True),
+        )
+        table.finish()
+        if (problem := ao_problem(ao)) is not None:
+            raise table.error(*problem)
+        return ao
 
     def _choice(self, table: Table, name: str, choices: tuple[str, ...], default: str) -> str:
         value = table.string(name, default)

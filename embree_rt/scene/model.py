@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
+from embree_rt.ambient_occlusion import AmbientOcclusion
 from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.film import Look
 from embree_rt.materials import PRESETS, RGB, Checker, Material
@@ -63,6 +64,8 @@ class RenderSettings:
     exposure: float = 0.0
     tonemap: str = "reinhard"
     transfer: str = "gamma2.2"
+    # Ambient occlusion of the camera rays' hits (``ambient_occlusion``): off at 0 samples.
+    ao: AmbientOcclusion = field(default_factory=AmbientOcclusion)
 
     def look(self) -> Look:
         """The ``film.Look`` these settings ask for."""

@@ -8,6 +8,7 @@ that file, so loading the saved scene shares one Trimesh between the placements 
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import asdict
 from pathlib import Path
@@ -22,6 +23,10 @@ from embree_rt.scene.model import CurveSet, Scene
 def scene_document(scene: Scene, path: Path) -> dict:
     """The scene as a plain dict in the file schema, writing its bulk data beside ``path``."""
     document: dict = {"render": asdict(scene.render), **look_document(scene)}
+    if not scene.render.ao.samples:  # off: files without ambient occlusion stay as they were
+        del document["render"]["ao"]
+    elif math.isinf(scene.render.ao.distance):  # unlimited: the key left out
+        del document["render"]["ao"]["distance"]
     if scene.animation is not None:
         document["animation"] = animation_document(scene.animation)
     if len(scene.sphere_radii):
