@@ -224,3 +224,20 @@ def test_the_command_line_frames_a_standard_view_and_names_its_projection(tmp_pa
     code = main([*common, "--ortho", "-D", "camera.view_height=2", "--fov", "30", "-o", str(out)])
     assert code == 2 and not out.exists()
     assert "view_height" in capsys.readouterr().err
+
+
+def test_headlight_lights_what_faces_the_camera(tmp_path) -> None:
+    from embree_rt.cli import main
+
+    scene = tmp_path / "dark.toml"
+    scene.write_text(
+        "[camera]\nposition = [0, 1, 6]\nlook_at = [0, 1, 0]\n\n"
+        "[[spheres]]\ncenter = [0, 1, 0]\nradius = 1\n"
+    )
+    common = ["render", str(scene), "--width", "16", "--height", "16", "--spp", "1", "--quiet"]
+    assert main([*common, "-o", str(tmp_path / "dark.npy")]) == 0
+    assert main([*common, "--headlight", "-o", str(tmp_path / "lit.npy")]) == 0
+    dark, lit = np.load(tmp_path / "dark.npy"), np.load(tmp_path / "lit.npy")
+    # the sphere's centre faces the camera: ambient alone without the light, much more with it
+    assert (lit[8, 8] > 3 * dark[8, 8]).all()
+    np.testing.assert_array_equal(lit[0, 0], dark[0, 0])  # the sky is the sky

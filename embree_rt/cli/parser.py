@@ -281,6 +281,11 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         "orthographic unless --perspective",
     )
     parser.add_argument(
+        "--headlight",
+        action="store_true",
+        help="add a white light at the camera (a still's: not with an animation)",
+    )
+    parser.add_argument(
         "-t",
         "--threads",
         "--nthreads",

@@ -45,7 +45,7 @@ def command_random(args: argparse.Namespace) -> None:
             raise UsageError(f"--save-scene: {target}: expected a .toml or .json file name")
         if not target.parent.is_dir():
             raise UsageError(f"--save-scene: {target}: directory {target.parent} does not exist")
-    from embree_rt.cli.scene_input import only_render_settings, with_view
+    from embree_rt.cli.scene_input import only_render_settings, restaged, staged
     from embree_rt.scene.model import Scene
     from embree_rt.scene.settings import apply_to_scene
 
@@ -64,7 +64,7 @@ def command_random(args: argparse.Namespace) -> None:
     mesh = None if args.instance is None else instance_mesh(args.instance)
     # A cluster's workers generate a plain field themselves, from its plan; a field of
     # instances, one to be saved, or one changed beyond its render settings is made here.
-    from_plan = mesh is None and only_render_settings(args.settings) and args.view is None
+    from_plan = mesh is None and only_render_settings(args.settings) and not restaged(args)
     on_workers = bool(args.cluster or args.scheduler) and args.save_scene is None and from_plan
     if not (on_workers and args.partition):  # in bricks, each worker checks its own
         require_memory_for_field(plan.count, scene.render, args)
@@ -74,7 +74,7 @@ def command_random(args: argparse.Namespace) -> None:
         from embree_rt.scene.instances import spheres_to_instances
 
         spheres_to_instances(scene, mesh, keep=plan.heroes, seed=plan.seed)
-    scene = with_view(scene, args)
+    scene = staged(scene, args)
     generate_s = time.perf_counter() - started
     if args.save_scene is not None:
         writing(args.save_scene, lambda: save_scene(scene, args.save_scene))

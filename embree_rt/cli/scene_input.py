@@ -43,34 +43,61 @@ def read_scene(args: argparse.Namespace) -> tuple[Scene, Path | Scene]:
     if is_mesh_file(path):
         scene = Scene.from_file(path, floor=not args.no_floor)
         apply_to_scene(scene, settings, str(path))
-        return with_view(scene, args), scene
+        return staged(scene, args), scene
     if args.no_floor:
         settings.append(Setting("floor", False, "--no-floor"))
     scene = load_scene_with(path, settings)
-    if getattr(args, "view", None) is not None:
-        return with_view(scene, args), scene
+    if restaged(args):
+        return staged(scene, args), scene
     return scene, (path if only_render_settings(settings) else scene)
 
 
-def with_view(scene: Scene, args: argparse.Namespace) -> Scene:
+def restaged(args: argparse.Namespace) -> bool:
+    """Whether ``args`` change the scene after it is made (``staged``): then a cluster's
+    workers are given the scene itself, not its file or recipe."""
+    return getattr(args, "view", None) is not None or getattr(args, "headlight", False)
+
+
+def staged(scene: Scene, args: argparse.Namespace) -> Scene:
     """``scene`` with its camera turned to ``args.view`` (``scene.views.standard_view``) of
     the scene's bounds, orthographic unless ``--perspective`` came last of the projection
-    flags; the scene as it is without ``--view``."""
+    flags, and then with ``--headlight``: a white point light of intensity 1 at the camera
+    (lights have no fall-off, so it lights what faces the camera evenly); a still's camera
+    only, as a light does not move with an animation's camera."""
+    from embree_rt.scene.errors import SceneError
+
+    where = getattr(args, "scene", None) or "the scene"
     view = getattr(args, "view", None)
-    if view is None:
-        return scene
+    if view is not None:
+        if scene.animation is not None:
+            raise SceneError(where, "animation", f"--view {view}: the animation moves the camera")
+        staged_view(scene, args, view, where)
+    if getattr(args, "headlight", False):
+        if scene.animation is not None:
+            raise SceneError(
+                where,
+                "animation",
+                "--headlight: a light that follows an animated camera is "
+                "not supported; place a light in the scene instead",
+            )
+        from embree_rt.scene.model import PointLight
+
+        scene.lights.append(PointLight(position=tuple(scene.camera.position)))
+    return scene
+
+
+def staged_view(scene: Scene, args: argparse.Namespace, view: str, where: str) -> None:
+    """Turn ``scene``'s camera to the standard ``view`` (``staged``)."""
     from embree_rt.scene.errors import SceneError
     from embree_rt.scene.views import scene_bounds, standard_view
 
     bounds = scene_bounds(scene)
     if bounds is None:
-        where = getattr(args, "scene", None) or "the scene"
         raise SceneError(where, "(file)", f"--view {view}: the scene has nothing to frame")
     projections = [s.value for s in args.settings if s.key == "camera.projection"]
     orthographic = not projections or projections[-1] == "orthographic"
     aspect = scene.render.width / scene.render.height
     scene.camera = standard_view(scene.camera, *bounds, view, aspect, orthographic)
-    return scene
 
 
 def only_render_settings(settings) -> bool:
