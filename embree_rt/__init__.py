@@ -5,6 +5,7 @@
 and the render's statistics.
 """
 
+from embree_rt.ambient_occlusion import AmbientOcclusion
 from embree_rt.aovs import AOV_NAMES, save_with_aovs
 from embree_rt.api import Renderer, RenderResult, render
 from embree_rt.camera import Camera
@@ -13,7 +14,15 @@ from embree_rt.integrator import RenderStats
 from embree_rt.materials import PRESETS, Checker, Material, preset
 from embree_rt.scene.errors import SceneError
 from embree_rt.scene.loader import load_scene
-from embree_rt.scene.model import Background, Floor, MeshObject, PointLight, RenderSettings, Scene
+from embree_rt.scene.model import (
+    Background,
+    CurveSet,
+    Floor,
+    MeshObject,
+    PointLight,
+    RenderSettings,
+    Scene,
+)
 from embree_rt.scene.random_field import random_field
 from embree_rt.scene.writer import save_scene
 from embree_rt.version import __version__
@@ -21,9 +30,11 @@ from embree_rt.version import __version__
 __all__ = [
     "AOV_NAMES",
     "PRESETS",
+    "AmbientOcclusion",
     "Background",
     "Camera",
     "Checker",
+    "CurveSet",
     "Encoding",
     "Floor",
     "Look",
