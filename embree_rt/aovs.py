@@ -40,13 +40,16 @@ import numpy as np
 from embree_rt import film
 from embree_rt.batches import batch_ranges, ordered_results
 from embree_rt.camera import (
+    camera_rays,
     camera_to_world_opengl,
     intrinsics,
     pixel_center_rays,
+    tiled_samples,
     world_to_camera_opencv,
     world_to_camera_opengl,
 )
 from embree_rt.columns import scatter
+from embree_rt.compiled.camera_rays import sample_rays as sample_ray_columns
 
 if TYPE_CHECKING:
     from embree_rt.camera import CameraFrame
@@ -222,6 +225,41 @@ def render_aovs(
     return {name: values.reshape(height, width, *values.shape[1:]) for name, values in flat.items()}
 
 
+def render_coverage(integrator: Integrator, frame: CameraFrame, spp: int, seed: int) -> np.ndarray:
+    """(height, width) float32 share of each pixel's ``spp`` camera samples (the very rays the
+    beauty traces at ``seed``) that meet something, floor included: the alpha of a render
+    with a background of its own. In the integrator's batches; each pixel's count is formed
+    inside one batch, so the result does not depend on the batch size or thread count."""
+    width, height = frame.width, frame.height
+    hits = np.zeros(width * height, np.int64)
+    camera = camera_rays(frame, spp, seed)
+
+    def run(batch: tuple[int, int]) -> None:
+        start, count = batch
+        index, pixel = tiled_samples(frame, spp, start, count)
+        origins, directions = sample_ray_columns(camera, index)
+        rows, _ = integrator.geometry.intersect_compact(origins, directions, coherent=True)
+        first = start // spp
+        hits[first : first + count // spp] = np.bincount(
+            pixel[rows] - first, minlength=count // spp
+        )
+
+    batches = batch_ranges(width * height * spp, integrator.batch_size, spp, integrator.workers)
+    workers = integrator.workers
+    pool = ThreadPoolExecutor(max_workers=workers)
+    try:
+        done = (
+            ordered_results(pool, run, batches, ahead=2 * workers)
+            if workers > 1
+            else map(run, batches)
+        )
+        for _ in done:
+            pass
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    return (hits / np.float64(spp)).astype(np.float32).reshape(height, width)
+
+
 # -- files ------------------------------------------------------------------------------------
 
 
@@ -334,10 +372,10 @@ def save_with_aovs(
     them: as ``.npz`` keys, and as a JSON sidecar (``camera_json_path``) beside every format.
     """
     film.check_output_path(path, encoding)
-    image = film.check_image_shape(image, path)
+    image = film.check_image_shape(image, path, encoding)
     target = Path(path)
     suffix = target.suffix.lower()
-    beauty = np.asarray(image, np.float32)
+    beauty = film.linear_picture(image, encoding)  # the data formats' (composited) radiance
     arrays = {} if camera is None else camera_data(camera)
     if suffix == ".npz":
         files = [(target, lambda handle: np.savez(handle, beauty=beauty, **aovs, **arrays))]

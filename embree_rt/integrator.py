@@ -212,6 +212,7 @@ class Integrator(Closing):
         self.light_rgb = np.array(
             [np.asarray(lt.color, np.float32) * lt.intensity for lt in lights], np.float32
         ).reshape(-1, 3)
+        self.camera_sees_sky = scene.render.background == "sky"
         self.horizon = np.asarray(scene.background.horizon, np.float32)
         self.zenith = np.asarray(scene.background.zenith, np.float32)
 
@@ -327,7 +328,9 @@ class Integrator(Closing):
                 rows, surfaces = self.geometry.intersect_compact(
                     rays.origins, rays.directions, coherent=depth == 0, **self._without_ids()
                 )
-            if len(rows) < len(rays):
+            # (camera rays that meet nothing show the sky unless the render has a background
+            # of its own: the film composites that over the rays that met something)
+            if len(rows) < len(rays) and (depth > 0 or self.camera_sees_sky):
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False
                 escaped = np.flatnonzero(escaped)

@@ -228,6 +228,16 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
                 else ", also with --view"
             ),
         )
+    from embree_rt.film import BACKGROUNDS
+
+    parser.add_argument(
+        "--background",
+        action=SetKey,
+        key="render.background",
+        choices=BACKGROUNDS,
+        help="what camera rays that meet nothing show: the sky, white, black, or transparent "
+        "(an alpha channel: .png, .tif, .webp) (render.background)" + SCENE_DEFAULT,
+    )
     for flag, key in (("--camera-position", "camera.position"), ("--look-at", "camera.look_at")):
         parser.add_argument(
             flag,

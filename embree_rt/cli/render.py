@@ -104,7 +104,16 @@ def render_and_save(
         )
     check_library()
     framed = args.frames or "{frame" in args.output  # an animation's pattern, or a mistake
-    if scene.animation is not None or args.cluster or args.scheduler or framed:
+    animated = scene.animation is not None or args.cluster or args.scheduler or framed
+    background = scene.render.background
+    if background != "sky":
+        if animated:  # their frames are written by the cluster's and animation's own savers
+            raise UsageError(
+                f"--background {background}: for a still rendered here; animations and "
+                "cluster renders show the sky"
+            )
+        check_output(args.output, args.aov, output_encoding(args)._replace(background=background))
+    if animated:
         from embree_rt.cli.animate import render_frames_command
 
         try:

@@ -20,7 +20,7 @@ import numpy as np
 from embree_rt import budget
 from embree_rt.ambient_occlusion import AmbientOcclusion, ao_problem
 from embree_rt.camera import Camera, camera_problem
-from embree_rt.film import TONEMAPS, TRANSFERS
+from embree_rt.film import BACKGROUNDS, TONEMAPS, TRANSFERS
 from embree_rt.materials import PRESETS, Checker, Material
 from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.archives import Headers, array_headers, read_archive, unpacked_bytes
@@ -359,6 +359,7 @@ class SceneReader:
             tonemap=self._choice(table, "tonemap", TONEMAPS, current.tonemap),
             transfer=self._choice(table, "transfer", TRANSFERS, current.transfer),
             ao=self._ambient_occlusion(table.table("ao"), current.ao),
+            background=self._choice(table, "background", BACKGROUNDS, current.background),
         )
         table.finish()
         if (problem := render_problem(settings)) is not None:

@@ -66,6 +66,9 @@ class RenderSettings:
     transfer: str = "gamma2.2"
     # Ambient occlusion of the camera rays' hits (``ambient_occlusion``): off at 0 samples.
     ao: AmbientOcclusion = field(default_factory=AmbientOcclusion)
+    # What camera rays that meet nothing show (``film.BACKGROUNDS``): the sky, or a paper's
+    # white, black or transparent background (the sky still lights reflections).
+    background: str = "sky"
 
     def look(self) -> Look:
         """The ``film.Look`` these settings ask for."""

@@ -23,6 +23,8 @@ from embree_rt.scene.model import CurveSet, Scene
 def scene_document(scene: Scene, path: Path) -> dict:
     """The scene as a plain dict in the file schema, writing its bulk data beside ``path``."""
     document: dict = {"render": asdict(scene.render), **look_document(scene)}
+    if scene.render.background == "sky":  # files with the sky stay as they were
+        del document["render"]["background"]
     if not scene.render.ao.samples:  # off: files without ambient occlusion stay as they were
         del document["render"]["ao"]
     elif math.isinf(scene.render.ao.distance):  # unlimited: the key left out
