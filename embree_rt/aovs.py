@@ -26,12 +26,16 @@ what the beauty shades.
   escapes.
 - ``material_id`` (h, w) int32: the scene's materials in order (presets first, as
   ``Scene.materials`` holds them), then the floor's; -1 where the ray escapes.
+- ``ao`` (h, w) float32: ambient occlusion, the open share of the hit's cosine-weighted
+  hemisphere (1 = unoccluded, and where the ray escapes), with the render's ``ao`` settings
+  (``DEFAULT_AO_SAMPLES`` rays when the render has none).
 """
 
 from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
 
@@ -57,7 +61,17 @@ if TYPE_CHECKING:
     from embree_rt.integrator import Integrator
     from embree_rt.scene.model import Scene
 
-AOV_NAMES = ("depth", "z_depth", "position", "uv", "normal", "albedo", "object_id", "material_id")
+AOV_NAMES = (
+    "depth",
+    "z_depth",
+    "position",
+    "uv",
+    "normal",
+    "albedo",
+    "object_id",
+    "material_id",
+    "ao",
+)
 NOTHING_ID = -1
 FLOOR_ID = -2
 # Bytes a pixel of every AOV holds (float32 depths, positions, UVs, normals and albedo, int32 ids),
@@ -71,6 +85,7 @@ AOV_BYTES = {
     "albedo": 12,
     "object_id": 4,
     "material_id": 4,
+    "ao": 4,
 }
 # The EXR channels of each AOV, in the order of the array's last axis.
 EXR_CHANNELS = {
@@ -82,7 +97,10 @@ EXR_CHANNELS = {
     "albedo": ("albedo.R", "albedo.G", "albedo.B"),
     "object_id": ("object_id.id",),
     "material_id": ("material_id.id",),
+    "ao": ("ao.Y",),
 }
+# Rays a hit of the ``ao`` AOV when the render has no ambient occlusion of its own.
+DEFAULT_AO_SAMPLES = 16
 # Output formats that hold every AOV in the one file; the others get one file per AOV beside it.
 SINGLE_FILE_SUFFIXES = (".npz", ".exr")
 
@@ -155,12 +173,13 @@ def empty_aovs(names: tuple[str, ...], pixels: int) -> dict[str, np.ndarray]:
         "albedo": lambda: np.zeros((pixels, 3), np.float32),
         "object_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
         "material_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
+        "ao": lambda: np.ones(pixels, np.float32),
     }
     return {name: empty[name]() for name in names}
 
 
 def render_aovs(
-    integrator: Integrator, frame: CameraFrame, names: tuple[str, ...]
+    integrator: Integrator, frame: CameraFrame, names: tuple[str, ...], seed: int = 0
 ) -> dict[str, np.ndarray]:
     """The AOVs ``names`` of ``integrator``'s scene seen through the camera ``frame``: name ->
     (height, width), (height, width, 2) or (height, width, 3) array (see the module's
@@ -173,6 +192,9 @@ def render_aovs(
     width, height = frame.width, frame.height
     if not names:
         return {}
+    ao_settings = integrator.scene.render.ao
+    if not ao_settings.samples:
+        ao_settings = replace(ao_settings, samples=DEFAULT_AO_SAMPLES)
     flat = empty_aovs(names, width * height)
 
     def fill_vectors(name: str, batch: tuple[int, int], hit: np.ndarray, values) -> None:
@@ -207,6 +229,9 @@ def render_aovs(
             flat["material_id"][hit] = surfaces.material
         if "object_id" in flat:
             flat["object_id"][hit] = hit_object_ids(surfaces, integrator.geometry)
+        if "ao" in flat and len(hit):
+            # the beauty's own stage, with the pixel's number as its sample's
+            flat["ao"][hit] = integrator.open_shares(surfaces, hit, seed, ao_settings)
 
     workers = integrator.workers
     batches = batch_ranges(width * height, integrator.batch_size, 1, workers)
@@ -429,7 +454,8 @@ def visualize(name: str, values: np.ndarray) -> np.ndarray:
     depth: inverse depth, nearest hit white, falling toward black with distance (escapes
     black); position: each axis over the range of the hits as RGB; uv: u and v over the range
     of the hits that have them as red and green (the others black); normal: ``(n + 1) / 2``
-    as RGB (escapes black); albedo: gamma 2.2; ids: distinct colours (``id_colors``)."""
+    as RGB (escapes black); albedo: gamma 2.2; ids: distinct colours (``id_colors``); ao:
+    its share as grey."""
     if name == "depth":
         finite = np.isfinite(values)
         # (Never zero: a camera on a surface would make every other depth infinitely far.)
@@ -448,6 +474,8 @@ def visualize(name: str, values: np.ndarray) -> np.ndarray:
         return _to_bytes(np.where(hit, (values + 1.0) / 2.0, 0.0))
     if name == "albedo":
         return _to_bytes(np.clip(values, 0.0, 1.0) ** (1.0 / film.GAMMA))
+    if name == "ao":  # grey: open white, enclosed black
+        return np.repeat(_to_bytes(np.clip(values, 0.0, 1.0))[..., None], 3, axis=2)
     if name in ("object_id", "material_id"):
         return id_colors(values)
     raise ValueError(f"unknown AOV {name!r}; choose from {', '.join(AOV_NAMES)}")

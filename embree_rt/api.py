@@ -145,7 +145,7 @@ class Renderer(Integrator):
         if not names:
             return RenderResult(image, {}, stats, look, frame, background, alpha)
         began = time.perf_counter()
-        layers = render_aovs(self, frame, names)
+        layers = render_aovs(self, frame, names, settings.seed)
         stats.rays["aov"] = settings.width * settings.height  # one pixel-centre ray per pixel
         stats.render_s += time.perf_counter() - began
         return RenderResult(image, layers, stats, look, frame, background, alpha)

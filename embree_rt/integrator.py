@@ -18,6 +18,7 @@ from typing import Protocol
 import numpy as np
 
 from embree_rt import shading
+from embree_rt.ambient_occlusion import open_shares
 from embree_rt.batches import batch_ranges, ordered_results, worker_count
 from embree_rt.camera import CameraFrame, camera_rays, sample_rays, tiled_samples
 from embree_rt.closing import Closing
@@ -62,6 +63,8 @@ class BatchWork:
 
     block: FilmBlock
     rays: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAY_KINDS, 0))
+    # the render's seed, which ambient occlusion's directions are drawn with
+    seed: int = 0
 
 
 @dataclass
@@ -70,12 +73,15 @@ class RayBatch:
     directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput. ``origins`` is
     None for rays that have hit (their surface hits hold the points) and for camera rays not
     yet traced (made inside the query), whose ``directions`` are None until then and whose
-    ``weight`` is None: all ones, never spread into an array (1 · x is x, bit for bit)."""
+    ``weight`` is None: all ones, never spread into an array (1 · x is x, bit for bit).
+    ``sample`` (n,) int64: camera rays' global sample indices (what ambient occlusion draws
+    its directions from), None for every other ray."""
 
     origins: np.ndarray | None
     directions: np.ndarray | None
     pixel: np.ndarray
     weight: np.ndarray | None
+    sample: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.pixel)
@@ -213,6 +219,12 @@ class Integrator(Closing):
             [np.asarray(lt.color, np.float32) * lt.intensity for lt in lights], np.float32
         ).reshape(-1, 3)
         self.camera_sees_sky = scene.render.background == "sky"
+        self.ao = scene.render.ao
+        if self.ao.samples and not hasattr(self.geometry, "occluded_rays"):
+            raise ValueError(
+                "render.ao: ambient occlusion needs a tracer that answers occlusion rays "
+                "(one BVH: not bricks)"
+            )
         self.horizon = np.asarray(scene.background.horizon, np.float32)
         self.zenith = np.asarray(scene.background.zenith, np.float32)
 
@@ -287,8 +299,9 @@ class Integrator(Closing):
             raise ValueError(f"sample: must lie in [0, {spp}), got {sample}")
         index = np.arange(first, first + count, dtype=np.int64) * spp + sample
         origins, directions, pixel = sample_rays(frame, spp, seed, index)
-        work = BatchWork(FilmBlock(first, count))
-        rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
+        work = BatchWork(FilmBlock(first, count), seed=seed)
+        sample = index if self.ao.samples else None  # (what ambient occlusion draws from)
+        rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32), sample)
         work.rays["primary"] += count
         self._trace(rays, work, max_depth)
         return work.block
@@ -302,10 +315,10 @@ class Integrator(Closing):
         ``batch_ranges`` cuts them) through every bounce: their film block and ray counts.
         A pure function of its arguments and the scene, so any process holding the same scene
         computes the same block (``embree_rt.distributed`` runs it on Dask workers)."""
-        work = BatchWork(FilmBlock(start // spp, count // spp))
+        work = BatchWork(FilmBlock(start // spp, count // spp), seed=seed)
         index, pixel = tiled_samples(frame, spp, start, count)
         # Camera rays are made inside the first query, from their sample indices.
-        rays = RayBatch(None, None, pixel, None)
+        rays = RayBatch(None, None, pixel, None, index if self.ao.samples else None)
         work.rays["primary"] += count
         self._trace(rays, work, max_depth, (camera_rays(frame, spp, seed), index))
         return work
@@ -340,7 +353,8 @@ class Integrator(Closing):
             # The hits' origins are not needed again: their surfaces say where they are.
             # (camera rays' unit weights stay None: 1 · x is x, bit for bit)
             weight = None if rays.weight is None else np.take(rays.weight, rows, axis=1)
-            hit_rays = RayBatch(None, surfaces.incoming, np.take(rays.pixel, rows), weight)
+            sample = None if rays.sample is None else np.take(rays.sample, rows)
+            hit_rays = RayBatch(None, surfaces.incoming, np.take(rays.pixel, rows), weight, sample)
             rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
 
@@ -386,6 +400,8 @@ class Integrator(Closing):
         radiance = self._per_hit(self.ambient_share, surfaces, "ambient_share") * color
         if surfaces.looks is not None and surfaces.looks.occlusion is not None:
             radiance[:, surfaces.looks.rows] *= surfaces.looks.occlusion  # glTF occlusion maps
+        if self.ao.samples and rays.sample is not None:  # camera rays' hits: the open share
+            radiance *= self._open_shares(outside, normal, surfaces, rays.sample, work.seed)
         self._add_direct_light(radiance, outside, normal, d, color, surfaces, work)
         self._add_emission(radiance, surfaces)
         work.block.add_weighted(rays.pixel, rays.weight, radiance)
@@ -404,6 +420,26 @@ class Integrator(Closing):
         return RayBatch.concatenate(children) if children else NO_RAYS
 
     # -- the stages of shading --------------------------------------------------------------
+
+    def open_shares(self, surfaces: SurfaceHits, sample: np.ndarray, seed: int, ao) -> np.ndarray:
+        """(k,) float32 ambient occlusion of the k ``surfaces`` (``ambient_occlusion``, ``ao``
+        an ``AmbientOcclusion`` with samples) seen by rays with camera sample indices
+        ``sample`` (k,) int64 at ``seed``: from just off each surface, about its shading
+        normal turned to the ray, as the beauty's stage computes it (the AOV's too)."""
+        normal, face_normal, _ = self.facing_the_ray(surfaces.incoming, surfaces)
+        outside = np.multiply(face_normal, surface_offset(surfaces.scale))
+        outside += surfaces.position
+        return self._open_shares(outside, normal, surfaces, sample, seed, ao)
+
+    def _open_shares(self, outside, normal, surfaces, sample, seed, ao=None) -> np.ndarray:
+        """Ambient occlusion's stage: one occlusion batch of ``ao`` (the render's by default)
+        rays from the points ``outside`` (3, k) about ``normal`` (3, k); (k,) float32 open
+        shares, 1 on unlit materials (their colour is not ambient light)."""
+        ao = self.ao if ao is None else ao
+        share = open_shares(self.geometry.occluded_rays, outside, normal, sample, ao, seed)
+        if self.lit is not None:
+            share[~self.lit[surfaces.material]] = np.float32(1.0)
+        return share
 
     @staticmethod
     def _per_hit(table: np.ndarray, surfaces: SurfaceHits, name: str) -> np.ndarray:

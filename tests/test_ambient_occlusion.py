@@ -127,3 +127,20 @@ def test_images_with_ambient_occlusion_are_bitwise_the_same_for_any_threads_or_b
     scene.render.ao = AmbientOcclusion()
     plain = render(scene, threads=1, **settings).image
     assert (one <= plain).all() and (one < plain).any()
+
+
+def test_the_ao_aov_is_one_on_a_lone_convex_object_and_zero_inside_a_closed_one() -> None:
+    lone = Scene(floor=None, camera=Camera(position=(0.0, 0.0, 6.0), look_at=(0.0, 0.0, 0.0)))
+    lone.add_sphere((0.0, 0.0, 0.0), 1.5, "matte")
+    aovs = render(lone, width=32, height=24, spp=1, aovs=("ao", "object_id")).aovs
+    assert (aovs["object_id"] == 0).sum() > 100
+    np.testing.assert_array_equal(aovs["ao"], 1.0)  # sphere and sky alike
+    inside = Scene(floor=None, camera=Camera(position=(0.0, 0.0, 0.5), look_at=(0.0, 0.0, 0.0)))
+    inside.add_sphere((0.0, 0.0, 0.0), 3.0, "matte")
+    inside.render.ao = AmbientOcclusion(samples=8)
+    aovs = render(inside, width=32, height=24, spp=1, aovs=("ao",)).aovs
+    np.testing.assert_array_equal(aovs["ao"], 0.0)
+    # limited to a distance shorter than the sphere's far side, some rays get out
+    inside.render.ao = AmbientOcclusion(samples=8, distance=3.0)
+    limited = render(inside, width=32, height=24, spp=1, aovs=("ao",)).aovs["ao"]
+    assert 0.0 < limited.mean() < 1.0
