@@ -241,3 +241,14 @@ def test_headlight_lights_what_faces_the_camera(tmp_path) -> None:
     # the sphere's centre faces the camera: ambient alone without the light, much more with it
     assert (lit[8, 8] > 3 * dark[8, 8]).all()
     np.testing.assert_array_equal(lit[0, 0], dark[0, 0])  # the sky is the sky
+
+
+def test_an_orthographic_camera_is_written_and_read_back(tmp_path) -> None:
+    from embree_rt.scene.writer import save_scene
+
+    scene = Scene(camera=ORTHO)
+    save_scene(scene, tmp_path / "ortho.toml")
+    again = load_scene(tmp_path / "ortho.toml")
+    assert again.camera == ORTHO
+    save_scene(Scene(), tmp_path / "plain.toml")  # a perspective camera's table as it was
+    assert "projection" not in (tmp_path / "plain.toml").read_text()

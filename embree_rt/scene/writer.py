@@ -116,7 +116,6 @@ def look_document(scene: Scene) -> dict:
             "look_at": list(scene.camera.look_at),
             "up": list(scene.camera.up),
             "fov": float(scene.camera.fov),
-            "projection": scene.camera.projection,
         },
         "background": {
             "horizon": list(scene.background.horizon),
@@ -127,6 +126,8 @@ def look_document(scene: Scene) -> dict:
             for lt in scene.lights
         ],
     }
+    if scene.camera.projection != "perspective":  # perspective files stay as they were
+        document["camera"]["projection"] = scene.camera.projection
     if scene.camera.view_height is not None:
         del document["camera"]["fov"]
         document["camera"]["view_height"] = float(scene.camera.view_height)
