@@ -33,7 +33,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from embree_rt import Renderer, film, integrator
-from embree_rt.compiled.camera_rays import sample_directions
+from embree_rt.compiled.camera_rays import sample_rays
 from embree_rt.embree import kernels
 from embree_rt.integrator import DEFAULT_BATCH_SIZE
 from embree_rt.scene import random_field
@@ -229,10 +229,10 @@ def stage_breakdown(renderer: Renderer, image: dict) -> dict:
     # The camera rays were made inside the traversal kernel: make them again, timed, and move
     # that time from traversal to camera.
     indices, cameras = camera_batches[0::2], camera_batches[1::2]
-    sample_directions(cameras[0], indices[0][:1])  # loaded (or compiled) outside the timing
+    sample_rays(cameras[0], indices[0][:1])  # loaded (or compiled) outside the timing
     start = time.perf_counter()
     for camera, index in zip(cameras, indices, strict=True):
-        sample_directions(camera, index)
+        sample_rays(camera, index)
     rays_s = time.perf_counter() - start
     seconds = clock.seconds
     seconds["camera"] += rays_s

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 from embree_rt.version import __version__
 
 if TYPE_CHECKING:
+    from embree_rt.ambient_occlusion import AmbientOcclusion
     from embree_rt.aovs import save_with_aovs
     from embree_rt.api import Renderer, RenderResult, render
     from embree_rt.camera import Camera
@@ -27,6 +28,7 @@ if TYPE_CHECKING:
     from embree_rt.scene.loader import load_scene
     from embree_rt.scene.model import (
         Background,
+        CurveSet,
         Floor,
         MeshObject,
         PointLight,
@@ -38,6 +40,7 @@ if TYPE_CHECKING:
 
 # public name -> the module that defines it
 _HOMES = {
+    "AmbientOcclusion": "embree_rt.ambient_occlusion",
     "AOV_NAMES": "embree_rt.choices",
     "save_with_aovs": "embree_rt.aovs",
     "Renderer": "embree_rt.api",
@@ -56,6 +59,7 @@ _HOMES = {
     "SceneError": "embree_rt.scene.errors",
     "load_scene": "embree_rt.scene.loader",
     "Background": "embree_rt.scene.model",
+    "CurveSet": "embree_rt.scene.model",
     "Floor": "embree_rt.scene.model",
     "MeshObject": "embree_rt.scene.model",
     "PointLight": "embree_rt.scene.model",
@@ -68,9 +72,11 @@ _HOMES = {
 __all__ = [
     "AOV_NAMES",
     "PRESETS",
+    "AmbientOcclusion",
     "Background",
     "Camera",
     "Checker",
+    "CurveSet",
     "Encoding",
     "Floor",
     "Look",

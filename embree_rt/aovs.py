@@ -26,12 +26,16 @@ what the beauty shades.
   escapes.
 - ``material_id`` (h, w) int32: the scene's materials in order (presets first, as
   ``Scene.materials`` holds them), then the floor's; -1 where the ray escapes.
+- ``ao`` (h, w) float32: ambient occlusion, the open share of the hit's cosine-weighted
+  hemisphere (1 = unoccluded, and where the ray escapes), with the render's ``ao`` settings
+  (``DEFAULT_AO_SAMPLES`` rays when the render has none).
 """
 
 from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
 
@@ -40,14 +44,17 @@ import numpy as np
 from embree_rt import film
 from embree_rt.batches import batch_ranges, ordered_results
 from embree_rt.camera import (
+    camera_rays,
     camera_to_world_opengl,
     intrinsics,
     pixel_center_rays,
+    tiled_samples,
     world_to_camera_opencv,
     world_to_camera_opengl,
 )
 from embree_rt.choices import AOV_NAMES
 from embree_rt.columns import scatter
+from embree_rt.compiled.camera_rays import sample_rays as sample_ray_columns
 
 if TYPE_CHECKING:
     from embree_rt.camera import CameraFrame
@@ -68,6 +75,7 @@ AOV_BYTES = {
     "albedo": 12,
     "object_id": 4,
     "material_id": 4,
+    "ao": 4,
 }
 # The EXR channels of each AOV, in the order of the array's last axis.
 EXR_CHANNELS = {
@@ -79,7 +87,10 @@ EXR_CHANNELS = {
     "albedo": ("albedo.R", "albedo.G", "albedo.B"),
     "object_id": ("object_id.id",),
     "material_id": ("material_id.id",),
+    "ao": ("ao.Y",),
 }
+# Rays a hit of the ``ao`` AOV when the render has no ambient occlusion of its own.
+DEFAULT_AO_SAMPLES = 16
 # Output formats that hold every AOV in the one file; the others get one file per AOV beside it.
 SINGLE_FILE_SUFFIXES = (".npz", ".exr")
 
@@ -152,12 +163,13 @@ def empty_aovs(names: tuple[str, ...], pixels: int) -> dict[str, np.ndarray]:
         "albedo": lambda: np.zeros((pixels, 3), np.float32),
         "object_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
         "material_id": lambda: np.full(pixels, NOTHING_ID, np.int32),
+        "ao": lambda: np.ones(pixels, np.float32),
     }
     return {name: empty[name]() for name in names}
 
 
 def render_aovs(
-    integrator: Integrator, frame: CameraFrame, names: tuple[str, ...]
+    integrator: Integrator, frame: CameraFrame, names: tuple[str, ...], seed: int = 0
 ) -> dict[str, np.ndarray]:
     """The AOVs ``names`` of ``integrator``'s scene seen through the camera ``frame``: name ->
     (height, width), (height, width, 2) or (height, width, 3) array (see the module's
@@ -170,6 +182,9 @@ def render_aovs(
     width, height = frame.width, frame.height
     if not names:
         return {}
+    ao_settings = integrator.scene.render.ao
+    if not ao_settings.samples:
+        ao_settings = replace(ao_settings, samples=DEFAULT_AO_SAMPLES)
     flat = empty_aovs(names, width * height)
 
     def fill_vectors(name: str, batch: tuple[int, int], hit: np.ndarray, values) -> None:
@@ -204,6 +219,9 @@ def render_aovs(
             flat["material_id"][hit] = surfaces.material
         if "object_id" in flat:
             flat["object_id"][hit] = hit_object_ids(surfaces, integrator.geometry)
+        if "ao" in flat and len(hit):
+            # the beauty's own stage, with the pixel's number as its sample's
+            flat["ao"][hit] = integrator.open_shares(surfaces, hit, seed, ao_settings)
 
     workers = integrator.workers
     batches = batch_ranges(width * height, integrator.batch_size, 1, workers)
@@ -220,6 +238,41 @@ def render_aovs(
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
     return {name: values.reshape(height, width, *values.shape[1:]) for name, values in flat.items()}
+
+
+def render_coverage(integrator: Integrator, frame: CameraFrame, spp: int, seed: int) -> np.ndarray:
+    """(height, width) float32 share of each pixel's ``spp`` camera samples (the very rays the
+    beauty traces at ``seed``) that meet something, floor included: the alpha of a render
+    with a background of its own. In the integrator's batches; each pixel's count is formed
+    inside one batch, so the result does not depend on the batch size or thread count."""
+    width, height = frame.width, frame.height
+    hits = np.zeros(width * height, np.int64)
+    camera = camera_rays(frame, spp, seed)
+
+    def run(batch: tuple[int, int]) -> None:
+        start, count = batch
+        index, pixel = tiled_samples(frame, spp, start, count)
+        origins, directions = sample_ray_columns(camera, index)
+        rows, _ = integrator.geometry.intersect_compact(origins, directions, coherent=True)
+        first = start // spp
+        hits[first : first + count // spp] = np.bincount(
+            pixel[rows] - first, minlength=count // spp
+        )
+
+    batches = batch_ranges(width * height * spp, integrator.batch_size, spp, integrator.workers)
+    workers = integrator.workers
+    pool = ThreadPoolExecutor(max_workers=workers)
+    try:
+        done = (
+            ordered_results(pool, run, batches, ahead=2 * workers)
+            if workers > 1
+            else map(run, batches)
+        )
+        for _ in done:
+            pass
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    return (hits / np.float64(spp)).astype(np.float32).reshape(height, width)
 
 
 # -- files ------------------------------------------------------------------------------------
@@ -247,6 +300,12 @@ def camera_data(frame: CameraFrame) -> dict[str, np.ndarray]:
     }
 
 
+def projection_name(frame: CameraFrame) -> str:
+    """How ``frame`` projects, as the camera files name it: "perspective" (K divides by z) or
+    "orthographic" (K affine: pixel = K (x, y, 1), fx and fy in pixels per world unit)."""
+    return "orthographic" if frame.orthographic else "perspective"
+
+
 def camera_json_path(path: str | os.PathLike) -> Path:
     """The camera sidecar of the image ``path``: ``render.camera.json`` beside ``render.png``."""
     target = Path(path)
@@ -259,6 +318,7 @@ def _camera_json(frame: CameraFrame) -> bytes:
     record = {
         "width": frame.width,
         "height": frame.height,
+        "projection": projection_name(frame),
         **{name: matrix.tolist() for name, matrix in camera_data(frame).items()},
     }
     return (json.dumps(record, indent=2) + "\n").encode()
@@ -271,17 +331,17 @@ def nerf_transforms(views: list[tuple[Path, CameraFrame]], folder: Path) -> dict
     ``fl_x``, ``fl_y``, ``cx``, ``cy``, ``w``, ``h`` (pixels, centres at c + 1/2 as those tools
     place them), and ``frames[]`` of ``file_path`` and ``transform_matrix``, camera-to-world in
     OpenGL's convention (``camera.camera_to_world_opengl``); a frame whose field of view
-    differs from the first's carries its own ``camera_angle_x``, ``fl_x`` and ``fl_y``."""
+    differs from the first's carries its own ``camera_angle_x``, ``fl_x`` and ``fl_y``.
+    ``projection`` names how the first frame projects (``projection_name``); an orthographic
+    frame has no angle of view (``camera_angle_x`` left out) and its ``fl_x``, ``fl_y`` are
+    pixels per world unit."""
     import math
     import os
 
     def lens(frame: CameraFrame) -> dict:
         K = intrinsics(frame)
-        return {
-            "camera_angle_x": 2.0 * math.atan(frame.half_width),
-            "fl_x": K[0, 0],
-            "fl_y": K[1, 1],
-        }
+        angle = {} if frame.orthographic else {"camera_angle_x": 2.0 * math.atan(frame.half_width)}
+        return {**angle, "fl_x": K[0, 0], "fl_y": K[1, 1]}
 
     first = views[0][1]
     K = intrinsics(first)
@@ -300,6 +360,7 @@ def nerf_transforms(views: list[tuple[Path, CameraFrame]], folder: Path) -> dict
         "cy": K[1, 2] + 0.5,
         "w": first.width,
         "h": first.height,
+        "projection": projection_name(first),
         "frames": frames,
     }
 
@@ -326,10 +387,10 @@ def save_with_aovs(
     them: as ``.npz`` keys, and as a JSON sidecar (``camera_json_path``) beside every format.
     """
     film.check_output_path(path, encoding)
-    image = film.check_image_shape(image, path)
+    image = film.check_image_shape(image, path, encoding)
     target = Path(path)
     suffix = target.suffix.lower()
-    beauty = np.asarray(image, np.float32)
+    beauty = film.linear_picture(image, encoding)  # the data formats' (composited) radiance
     arrays = {} if camera is None else camera_data(camera)
     if suffix == ".npz":
         files = [(target, lambda handle: np.savez(handle, beauty=beauty, **aovs, **arrays))]
@@ -383,7 +444,8 @@ def visualize(name: str, values: np.ndarray) -> np.ndarray:
     depth: inverse depth, nearest hit white, falling toward black with distance (escapes
     black); position: each axis over the range of the hits as RGB; uv: u and v over the range
     of the hits that have them as red and green (the others black); normal: ``(n + 1) / 2``
-    as RGB (escapes black); albedo: gamma 2.2; ids: distinct colours (``id_colors``)."""
+    as RGB (escapes black); albedo: gamma 2.2; ids: distinct colours (``id_colors``); ao:
+    its share as grey."""
     if name == "depth":
         finite = np.isfinite(values)
         # (Never zero: a camera on a surface would make every other depth infinitely far.)
@@ -402,6 +464,8 @@ def visualize(name: str, values: np.ndarray) -> np.ndarray:
         return _to_bytes(np.where(hit, (values + 1.0) / 2.0, 0.0))
     if name == "albedo":
         return _to_bytes(np.clip(values, 0.0, 1.0) ** (1.0 / film.GAMMA))
+    if name == "ao":  # grey: open white, enclosed black
+        return np.repeat(_to_bytes(np.clip(values, 0.0, 1.0))[..., None], 3, axis=2)
     if name in ("object_id", "material_id"):
         return id_colors(values)
     raise ValueError(f"unknown AOV {name!r}; choose from {', '.join(AOV_NAMES)}")
@@ -460,6 +524,7 @@ def id_listing(scene: Scene, floor_material: int) -> list[str]:
     lines = [
         f"object ids: spheres {span(0, spheres)} in scene order, mesh placements "
         f"{span(first_mesh, len(placements))}, instances {span(first_copy, copies)}, "
+        f"curve sets {span(first_copy + copies, len(scene.curves))}, "
         f"floor {FLOOR_ID}, nothing {NOTHING_ID}"
     ]
     for index in range(min(spheres, LISTED_PER_KIND)):

@@ -22,7 +22,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from embree_rt import budget, film
-from embree_rt.aovs import aov_pixel_bytes, check_aov_names, render_aovs, save_with_aovs
+from embree_rt.aovs import (
+    aov_pixel_bytes,
+    check_aov_names,
+    render_aovs,
+    render_coverage,
+    save_with_aovs,
+)
 from embree_rt.camera import Camera, CameraFrame, camera_frame
 from embree_rt.integrator import DEFAULT_BATCH_SIZE, Integrator, RenderStats
 from embree_rt.scene.model import RenderSettings, Scene, SettingOverrides
@@ -49,6 +55,11 @@ class RenderResult:
     look: film.Look = film.DEFAULT_LOOK
     # The camera the image was seen through (its size included), for dataset files.
     camera: CameraFrame | None = None
+    # With a background other than the sky (``film.BACKGROUNDS``): (height, width) float32
+    # share of each pixel's camera rays that met something; ``image`` holds nothing where
+    # they did not, and ``save`` composites the background there.
+    background: str = "sky"
+    alpha: np.ndarray | None = None
 
     def to_srgb8(self) -> np.ndarray:
         """(height, width, 3) uint8: the image tone-mapped as a PNG is written
@@ -69,10 +80,14 @@ class RenderResult:
         written beside ``path``."""
         if encoding.look is None:
             encoding = encoding._replace(look=self.look)
+        image = self.image
+        if self.alpha is not None:
+            encoding = encoding._replace(background=self.background)
+            image = np.concatenate([image, self.alpha[..., None]], axis=2)
         if not self.aovs:
-            film.save_image(self.image, path, encoding)
+            film.save_image(image, path, encoding)
             return []
-        return save_with_aovs(self.image, self.aovs, path, encoding, camera=self.camera)
+        return save_with_aovs(image, self.aovs, path, encoding, camera=self.camera)
 
 
 class Renderer(Integrator):
@@ -123,13 +138,20 @@ class Renderer(Integrator):
                 progress=integrator_progress(bar, progress),
             )
         look = settings.look()
+        alpha = None
+        if self.scene.render.background != "sky":
+            began = time.perf_counter()
+            alpha = render_coverage(self, frame, settings.spp, settings.seed)
+            stats.rays["primary"] += settings.width * settings.height * settings.spp
+            stats.render_s += time.perf_counter() - began
+        background = self.scene.render.background
         if not names:
-            return RenderResult(image, {}, stats, look, frame)
+            return RenderResult(image, {}, stats, look, frame, background, alpha)
         began = time.perf_counter()
-        layers = render_aovs(self, frame, names)
+        layers = render_aovs(self, frame, names, settings.seed)
         stats.rays["aov"] = settings.width * settings.height  # one pixel-centre ray per pixel
         stats.render_s += time.perf_counter() - began
-        return RenderResult(image, layers, stats, look, frame)
+        return RenderResult(image, layers, stats, look, frame, background, alpha)
 
     def update_spheres(self, centers: np.ndarray, radii: np.ndarray) -> None:
         """Move the scene's spheres to ``centers`` (n, 3) and ``radii`` (n,) (the same n and

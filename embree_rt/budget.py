@@ -41,6 +41,10 @@ GEOMETRY_BYTES_PER_SPHERE = {"user": 152, "point": 51, "mesh": 310}
 BYTES_PER_TRIANGLE = 12 + 12 + 64
 BYTES_PER_INSTANCE = 256
 BYTES_PER_ARRAYED_INSTANCE = 128
+# A round linear curve segment in the BVH (its share of the float32 (x, y, z, r) points, its
+# index, Embree's nodes and build): the peak resident memory of building a BVH of separate
+# segments (two points each, the worst case) grew by 153 bytes a segment from 2e5 to 1e6.
+BYTES_PER_CURVE_SEGMENT = 160
 # Per pixel: the float32 image, the film's float64 sums of the blocks in flight, the tone
 # mapping's float32 temporaries and the encoder's bytes. 3840x2160 and 7680x4320 at 1 spp grew
 # by 72 bytes a pixel with a PNG written (36 before it).
@@ -97,16 +101,25 @@ def geometry_bytes(count: int, kind: str) -> int:
     return count * GEOMETRY_BYTES_PER_SPHERE[kind]
 
 
-def bvh_bytes(sphere_count: int, kind: str, triangles: int, instances: int, arrayed: int) -> int:
+def bvh_bytes(
+    sphere_count: int,
+    kind: str,
+    triangles: int,
+    instances: int,
+    arrayed: int,
+    curve_segments: int = 0,
+) -> int:
     """An estimate of a BVH's memory: ``sphere_count`` spheres entered as ``kind``
     (``geometry_bytes``), ``triangles`` distinct triangles, ``instances`` instances of their
     own and ``arrayed`` instances in instance arrays (neither counting the spheres' own
-    instances when ``kind`` is "mesh": ``GEOMETRY_BYTES_PER_SPHERE`` holds those)."""
+    instances when ``kind`` is "mesh": ``GEOMETRY_BYTES_PER_SPHERE`` holds those), and
+    ``curve_segments`` round curve segments."""
     return (
         geometry_bytes(sphere_count, kind)
         + triangles * BYTES_PER_TRIANGLE
         + instances * BYTES_PER_INSTANCE
         + arrayed * BYTES_PER_ARRAYED_INSTANCE
+        + curve_segments * BYTES_PER_CURVE_SEGMENT
     )
 
 

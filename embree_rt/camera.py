@@ -1,5 +1,5 @@
-"""The pinhole camera: what a scene says of it (``Camera``) and the one rule it must follow
-(``camera_problem``), its frame, and jittered, stratified primary rays."""
+"""The camera, pinhole or orthographic: what a scene says of it (``Camera``) and the one rule
+it must follow (``camera_problem``), its frame, and jittered, stratified primary rays."""
 
 from __future__ import annotations
 
@@ -9,20 +9,33 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from embree_rt.compiled.camera_rays import CameraRays, sample_directions, tile_order
+from embree_rt.compiled import camera_rays as compiled_rays
+from embree_rt.compiled.camera_rays import CameraRays, tile_order
 from embree_rt.sampling import hash_key
 
 Vec3 = tuple[float, float, float]
 
 
+PROJECTIONS = ("perspective", "orthographic")
+
+
 @dataclass
 class Camera:
-    """A pinhole camera at ``position`` looking at ``look_at``; ``fov`` is vertical, in degrees."""
+    """A camera at ``position`` looking at ``look_at``.
+
+    ``projection`` "perspective" (a pinhole; ``fov`` is vertical, in degrees) or
+    "orthographic": parallel rays along the view, from the plane through ``position`` facing
+    ``look_at``, the image ``view_height`` world units tall. An orthographic camera without a
+    ``view_height`` shows what its ``fov`` shows at ``look_at``'s distance:
+    ``2 distance tan(fov / 2)`` (``view_height_of``), so switching a framed camera to
+    orthographic keeps the object it looks at the same size."""
 
     position: Vec3 = (0.0, 1.0, 5.0)
     look_at: Vec3 = (0.0, 0.0, 0.0)
     up: Vec3 = (0.0, 1.0, 0.0)
     fov: float = 45.0
+    projection: str = "perspective"
+    view_height: float | None = None
 
 
 # sin of the smallest angle allowed between a camera's ``up`` and its viewing direction: below
@@ -36,8 +49,24 @@ def camera_problem(camera: Camera) -> tuple[str, str] | None:
     The one rule for a camera, followed by scene files and by ``camera.camera_frame``: ``fov``
     a number of degrees strictly between 0 and 180; ``position``, ``look_at`` and ``up`` three
     finite numbers each; ``look_at`` apart from ``position``; ``up`` not zero and at least
-    ``MIN_UP_SINE`` (sine of the angle) away from the viewing direction.
+    ``MIN_UP_SINE`` (sine of the angle) away from the viewing direction; ``projection`` one of
+    ``PROJECTIONS``; ``view_height`` None or, on an orthographic camera only, a finite number
+    of world units above 0.
     """
+    if camera.projection not in PROJECTIONS:
+        return "projection", f"expected one of {', '.join(PROJECTIONS)}, got {camera.projection!r}"
+    if camera.view_height is not None:
+        if camera.projection != "orthographic":
+            return (
+                "view_height",
+                'only an orthographic camera has one (projection = "orthographic")',
+            )
+        try:
+            height = float(camera.view_height)
+        except (TypeError, ValueError):
+            return "view_height", f"expected a number of world units, got {camera.view_height!r}"
+        if not (math.isfinite(height) and height > 0.0 and height < 1e30):
+            return "view_height", f"must be a finite number of world units > 0, got {height:g}"
     try:
         fov = float(camera.fov)
     except (TypeError, ValueError):
@@ -89,9 +118,11 @@ class CameraFrame:
     """A validated camera and image size, as a right-handed orthonormal basis.
 
     ``origin`` (3,) float64 is the eye; ``u`` (right), ``v`` (up) and ``w`` (backward: the
-    camera looks along ``-w``) are (3,) float64 unit vectors. The image plane at distance 1
-    spans ``[-half_width, half_width] × [-half_height, half_height]``; the image is ``width`` ×
-    ``height`` pixels, row 0 at the top, column 0 at the left.
+    camera looks along ``-w``) are (3,) float64 unit vectors. The image is ``width`` ×
+    ``height`` pixels, row 0 at the top, column 0 at the left. A perspective frame's image
+    plane at distance 1 spans ``[-half_width, half_width] × [-half_height, half_height]``;
+    an ``orthographic`` frame's rays all run along ``-w`` from the points ``origin + x u + y v``
+    of that rectangle (world units) through the eye.
     """
 
     origin: np.ndarray
@@ -102,6 +133,7 @@ class CameraFrame:
     half_height: float
     width: int
     height: int
+    orthographic: bool = False
 
 
 def _positive_integer(value: object, name: str) -> int:
@@ -132,7 +164,11 @@ def camera_frame(camera: Camera, width: int, height: int) -> CameraFrame:
     side = np.cross(up / np.linalg.norm(up), w)
     u = side / np.linalg.norm(side)
     v = np.cross(w, u)
-    half_height = math.tan(math.radians(fov) / 2.0)
+    orthographic = camera.projection == "orthographic"
+    if orthographic:
+        half_height = view_height_of(camera) / 2.0
+    else:
+        half_height = math.tan(math.radians(fov) / 2.0)
     for vector in (position, u, v, w):
         vector.setflags(write=False)
     return CameraFrame(
@@ -144,7 +180,17 @@ def camera_frame(camera: Camera, width: int, height: int) -> CameraFrame:
         half_height=half_height,
         width=width,
         height=height,
+        orthographic=orthographic,
     )
+
+
+def view_height_of(camera: Camera) -> float:
+    """The world units an orthographic ``camera``'s image spans from bottom to top: its
+    ``view_height``, or without one the height its ``fov`` sees at ``look_at``'s distance."""
+    if camera.view_height is not None:
+        return float(camera.view_height)
+    distance = math.dist(camera.position, camera.look_at)
+    return 2.0 * distance * math.tan(math.radians(float(camera.fov)) / 2.0)
 
 
 def strata(spp: int) -> tuple[int, int, np.ndarray]:
@@ -230,6 +276,7 @@ def camera_rays(frame: CameraFrame, spp: int, seed: int) -> CameraRays:
         ny,
         cells,
         hash_key(seed, 0),
+        frame.orthographic,
     )
 
 
@@ -245,13 +292,13 @@ def sample_rays(
     render is the same ray whichever call, batch or order makes it. The point on the image
     plane is worked out in float64 (the jitter must survive being added to a column number in
     the thousands) and rounded once to float32; the direction ``u x + v y - w`` and its
-    normalisation are float32 (``compiled.camera_rays.sample_direction``). Returns origins
-    (3, n) float32, unit directions (3, n) float32 and pixel (n,) int64."""
+    normalisation are float32 (``compiled.camera_rays.sample_direction``). An orthographic
+    frame's rays run along ``-w`` from that point of the image plane, ``eye + (u x + v y)`` in
+    float32 (``compiled.camera_rays.sample_origin``). Returns origins (3, n) float32, unit
+    directions (3, n) float32 and pixel (n,) int64."""
     index = np.ascontiguousarray(index, np.int64)
     spp = _positive_integer(spp, "spp")
-    directions = sample_directions(camera_rays(frame, spp, seed), index)
-    origins = np.empty((3, len(index)), np.float32)
-    origins[:] = frame.origin.astype(np.float32)[:, None]
+    origins, directions = compiled_rays.sample_rays(camera_rays(frame, spp, seed), index)
     return origins, directions, index // spp
 
 
@@ -285,10 +332,13 @@ def _rays_through(
         np.float32
     )
     u, v, w = (axis.astype(np.float32)[:, None] for axis in (frame.u, frame.v, frame.w))
-    directions = u * screen_x + v * screen_y - w  # (3, count) float32
-    directions /= np.sqrt(directions[0] ** 2 + directions[1] ** 2 + directions[2] ** 2)
     origins = np.empty((3, len(pixel)), np.float32)
     origins[:] = frame.origin.astype(np.float32)[:, None]
+    if frame.orthographic:
+        origins += u * screen_x + v * screen_y
+        return origins, np.repeat(-w, len(pixel), axis=1), pixel
+    directions = u * screen_x + v * screen_y - w  # (3, count) float32
+    directions /= np.sqrt(directions[0] ** 2 + directions[1] ** 2 + directions[2] ** 2)
     return origins, directions, pixel
 
 
@@ -300,10 +350,12 @@ OPENCV_FROM_OPENGL = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
 def intrinsics(frame: CameraFrame) -> np.ndarray:
-    """(3, 3) float64 K of the pinhole ``frame`` in OpenCV's pixel convention: a camera-space
-    point (x, y, z) (OpenCV axes) lands at column ``fx x / z + cx``, row ``fy y / z + cy``, and
-    the centre of pixel (column c, row r) is at (c, r), so ``cx = width / 2 - 1/2``. (Tools that
-    put pixel centres at c + 1/2, as NeRF's and Blender's do, take ``cx + 1/2``, ``cy + 1/2``.)"""
+    """(3, 3) float64 K of ``frame`` in OpenCV's pixel convention: a camera-space point
+    (x, y, z) (OpenCV axes) lands, through a pinhole, at column ``fx x / z + cx``, row
+    ``fy y / z + cy``; through an orthographic frame K is affine, the point lands at
+    ``K @ (x, y, 1)`` whatever its z (fx, fy then pixels per world unit). The centre of pixel
+    (column c, row r) is at (c, r), so ``cx = width / 2 - 1/2``. (Tools that put pixel centres
+    at c + 1/2, as NeRF's and Blender's do, take ``cx + 1/2``, ``cy + 1/2``.)"""
     fx = frame.width / (2.0 * frame.half_width)
     fy = frame.height / (2.0 * frame.half_height)
     return np.array(

@@ -504,6 +504,11 @@ def render(
     which builds once per worker for all of them.
     """
     local = scene if isinstance(scene, Scene) else _local_view(scene)
+    if local.render.background != "sky":  # its alpha pass is made by ``api.Renderer`` alone
+        raise ValueError(
+            f"render.background = {local.render.background!r}: render it locally "
+            "(embree_rt.render); a cluster's images show the sky"
+        )
     settings = local.render.with_overrides(**overrides)
     renderer = ClusterRenderer(scene, client, spheres=spheres, batch_size=batch_size)
     # one image: nothing to keep (a ClusterRenderer keeps its BVHs)

@@ -19,7 +19,7 @@ from typing import BinaryIO, NamedTuple
 import numpy as np
 
 from embree_rt.batches import worker_count
-from embree_rt.choices import TONEMAPS, TRANSFERS
+from embree_rt.choices import BACKGROUNDS, TONEMAPS, TRANSFERS
 from embree_rt.compiled import display_codes, film_sums
 
 GAMMA = 2.2
@@ -46,16 +46,22 @@ IMAGE_SUFFIXES = (*PILLOW_FORMATS, ".npy", ".npz", ".exr")
 SIXTEEN_BIT_SUFFIXES = (".png", ".tif", ".tiff")
 QUALITY_SUFFIXES = (".jpg", ".jpeg", ".webp")
 DEFAULT_QUALITY = 90
+# The formats that hold an alpha channel (a transparent background, ``choices.BACKGROUNDS``).
+ALPHA_SUFFIXES = (".png", ".tif", ".tiff", ".webp")
 
 
 class Encoding(NamedTuple):
     """How a display image stores its pixels: ``bit_depth`` 8, or 16 for .png and .tif/.tiff;
     ``quality`` 1 to 100 for the lossy .jpg/.jpeg and .webp (None: ``DEFAULT_QUALITY``);
-    ``look`` the tone mapping (``Look``; None: the default)."""
+    ``look`` the tone mapping (``Look``; None: the default); ``background`` one of
+    ``BACKGROUNDS``: other than "sky", the image carries a 4th channel, the share of each
+    pixel's camera rays that met something (its colour channels hold nothing where they did
+    not), and the background goes where they did not (``composite``)."""
 
     bit_depth: int = 8
     quality: int | None = None
     look: Look | None = None
+    background: str = "sky"
 
 
 DEFAULT_ENCODING = Encoding()
@@ -67,6 +73,10 @@ def encoding_problem(suffix: str, encoding: Encoding) -> str | None:
         return f"bit depth must be 8 or 16, got {encoding.bit_depth}"
     if encoding.bit_depth == 16 and suffix not in SIXTEEN_BIT_SUFFIXES:
         return f"16-bit images are written as {', '.join(SIXTEEN_BIT_SUFFIXES)}, not {suffix}"
+    if encoding.background not in BACKGROUNDS:
+        return f"background must be one of {', '.join(BACKGROUNDS)}, got {encoding.background!r}"
+    if encoding.background == "transparent" and suffix not in ALPHA_SUFFIXES:
+        return f"a transparent background needs an alpha channel: {', '.join(ALPHA_SUFFIXES)}"
     if encoding.quality is not None:
         if suffix not in QUALITY_SUFFIXES:
             return f"quality applies to the lossy {', '.join(QUALITY_SUFFIXES)}, not {suffix}"
@@ -381,20 +391,23 @@ def _exr_module():
 def write_pixels(
     pixels: np.ndarray, handle: BinaryIO, suffix: str, quality: int | None = None
 ) -> None:
-    """Write (h, w, 3) uint8 or uint16 display ``pixels`` as the display format of ``suffix``
+    """Write (h, w, 3) (or with alpha (h, w, 4)) uint8 or uint16 display ``pixels`` as the
+    display format of ``suffix``
     (``PILLOW_FORMATS``) to ``handle``: uint8 through Pillow (``quality`` for JPEG and WebP),
     uint16 as 16-bit RGB PNG (pypng) or TIFF (tifffile)."""
-    height, width, _ = pixels.shape
+    height, width, channels = pixels.shape
+    alpha = channels == 4
     if pixels.dtype == np.uint16:
         if suffix == ".png":
             import png
 
-            writer = png.Writer(width, height, greyscale=False, bitdepth=16)
-            writer.write(handle, pixels.reshape(height, width * 3))
+            writer = png.Writer(width, height, greyscale=False, alpha=alpha, bitdepth=16)
+            writer.write(handle, pixels.reshape(height, width * channels))
         else:
             import tifffile
 
-            tifffile.imwrite(handle, pixels, photometric="rgb")
+            extra = {"extrasamples": ["unassalpha"]} if alpha else {}
+            tifffile.imwrite(handle, pixels, photometric="rgb", **extra)
         return
     from PIL import Image
 
@@ -405,19 +418,45 @@ def write_pixels(
     Image.fromarray(pixels).save(handle, format=name, **options)
 
 
+def composite(values: np.ndarray, alpha: np.ndarray, background: str) -> np.ndarray:
+    """(h, w, 3) float32 ``values`` (display values in [0, 1], or linear radiance) of pixels
+    whose camera rays met something in the (h, w) float32 share ``alpha`` (and nothing
+    elsewhere) over ``background``: white adds ``1 - alpha`` of white, black nothing;
+    transparent gives (h, w, 4) straight (not premultiplied) colour and alpha, as PNG holds."""
+    if background == "white":
+        return values + (np.float32(1.0) - alpha)[..., None]
+    if background == "black":
+        return values
+    with np.errstate(divide="ignore", invalid="ignore"):
+        straight = np.where(alpha[..., None] > 0, values / alpha[..., None], np.float32(0.0))
+    return np.concatenate([np.minimum(straight, np.float32(1.0)), alpha[..., None]], axis=2)
+
+
 def _write_display(
     suffix: str, image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING
 ) -> None:
     look = encoding.look or DEFAULT_LOOK
-    if encoding.bit_depth == 8:
+    if image.shape[2] == 4:  # an alpha channel: composited over the encoding's background
+        values = composite(display_values(image[..., :3], look), image[..., 3], encoding.background)
+        pixels = quantize(values, encoding.bit_depth)
+    elif encoding.bit_depth == 8:
         pixels = tonemap(image, look)
     else:
         pixels = quantize(display_values(image, look), encoding.bit_depth)
     write_pixels(pixels, handle, suffix, encoding.quality)
 
 
+def linear_picture(image: np.ndarray, encoding: Encoding) -> np.ndarray:
+    """(h, w, 3) float32 linear ``image`` as the data formats hold it: with an alpha channel
+    (``Encoding.background``) composited over white (radiance 1) or black."""
+    image = np.asarray(image, np.float32)
+    if image.shape[2] == 4:
+        image = composite(image[..., :3], image[..., 3], encoding.background)
+    return image
+
+
 def _write_npy(image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING) -> None:
-    save_npy(np.asarray(image, np.float32), handle)
+    save_npy(linear_picture(image, encoding), handle)
 
 
 class _WriteOnly:
@@ -436,11 +475,11 @@ def save_npy(array: np.ndarray, handle: BinaryIO) -> None:
 
 
 def _write_npz(image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING) -> None:
-    np.savez(handle, beauty=np.asarray(image, np.float32))
+    np.savez(handle, beauty=linear_picture(image, encoding))
 
 
 def _write_exr(image: np.ndarray, handle: BinaryIO, encoding: Encoding = DEFAULT_ENCODING) -> None:
-    write_exr_channels({"RGB": np.ascontiguousarray(image, np.float32)}, handle)
+    write_exr_channels({"RGB": np.ascontiguousarray(linear_picture(image, encoding))}, handle)
 
 
 def write_exr_channels(channels: dict[str, np.ndarray], handle: BinaryIO) -> None:
@@ -463,11 +502,18 @@ WRITERS: dict[str, Callable[..., None]] = {
 }
 
 
-def check_image_shape(image: np.ndarray, path: str | os.PathLike) -> np.ndarray:
-    """``image`` as an array; ValueError naming ``path`` unless it is (h, w, 3), h, w >= 1."""
+def check_image_shape(
+    image: np.ndarray, path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCODING
+) -> np.ndarray:
+    """``image`` as an array; ValueError naming ``path`` unless it is (h, w, 3), h, w >= 1, or
+    (h, w, 4) with a background other than the sky (``Encoding``)."""
     image = np.asarray(image)
-    if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
-        raise ValueError(f"{path}: expected an (h, w, 3) image, got shape {image.shape}")
+    channels = 3 if encoding.background == "sky" else 4
+    if image.ndim != 3 or image.shape[2] != channels or image.shape[0] < 1 or image.shape[1] < 1:
+        raise ValueError(
+            f"{path}: expected an (h, w, {channels}) image with background "
+            f"{encoding.background!r}, got shape {image.shape}"
+        )
     return image
 
 
@@ -483,7 +529,7 @@ def save_image(
     ``path`` is left as it was and no partial file is left.
     """
     check_output_path(path, encoding)
-    image = check_image_shape(image, path)
+    image = check_image_shape(image, path, encoding)
     target = Path(path)
     writer = WRITERS[target.suffix.lower()]
     write_atomically([(target, lambda handle: writer(image, handle, encoding))])

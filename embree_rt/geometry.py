@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from embree_rt.ambient_occlusion import plane_blocks
 from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.embree import BVH, spheres_in_spatial_order
@@ -109,7 +110,8 @@ class BuiltMesh:
 
 @dataclass
 class Placement:
-    """A top-level geometry that places built meshes (indices ``meshes``): one instance, or
+    """A top-level geometry that places built meshes (indices ``meshes``; none for a curve
+    set, placed as a BVH of its own): one instance, or
     (``in_array``) an instance array whose instance i has material ``materials[i]`` ((n,)
     int32; a single instance's is its one material); ``smooth`` shading; ``first_object`` the
     object id of its first copy (``Scene.object_id_starts``); ``scale`` a bound on a single
@@ -173,6 +175,9 @@ class SceneGeometry(Closing):
         self.floor = scene.floor
         # The floor's material comes after the scene's own in the renderer's material table.
         self.floor_material = len(scene.materials)
+        # Each curve set's own BVH, placed once in the scene's (closed with it).
+        self._curve_bvhs: list[BVH] = []
+        self.curve_segment_count = 0
         self.triangle_count = 0
         self.instance_count = 0
         try:
@@ -188,6 +193,7 @@ class SceneGeometry(Closing):
                 scene.sphere_radii = np.zeros(0, np.float32)  # would keep the arrays)
                 scene.sphere_materials = np.zeros(0, np.int32)
             self._add_meshes(scene)
+            self._add_curves(scene)
             self.bvh.commit()
             self._finish_tables()
         except BaseException:
@@ -356,6 +362,24 @@ class SceneGeometry(Closing):
             looks.append(MeshObject(mesh=entry.mesh, mesh_colors=entry.mesh_colors))
         self.mesh_colors = MeshColors(looks, geom_ids)
 
+    def _add_curves(self, scene: Scene) -> None:
+        """Each curve set as a BVH of its own placed once (identity): its hits then carry the
+        instance's id, which names the set, its material and scale as a mesh placement's do;
+        a placement of no mesh, so no mesh lookup reads them."""
+        for curves, object_id in zip(scene.curves, scene.curve_ids(), strict=True):
+            child = BVH(threads=self.bvh.threads)
+            self._curve_bvhs.append(child)
+            child.add_curves(curves.points, curves.radii, curves.starts)
+            child.commit()
+            geom_id = self.bvh.add_instance(child, np.eye(4))
+            material = np.array([scene.material_index(curves.material)], np.int32)
+            self._placements.append(
+                Placement(
+                    geom_id, [], material, False, int(object_id), scale=child.coordinate_bound
+                )
+            )
+            self.curve_segment_count += len(curves)
+
     def _finish_tables(self) -> None:
         """The tables by top-level geometry id and the meshes' concatenated tables that turn a
         hit's ids into its material, scale and smooth normal, from the placements and meshes."""
@@ -372,7 +396,7 @@ class SceneGeometry(Closing):
         self.array_child = np.full((size, widest), -1, np.int32)
         for placement in self._placements:
             geom_id = placement.geom_id
-            self.instance_child[geom_id] = placement.meshes[0]
+            self.instance_child[geom_id] = placement.meshes[0] if placement.meshes else -1
             self.instance_material[geom_id] = placement.materials[0]
             self.instance_smooth[geom_id] = placement.smooth
             self.instance_scale[geom_id] = placement.scale
@@ -401,7 +425,8 @@ class SceneGeometry(Closing):
             instance_labels={placement.geom_id: placement.materials for placement in arrays},
         )
         self.smooth_meshes = bool(self.instance_smooth.any())
-        self.has_meshes = self.instance_count > 0
+        # Curve sets' hits carry instance ids too (their object ids and materials read them).
+        self.has_meshes = self.instance_count > 0 or bool(self._curve_bvhs)
         # Mesh looks and sphere colours are found by each hit's Embree ids.
         self.needs_ids = self.has_meshes or self.sphere_colors is not None
 
@@ -409,6 +434,8 @@ class SceneGeometry(Closing):
         self.bvh.close()
         for mesh in self._meshes:
             mesh.bvh.close()
+        for curve_bvh in self._curve_bvhs:
+            curve_bvh.close()
 
     # -- queries ------------------------------------------------------------------------------
 
@@ -555,6 +582,9 @@ class SceneGeometry(Closing):
         (k,) the instance within an instance array (-1 for other hits)."""
         smooth = self.instance_smooth[inst]
         child = self.instance_child[inst]
+        # hits on curves (no mesh: child -1) read mesh 0's face 0, and keep their face normal
+        prim = np.where(child >= 0, prim, 0)
+        child = np.maximum(child, 0)
         if self.bvh.array_count:
             position = self.bvh.instance_children(inst, inst_prim)
             in_array = position >= 0
@@ -580,6 +610,15 @@ class SceneGeometry(Closing):
         """(k,) bool: whether any surface, floor included, lies between each of the ``points``
         (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``segments.occluded_toward``."""
         return segments.occluded_toward(self.bvh, points, rows, target, self.labels.plane_y)
+
+    def occluded_rays(
+        self, origins: np.ndarray, directions: np.ndarray, distance: float
+    ) -> np.ndarray:
+        """(n,) bool: whether any surface, floor included, lies on each ray from ``origins``
+        along ``directions`` ((3, n) float32) within ``distance`` (inf: any): one occlusion
+        batch (ambient occlusion's)."""
+        blocked = self.bvh.occluded(origins.T, directions.T, 0.0, np.float32(distance))
+        return blocked | plane_blocks(origins, directions, self.labels.plane_y, distance)
 
     def toward_lights(
         self,

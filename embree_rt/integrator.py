@@ -20,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from embree_rt import shading
+from embree_rt.ambient_occlusion import AmbientOcclusion, open_shares
 from embree_rt.batches import batch_ranges, ordered_results, worker_count
 from embree_rt.camera import CameraFrame, camera_rays, sample_rays, tiled_samples
 from embree_rt.closing import Closing
@@ -62,6 +63,8 @@ class BatchWork:
 
     block: FilmBlock
     rays: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RAY_KINDS, 0))
+    # the render's seed, which ambient occlusion's directions are drawn with
+    seed: int = 0
 
 
 @dataclass
@@ -69,12 +72,15 @@ class RayBatch:
     """Rays in flight, one per column: ``origins``, ``directions`` (3, n) float32 (unit
     directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput. Camera rays'
     origins (the eye) and unit weights are zero-stride views (``camera_batch``): every stage
-    reads them as any other, and 1 · x is x, bit for bit."""
+    reads them as any other, and 1 · x is x, bit for bit. ``sample`` (n,) int64: camera rays'
+    global sample indices (what ambient occlusion draws its directions from); None for the
+    rays spawned at hits, which ambient occlusion does not reach."""
 
     origins: np.ndarray
     directions: np.ndarray
     pixel: np.ndarray
     weight: np.ndarray
+    sample: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.pixel)
@@ -101,23 +107,31 @@ NO_RAYS = RayBatch(
 
 class HitRays(NamedTuple):
     """The rays of a batch that hit, as shading reads them (their surfaces hold the points):
-    ``directions`` (3, k) float32 unit, ``pixel`` (k,) int64, ``weight`` (3, k) float32."""
+    ``directions`` (3, k) float32 unit, ``pixel`` (k,) int64, ``weight`` (3, k) float32,
+    ``sample`` (k,) int64 the camera sample indices of camera rays (``RayBatch.sample``),
+    None for rays spawned at hits."""
 
     directions: np.ndarray
     pixel: np.ndarray
     weight: np.ndarray
+    sample: np.ndarray | None
 
 
-def camera_batch(origin: np.ndarray, directions: np.ndarray, pixel: np.ndarray) -> RayBatch:
+def camera_batch(
+    origin: np.ndarray, directions: np.ndarray, pixel: np.ndarray, sample: np.ndarray
+) -> RayBatch:
     """The ``RayBatch`` of n camera rays from one ``origin`` (3,) float32 along ``directions``
-    (3, n) float32 of ``pixel`` (n,) int64, weighing one: the eye and the ones repeated by zero
-    strides, not copied."""
+    (3, n) float32 of ``pixel`` (n,) int64 and camera sample ``sample`` (n,) int64, weighing
+    one: the eye and the ones repeated by zero strides, not copied. (An orthographic camera's
+    rays start on its image plane, not at ``origin``; nothing reads camera rays' origins after
+    the query that made them: their hits' surfaces hold the points.)"""
     n = len(pixel)
     return RayBatch(
         np.broadcast_to(np.asarray(origin, np.float32)[:, None], (3, n)),
         directions,
         pixel,
         np.broadcast_to(np.float32(1.0), (3, n)),
+        sample,
     )
 
 
@@ -179,6 +193,8 @@ class Integrator(Closing):
         self.light_rgb = np.array(
             [np.asarray(lt.color, np.float32) * lt.intensity for lt in lights], np.float32
         ).reshape(-1, 3)
+        self.camera_sees_sky = scene.render.background == "sky"
+        self.ao = scene.render.ao
         self.horizon = np.asarray(scene.background.horizon, np.float32)
         self.zenith = np.asarray(scene.background.zenith, np.float32)
 
@@ -253,8 +269,8 @@ class Integrator(Closing):
             raise ValueError(f"sample: must lie in [0, {spp}), got {sample}")
         index = np.arange(first, first + count, dtype=np.int64) * spp + sample
         origins, directions, pixel = sample_rays(frame, spp, seed, index)
-        work = BatchWork(FilmBlock(first, count))
-        rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32))
+        work = BatchWork(FilmBlock(first, count), seed=seed)
+        rays = RayBatch(origins, directions, pixel, np.ones((3, count), np.float32), index)
         work.rays["primary"] += count
         rows, surfaces = self.geometry.intersect_compact(origins, directions, True, ids=False)
         self._trace(rays, rows, surfaces, work, max_depth)
@@ -269,13 +285,13 @@ class Integrator(Closing):
         ``batch_ranges`` cuts them) through every bounce: their film block and ray counts.
         A pure function of its arguments and the scene, so any process holding the same scene
         computes the same block (``embree_rt.distributed`` runs it on Dask workers)."""
-        work = BatchWork(FilmBlock(start // spp, count // spp))
+        work = BatchWork(FilmBlock(start // spp, count // spp), seed=seed)
         index, pixel = tiled_samples(frame, spp, start, count)
         # Camera rays are made inside the first query, from their sample indices.
         camera = camera_rays(frame, spp, seed)
         rows, surfaces, directions = self.geometry.intersect_camera(camera, index, ids=False)
         work.rays["primary"] += count
-        rays = camera_batch(camera.origin, directions, pixel)
+        rays = camera_batch(camera.origin, directions, pixel, index)
         self._trace(rays, rows, surfaces, work, max_depth)
         return work
 
@@ -291,7 +307,9 @@ class Integrator(Closing):
         shade their children to ``max_depth``."""
         depth = 0
         while True:
-            if len(rows) < len(rays):
+            # (camera rays that meet nothing show the sky unless the render has a background
+            # of its own: the film composites that over the rays that met something)
+            if len(rows) < len(rays) and (depth > 0 or self.camera_sees_sky):
                 escaped = np.ones(len(rays), bool)
                 escaped[rows] = False
                 escaped = np.flatnonzero(escaped)
@@ -299,8 +317,12 @@ class Integrator(Closing):
                 sky = shading.sky_at(rays.directions[1][escaped], self.horizon, self.zenith)
                 work.block.add_weighted(rays.pixel, rays.weight, sky, escaped)
             # The hits' origins are not needed again: their surfaces say where they are.
+            sample = None if rays.sample is None else np.take(rays.sample, rows)
             hit_rays = HitRays(
-                surfaces.incoming, np.take(rays.pixel, rows), np.take(rays.weight, rows, axis=1)
+                surfaces.incoming,
+                np.take(rays.pixel, rows),
+                np.take(rays.weight, rows, axis=1),
+                sample,
             )
             rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
             depth += 1
@@ -326,6 +348,8 @@ class Integrator(Closing):
         outside += surfaces.position  # (position + face_normal · offset)
         radiance = ambient_share * hits.color
         radiance *= hits.occlusion  # (x · 1 is x: the bits of unoccluded hits stay)
+        if self.ao.samples and rays.sample is not None:  # camera rays' hits: the open share
+            radiance *= self._open_shares(outside, normal, hits.lit, rays.sample, work.seed)
         self._add_direct_light(radiance, outside, normal, d, hits, diffuse_share, work)
         if self.materials.glows:
             radiance += hits.emission
@@ -356,6 +380,36 @@ class Integrator(Closing):
             checker = self.scene.floor.checker
             shading.checker(surfaces.position[:, :floor], checker, hits.color[:, :floor])
         return hits
+
+    def open_shares(
+        self, surfaces: SurfaceHits, sample: np.ndarray, seed: int, ao: AmbientOcclusion
+    ) -> np.ndarray:
+        """(k,) float32 ambient occlusion of the k ``surfaces`` (``ambient_occlusion``, ``ao``
+        an ``AmbientOcclusion`` with samples) seen by rays with camera sample indices
+        ``sample`` (k,) int64 at ``seed``: from just off each surface, about its shading
+        normal turned to the ray, as the beauty's stage computes it (the AOV's too)."""
+        normal, face_normal, _ = self.facing_the_ray(surfaces.incoming, surfaces)
+        outside = np.multiply(face_normal, surface_offset(surfaces.scale))
+        outside += surfaces.position
+        lit = ~np.take(self.materials.unlit, surfaces.material)
+        return self._open_shares(outside, normal, lit, sample, seed, ao)
+
+    def _open_shares(
+        self,
+        outside: np.ndarray,
+        normal: np.ndarray,
+        lit: np.ndarray,
+        sample: np.ndarray,
+        seed: int,
+        ao: AmbientOcclusion | None = None,
+    ) -> np.ndarray:
+        """Ambient occlusion's stage: one occlusion batch of ``ao`` (the render's by default)
+        rays from the points ``outside`` (3, k) about ``normal`` (3, k); (k,) float32 open
+        shares, 1 where not ``lit`` (k,) bool (an unlit colour is not ambient light)."""
+        ao = self.ao if ao is None else ao
+        share = open_shares(self.geometry.occluded_rays, outside, normal, sample, ao, seed)
+        share[~lit] = np.float32(1.0)
+        return share
 
     @staticmethod
     def _absorb_inside(weight, t, absorption, entering) -> None:

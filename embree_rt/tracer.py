@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from embree_rt import shading
-from embree_rt.compiled.camera_rays import CameraRays, sample_directions
+from embree_rt.compiled.camera_rays import CameraRays, sample_rays
 from embree_rt.geometry import SurfaceHits
 
 # Per light: (n,) bool which points see it, (3, n) float32 unit directions toward it where
@@ -62,6 +62,15 @@ class Tracer(Protocol):
         the ``points`` (3, n) float32 at ``rows`` (k,) int64 to ``target`` (3,)."""
         ...
 
+    def occluded_rays(
+        self, origins: np.ndarray, directions: np.ndarray, distance: float
+    ) -> np.ndarray:
+        """(n,) bool: whether any surface, the floor included, lies on each ray from
+        ``origins`` along unit ``directions`` ((3, n) float32) within ``distance`` (inf: any):
+        one batch of ambient occlusion's rays. A tracer that cannot answer them (bricks)
+        raises ``NotImplementedError``."""
+        ...
+
     def close(self) -> None: ...
 
 
@@ -83,8 +92,7 @@ class RaysInNumPy:
     def intersect_camera(
         self, camera: CameraRays, index: np.ndarray, ids: bool = True
     ) -> tuple[np.ndarray, SurfaceHits, np.ndarray]:
-        directions = sample_directions(camera, np.ascontiguousarray(index, np.int64))
-        origins = np.repeat(camera.origin[:, None], len(index), axis=1)
+        origins, directions = sample_rays(camera, np.ascontiguousarray(index, np.int64))
         rows, surfaces = self.intersect_compact(origins, directions, coherent=True, ids=ids)
         return rows, surfaces, directions
 

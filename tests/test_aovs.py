@@ -584,7 +584,9 @@ def test_exr_layers_read_back_by_openexr(tmp_path: Path, rendered) -> None:
         "albedo.B",
         "object_id.id",
         "material_id.id",
+        "ao.Y",
     }
+    np.testing.assert_array_equal(channels["ao.Y"], layers["ao"])
     for axis, name in enumerate("RGB"):
         np.testing.assert_array_equal(channels[name], beauty[..., axis])
     np.testing.assert_array_equal(channels["depth.Z"], layers["depth"])
@@ -741,7 +743,7 @@ def test_an_unknown_aov_is_one_line_exit_2_and_writes_nothing(tmp_path: Path) ->
     assert result.returncode == 2
     assert result.stderr.splitlines() == [
         "embree-rt: error: --aov: unknown AOV 'segmentation'; choose from depth, z_depth, "
-        "position, uv, normal, albedo, object_id, material_id"
+        "position, uv, normal, albedo, object_id, material_id, ao"
     ]
     assert old.read_bytes() == b"an old image"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png", "s.toml"]

@@ -186,7 +186,7 @@ def test_images_are_the_same_on_one_and_two_threads() -> None:
 
 
 COMPILED = [
-    camera_module.sample_directions,
+    camera_module.sample_rays,
     camera_module.write_directions,
     camera_query.intersect_camera_chunk,
     film_sums.add_weighted,
@@ -206,6 +206,7 @@ def test_compiled_camera_and_film_code_has_no_fused_multiply_add() -> None:
     # Python source again, with the same options, for the arguments a render gives them
     # (sample_direction is inlined into write_directions), and read the machine code.
     frame = camera_frame(Camera(), 64, 48)
+    ortho_frame = camera_frame(Camera(projection="orthographic", view_height=3.0), 64, 48)
     bvh = BVH(threads=1)
     index, pixel = tiled_samples(frame, 4, 0, 64 * 48 * 4)
     rgb = np.ones((3, len(index)), np.float32)
@@ -213,8 +214,16 @@ def test_compiled_camera_and_film_code_has_no_fused_multiply_add() -> None:
     calls = [
         (
             camera_module.write_directions,
-            (camera_rays(frame, 4, 1), index, 0, len(index), np.empty((3, len(index)), np.float32)),
+            (
+                camera_rays(frame, 4, 1),
+                index,
+                0,
+                len(index),
+                np.empty((3, len(index)), np.float32),
+                None,
+            ),
         ),
+        (camera_module.sample_rays, (camera_rays(ortho_frame, 4, 1), index)),
         (film_sums.add_weighted, (np.zeros((3, 64 * 48)), 0, pixel, rgb, rgb, None)),
         (film_sums.add_weighted, (np.zeros((3, 64 * 48)), 0, pixel, ones, rgb, index)),
         (film_sums.mean_into, (np.empty((64 * 48, 3), np.float32), 0, np.zeros((3, 64 * 48)), 4)),

@@ -94,6 +94,20 @@ def test_cluster_image_is_bitwise_the_local_image(cluster, name: str, as_path: b
     assert held and not any(held.values())
 
 
+def test_ambient_occlusion_on_the_cluster_is_bitwise_the_local_image(cluster) -> None:
+    """Each hit's occlusion rays are drawn from its camera sample's index and the seed alone,
+    so the workers trace the very rays the local render does."""
+    _, client = cluster
+    scene = rt.load_scene(SCENES / "benzene.toml")
+    scene.render.background = "sky"  # (a background's alpha pass is local-only: refused here)
+    scene.render.ao = rt.AmbientOcclusion(samples=6, distance=2.0)
+    image = bounded(rd.render, scene, client, batch_size=SMALL_BATCH, **SMALL).image
+    assert np.array_equal(image, local_image(scene))
+    scene.render.background = "white"
+    with pytest.raises(ValueError, match=r"render\.background"):
+        rd.render(scene, client, **SMALL)
+
+
 def test_random_field_of_1e5_spheres_is_bitwise_the_local_image(cluster) -> None:
     _, client = cluster
     plan = plan_field(100_000, seed=3)

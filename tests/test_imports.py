@@ -99,6 +99,7 @@ def test_no_module_imports_itself_through_others() -> None:
 # named in the layer's paragraph of docs/architecture.md.
 LAYERS: dict[str, tuple[str, ...]] = {
     "leaves": (
+        "ambient_occlusion",
         "batches",
         "budget",
         "camera",
@@ -109,6 +110,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
         "errors",
         "film",
         "materials",
+        "memory",
         "sampling",
         "shading",
         "sphere_modes",

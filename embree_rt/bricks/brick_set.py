@@ -120,6 +120,15 @@ class BrickSet(RaysInNumPy, Closing):
         brick blocks the segment from each ``points[:, rows]`` ((3, n) float32) to ``target``."""
         return self.occluded_toward_each(points, [rows], np.reshape(target, (1, 3)))[0]
 
+    def occluded_rays(
+        self, origins: np.ndarray, directions: np.ndarray, distance: float
+    ) -> np.ndarray:
+        """Refused: ambient occlusion's occlusion rays are not routed over bricks (the command
+        refuses ``--ao`` with bricks before anything is built)."""
+        raise NotImplementedError(
+            "render.ao: ambient occlusion is not rendered over bricks; render on one BVH"
+        )
+
     def occluded_toward_each(
         self, points: np.ndarray, rows_each: list[np.ndarray], targets: np.ndarray
     ) -> list[np.ndarray]:

@@ -56,6 +56,7 @@ def without_objects(scene: Scene, floor: bool = False) -> Scene:
         sphere_colors=None,
         meshes=[],
         instances=[],
+        curves=[],
         animation=None,
         notes=[],
     )
@@ -63,7 +64,7 @@ def without_objects(scene: Scene, floor: bool = False) -> Scene:
 
 def scene_brick(scene: Scene, partition: Partition, index: int) -> BrickContents:
     """Brick ``index`` of ``partition`` cut from ``scene``: the spheres whose centre, and the
-    mesh placements and instance copies whose world box's centre, lie in it."""
+    mesh placements, instance copies and curve sets whose world box's centre, lie in it."""
     ids = []
     mine = np.flatnonzero(partition.brick_of(scene.sphere_centers) == index)
     ids.append(mine.astype(np.int64))
@@ -92,6 +93,14 @@ def scene_brick(scene: Scene, partition: Partition, index: int) -> BrickContents
                 )
             )
             ids.append(first_id + copies.astype(np.int64))
+    # a curve set, whole, where its box's centre lies (the brick's box then reaches all of it)
+    for curves, object_id in zip(scene.curves, scene.curve_ids(), strict=True):
+        radii = np.asarray(curves.radii, np.float64)[:, None]
+        low = (curves.points - radii).min(axis=0)
+        high = (curves.points + radii).max(axis=0)
+        if partition.brick_of(((low + high) / 2)[None])[0] == index:
+            part.curves.append(curves)
+            ids.append(np.array([object_id], np.int64))
     return BrickContents(index, part, np.concatenate(ids))
 
 

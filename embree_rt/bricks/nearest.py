@@ -29,7 +29,8 @@ from embree_rt.mesh_attributes import HitLooks
 
 NO_OBJECT = np.iinfo(np.int64).max
 # Fields of SurfaceHits that are not one column per hit.
-_NOT_COLUMNS = {"flat", "floor_count", "looks"}
+# (rows and their values, not one column a hit: gathered as the looks' colours are)
+_NOT_COLUMNS = {"flat", "floor_count", "looks", "painted", "paint"}
 
 
 def nearest_over_bricks(
@@ -83,7 +84,8 @@ def gather_surfaces(
     """One ``SurfaceHits`` whose column j is column ``column[j]`` of ``parts[source[j]]``
     ((m,) int64 each), its first ``floor_count`` columns floor hits. Every per-hit field is
     gathered (whatever fields ``SurfaceHits`` has), in the widest of the parts' dtypes; a field
-    some part lacks (None) is None. Of the parts' looks, their colours are kept."""
+    some part lacks (None) is None. Of the parts' looks, their colours are kept, and their
+    painted hits' colours (``painted``, ``paint``)."""
     picks = [np.flatnonzero(source == index) for index in range(len(parts))]
     m = len(source)
     values = {}
@@ -106,16 +108,25 @@ def gather_surfaces(
     if flat:
         values["face_normal"] = values["normal"]
     colored, color = [], []
+    painted, paint = [], []
     for part, pick in zip(parts, picks, strict=True):
-        if not len(part.looks.rows) or not len(pick):
+        if not len(pick):
             continue
         place = np.full(len(part.t), -1, np.int64)
         place[column[pick]] = pick
-        kept = place[part.looks.rows] >= 0
-        colored.append(place[part.looks.rows][kept])
-        color.append(part.looks.color[:, kept])
+        for rows, values_at, kept_rows, kept_values in (
+            (part.looks.rows, part.looks.color, colored, color),
+            (part.painted, part.paint, painted, paint),
+        ):
+            if len(rows):
+                kept = place[rows] >= 0
+                kept_rows.append(place[rows][kept])
+                kept_values.append(values_at[:, kept])
     looks = HitLooks(
         np.concatenate(colored) if colored else np.zeros(0, np.int64),
         np.concatenate(color, axis=1) if color else np.zeros((3, 0), np.float32),
     )
+    if painted:
+        values["painted"] = np.concatenate(painted)
+        values["paint"] = np.concatenate(paint, axis=1)
     return SurfaceHits(**values, flat=flat, floor_count=floor_count, looks=looks)

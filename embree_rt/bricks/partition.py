@@ -159,7 +159,8 @@ def object_centers(scene: Scene) -> np.ndarray:
 
 def object_bounds(scene: Scene, spheres: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(n, 3) float64 low and high corners of each object's world bounding box in object-id
-    order (without the spheres when ``spheres`` is False: the meshes' placements and copies)."""
+    order (without the spheres when ``spheres`` is False: the meshes' placements and copies,
+    then the curve sets)."""
     parts_low, parts_high = [], []
     if spheres:
         centers = np.asarray(scene.sphere_centers, np.float64)
@@ -174,6 +175,11 @@ def object_bounds(scene: Scene, spheres: bool = True) -> tuple[np.ndarray, np.nd
         low, high = placed_bounds(entry.mesh.bounds, entry.transforms)
         parts_low.append(low)
         parts_high.append(high)
+    for curves in scene.curves:  # a curve set is one object
+        radii = np.asarray(curves.radii, np.float64)[:, None]
+        points = np.asarray(curves.points, np.float64)
+        parts_low.append((points - radii).min(axis=0)[None])
+        parts_high.append((points + radii).max(axis=0)[None])
     if not parts_low:
         return np.zeros((0, 3)), np.zeros((0, 3))
     return np.concatenate(parts_low), np.concatenate(parts_high)

@@ -19,7 +19,8 @@ import numpy as np
 from embree_rt.aovs import nerf_transforms
 from embree_rt.camera import camera_frame
 from embree_rt.cli.checks import check_output, output_encoding
-from embree_rt.cli.job import Job, frames_of, output_paths
+from embree_rt.cli.frame_paths import output_paths
+from embree_rt.cli.job import Job, frames_of
 from embree_rt.errors import InputError
 from embree_rt.film import Encoding, save_image, write_atomically
 from embree_rt.scene.animation import camera_at

@@ -15,6 +15,7 @@ from embree_rt.cli.job import info_job
 from embree_rt.cli.sources import prepare_scene
 from embree_rt.cli.summary import Timeline
 from embree_rt.geometry import SceneGeometry, sphere_kind
+from embree_rt.scene.views import scene_bounds
 
 
 def command_info(args: argparse.Namespace, clock: CompileClock, timeline: Timeline) -> None:
@@ -59,6 +60,7 @@ def command_info(args: argparse.Namespace, clock: CompileClock, timeline: Timeli
         unique_triangles,
         instances=instances - in_arrays,
         arrayed=in_arrays - sphere_instances,
+        curve_segments=sum(len(curves) for curves in scene.curves),
     )
     listing = id_listing(scene, floor_material)
     print(f"scene:      {args.scene}")
@@ -70,6 +72,8 @@ def command_info(args: argparse.Namespace, clock: CompileClock, timeline: Timeli
     print(f"triangles:  {unique_triangles:,} stored, {triangles:,} placed")
     print(f"instances:  {instances:,}")
     print(f"arrays:     {count(arrays, 'instance array')} holding {count(in_arrays, 'instance')}")
+    segments = sum(len(curves) for curves in scene.curves)
+    print(f"curves:     {count(segments, 'segment')} in {count(len(scene.curves), 'set')}")
     print(f"lights:     {len(scene.lights)}")
     # as many as the material ids listed below: the scene's and, with a floor, the floor's
     print(f"materials:  {sum(line.startswith('  material ') for line in listing)}")
@@ -116,33 +120,3 @@ def scene_bytes(scene) -> int:
         total += mesh.vertices.nbytes + mesh.faces.nbytes
     total += sum(entry.transforms.nbytes + entry.materials.nbytes for entry in scene.instances)
     return total
-
-
-def scene_bounds(scene) -> tuple[np.ndarray, np.ndarray] | None:
-    """(3,) float64 low and high corners of everything in ``scene`` but the floor, or None
-    when it is empty."""
-    lows, highs = [], []
-    if len(scene.sphere_radii):
-        radius = scene.sphere_radii[:, None]
-        lows.append((scene.sphere_centers - radius).min(axis=0))
-        highs.append((scene.sphere_centers + radius).max(axis=0))
-    for placement in scene.meshes:
-        corners = placement.mesh.bounds
-        box = np.array(
-            [[x, y, z, 1.0] for x in corners[:, 0] for y in corners[:, 1] for z in corners[:, 2]]
-        )
-        world = box @ placement.transform.T
-        lows.append(world[:, :3].min(axis=0))
-        highs.append(world[:, :3].max(axis=0))
-    for entry in scene.instances:
-        corners = entry.mesh.bounds
-        box = np.array(
-            [[x, y, z] for x in corners[:, 0] for y in corners[:, 1] for z in corners[:, 2]]
-        )
-        world = np.einsum("nij,kj->nki", entry.transforms[:, :3, :3], box)
-        world += entry.transforms[:, None, :3, 3]
-        lows.append(world.min(axis=(0, 1)))
-        highs.append(world.max(axis=(0, 1)))
-    if not lows:
-        return None
-    return np.min(lows, axis=0), np.max(highs, axis=0)

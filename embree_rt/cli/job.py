@@ -14,15 +14,14 @@ A new kind of input (a particle file, say) is a new ``Source`` kind here, chosen
 from __future__ import annotations
 
 import argparse
-import string
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
 from embree_rt.cli.checks import check_output, output_encoding
 from embree_rt.cli.errors import UsageError
+from embree_rt.cli.frame_paths import frame_range
 from embree_rt.cli.particles import refuse_particle_flags
-from embree_rt.errors import InputError
 from embree_rt.scene.errors import SceneError
 
 SCENE_SUFFIXES = (".toml", ".json")
@@ -88,6 +87,23 @@ class OnDask(NamedTuple):
 Where = OnThisMachine | OnDask
 
 
+class Staging(NamedTuple):
+    """What the command changes of the scene once it is made (``cli.sources``): its camera
+    turned to the standard ``view`` of its bounds (``scene.views``; None: its own camera),
+    ``orthographic`` unless ``--perspective`` came last of the projection flags, and a white
+    ``headlight`` at the camera. A still's camera only: an animation's moves."""
+
+    view: str | None = None
+    orthographic: bool = True
+    headlight: bool = False
+
+    @property
+    def restages(self) -> bool:
+        """Whether the scene is changed after it is made: then a cluster's workers are given
+        the scene itself, not its file or recipe."""
+        return self.view is not None or self.headlight
+
+
 class Output(NamedTuple):
     """What is written: ``pattern`` (a file, or an animation's ``{frame}`` pattern), the AOVs
     beside it, the bits and quality of its encoding, the frames asked for (``--frames``) and
@@ -111,8 +127,9 @@ class Job:
     """One command line's request: ``source`` made into a scene with ``settings`` (and without
     its floor if ``no_floor``), rendered ``where``, written as ``output`` (None: ``info``,
     which writes nothing); ``spheres`` how
-    spheres enter the BVH; ``quiet`` no progress bar or summary; ``scene_name`` what messages
-    call the scene ("the random field" for one)."""
+    spheres enter the BVH; ``quiet`` no progress bar or summary; ``staging`` what the command
+    changes of the made scene; ``scene_name`` what messages call the scene ("the random field"
+    for one)."""
 
     source: Source
     settings: tuple
@@ -121,6 +138,7 @@ class Job:
     output: Output | None
     spheres: str
     quiet: bool
+    staging: Staging
 
     @property
     def scene_name(self) -> str:
@@ -184,6 +202,35 @@ def where_of(args: argparse.Namespace) -> Where:
     return OnDask(args.cluster, args.scheduler, args.scheduler_timeout, args.partition)
 
 
+def staging_of(args: argparse.Namespace) -> Staging:
+    """``--view``, the projection flags (the last one given wins) and ``--headlight``."""
+    projections = [s.value for s in args.settings if s.key == "camera.projection"]
+    return Staging(
+        view=getattr(args, "view", None),
+        orthographic=not projections or projections[-1] == "orthographic",
+        headlight=bool(getattr(args, "headlight", False)),
+    )
+
+
+def refuse_for_scene(job: Job, scene) -> None:
+    """Refuse what the made ``scene`` makes of the job impossible: a background other than the
+    sky beyond a still rendered here (its alpha pass is ``api.Renderer``'s), and ambient
+    occlusion over bricks (their workers answer no occlusion rays)."""
+    background = scene.render.background
+    if job.output is not None and background != "sky":
+        if job.on_dask or job.output.framed or scene.animation is not None:
+            raise UsageError(
+                f"--background {background}: for a still rendered here; animations and "
+                "cluster renders show the sky"
+            )
+        encoding = output_encoding(job.output)._replace(background=background)
+        check_output(job.output.pattern, job.output.aovs, encoding)
+    if scene.render.ao.samples and job.on_dask and job.where.partition is not None:
+        raise UsageError(
+            "--ao: ambient occlusion is rendered on one BVH, not over bricks (--partition)"
+        )
+
+
 def job_from_args(args: argparse.Namespace) -> Job:
     """The ``Job`` of ``render`` or ``random``'s flags, with everything checked that needs no
     scene: the combinations of flags, the output path (before any work), ``--save-scene``."""
@@ -209,6 +256,7 @@ def job_from_args(args: argparse.Namespace) -> Job:
         output=output,
         spheres=args.spheres,
         quiet=args.quiet,
+        staging=staging_of(args),
     )
 
 
@@ -222,6 +270,7 @@ def info_job(args: argparse.Namespace) -> Job:
         output=None,
         spheres=args.spheres,
         quiet=True,
+        staging=staging_of(args),
     )
 
 
@@ -235,48 +284,3 @@ def frames_of(job: Job, animation) -> range | None:
     if job.output.aovs is not None:
         raise UsageError(AOVS_ONLY_STILLS_HERE)
     return frame_range(job.output.frames, animation.frames)
-
-
-def output_paths(pattern: str, frames: range | None) -> dict[int | None, str]:
-    """The file of each frame: ``pattern.format(frame=f)`` for an animation (``frames``), the
-    pattern itself for a still (``frames`` None). Raises InputError naming ``-o``."""
-    try:
-        fields = {name for _, name, _, _ in string.Formatter().parse(pattern) if name is not None}
-    except ValueError as error:
-        raise InputError(f"-o: {pattern}: not a valid pattern: {error}") from None
-    if frames is None:
-        if fields:
-            raise InputError(
-                f"-o: {pattern}: a pattern with {{frame}} needs a scene with an [animation]"
-            )
-        return {None: pattern}
-    if fields != {"frame"}:
-        raise InputError(
-            f"-o: {pattern}: the scene is animated: name the file with {{frame}} and nothing "
-            "else in braces (e.g. shots/f_{frame:04d}.png), or every frame would overwrite one file"
-        )
-    try:
-        paths = {f: pattern.format(frame=f) for f in frames}
-    except (ValueError, TypeError) as error:
-        raise InputError(f"-o: {pattern}: cannot format a frame number: {error}") from None
-    if len(set(paths.values())) < len(paths):
-        raise InputError(f"-o: {pattern}: gives two frames the same file name")
-    return paths
-
-
-def frame_range(text: str | None, count: int) -> range:
-    """Frames ``A:B`` (``A`` to ``B - 1``, as a Python slice; either end may be left out) or
-    ``A`` (one frame) of an animation of ``count`` frames. Raises InputError naming --frames."""
-    if text is None:
-        return range(count)
-    first, colon, last = text.partition(":")
-    try:
-        start = int(first) if first.strip() else 0
-        stop = (int(last) if last.strip() else count) if colon else start + 1
-    except ValueError:
-        raise InputError(f"--frames: expected A:B (frame numbers), got {text!r}") from None
-    if not 0 <= start < stop <= count:
-        raise InputError(
-            f"--frames: {text!r} is not a non-empty range within the animation's frames 0:{count}"
-        )
-    return range(start, stop)

@@ -8,7 +8,14 @@ import math
 import re
 import sys
 
-from embree_rt.choices import AOV_NAMES, SPHERE_MODES, TONEMAPS, TRANSFERS
+from embree_rt.choices import (
+    AOV_NAMES,
+    BACKGROUNDS,
+    SPHERE_MODES,
+    STANDARD_VIEWS,
+    TONEMAPS,
+    TRANSFERS,
+)
 from embree_rt.cli.errors import EXIT_BAD_INPUT
 from embree_rt.version import __version__
 
@@ -153,7 +160,12 @@ class SetKey(argparse.Action):
                 raise argparse.ArgumentError(self, str(error)) from None
         else:
             words = values if isinstance(values, list) else [values]
-            value = [parse_value(word) for word in words] if self.nargs else parse_value(values)
+            if self.nargs == 0:  # a flag standing for one value of its key: --ortho
+                value = self.const
+            elif self.nargs:
+                value = [parse_value(word) for word in words]
+            else:
+                value = parse_value(values)
             setting = Setting(self.key, value, " ".join([option_string, *words]))
         namespace.settings = (*namespace.settings, setting)
 
@@ -180,13 +192,21 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
         ),
         "--seed": ("render.seed", "the sampler's seed (render.seed); random: the field's too"),
         "--fov": ("camera.fov", "vertical field of view in degrees (camera.fov)"),
+        "--ao": (
+            "render.ao.samples",
+            "ambient occlusion: rays a camera-ray hit, 0 off (render.ao.samples)",
+        ),
+        "--ao-distance": (
+            "render.ao.distance",
+            "how far ambient occlusion looks for occluders, world units (render.ao.distance)",
+        ),
         "--exposure": (
             "render.exposure",
             "stops of exposure before the tone map, e.g. 1 doubles the light (render.exposure)",
         ),
     }
     for flag, (key, text) in shortcuts.items():
-        metavar = "EV" if flag == "--exposure" else "N"
+        metavar = {"--exposure": "EV", "--ao-distance": "D"}.get(flag, "N")
         parser.add_argument(
             flag, action=SetKey, key=key, metavar=metavar, help=text + SCENE_DEFAULT
         )
@@ -204,6 +224,28 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
         choices=TRANSFERS,
         help="the display curve: a 2.2 power, or sRGB's piecewise curve "
         "(render.transfer)" + SCENE_DEFAULT + ", else gamma2.2",
+    )
+    for flag, projection in (("--ortho", "orthographic"), ("--perspective", "perspective")):
+        parser.add_argument(
+            flag,
+            action=SetKey,
+            key="camera.projection",
+            nargs=0,
+            const=projection,
+            help=f'a {projection} camera (camera.projection = "{projection}")'
+            + (
+                ", its view_height from camera.view_height or else what fov sees at look_at"
+                if projection == "orthographic"
+                else ", also with --view"
+            ),
+        )
+    parser.add_argument(
+        "--background",
+        action=SetKey,
+        key="render.background",
+        choices=BACKGROUNDS,
+        help="what camera rays that meet nothing show: the sky, white, black, or transparent "
+        "(an alpha channel: .png, .tif, .webp) (render.background)" + SCENE_DEFAULT,
     )
     for flag, key in (("--camera-position", "camera.position"), ("--look-at", "camera.look_at")):
         parser.add_argument(
@@ -250,6 +292,17 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         "file each beside a .png or .npy",
     )
     add_setting_flags(parser)
+    parser.add_argument(
+        "--view",
+        choices=STANDARD_VIEWS,
+        help="a standard view framing the scene's bounds along an axis of its up convention, "
+        "orthographic unless --perspective",
+    )
+    parser.add_argument(
+        "--headlight",
+        action="store_true",
+        help="add a white light at the camera (a still's: not with an animation)",
+    )
     parser.add_argument(
         "-t",
         "--threads",

@@ -123,7 +123,7 @@ def render_particle_frames(args: argparse.Namespace) -> None:
     from embree_rt.api import render
     from embree_rt.cli.checks import check_library, output_encoding, writing
     from embree_rt.cli.errors import UsageError
-    from embree_rt.cli.job import output_paths
+    from embree_rt.cli.frame_paths import output_paths
     from embree_rt.film import check_output_path
     from embree_rt.scene.particles import read_particles
     from embree_rt.scene.settings import apply_to_scene

@@ -13,7 +13,14 @@ import numpy as np
 from embree_rt import budget
 from embree_rt.cli.checks import check_library, memory_key, writing
 from embree_rt.cli.errors import UsageError
-from embree_rt.cli.job import Job, MeshFile, ParticleFile, RandomField, SceneFile
+from embree_rt.cli.job import (
+    Job,
+    MeshFile,
+    ParticleFile,
+    RandomField,
+    SceneFile,
+    refuse_for_scene,
+)
 from embree_rt.integrator import DEFAULT_BATCH_SIZE
 from embree_rt.scene.errors import SceneError, warn_input
 from embree_rt.scene.instances import mesh_from_parts, spheres_to_instances
@@ -46,7 +53,8 @@ def prepare_scene(job: Job, timeline) -> MadeScene:
     warned of, and the Embree library loaded before any work: one that is missing, or that
     ``EMBREE_RT_LIBRARY`` names wrongly, is the installation's problem."""
     timeline.mark_scene_started()
-    made = make_scene(job)
+    made = staged(make_scene(job), job)
+    refuse_for_scene(job, made.scene)
     timeline.mark_scene_made()
     if not made.scene.lights:
         warn_input(f"{job.scene_name}: lights: none: only the sky and ambient light show it")
@@ -79,6 +87,41 @@ def make_scene(job: Job) -> MadeScene:
         apply_to_scene(scene, settings, str(source.path))
         return MadeScene(scene, "load", time.perf_counter() - started, scene)
     raise TypeError(f"no scene is made from a {type(source).__name__}")
+
+
+def staged(made: MadeScene, job: Job) -> MadeScene:
+    """``made`` with its scene changed as ``job.staging`` says: the camera turned to the
+    standard view of the scene's bounds (``scene.views.standard_view``), then a headlight, a
+    white point light of intensity 1 at the camera (lights have no fall-off, so it lights what
+    faces the camera evenly). A restaged scene is given to a cluster's workers as it is."""
+    staging = job.staging
+    if not staging.restages:
+        return made
+    scene = made.scene
+    if scene.animation is not None:
+        flag = f"--view {staging.view}" if staging.view is not None else "--headlight"
+        raise SceneError(
+            job.scene_name,
+            "animation",
+            f"{flag}: the animation moves the camera; place a light or a camera in the scene",
+        )
+    if staging.view is not None:
+        from embree_rt.scene.views import scene_bounds, standard_view
+
+        bounds = scene_bounds(scene)
+        if bounds is None:
+            raise SceneError(
+                job.scene_name, "(file)", f"--view {staging.view}: the scene has nothing to frame"
+            )
+        aspect = scene.render.width / scene.render.height
+        scene.camera = standard_view(
+            scene.camera, *bounds, staging.view, aspect, staging.orthographic
+        )
+    if staging.headlight:
+        from embree_rt.scene.model import PointLight
+
+        scene.lights.append(PointLight(position=tuple(scene.camera.position)))
+    return made._replace(for_workers=scene)
 
 
 def only_render_settings(settings) -> bool:

@@ -1,8 +1,10 @@
 """Camera samples compiled: the tile order of a batch's samples and the ray of each sample.
 
 ``camera.tiled_samples`` and ``camera.sample_rays`` state the rule; these loops compute it in
-one pass each, with no (n,) temporaries, and the Embree layer calls ``sample_direction`` while
-it fills a packet, so camera rays need no arrays before traversal.
+one pass each, with no (n,) temporaries, and the Embree layer calls ``write_directions`` chunk
+by chunk while it traces, so camera rays need no arrays before traversal. A perspective
+camera's rays share its eye and differ in direction; an orthographic camera's share the
+direction ``-w`` and start from the image plane, each at its own origin.
 
 Every value is formed by the same operations, in the same order and the same precision, as the
 NumPy expressions that first defined these rays (SplitMix64 in wrapping uint64; the jitter
@@ -32,7 +34,8 @@ class CameraRays(NamedTuple):
     = 2 half_width / width and ``half_width`` (likewise ``row_scale``, ``half_height``) float64;
     ``width``, ``spp`` the image's width and samples per pixel; ``nx``, ``ny`` and ``cells``
     (spp,) int64 the jitter grid (``camera.strata``); ``key`` the uint64 hash key of the seed
-    and dimension 0 (``sampling.hash_key``)."""
+    and dimension 0 (``sampling.hash_key``); ``orthographic`` whether the rays are parallel
+    (the half sizes then in world units)."""
 
     origin: np.ndarray
     u: np.ndarray
@@ -48,6 +51,7 @@ class CameraRays(NamedTuple):
     ny: int
     cells: np.ndarray
     key: np.uint64
+    orthographic: bool
 
 
 @njit(inline="always")
@@ -60,8 +64,8 @@ def splitmix64(x):
 
 
 @njit(inline="always")
-def sample_direction(camera, index):
-    """The float32 unit direction (x, y, z) of camera sample ``index`` (int64)."""
+def sample_screen(camera, index):
+    """The float32 image-plane point (x right, y up) of camera sample ``index`` (int64)."""
     spp = camera.spp
     pixel = index // spp
     row = pixel // camera.width
@@ -82,6 +86,13 @@ def sample_direction(camera, index):
     line = np.float64(row) + y
     screen_x = np.float32(column * camera.column_scale - camera.half_width)
     screen_y = np.float32(camera.half_height - line * camera.row_scale)
+    return screen_x, screen_y
+
+
+@njit(inline="always")
+def sample_direction(camera, index):
+    """The float32 unit direction (x, y, z) of perspective camera sample ``index`` (int64)."""
+    screen_x, screen_y = sample_screen(camera, index)
     u, v, w = camera.u, camera.v, camera.w
     dx = u[0] * screen_x + v[0] * screen_y - w[0]
     dy = u[1] * screen_x + v[1] * screen_y - w[1]
@@ -90,10 +101,36 @@ def sample_direction(camera, index):
     return dx / length, dy / length, dz / length
 
 
+@njit(inline="always")
+def sample_origin(camera, index):
+    """The float32 origin (x, y, z) of orthographic camera sample ``index`` (int64): its
+    image-plane point ``eye + x u + y v``, in float32 as a perspective direction is formed."""
+    screen_x, screen_y = sample_screen(camera, index)
+    o, u, v = camera.origin, camera.u, camera.v
+    return (
+        o[0] + (u[0] * screen_x + v[0] * screen_y),
+        o[1] + (u[1] * screen_x + v[1] * screen_y),
+        o[2] + (u[2] * screen_x + v[2] * screen_y),
+    )
+
+
 @njit(nogil=True, cache=True)
-def write_directions(camera, index, first, stop, directions):
-    """Directions of samples ``index[first:stop]`` ((n,) int64) into the same columns of
-    ``directions`` (3, n) float32."""
+def write_directions(camera, index, first, stop, directions, origins):
+    """Rays of samples ``index[first:stop]`` ((n,) int64): their directions into the same
+    columns of ``directions`` (3, n) float32 and, for an orthographic camera, their origins
+    into ``origins`` (3, n) float32 (None for a perspective camera, whose rays all start at
+    its eye)."""
+    if camera.orthographic:
+        for i in range(first, stop):
+            directions[0, i] = -camera.w[0]
+            directions[1, i] = -camera.w[1]
+            directions[2, i] = -camera.w[2]
+            if origins is not None:
+                ox, oy, oz = sample_origin(camera, index[i])
+                origins[0, i] = ox
+                origins[1, i] = oy
+                origins[2, i] = oz
+        return
     for i in range(first, stop):
         dx, dy, dz = sample_direction(camera, index[i])
         directions[0, i] = dx
@@ -102,12 +139,19 @@ def write_directions(camera, index, first, stop, directions):
 
 
 @njit(nogil=True, cache=True)
-def sample_directions(camera, index):
-    """(3, n) float32 unit directions of the (n,) int64 camera samples ``index``."""
+def sample_rays(camera, index):
+    """(3, n) float32 origins and (3, n) float32 unit directions of the (n,) int64 camera
+    samples ``index``."""
     n = index.shape[0]
     directions = np.empty((3, n), np.float32)
-    write_directions(camera, index, 0, n, directions)
-    return directions
+    origins = np.empty((3, n), np.float32)
+    write_directions(camera, index, 0, n, directions, origins)
+    if not camera.orthographic:
+        for i in range(n):
+            origins[0, i] = camera.origin[0]
+            origins[1, i] = camera.origin[1]
+            origins[2, i] = camera.origin[2]
+    return origins, directions
 
 
 @njit(nogil=True, cache=True)

@@ -28,6 +28,7 @@ from embree_rt.embree.validation import (
     as_points,
     as_positive,
     as_ray_bounds,
+    as_segment_starts,
     as_transform,
     as_triangle_indices,
 )
@@ -376,6 +377,41 @@ class BVH(Closing):
             hit_filter.install(self._lib, geometry)
             self._hit_filters.append(hit_filter)  # Embree reads its data while the BVH lives
         return self._attach(geometry, "adding triangles")
+
+    def add_curves(self, points: np.ndarray, radii: np.ndarray, starts: np.ndarray) -> int:
+        """Add round linear curves (Embree's ``ROUND_LINEAR_CURVE``): ``points`` (m, 3) and
+        ``radii`` (m,) > 0 the control points, ``starts`` (k,) int the segments, segment s
+        running from point ``starts[s]`` to ``starts[s] + 1`` as a cone touching a sphere at
+        each end. Segments whose starts follow one another join (Embree reads neighbours from
+        the index buffer), so a polyline is the run of its points. A hit's ``prim_id`` is its
+        segment, ``u`` where along it (0 to 1), and its normal the surface's. Returns geom id."""
+        points = as_points(points, "points")
+        radii = as_positive(radii, "radii", len(points))
+        starts = as_segment_starts(starts, "starts", len(points))
+        self._live_scene()
+        geometry = self._lib.rtcNewGeometry(
+            self._device.handle, library.GEOMETRY_TYPE_ROUND_LINEAR_CURVE
+        )
+        self._device.check("rtcNewGeometry(ROUND_LINEAR_CURVE)")
+        vertex_pointer = self._new_buffer(
+            geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT4, 16, len(points)
+        )
+        index_pointer = self._new_buffer(
+            geometry, library.BUFFER_TYPE_INDEX, library.FORMAT_UINT, 4, len(starts)
+        )
+        if len(points):
+            target = (ctypes.c_float * (4 * len(points))).from_address(vertex_pointer)
+            packed = np.ctypeslib.as_array(target).reshape(-1, 4)
+            packed[:, :3] = points
+            packed[:, 3] = radii
+        if len(starts):
+            target = (ctypes.c_uint32 * len(starts)).from_address(index_pointer)
+            np.ctypeslib.as_array(target)[:] = starts
+        self.primitive_count += len(starts)
+        if len(points):
+            reach = (np.abs(points).max(axis=1) + radii).max()
+            self.coordinate_bound = max(self.coordinate_bound, float(reach))
+        return self._attach(geometry, "adding curves")
 
     def _check_instanceable(self, child: object, argument: str) -> None:
         """Raise unless ``child`` is a committed BVH other than this one."""

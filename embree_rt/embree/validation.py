@@ -55,6 +55,22 @@ def as_indices(values: np.ndarray, name: str, count: int) -> np.ndarray:
     return array
 
 
+def as_segment_starts(values: np.ndarray, name: str, vertex_count: int) -> np.ndarray:
+    """``values`` as a (k,) uint32 array of segment starts: vertex i begins a segment that
+    ends at vertex i + 1, so each start lies in ``[0, vertex_count - 1)``."""
+    array = np.asarray(values)
+    if array.ndim != 1 or (len(array) and array.dtype.kind not in "iu"):
+        raise ValueError(f"{name}: expected (k,) integer indices, got {array.shape} {array.dtype}")
+    bad = (array < 0) | (array >= vertex_count - 1)
+    if bad.any():
+        row = _first_bad_row(bad)
+        raise ValueError(
+            f"{name}: row {row} is {array[row]}: a segment from vertex i to i + 1 starts in "
+            f"[0, {vertex_count - 1})"
+        )
+    return np.ascontiguousarray(array, dtype=np.uint32)
+
+
 def as_triangle_indices(values: np.ndarray, name: str, vertex_count: int) -> np.ndarray:
     """``values`` as a (k, 3) uint32 array of vertex indices in ``[0, vertex_count)``."""
     array = np.asarray(values)

@@ -19,7 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from embree_rt import budget
+from embree_rt.ambient_occlusion import AmbientOcclusion, ao_problem
 from embree_rt.camera import Camera
+from embree_rt.choices import BACKGROUNDS
 from embree_rt.errors import FieldError
 from embree_rt.film import TONEMAPS, TRANSFERS
 from embree_rt.materials import PRESETS, Checker, Material
@@ -241,6 +243,7 @@ class SceneReader:
         self.particles = [self._particles(t) for t in root.tables("particles")]
         self.meshes = [self._mesh(t) for t in root.tables("meshes")]
         self.instances = [self._instances(t) for t in root.tables("instances")]
+        self.curves = [self._curves(t) for t in root.tables("curves")]
         root.finish()
 
     def named_files(self) -> list[Path]:
@@ -339,6 +342,8 @@ class SceneReader:
                     entry.material if materials is None else materials,
                     entry.smooth,
                 )
+        for points, radii, material, color in self.curves:
+            scene.add_curves(points, radii, material, color=color)
         return scene
 
     # -- sections -----------------------------------------------------------------------------
@@ -374,10 +379,25 @@ class SceneReader:
             exposure=table.number("exposure", current.exposure, low=-64, high=64),
             tonemap=self._choice(table, "tonemap", TONEMAPS, current.tonemap),
             transfer=self._choice(table, "transfer", TRANSFERS, current.transfer),
+            ao=self._ambient_occlusion(table.table("ao"), current.ao),
+            background=self._choice(table, "background", BACKGROUNDS, current.background),
         )
         table.finish()
         self._check(table, render_problem(settings))
         return settings
+
+    def _ambient_occlusion(
+        self, table: Table | None, current: AmbientOcclusion
+    ) -> AmbientOcclusion:
+        if table is None:
+            return current
+        ao = AmbientOcclusion(
+            samples=table.integer("samples", current.samples, low=0, high=4096),
+            distance=table.number("distance", current.distance, low=0, low_open=True),
+        )
+        table.finish()
+        self._check(table, ao_problem(ao))
+        return ao
 
     def _choice(self, table: Table, name: str, choices: tuple[str, ...], default: str) -> str:
         value = table.string(name, default)
@@ -386,11 +406,17 @@ class SceneReader:
         return value
 
     def _camera(self, table: Table, current: Camera) -> Camera:
+        if table.has("fov") and table.has("view_height"):
+            raise table.error(
+                "view_height", "an orthographic camera's view_height and fov cannot both be set"
+            )
         camera = Camera(
             position=table.vector("position", current.position),
             look_at=table.vector("look_at", current.look_at),
             up=table.vector("up", current.up),
             fov=table.number("fov", current.fov),
+            projection=table.string("projection", current.projection),
+            view_height=table.number("view_height", current.view_height),
         )
         table.finish()
         # The rule the renderer's camera follows, so that a scene which loads also renders.
@@ -493,6 +519,45 @@ class SceneReader:
         if (problem := unreadable_problem(path)) is not None:
             raise table.error(key, f"{path}: {problem}")
         return path
+
+    def _curves(self, table: Table) -> tuple[np.ndarray, np.ndarray, str, tuple | None]:
+        """A polyline of round tubes: ``points`` (at least two [x, y, z]), ``radius`` (one for
+        all) or ``radii`` (one a point), ``material``, and ``color`` (the material in that
+        colour). Checked here by the rules ``Scene.add_curves`` applies."""
+        points = table.raw("points")
+        if points is None:
+            table.require("points")
+        if not isinstance(points, list) or len(points) < 2:
+            raise table.error(
+                "points", f"expected a list of at least two [x, y, z], got {points!r}"
+            )
+        for row, point in enumerate(points):
+            if not (
+                isinstance(point, list)
+                and len(point) == 3
+                and all(isinstance(c, int | float) and not isinstance(c, bool) for c in point)
+            ):
+                raise table.error("points", f"row {row}: expected [x, y, z], got {point!r}")
+        points = np.array(points, np.float64)
+        if table.has("radius") == table.has("radii"):
+            raise table.error("radius", "give radius (one for all points) or radii (one a point)")
+        if table.has("radius"):
+            radii = np.full(len(points), table.number("radius", low=MIN_LENGTH))
+        else:
+            values = table.raw("radii")
+            if not isinstance(values, list) or len(values) != len(points):
+                raise table.error("radii", f"expected {len(points)} numbers, one a point")
+            if not all(isinstance(r, int | float) and not isinstance(r, bool) for r in values):
+                raise table.error("radii", f"expected numbers, got {values!r}")
+            radii = np.array(values, np.float64)
+        if (problem := spheres_problem(points, radii)) is not None:
+            raise table.error("points", problem.replace("centers", "points", 1))
+        entry = (points, radii, self._material_name(table), table.color("color"))
+        table.finish()
+        return entry
+
+    def _file(self, table: Table) -> Path:
+        return (self.base / table.file_name("file")).resolve()
 
     def _sphere_array(self, table: Table) -> _SphereArrayEntry:
         entry = _SphereArrayEntry(table.key("file"), self._file(table), self._material_name(table))

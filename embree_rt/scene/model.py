@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
+from embree_rt.ambient_occlusion import AmbientOcclusion
 from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.film import Look
 from embree_rt.materials import PRESETS, RGB, Checker, Material
@@ -74,6 +75,11 @@ class RenderSettings:
     exposure: float = 0.0
     tonemap: str = "reinhard"
     transfer: str = "gamma2.2"
+    # Ambient occlusion of the camera rays' hits (``ambient_occlusion``): off at 0 samples.
+    ao: AmbientOcclusion = field(default_factory=AmbientOcclusion)
+    # What camera rays that meet nothing show (``film.BACKGROUNDS``): the sky, or a paper's
+    # white, black or transparent background (the sky still lights reflections).
+    background: str = "sky"
 
     def look(self) -> Look:
         """The ``film.Look`` these settings ask for."""
@@ -195,6 +201,23 @@ class MeshObject:
 
 
 @dataclass
+class CurveSet:
+    """Round tubes: polylines of control ``points`` (m, 3) float32 with a ``radii`` (m,)
+    float32 > 0 at each, drawn as Embree's round linear curves (a cone between each pair of
+    neighbouring points, touching a sphere at each), all of ``material``. ``starts`` (k,)
+    int64 the segments: segment s runs from point ``starts[s]`` to ``starts[s] + 1``, so a
+    polyline of p points is p - 1 consecutive starts and a bond a start of its own."""
+
+    points: np.ndarray
+    radii: np.ndarray
+    starts: np.ndarray
+    material: str = "matte"
+
+    def __len__(self) -> int:
+        return len(self.starts)
+
+
+@dataclass
 class Scene:
     """Everything to render.
 
@@ -217,6 +240,7 @@ class Scene:
     sphere_colors: np.ndarray | None = None
     meshes: list[MeshObject] = field(default_factory=list)
     instances: list[MeshInstances] = field(default_factory=list)
+    curves: list[CurveSet] = field(default_factory=list)
     # A camera path (``scene.animation``): None for a still image.
     animation: Animation | None = None
     # What the scene's maker found and chose, one line each (a mesh file rendered on its own:
@@ -401,6 +425,60 @@ class Scene:
         sizes = np.array([len(entry) for entry in self.instances], np.int64)
         instance_starts = first_mesh + len(self.meshes) + np.cumsum(sizes) - sizes
         return mesh_ids, instance_starts
+
+    def curve_ids(self) -> np.ndarray:
+        """(len(curves),) int64 the object id of each curve set, after every sphere, mesh
+        placement and instance (``object_id_starts``): a curve set is one object."""
+        first = len(self.sphere_radii) + len(self.meshes) + sum(len(e) for e in self.instances)
+        return first + np.arange(len(self.curves), dtype=np.int64)
+
+    def add_curves(
+        self,
+        points: np.ndarray,
+        radii: float | np.ndarray,
+        material: str = "matte",
+        *,
+        starts: np.ndarray | None = None,
+        color: RGB | None = None,
+    ) -> CurveSet:
+        """Add round tubes through ``points`` (m, 3): one polyline through them all, or with
+        ``starts`` (k,) int the segments from point ``starts[s]`` to ``starts[s] + 1`` (bonds:
+        pairs of points, ``starts = 0, 2, 4, ...``). ``radii`` one radius or (m,) per point,
+        each > 0. ``material`` a material's name; with ``color`` (linear RGB) the tubes take
+        that material in that colour (a material of its own, named after both). Returns the
+        ``CurveSet`` added; ValueError naming the argument for bad values."""
+        points = np.asarray(points, np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or len(points) < 2:
+            raise ValueError(f"points: expected (m, 3) with m >= 2, got shape {points.shape}")
+        radii = np.broadcast_to(np.asarray(radii, np.float64), (len(points),))
+        if not np.isfinite(points).all():
+            raise ValueError("points: must be finite")
+        if not (np.isfinite(radii) & (radii > 0)).all():
+            raise ValueError("radii: must be finite and > 0")
+        if (problem := spheres_problem(points, radii)) is not None:  # (its rule, for points)
+            raise ValueError(problem.replace("centers", "points", 1))
+        if starts is None:
+            starts = np.arange(len(points) - 1, dtype=np.int64)
+        starts = np.asarray(starts)
+        if starts.ndim != 1 or (len(starts) and starts.dtype.kind not in "iu"):
+            raise ValueError(f"starts: expected (k,) integers, got {starts.dtype} {starts.shape}")
+        if len(starts) and (starts.min() < 0 or starts.max() >= len(points) - 1):
+            raise ValueError(f"starts: each must lie in [0, {len(points) - 1})")
+        self.material_index(material)
+        if color is not None:
+            rgb = tuple(float(c) for c in color)
+            name = f"{material}@{rgb[0]:g},{rgb[1]:g},{rgb[2]:g}"
+            if name not in self.materials:
+                self.materials[name] = replace(self.materials[material], color=rgb)
+            material = name
+        curve_set = CurveSet(
+            points.astype(np.float32),
+            radii.astype(np.float32),
+            starts.astype(np.int64, copy=False),
+            material,
+        )
+        self.curves.append(curve_set)
+        return curve_set
 
     def material_index(self, name: str) -> int:
         try:

@@ -8,6 +8,7 @@ that file, so loading the saved scene shares one Trimesh between the placements 
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import asdict
 from pathlib import Path
@@ -16,12 +17,18 @@ import numpy as np
 
 from embree_rt.materials import PRESETS, Material
 from embree_rt.scene.animation import animation_document
-from embree_rt.scene.model import Scene
+from embree_rt.scene.model import CurveSet, Scene
 
 
 def scene_document(scene: Scene, path: Path) -> dict:
     """The scene as a plain dict in the file schema, writing its bulk data beside ``path``."""
     document: dict = {"render": asdict(scene.render), **look_document(scene)}
+    if scene.render.background == "sky":  # files with the sky stay as they were
+        del document["render"]["background"]
+    if not scene.render.ao.samples:  # off: files without ambient occlusion stay as they were
+        del document["render"]["ao"]
+    elif math.isinf(scene.render.ao.distance):  # unlimited: the key left out
+        del document["render"]["ao"]["distance"]
     if scene.animation is not None:
         document["animation"] = animation_document(scene.animation)
     if len(scene.sphere_radii):
@@ -75,7 +82,31 @@ def scene_document(scene: Scene, path: Path) -> dict:
                 }
             )
         document["instances"] = entries
+    if scene.curves:
+        document["curves"] = [
+            {"points": points, "radii": radii, "material": curves.material}
+            for curves in scene.curves
+            for points, radii in polylines(curves)
+        ]
     return document
+
+
+def polylines(curves: CurveSet) -> list[tuple[list, list]]:
+    """The polylines of a curve set, each (points, radii) as lists: the runs of its segments
+    whose starts follow one another (a file's ``[[curves]]`` entry holds one polyline, so a
+    set of separate segments is written as one entry each)."""
+    starts = np.sort(curves.starts)
+    if not len(starts):
+        return []
+    breaks = np.flatnonzero(np.diff(starts) != 1) + 1
+    runs = np.split(starts, breaks)
+    return [
+        (
+            curves.points[run[0] : run[-1] + 2].astype(float).tolist(),
+            curves.radii[run[0] : run[-1] + 2].astype(float).tolist(),
+        )
+        for run in runs
+    ]
 
 
 def look_document(scene: Scene) -> dict:
@@ -97,6 +128,11 @@ def look_document(scene: Scene) -> dict:
             for lt in scene.lights
         ],
     }
+    if scene.camera.projection != "perspective":  # perspective files stay as they were
+        document["camera"]["projection"] = scene.camera.projection
+    if scene.camera.view_height is not None:
+        del document["camera"]["fov"]
+        document["camera"]["view_height"] = float(scene.camera.view_height)
     materials = {
         name: _material_dict(material)
         for name, material in scene.materials.items()

@@ -20,13 +20,14 @@ from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, Rays, intersect_chunk
 from embree_rt.tracing.records import HitLabels, HitRecords, records_of
 
 
-def camera_query_rays(origin: np.ndarray, directions: np.ndarray) -> Rays:
-    """The ``kernels.Rays`` view of n camera rays from one (3,) float32 ``origin`` along the
-    columns of (3, n) float32 ``directions`` (as the kernels below fill them), t in [0, inf]:
-    the eye, tnear and tfar repeated by zero strides, not copied."""
+def camera_query_rays(origin: np.ndarray, directions: np.ndarray, origins=None) -> Rays:
+    """The ``kernels.Rays`` view of n camera rays from one (3,) float32 ``origin`` (or, for an
+    orthographic camera, from the columns of (3, n) float32 ``origins``) along the columns of
+    (3, n) float32 ``directions`` (as the kernels below fill them), t in [0, inf]: the eye,
+    tnear and tfar repeated by zero strides, not copied."""
     n = directions.shape[1]
     return Rays(
-        np.broadcast_to(origin, (n, 3)),
+        np.broadcast_to(origin, (n, 3)) if origins is None else origins.T,
         directions.T,
         np.broadcast_to(np.float32(0.0), (n,)),
         np.broadcast_to(np.float32(np.inf), (n,)),
@@ -35,27 +36,39 @@ def camera_query_rays(origin: np.ndarray, directions: np.ndarray) -> Rays:
 
 @njit(nogil=True, cache=True)
 def intersect_camera_chunk(
-    words, first, stop, query, camera, index, directions, rays, hits, inst_prim
+    words, first, stop, query, camera, index, directions, origins, rays, hits, inst_prim
 ):
-    """Samples first .. stop: their directions written, their rays traced (``intersect_chunk``)."""
-    write_directions(camera, index, first, stop, directions)
+    """Samples first .. stop: their directions (and an orthographic camera's origins) written,
+    their rays traced (``intersect_chunk``)."""
+    write_directions(camera, index, first, stop, directions, origins)
     intersect_chunk(words, first, stop, query, rays, hits, inst_prim)
 
 
 # ``query`` a ``kernels.Query``; ``camera`` a ``compiled.camera_rays.CameraRays``, ``index``
-# (n,) int64 sample indices; ``directions`` (3, n) float32 to fill, ``rays`` its
-# ``camera_query_rays`` view; ``hits`` a ``kernels.NearestHits`` and ``inst_prim`` (n,) int32 or
-# None, as ``kernels.intersect`` fills them.
+# (n,) int64 sample indices; ``directions`` (3, n) float32 to fill, ``origins`` (3, n) float32
+# to fill for an orthographic camera (else None), ``rays`` their ``camera_query_rays`` view;
+# ``hits`` a ``kernels.NearestHits`` and ``inst_prim`` (n,) int32 or None, as
+# ``kernels.intersect`` fills them.
 
 
 @njit(parallel=True, nogil=True, cache=True)
-def intersect_camera(query, camera, index, directions, rays, hits, inst_prim):
+def intersect_camera(query, camera, index, directions, origins, rays, hits, inst_prim):
     n = index.shape[0]
     scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
     for c in prange(len(scratch)):
         first, stop = chunk_span(c, CHUNK, n)
         intersect_camera_chunk(
-            scratch[c], first, stop, query, camera, index, directions, rays, hits, inst_prim
+            scratch[c],
+            first,
+            stop,
+            query,
+            camera,
+            index,
+            directions,
+            origins,
+            rays,
+            hits,
+            inst_prim,
         )
 
 
@@ -70,11 +83,13 @@ def intersect_camera_records(
     index = np.ascontiguousarray(index, np.int64)
     n = len(index)
     directions = np.empty((3, n), np.float32)
-    rays = camera_query_rays(camera.origin, directions)
+    origins = np.empty((3, n), np.float32) if camera.orthographic else None
+    rays = camera_query_rays(camera.origin, directions, origins)
     hits = bvh.empty_hits(n)
     if n:
-        arguments = (query, camera, index, directions, rays, *bvh.kernel_hits(hits))
+        arguments = (query, camera, index, directions, origins, rays, *bvh.kernel_hits(hits))
         bvh.run_query(intersect_camera_chunk, intersect_camera, arguments, n)
-    origins = np.broadcast_to(camera.origin[:, None], (3, n))
+    if origins is None:
+        origins = np.broadcast_to(camera.origin[:, None], (3, n))
     records = records_of(bvh, origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
     return records, directions

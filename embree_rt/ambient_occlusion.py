@@ -1,0 +1,118 @@
+"""Ambient occlusion: the share of a surface point's cosine-weighted hemisphere that is open.
+
+Each of a hit's ``samples`` directions is drawn from the counter-based hash
+(``sampling.uniform_pair``) at the index ``sample_index * samples + j``, so a hit's directions
+depend on its camera sample's global index and the seed alone: the same bits whatever the
+threads, batch size or machine. The fraction of those rays that nothing blocks within
+``distance`` estimates the cosine-weighted open share (the integral of cos θ / π over the
+unblocked directions), which scales the ambient term of the hit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from embree_rt.sampling import uniform_pair
+
+# The hash dimension of ambient occlusion's directions (the camera's jitter is dimension 0).
+AO_DIMENSION = 7
+
+
+@dataclass(frozen=True)
+class AmbientOcclusion:
+    """A render's ambient occlusion: ``samples`` rays a camera-ray hit (0: off), each blocked
+    by what lies within ``distance`` world units (inf: anything)."""
+
+    samples: int = 0
+    distance: float = math.inf
+
+
+def ao_problem(ao: AmbientOcclusion) -> tuple[str, str] | None:
+    """What is wrong with ``ao``, as (field, problem), or None: ``samples`` an integer from 0
+    to 4096, ``distance`` a number > 0 (inf allowed)."""
+    samples = ao.samples
+    if isinstance(samples, bool) or not isinstance(samples, int) or not 0 <= samples <= 4096:
+        return "samples", f"expected an integer from 0 to 4096, got {samples!r}"
+    try:
+        distance = float(ao.distance)
+    except (TypeError, ValueError):
+        return "distance", f"expected a number of world units, got {ao.distance!r}"
+    if not distance > 0.0:  # (NaN fails too)
+        return "distance", f"must be > 0 (inf: unlimited), got {ao.distance!r}"
+    return None
+
+
+def orthonormal_frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two (3, k) float32 unit tangents ``t``, ``b`` with (t, b, n) right-handed and
+    orthonormal for the (3, k) float32 unit ``normal`` columns (Duff et al. 2017's branchless
+    frame: no division by a small number for any normal)."""
+    x, y, z = normal
+    sign = np.where(z >= 0, np.float32(1.0), np.float32(-1.0))
+    a = np.float32(-1.0) / (sign + z)
+    b = x * y * a
+    tangent = np.stack([np.float32(1.0) + sign * x * x * a, sign * b, -sign * x])
+    bitangent = np.stack([b, sign + y * y * a, -y])
+    return tangent.astype(np.float32, copy=False), bitangent.astype(np.float32, copy=False)
+
+
+def hemisphere_directions(
+    normal: np.ndarray, sample_index: np.ndarray, samples: int, seed: int
+) -> np.ndarray:
+    """(3, k * samples) float32 unit directions, cosine-weighted about each of the (3, k)
+    float32 unit ``normal`` columns: hit i's ``samples`` directions are columns
+    ``i * samples .. i * samples + samples - 1``, drawn at hash indices
+    ``sample_index[i] * samples + j`` ((k,) int64 the hits' camera sample indices) of
+    dimension ``AO_DIMENSION`` (Malley's method: a uniform point on the unit disc lifted to
+    the hemisphere)."""
+    k = normal.shape[1]
+    index = (np.asarray(sample_index, np.int64)[:, None] * samples + np.arange(samples)).ravel()
+    u1, u2 = uniform_pair(seed, index, AO_DIMENSION)
+    radius = np.sqrt(u1)
+    phi = np.float32(2.0 * math.pi) * u2
+    local_x = radius * np.cos(phi)
+    local_y = radius * np.sin(phi)
+    local_z = np.sqrt(np.maximum(np.float32(1.0) - u1, np.float32(0.0)))
+    tangent, bitangent = orthonormal_frames(normal)
+    repeat = np.repeat(np.arange(k), samples)
+    directions = (
+        tangent[:, repeat] * local_x + bitangent[:, repeat] * local_y + normal[:, repeat] * local_z
+    )
+    directions /= np.sqrt(np.sum(directions * directions, axis=0))
+    return directions.astype(np.float32, copy=False)
+
+
+def plane_blocks(
+    origins: np.ndarray, directions: np.ndarray, plane_y: float | None, distance: float
+) -> np.ndarray:
+    """(n,) bool whether the ground plane y = ``plane_y`` (None: none) lies on each ray
+    ``origins + t directions`` ((3, n) float32) with 0 < t <= ``distance``."""
+    if plane_y is None:
+        return np.zeros(origins.shape[1], bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (np.float32(plane_y) - origins[1]) / directions[1]
+    return (t > 0) & (t <= distance)
+
+
+def open_share(blocked: np.ndarray, samples: int) -> np.ndarray:
+    """(k,) float32 share of each hit's ``samples`` rays not ``blocked`` ((k * samples,)
+    bool, a hit's rays together)."""
+    unblocked = (~blocked).reshape(-1, samples).sum(axis=1)
+    return (unblocked / np.float32(samples)).astype(np.float32)
+
+
+def open_shares(
+    occluded, points: np.ndarray, normal: np.ndarray, sample_index: np.ndarray, ao, seed: int
+) -> np.ndarray:
+    """(k,) float32 open share of the hemisphere over each of the k ``points`` (3, k) float32
+    (already off their surfaces) about the unit ``normal`` (3, k) float32 (facing the side the
+    point is seen from), ``ao`` an ``AmbientOcclusion`` with samples > 0: its rays in one
+    occlusion batch through ``occluded(origins, directions, distance)`` ((3, n) float32 each ->
+    (n,) bool), the directions of ``hemisphere_directions`` at the (k,) int64 camera
+    ``sample_index`` and ``seed``."""
+    samples = ao.samples
+    directions = hemisphere_directions(normal, sample_index, samples, seed)
+    origins = np.repeat(points, samples, axis=1)
+    return open_share(occluded(origins, directions, float(ao.distance)), samples)

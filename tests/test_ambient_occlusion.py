@@ -1,0 +1,146 @@
+"""Ambient occlusion against closed forms: the open share of a cosine-weighted hemisphere is 1
+over an open plane, 1/2 at the foot of an infinite wall (by symmetry: the wall blocks exactly
+the half of the hemisphere facing it, and cos θ is symmetric about the wall's normal), 0 inside
+a closed sphere; and the image with it bitwise the same for any threads or batch size.
+
+Sampling error: the estimate at the wall's foot averages n = points x samples independent
+Bernoulli(1/2) rays, standard deviation 0.5 / sqrt(n); the test allows 4 of them (a false
+failure once in ~16,000 runs, and these rays are fixed by the hash: the test is deterministic).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from embree_rt import Camera, PointLight, Scene, render
+from embree_rt.ambient_occlusion import (
+    AmbientOcclusion,
+    hemisphere_directions,
+    open_shares,
+)
+from embree_rt.geometry import SceneGeometry
+
+
+def shares(scene: Scene, points, normals, samples: int, distance: float = math.inf) -> np.ndarray:
+    points = np.asarray(points, np.float32)
+    normals = np.asarray(normals, np.float32)
+    with SceneGeometry(scene, threads=1) as geometry:
+        return open_shares(
+            geometry.occluded_rays,
+            points,
+            normals,
+            np.arange(points.shape[1], dtype=np.int64),
+            AmbientOcclusion(samples, distance),
+            seed=3,
+        )
+
+
+def up_normals(k: int) -> np.ndarray:
+    return np.tile(np.array([[0.0], [1.0], [0.0]], np.float32), (1, k))
+
+
+def test_directions_are_unit_in_the_hemisphere_and_cosine_weighted() -> None:
+    rng = np.random.default_rng(1)
+    normal = rng.normal(size=(3, 50)).astype(np.float32)
+    normal /= np.linalg.norm(normal, axis=0)
+    samples = 400
+    directions = hemisphere_directions(normal, np.arange(50), samples, seed=9)
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=0), 1.0, atol=1e-6)
+    cosine = np.sum(directions * np.repeat(normal, samples, axis=1), axis=0)
+    assert cosine.min() > -1e-6
+    # cosine-weighted: cos θ has density 2 cos θ on [0, 1], mean 2/3, E[cos²] = 1/2
+    n = cosine.size
+    assert abs(cosine.mean() - 2 / 3) < 4 * math.sqrt(1 / 2 - 4 / 9) / math.sqrt(n)
+    # uniform in azimuth about the normal: no preferred tangent direction
+    assert np.abs(directions.mean(axis=1) - normal.mean(axis=1) * 2 / 3).max() < 0.02
+
+
+def test_an_open_plane_has_ambient_occlusion_one() -> None:
+    scene = Scene()  # the floor at y = 0 alone
+    k = 300
+    points = np.stack([np.linspace(-50, 50, k), np.full(k, 1e-4), np.linspace(3, -7, k)])
+    np.testing.assert_array_equal(shares(scene, points, up_normals(k), 16), 1.0)
+
+
+def test_the_foot_of_an_infinite_wall_has_ambient_occlusion_one_half() -> None:
+    scene = Scene()  # floor y = 0, a wall x = 0 far larger than the points' distance to it
+    wall = trimesh.Trimesh(
+        vertices=[[0, 0, -1e4], [0, 0, 1e4], [0, 1e4, 1e4], [0, 1e4, -1e4]],
+        faces=[[0, 1, 2], [0, 2, 3]],
+    )
+    scene.add_mesh(wall, "matte", smooth=False)
+    k, samples = 400, 64
+    points = np.stack([np.full(k, 1e-3), np.full(k, 1e-3), np.linspace(-5, 5, k)])
+    share = shares(scene, points, up_normals(k), samples)
+    sigma = 0.5 / math.sqrt(k * samples)
+    assert abs(share.mean() - 0.5) < 4 * sigma
+    # and half of that far from the wall's foot, on a wall's own face: a point on the wall
+    # facing +x sees the floor block the lower half of its hemisphere
+    on_wall = np.stack([np.full(k, 1e-3), np.full(k, 1e-3), np.linspace(-5, 5, k)])
+    normals = np.tile(np.array([[1.0], [0.0], [0.0]], np.float32), (1, k))
+    assert abs(shares(scene, on_wall, normals, samples).mean() - 0.5) < 4 * sigma
+
+
+def test_inside_a_closed_sphere_ambient_occlusion_is_zero_and_distance_limits_it() -> None:
+    scene = Scene(floor=None)
+    scene.add_sphere((0.0, 0.0, 0.0), 2.0, "matte")
+    rng = np.random.default_rng(2)
+    k = 200
+    points = (rng.uniform(-0.5, 0.5, size=(3, k))).astype(np.float32)
+    normals = rng.normal(size=(3, k)).astype(np.float32)
+    normals /= np.linalg.norm(normals, axis=0)
+    np.testing.assert_array_equal(shares(scene, points, normals, 16), 0.0)
+    # nothing lies within 1 of a point at most 0.87 from the centre of a sphere of radius 2
+    np.testing.assert_array_equal(shares(scene, points, normals, 16, distance=1.0), 1.0)
+
+
+def ao_scene() -> Scene:
+    scene = Scene(camera=Camera(position=(0.0, 3.0, 7.0), look_at=(0.0, 0.5, 0.0)))
+    scene.lights.append(PointLight(position=(3.0, 6.0, 4.0)))
+    rng = np.random.default_rng(5)
+    centers = np.c_[rng.uniform(-3, 3, 40), rng.uniform(0.2, 1.5, 40), rng.uniform(-3, 2, 40)]
+    scene.add_spheres(centers, rng.uniform(0.2, 0.5, 40), "matte")
+    scene.add_curves([[-3, 0.2, 1.5], [0, 1.2, 1.0], [3, 0.2, 1.5]], 0.15, "glossy")
+    scene.render.ao = AmbientOcclusion(samples=6, distance=2.0)
+    return scene
+
+
+@pytest.mark.parametrize("threads, batch_size", [(2, 1000), (3, 777)])
+def test_images_with_ambient_occlusion_are_bitwise_the_same_for_any_threads_or_batch(
+    threads: int, batch_size: int
+) -> None:
+    """Each hit's rays are drawn from its camera sample's global index alone, each ray's answer
+    is Embree's occlusion of that one ray (whatever packet or thread traces it), and a pixel's
+    samples are summed in one order: so the bits cannot depend on the split, on any ISA."""
+    scene = ao_scene()
+    settings = {"width": 64, "height": 40, "spp": 2, "max_depth": 2}
+    one = render(scene, threads=1, **settings).image
+    assert (
+        one.tobytes()
+        == render(scene, threads=threads, batch_size=batch_size, **settings).image.tobytes()
+    )
+    # and AO changed the picture: darker than without it, nowhere brighter
+    scene.render.ao = AmbientOcclusion()
+    plain = render(scene, threads=1, **settings).image
+    assert (one <= plain).all() and (one < plain).any()
+
+
+def test_the_ao_aov_is_one_on_a_lone_convex_object_and_zero_inside_a_closed_one() -> None:
+    lone = Scene(floor=None, camera=Camera(position=(0.0, 0.0, 6.0), look_at=(0.0, 0.0, 0.0)))
+    lone.add_sphere((0.0, 0.0, 0.0), 1.5, "matte")
+    aovs = render(lone, width=32, height=24, spp=1, aovs=("ao", "object_id")).aovs
+    assert (aovs["object_id"] == 0).sum() > 100
+    np.testing.assert_array_equal(aovs["ao"], 1.0)  # sphere and sky alike
+    inside = Scene(floor=None, camera=Camera(position=(0.0, 0.0, 0.5), look_at=(0.0, 0.0, 0.0)))
+    inside.add_sphere((0.0, 0.0, 0.0), 3.0, "matte")
+    inside.render.ao = AmbientOcclusion(samples=8)
+    aovs = render(inside, width=32, height=24, spp=1, aovs=("ao",)).aovs
+    np.testing.assert_array_equal(aovs["ao"], 0.0)
+    # limited to a distance shorter than the sphere's far side, some rays get out
+    inside.render.ao = AmbientOcclusion(samples=8, distance=3.0)
+    limited = render(inside, width=32, height=24, spp=1, aovs=("ao",)).aovs["ao"]
+    assert 0.0 < limited.mean() < 1.0
