@@ -147,8 +147,14 @@ def generate_field(job: Job, field: RandomField, started: float) -> MadeScene:
         scene.floor = None
     mesh = None if field.instance is None else instance_mesh(field.instance)
     # A cluster's workers generate a plain field themselves, from its plan; a field of
-    # instances, one to be saved, or one changed beyond its render settings is made here.
-    from_plan = mesh is None and not job.no_floor and only_render_settings(job.settings)
+    # instances, one to be saved, or one changed beyond its render settings (or staged) is
+    # made here.
+    from_plan = (
+        mesh is None
+        and not job.no_floor
+        and only_render_settings(job.settings)
+        and not job.staging.restages
+    )
     on_workers = job.on_dask and field.save_scene is None and from_plan
     if not (on_workers and job.where.partition):  # in bricks, each worker checks its own
         require_memory_for_field(plan.count, scene.render, job, instanced=mesh is not None)
