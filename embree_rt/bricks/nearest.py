@@ -29,7 +29,7 @@ from embree_rt.mesh_attributes import HitLooks
 
 NO_OBJECT = np.iinfo(np.int64).max
 # Fields of SurfaceHits that are not one column per hit.
-_NOT_COLUMNS = {"flat", "floor_count", "looks"}
+_NOT_COLUMNS = {"flat", "floor_count", "looks", "painted", "paint"}
 
 
 def nearest_over_bricks(
@@ -105,17 +105,30 @@ def gather_surfaces(
     flat = all(part.flat for part, pick in zip(parts, picks, strict=True) if len(pick))
     if flat:
         values["face_normal"] = values["normal"]
-    colored, color = [], []
+    colored, color = _gathered_rows(
+        parts, picks, column, lambda part: (part.looks.rows, part.looks.color)
+    )
+    painted, paint = _gathered_rows(parts, picks, column, lambda part: (part.painted, part.paint))
+    values.update(painted=painted, paint=paint)
+    looks = HitLooks(colored, color)
+    return SurfaceHits(**values, flat=flat, floor_count=floor_count, looks=looks)
+
+
+def _gathered_rows(parts, picks, column, rows_of) -> tuple[np.ndarray, np.ndarray]:
+    """The (j,) int64 gathered columns and (3, j) float32 values of a per-row field of the
+    ``parts`` (``rows_of(part)``: its rows and their (3, r) values), for the columns that
+    ``picks``/``column`` take from each part (as ``gather_surfaces``)."""
+    rows, values = [], []
     for part, pick in zip(parts, picks, strict=True):
-        if not len(part.looks.rows) or not len(pick):
+        part_rows, part_values = rows_of(part)
+        if not len(part_rows) or not len(pick):
             continue
         place = np.full(len(part.t), -1, np.int64)
         place[column[pick]] = pick
-        kept = place[part.looks.rows] >= 0
-        colored.append(place[part.looks.rows][kept])
-        color.append(part.looks.color[:, kept])
-    looks = HitLooks(
-        np.concatenate(colored) if colored else np.zeros(0, np.int64),
-        np.concatenate(color, axis=1) if color else np.zeros((3, 0), np.float32),
+        kept = place[part_rows] >= 0
+        rows.append(place[part_rows][kept])
+        values.append(part_values[:, kept])
+    return (
+        np.concatenate(rows) if rows else np.zeros(0, np.int64),
+        np.concatenate(values, axis=1) if values else np.zeros((3, 0), np.float32),
     )
-    return SurfaceHits(**values, flat=flat, floor_count=floor_count, looks=looks)
