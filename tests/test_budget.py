@@ -195,7 +195,7 @@ def test_info_estimates_the_bvh_from_the_budgets_figures(tmp_path: Path, capsys)
     for spheres, kind in (("analytic", "user"), ("point", "point")):
         assert cli.main(["info", str(scene_file), "--spheres", spheres]) == 0
         out = capsys.readouterr().out
-        estimate = re.search(r"memory: +~([\d.]+) MiB \(estimate\)", out)
+        estimate = re.search(r"memory: +BVH ~([\d.]+) MiB \(estimate\)", out)
         assert estimate is not None, out
         expected = count * GEOMETRY_BYTES_PER_SPHERE[kind] / 2**20
         assert float(estimate.group(1)) == pytest.approx(expected, abs=0.051)

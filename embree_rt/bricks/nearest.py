@@ -29,7 +29,6 @@ from embree_rt.mesh_attributes import HitLooks
 
 NO_OBJECT = np.iinfo(np.int64).max
 # Fields of SurfaceHits that are not one column per hit.
-# (rows and their values, not one column a hit: gathered as the looks' colours are)
 _NOT_COLUMNS = {"flat", "floor_count", "looks", "painted", "paint"}
 
 
@@ -84,8 +83,7 @@ def gather_surfaces(
     """One ``SurfaceHits`` whose column j is column ``column[j]`` of ``parts[source[j]]``
     ((m,) int64 each), its first ``floor_count`` columns floor hits. Every per-hit field is
     gathered (whatever fields ``SurfaceHits`` has), in the widest of the parts' dtypes; a field
-    some part lacks (None) is None. Of the parts' looks, their colours are kept, and their
-    painted hits' colours (``painted``, ``paint``)."""
+    some part lacks (None) is None. Of the parts' looks, their colours are kept."""
     picks = [np.flatnonzero(source == index) for index in range(len(parts))]
     m = len(source)
     values = {}
@@ -107,26 +105,30 @@ def gather_surfaces(
     flat = all(part.flat for part, pick in zip(parts, picks, strict=True) if len(pick))
     if flat:
         values["face_normal"] = values["normal"]
-    colored, color = [], []
-    painted, paint = [], []
+    colored, color = _gathered_rows(
+        parts, picks, column, lambda part: (part.looks.rows, part.looks.color)
+    )
+    painted, paint = _gathered_rows(parts, picks, column, lambda part: (part.painted, part.paint))
+    values.update(painted=painted, paint=paint)
+    looks = HitLooks(colored, color)
+    return SurfaceHits(**values, flat=flat, floor_count=floor_count, looks=looks)
+
+
+def _gathered_rows(parts, picks, column, rows_of) -> tuple[np.ndarray, np.ndarray]:
+    """The (j,) int64 gathered columns and (3, j) float32 values of a per-row field of the
+    ``parts`` (``rows_of(part)``: its rows and their (3, r) values), for the columns that
+    ``picks``/``column`` take from each part (as ``gather_surfaces``)."""
+    rows, values = [], []
     for part, pick in zip(parts, picks, strict=True):
-        if not len(pick):
+        part_rows, part_values = rows_of(part)
+        if not len(part_rows) or not len(pick):
             continue
         place = np.full(len(part.t), -1, np.int64)
         place[column[pick]] = pick
-        for rows, values_at, kept_rows, kept_values in (
-            (part.looks.rows, part.looks.color, colored, color),
-            (part.painted, part.paint, painted, paint),
-        ):
-            if len(rows):
-                kept = place[rows] >= 0
-                kept_rows.append(place[rows][kept])
-                kept_values.append(values_at[:, kept])
-    looks = HitLooks(
-        np.concatenate(colored) if colored else np.zeros(0, np.int64),
-        np.concatenate(color, axis=1) if color else np.zeros((3, 0), np.float32),
+        kept = place[part_rows] >= 0
+        rows.append(place[part_rows][kept])
+        values.append(part_values[:, kept])
+    return (
+        np.concatenate(rows) if rows else np.zeros(0, np.int64),
+        np.concatenate(values, axis=1) if values else np.zeros((3, 0), np.float32),
     )
-    if painted:
-        values["painted"] = np.concatenate(painted)
-        values["paint"] = np.concatenate(paint, axis=1)
-    return SurfaceHits(**values, flat=flat, floor_count=floor_count, looks=looks)
