@@ -247,8 +247,13 @@ def test_help_explains_every_flag_and_random_takes_every_rendering_flag() -> Non
     assert "--frames" in render_help and "--overwrite" in render_help
     random_help = " ".join(run_cli("random", "--help").stdout.split())
     assert "--count N" in random_help and "spheres in the field" in random_help
-    # random renders as render does: every flag of render's, and its own for the field
-    assert flags_of(commands["render"]) <= flags_of(commands["random"])
+    # random renders as render does: every flag of render's but those that say how a particle
+    # file is read and drawn (a field has no file), and its own for the field
+    from embree_rt.cli.particles import PARTICLE_FLAG_DEFAULTS
+
+    particle_flags = {"--" + name.replace("_", "-") for name in PARTICLE_FLAG_DEFAULTS}
+    assert flags_of(commands["render"]) - particle_flags <= flags_of(commands["random"])
+    assert not particle_flags & flags_of(commands["random"])
     assert flags_of(commands["random"]) - flags_of(commands["render"]) == {
         "--count",
         "--save-scene",
@@ -446,7 +451,7 @@ def test_version_and_help_load_neither_numpy_nor_numba(line: list[str]) -> None:
 @pytest.mark.parametrize(
     ("line", "flag", "meant"),
     [
-        (["render", "s.toml", "-o", "x.png", "--ao", "depth"], "--ao", "--aov"),
+        (["render", "s.toml", "-o", "x.png", "--ao-dist", "2"], "--ao-dist", "--ao-distance"),
         (["random", "--count", "5", "-o", "x.png", "--inst", "m.obj"], "--inst", "--instance"),
         (["info", "s.toml", "--sphere", "mesh"], "--sphere", "--spheres"),
         (["serve", "--po", "0"], "--po", "--port"),
@@ -460,8 +465,8 @@ def test_version_and_help_load_neither_numpy_nor_numba(line: list[str]) -> None:
 def test_a_flag_is_never_read_from_its_prefix(
     capsys: pytest.CaptureFixture, line: list[str], flag: str, meant: str
 ) -> None:
-    """``--ao`` is not taken for ``--aov``: a prefix that names one flag today could name
-    another tomorrow. It is refused, with the flag it may have meant."""
+    """``--ao-dist`` is not taken for ``--ao-distance``: a prefix that names one flag today
+    could name another tomorrow. It is refused, with the flag it may have meant."""
     from embree_rt.cli import main
 
     assert main(line) == 2

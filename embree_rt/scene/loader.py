@@ -556,9 +556,6 @@ class SceneReader:
         table.finish()
         return entry
 
-    def _file(self, table: Table) -> Path:
-        return (self.base / table.file_name("file")).resolve()
-
     def _sphere_array(self, table: Table) -> _SphereArrayEntry:
         entry = _SphereArrayEntry(table.key("file"), self._file(table), self._material_name(table))
         table.finish()
@@ -567,12 +564,12 @@ class SceneReader:
     def _particles(self, table: Table) -> _ParticlesEntry:
         from embree_rt.scene.particles.look import ParticleLook
 
-        topology = table.file_name("topology") if table.has("topology") else None
+        topology = self._file(table, "topology") if table.has("topology") else None
         color = table.vector("color", None, non_negative=True, high=1.0)
         entry = _ParticlesEntry(
             key=table.key("file"),
             path=self._file(table),
-            topology=None if topology is None else (self.base / topology).resolve(),
+            topology=topology,
             frame=table.integer("frame", 0, low=0),
             up=table.string("up", "z"),
             select=table.string("select"),
