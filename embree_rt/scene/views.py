@@ -106,34 +106,23 @@ def standard_view(
     across = 2.0 * np.abs(corners @ side).max()
     tall = 2.0 * np.abs(corners @ screen_up).max()
     if orthographic:
-        height = max(tall, across / aspect, 1e-9) / FILL
         distance = 1.1 * radius
-        return replace(
-            camera,
-            position=tuple(float(c) for c in center + distance * toward),
-            look_at=tuple(float(c) for c in center),
-            up=tuple(float(c) for c in image_up),
-            projection="orthographic",
-            view_height=height,
+        height = max(tall, across / aspect, 1e-9) / FILL
+    else:
+        # back until every corner is inside the image: a corner ``toward`` by z from the
+        # centre and off the axis by x, y needs the eye at least z + |x| / tan(half width) away
+        tall_tan = math.tan(math.radians(float(camera.fov)) / 2.0) * FILL
+        along = corners @ toward
+        off_axis = np.maximum(
+            np.abs(corners @ side) / (tall_tan * aspect), np.abs(corners @ screen_up) / tall_tan
         )
-    # back until every corner is inside the image: a corner ``toward`` by z from the centre
-    # and off the axis by x, y needs the eye at least z + |x| / tan(half width) away
-    tall_tan = math.tan(math.radians(float(camera.fov)) / 2.0) * FILL
-    along = corners @ toward
-    distance = float(
-        np.max(
-            along
-            + np.maximum(
-                np.abs(corners @ side) / (tall_tan * aspect), np.abs(corners @ screen_up) / tall_tan
-            )
-        )
-    )
-    distance = max(distance, 1e-9)
+        distance = max(float(np.max(along + off_axis)), 1e-9)
+        height = None
     return replace(
         camera,
         position=tuple(float(c) for c in center + distance * toward),
         look_at=tuple(float(c) for c in center),
         up=tuple(float(c) for c in image_up),
-        projection="perspective",
-        view_height=None,
+        projection="orthographic" if orthographic else "perspective",
+        view_height=height,
     )
