@@ -156,7 +156,7 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
         scene.extent,
         mesh.bounds,
         2,
-    )[3:5]
+    ).local[:2]
     runs["all_hits_bare_2t_segment_ordered"] = lambda: scene.bvh.all_hits(*segment, 0.0, np.inf, 8)
     rates: dict[str, list[float]] = {key: [] for key in runs}
     for _ in range(turns):

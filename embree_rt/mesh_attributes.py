@@ -22,7 +22,7 @@ from embree_rt.textures import DEFAULT_SAMPLER, sample_texture
 if TYPE_CHECKING:  # mesh import loads trimesh (~1 s): only scenes with meshes pay for it
     import trimesh
 
-    from embree_rt.embree.alpha_filter import TriangleFilter
+    from embree_rt.embree import GeometryFilter
     from embree_rt.scene.meshes import MeshSurface
 
 # A vertex normal shorter than this has no direction to give: trimesh's average of the faces
@@ -341,7 +341,7 @@ def is_closed(mesh: trimesh.Trimesh) -> bool:
     return bool(merged.is_watertight)
 
 
-def mesh_hit_filter(mesh: trimesh.Trimesh) -> TriangleFilter | None:
+def mesh_hit_filter(mesh: trimesh.Trimesh) -> GeometryFilter | None:
     """The Embree hit filter a mesh's glTF material asks for (``alpha_filter``): cutouts where
     its alpha is low (MASK, BLEND) and, unless it is double-sided, no back. None for every
     other mesh, so that they trace at no extra cost: glass (a refracted ray must leave through
@@ -353,7 +353,7 @@ def mesh_hit_filter(mesh: trimesh.Trimesh) -> TriangleFilter | None:
     one_sided = not looks.double_sided and not looks.material.is_glass
     if one_sided and not looks.has_alpha and is_closed(mesh):
         return None
-    from embree_rt.embree.alpha_filter import triangle_filter
+    from embree_rt.tracing.alpha_filter import triangle_filter
 
     base = looks.base_color
     return triangle_filter(

@@ -44,7 +44,7 @@ DEFAULT_SAMPLER = Sampler()
 def wrap_texel(index, size, mode):
     """Texel index (int, or int64 array) ``index`` along an axis of ``size`` texels brought into
     [0, size) by wrap ``mode``: repeat modulo ``size``, clamp to the edge texel, or mirror every
-    other period. Plain arithmetic, so that the compiled alpha test (``embree_rt.embree.
+    other period. Plain arithmetic, so that the compiled alpha test (``embree_rt.tracing.
     alpha_filter``) runs this very function on single texels."""
     if mode == CLAMP_TO_EDGE:
         return np.minimum(np.maximum(index, 0), size - 1)

@@ -11,12 +11,15 @@ import trimesh
 from numba import njit
 from trimesh.constants import tol
 
-from embree_rt.trimesh_ray import RayMeshIntersector, exact_hits, local_scene
-from embree_rt.trimesh_ray.decided_hits import decided_hits
-from embree_rt.trimesh_ray.finished_hits import finished_hits
-from embree_rt.trimesh_ray.hit_inputs import tolerances, world_rays
+from embree_rt.trimesh_ray import RayMeshIntersector, exact_hits, local_frame
+from embree_rt.trimesh_ray.hit_passes import (
+    decided_hits,
+    finished_hits,
+    settled_hits,
+    tolerances,
+    world_rays,
+)
 from embree_rt.trimesh_ray.local_frame import box_cells, local_rays, ordered_local_rays, segment_key
-from embree_rt.trimesh_ray.settled_hits import settled_hits
 
 
 @njit(cache=False)
@@ -61,10 +64,10 @@ def test_ordered_local_rays_are_local_rays_moved_to_their_order():
     directions = trimesh.util.unitize(rng.normal(size=(5000, 3)))
     shift, scale, extent = np.array([1.0, -2.0, 3.0]), 0.37, 80.0
     bounds = np.array([[-20.0, -20, -20], [30.0, 30, 30]])
-    order, ordered_origins, ordered_directions, *local, finite = ordered_local_rays(
+    order, ordered_origins, ordered_directions, local = ordered_local_rays(
         origins, directions, shift, scale, extent, bounds, 2
     )
-    assert finite
+    assert local.finite
     assert sorted(order.tolist()) == list(range(5000))
     cells = box_cells(bounds[0], bounds[1])
     keys = _keys(origins, directions, bounds[0], bounds[1], cells)
@@ -72,7 +75,7 @@ def test_ordered_local_rays_are_local_rays_moved_to_their_order():
     np.testing.assert_array_equal(ordered_origins, origins[order])
     np.testing.assert_array_equal(ordered_directions, directions[order])
     for ordered, given in zip(
-        local, local_rays(origins, directions, shift, scale, extent)[:3], strict=True
+        local[:3], local_rays(origins, directions, shift, scale, extent)[:3], strict=True
     ):
         np.testing.assert_array_equal(ordered, given[order])
 
@@ -105,10 +108,10 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
     inner.apply_scale(0.5 * scale)
     mesh = trimesh.util.concatenate([mesh, inner])
     origins, directions = _hard_rays(mesh, scale, 1400, seed=11)
-    monkeypatch.setattr(local_scene, "REORDER_FACES", 0)
+    monkeypatch.setattr(local_frame, "REORDER_FACES", 0)
     ordered = RayMeshIntersector(mesh)
     assert ordered._scene.bounds is not None  # built now (lazily), while every mesh is big
-    monkeypatch.setattr(local_scene, "REORDER_FACES", 1 << 40)
+    monkeypatch.setattr(local_frame, "REORDER_FACES", 1 << 40)
     given = RayMeshIntersector(mesh)
     assert given._scene.bounds is None
     monkeypatch.setattr(exact_hits, "FIRST_ROOM", 2)  # overflowing rays traced again
@@ -122,7 +125,7 @@ def test_all_hits_in_the_traced_order_equal_those_in_the_given_order(scale, monk
 
 def test_non_finite_rays_traced_in_order_are_refused_naming_their_row(monkeypatch):
     """The row as given, not its place in the tracing order (which sorts a NaN ray first)."""
-    monkeypatch.setattr(local_scene, "REORDER_FACES", 0)
+    monkeypatch.setattr(local_frame, "REORDER_FACES", 0)
     ours = RayMeshIntersector(trimesh.creation.icosphere(subdivisions=2))
     origins = np.tile([0.0, 0.0, -5.0], (3000, 1))
     directions = np.tile([0.0, 0.0, 1.0], (3000, 1))

@@ -72,7 +72,7 @@ def _run(bvh, point, radius, stack=False):
     scratch = np.zeros(point_query.SCRATCH_WORDS, np.uint32)
     log = np.zeros(1 + _RECORD * _CALLS, np.float64)
     b = _query(
-        bvh.scene_address(),
+        bvh.committed_scene(),
         scratch,
         *np.float32(point),
         np.float32(radius),

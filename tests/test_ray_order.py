@@ -11,9 +11,9 @@ import trimesh
 from numba import njit
 
 from embree_rt.compiled.morton import radix_order
-from embree_rt.trimesh_ray import RayMeshIntersector, local_scene
+from embree_rt.trimesh_ray import RayMeshIntersector, local_frame
+from embree_rt.trimesh_ray.hit_passes import screened_nearest
 from embree_rt.trimesh_ray.local_frame import box_cells, entry_key
-from embree_rt.trimesh_ray.screened_nearest import screened_nearest
 
 
 @njit(cache=False)
@@ -76,10 +76,10 @@ def test_first_hits_in_the_traced_order_equal_those_in_the_given_order(scale, mo
     start = rng.normal(size=(len(targets), 3))
     origins = 3 * scale * start / np.linalg.norm(start, axis=1)[:, None]
     directions = targets - origins
-    monkeypatch.setattr(local_scene, "REORDER_FACES", 0)
+    monkeypatch.setattr(local_frame, "REORDER_FACES", 0)
     sorted_first = RayMeshIntersector(mesh)
     scene = sorted_first._scene  # built now (lazily), while every mesh counts as big
-    monkeypatch.setattr(local_scene, "REORDER_FACES", 1 << 40)
+    monkeypatch.setattr(local_frame, "REORDER_FACES", 1 << 40)
     given_first = RayMeshIntersector(mesh)
     assert scene.bounds is not None and given_first._scene.bounds is None
     screen = dict(

@@ -628,7 +628,7 @@ def test_rays_beyond_float32_are_refused_with_the_row_as_given(subdivisions, que
 def test_vertex_positions_are_grouped_as_numpy_unique_groups_them() -> None:
     # The edge and vertex re-checks find a vertex's neighbours by position (unmerged meshes
     # repeat positions); the fast grouping must give the very classes np.unique gives.
-    from embree_rt.trimesh_ray.local_scene import position_ids
+    from embree_rt.trimesh_ray.local_frame import position_ids
 
     rng = np.random.default_rng(5)
     vertices = rng.integers(-3, 4, (5000, 3)).astype(np.float64) * 0.5

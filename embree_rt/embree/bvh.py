@@ -6,6 +6,7 @@ import ctypes
 import threading
 import weakref
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -23,7 +24,6 @@ from embree_rt.embree import (
     user_spheres,
     world_normals,
 )
-from embree_rt.embree.alpha_filter import TriangleFilter
 from embree_rt.embree.validation import (
     as_points,
     as_positive,
@@ -60,6 +60,19 @@ class Hits:
     def hit(self) -> np.ndarray:
         """(n,) bool: which rays hit something."""
         return self.geom_id >= 0
+
+
+class GeometryFilter(NamedTuple):
+    """Embree filter functions of one triangle geometry (``BVH.add_triangles``): ``user_data``
+    the (w,) uint64 block Embree hands them as the geometry's user pointer, ``intersect`` the
+    address of the nearest-hit filter and ``occluded`` the occlusion query's (0: occlusion
+    queries meet the geometry unfiltered), each a ``void(const RTCFilterFunctionNArguments*)``;
+    ``keep`` the arrays the block points at, held while Embree may call the filters."""
+
+    user_data: np.ndarray
+    intersect: int
+    occluded: int
+    keep: tuple
 
 
 SPHERE_KINDS = ("user", "point")
@@ -180,7 +193,7 @@ class BVH(Closing):
         self._sphere_reach: dict[int, float] = {}
         self._point_spheres: set[int] = set()
         self._bound_without_spheres = 0.0
-        self._hit_filters: list[TriangleFilter] = []
+        self._hit_filters: list[GeometryFilter] = []
         # Inverse-transpose of each single instance's linear part, by geometry id: one
         # (g, 3, 3) table at commit (world_normals).
         self._normal_matrices: dict[int, np.ndarray] = {}
@@ -227,9 +240,29 @@ class BVH(Closing):
         self.geometry_count += 1
         return int(geom_id)
 
+    def _new_geometry(self, kind: str) -> int:
+        """A new Embree geometry of ``library.GEOMETRY_TYPE_<kind>``, to be ``_attach``ed."""
+        self._live_scene()
+        geometry = self._lib.rtcNewGeometry(
+            self._device.handle, getattr(library, f"GEOMETRY_TYPE_{kind}")
+        )
+        self._device.check(f"rtcNewGeometry({kind})")
+        return geometry
+
     def _new_buffer(self, geometry: int, kind: int, fmt: int, stride: int, count: int) -> int:
         pointer = self._lib.rtcSetNewGeometryBuffer(geometry, kind, 0, fmt, stride, count)
         self._device.check("rtcSetNewGeometryBuffer")
+        return pointer
+
+    def _new_filled_buffer(self, geometry: int, kind: int, fmt: int, rows: np.ndarray) -> int:
+        """A new buffer of Embree's ``fmt`` holding ``rows`` (n, w), 4-byte items (float32 or
+        uint32, as ``fmt`` reads them), n of them, each of w words."""
+        count, width = rows.shape
+        pointer = self._new_buffer(geometry, kind, fmt, 4 * width, count)
+        if count:
+            ctype = ctypes.c_float if rows.dtype == np.float32 else ctypes.c_uint32
+            target = (ctype * rows.size).from_address(pointer)
+            np.ctypeslib.as_array(target).reshape(count, width)[:] = rows
         return pointer
 
     def add_spheres(self, centers: np.ndarray, radii: np.ndarray, kind: str = "user") -> int:
@@ -244,13 +277,9 @@ class BVH(Closing):
             raise ValueError(f"kind: expected one of {SPHERE_KINDS}, got {kind!r}")
         centers = as_points(centers, "centers")
         radii = as_positive(radii, "radii", len(centers))
-        self._live_scene()
         count = len(centers)
         if kind == "point":
-            geometry = self._lib.rtcNewGeometry(
-                self._device.handle, library.GEOMETRY_TYPE_SPHERE_POINT
-            )
-            self._device.check("rtcNewGeometry(SPHERE_POINT)")
+            geometry = self._new_geometry("SPHERE_POINT")
             pointer = self._new_buffer(
                 geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT4, 16, count
             )
@@ -269,8 +298,7 @@ class BVH(Closing):
             if self.movable:
                 self._lib.rtcSetGeometryBuildQuality(geometry, library.BUILD_QUALITY_REFIT)
         else:
-            geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_USER)
-            self._device.check("rtcNewGeometry(USER)")
+            geometry = self._new_geometry("USER")
             # Stored in spatial order, for the callbacks' memory traffic (spatial_order); the
             # callbacks report each sphere by its index among the spheres given.
             packed, order, slot, in_order, reach = spatial_order.store_in_spatial_order(
@@ -347,34 +375,28 @@ class BVH(Closing):
         self._device.check("refitting the moved spheres")
 
     def add_triangles(
-        self, vertices: np.ndarray, faces: np.ndarray, hit_filter: TriangleFilter | None = None
+        self, vertices: np.ndarray, faces: np.ndarray, hit_filter: GeometryFilter | None = None
     ) -> int:
         """Add a triangle mesh: ``vertices`` (m, 3) float, ``faces`` (k, 3) int in [0, m);
-        ``hit_filter`` (``alpha_filter.triangle_filter``) cuts holes in it or hides its back."""
+        ``hit_filter`` (a ``GeometryFilter``) rejects some of its hits, to cut holes in it or
+        hide its back."""
         vertices = as_points(vertices, "vertices")
         faces = as_triangle_indices(faces, "faces", len(vertices))
-        self._live_scene()
-        geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_TRIANGLE)
-        self._device.check("rtcNewGeometry(TRIANGLE)")
-        vertex_pointer = self._new_buffer(
-            geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT3, 12, len(vertices)
+        geometry = self._new_geometry("TRIANGLE")
+        self._new_filled_buffer(
+            geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT3, vertices
         )
-        index_pointer = self._new_buffer(
-            geometry, library.BUFFER_TYPE_INDEX, library.FORMAT_UINT3, 12, len(faces)
-        )
-        if len(vertices):
-            target = (ctypes.c_float * vertices.size).from_address(vertex_pointer)
-            np.ctypeslib.as_array(target)[:] = vertices.reshape(-1)
-        if len(faces):
-            target = (ctypes.c_uint32 * faces.size).from_address(index_pointer)
-            np.ctypeslib.as_array(target)[:] = faces.reshape(-1)
+        self._new_filled_buffer(geometry, library.BUFFER_TYPE_INDEX, library.FORMAT_UINT3, faces)
         self.primitive_count += len(faces)
         if len(vertices):
             bound = float(np.abs(vertices).max())
             self.coordinate_bound = max(self.coordinate_bound, bound)
             self._bound_without_spheres = max(self._bound_without_spheres, bound)
         if hit_filter is not None:
-            hit_filter.install(self._lib, geometry)
+            self._lib.rtcSetGeometryUserData(geometry, hit_filter.user_data.ctypes.data)
+            self._lib.rtcSetGeometryIntersectFilterFunction(geometry, hit_filter.intersect)
+            if hit_filter.occluded:
+                self._lib.rtcSetGeometryOccludedFilterFunction(geometry, hit_filter.occluded)
             self._hit_filters.append(hit_filter)  # Embree reads its data while the BVH lives
         return self._attach(geometry, "adding triangles")
 
@@ -388,25 +410,11 @@ class BVH(Closing):
         points = as_points(points, "points")
         radii = as_positive(radii, "radii", len(points))
         starts = as_segment_starts(starts, "starts", len(points))
-        self._live_scene()
-        geometry = self._lib.rtcNewGeometry(
-            self._device.handle, library.GEOMETRY_TYPE_ROUND_LINEAR_CURVE
-        )
-        self._device.check("rtcNewGeometry(ROUND_LINEAR_CURVE)")
-        vertex_pointer = self._new_buffer(
-            geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT4, 16, len(points)
-        )
-        index_pointer = self._new_buffer(
-            geometry, library.BUFFER_TYPE_INDEX, library.FORMAT_UINT, 4, len(starts)
-        )
-        if len(points):
-            target = (ctypes.c_float * (4 * len(points))).from_address(vertex_pointer)
-            packed = np.ctypeslib.as_array(target).reshape(-1, 4)
-            packed[:, :3] = points
-            packed[:, 3] = radii
-        if len(starts):
-            target = (ctypes.c_uint32 * len(starts)).from_address(index_pointer)
-            np.ctypeslib.as_array(target)[:] = starts
+        geometry = self._new_geometry("ROUND_LINEAR_CURVE")
+        packed = np.column_stack((points, radii)).astype(np.float32, copy=False)
+        self._new_filled_buffer(geometry, library.BUFFER_TYPE_VERTEX, library.FORMAT_FLOAT4, packed)
+        rows = starts.reshape(-1, 1)
+        self._new_filled_buffer(geometry, library.BUFFER_TYPE_INDEX, library.FORMAT_UINT, rows)
         self.primitive_count += len(starts)
         if len(points):
             reach = (np.abs(points).max(axis=1) + radii).max()
@@ -426,9 +434,7 @@ class BVH(Closing):
         """Place the committed BVH ``other`` by a (4, 4) affine ``transform`` (object → world)."""
         self._check_instanceable(other, "other")
         matrix = as_transform(transform, "transform")
-        self._live_scene()
-        geometry = self._lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_INSTANCE)
-        self._device.check("rtcNewGeometry(INSTANCE)")
+        geometry = self._new_geometry("INSTANCE")
         self._lib.rtcSetGeometryInstancedScene(geometry, other._live_scene())
         column_major = np.ascontiguousarray(matrix.T, dtype=np.float32)
         self._lib.rtcSetGeometryTransform(
@@ -488,10 +494,8 @@ class BVH(Closing):
                     f"child_index: row {row} is {index[row]}, outside [0, {len(children)})"
                 )
             index = np.ascontiguousarray(index, np.uint32)
-        self._live_scene()
         lib = self._lib
-        geometry = lib.rtcNewGeometry(self._device.handle, library.GEOMETRY_TYPE_INSTANCE_ARRAY)
-        self._device.check("rtcNewGeometry(INSTANCE_ARRAY)")
+        geometry = self._new_geometry("INSTANCE_ARRAY")
         if index is None:
             lib.rtcSetGeometryInstancedScene(geometry, children[0]._live_scene())
         else:
@@ -570,12 +574,6 @@ class BVH(Closing):
         if not self._committed:
             raise RuntimeError("commit() the BVH before querying it")
         _prepare_kernels()
-
-    def scene_address(self) -> int:
-        """The committed Embree scene's handle, for compiled queries defined outside this class
-        (``point_query``'s callers)."""
-        self._ready_to_query()
-        return self._live_scene()
 
     def query_rays(self, origins, directions, tnear, tfar) -> kernels.Rays:
         """A query's rays, validated, as the kernels take them (refused before ``commit``)."""
@@ -736,8 +734,8 @@ class BVH(Closing):
 
     def committed_scene(self) -> int:
         """The committed Embree scene's handle (``RTCScene``), for a compiled pass that calls
-        Embree's nearest-hit query itself (``kernels.intersect_chunk``) on this BVH; refuses
-        before ``commit`` or after ``close``."""
+        Embree's queries itself (``kernels.intersect_chunk``, ``point_query``) on this BVH;
+        refuses before ``commit`` or after ``close``."""
         self._ready_to_query()
         return self._live_scene()
 

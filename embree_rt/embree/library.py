@@ -112,6 +112,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "rtcSetGeometryBoundsFunction": (None, [p, p, p]),
         "rtcSetGeometryIntersectFunction": (None, [p, p]),
         "rtcSetGeometryOccludedFunction": (None, [p, p]),
+        "rtcSetGeometryIntersectFilterFunction": (None, [p, p]),
+        "rtcSetGeometryOccludedFilterFunction": (None, [p, p]),
         "rtcGetGeometry": (p, [p, u]),
         "rtcUpdateGeometryBuffer": (None, [p, i, u]),
     }

@@ -58,6 +58,7 @@ from embree_rt.embree.kernels import (
     RAY_TIME,
     RAY_TNEAR,
     Rays,
+    aligned_word,
     rtc_intersect1,
 )
 
@@ -73,6 +74,7 @@ ARGS_WORDS = 6  # 40 bytes, rounded up
 
 # RTCFilterFunctionNArguments in 8-byte words
 FILTER_VALID = 0
+FILTER_USER = 1  # the geometry's user pointer
 FILTER_CONTEXT = 2
 FILTER_RAY = 3
 FILTER_HIT = 4
@@ -98,7 +100,7 @@ CONTEXT_WORDS = 10
 
 # One scratch row per parallel chunk: RTCRayHit (96 bytes, 16-aligned) + arguments + context.
 _RAYHIT_WORDS64 = 12
-_SCRATCH_WORDS = 2 * (2 + _RAYHIT_WORDS64 + ARGS_WORDS + CONTEXT_WORDS)  # 4-byte words
+SCRATCH_WORDS = 2 * (2 + _RAYHIT_WORDS64 + ARGS_WORDS + CONTEXT_WORDS)  # 4-byte words
 CHUNK = 64  # rays per parallel iteration
 
 _FILTER_SIGNATURE = types.void(types.uintp)
@@ -163,12 +165,6 @@ FILTER_ADDRESS = _record_and_reject.address
 
 
 @njit(inline="always")
-def _aligned16(words) -> int:
-    """Index of the first 16-byte-aligned 4-byte word of ``words``."""
-    return ((16 - (words.ctypes.data & 15)) & 15) >> 2
-
-
-@njit(inline="always")
 def _put64(words, k, value):
     """Store a 64-bit value at 4-byte words k, k + 1 (little-endian)."""
     words[k] = np.uint32(value & 0xFFFFFFFF)
@@ -176,12 +172,12 @@ def _put64(words, k, value):
 
 
 @njit(inline="always")
-def _prepare_scratch(scene, words, filter_address):
+def prepare_scratch(scene, words, filter_address):
     """Lay out RTCRayHit, RTCIntersectArguments and our context in ``words`` (a uint32 row:
     the same element type as the kernels' packets, which numba's parallel loops handle);
-    returns the tracer ``_trace_one`` takes: (scene, words, and the 4-byte word offsets of the
+    returns the tracer ``trace_one`` takes: (scene, words, and the 4-byte word offsets of the
     three)."""
-    rayhit = _aligned16(words)
+    rayhit = aligned_word(words, 16)
     args = rayhit + 2 * _RAYHIT_WORDS64
     context = args + 2 * ARGS_WORDS
     base = np.uint64(words.ctypes.data)
@@ -198,7 +194,7 @@ def _prepare_scratch(scene, words, filter_address):
 
 
 @njit(inline="always")
-def _trace_one(tracer, origin, direction, tnear, tfar, rows):
+def trace_one(tracer, origin, direction, tnear, tfar, rows):
     """Trace one ray, recording its hits in ``rows`` = (t, prim, u, v, cos), (capacity,)
     float32, int32, float32, float32, float32 each; returns (count, more)."""
     scene, words, rayhit, args, context = tracer
@@ -252,10 +248,10 @@ def _sort_hits(count, t, prim, u, v, cos):
 def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
     origins, directions, tnear, tfar = rays
     t, prim, u, v, cos, count, more = hits
-    tracer = _prepare_scratch(scene, words, filter_address)
+    tracer = prepare_scratch(scene, words, filter_address)
     for i in range(first, stop):
         rows = (t[i], prim[i], u[i], v[i], cos[i])
-        found, dropped = _trace_one(tracer, origins[i], directions[i], tnear[i], tfar[i], rows)
+        found, dropped = trace_one(tracer, origins[i], directions[i], tnear[i], tfar[i], rows)
         _sort_hits(found, t[i], prim[i], u[i], v[i], cos[i])
         count[i] = found
         more[i] = dropped
@@ -264,50 +260,10 @@ def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
 @njit(parallel=True, nogil=True, cache=True)
 def _all_hits(scene, filter_address, rays, hits):
     n = rays.origins.shape[0]
-    scratch = chunk_scratch(n, CHUNK, _SCRATCH_WORDS)
+    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
     for c in prange(len(scratch)):
         first, stop = chunk_span(c, CHUNK, n)
         _all_hits_chunk(scene, filter_address, scratch[c], first, stop, rays, hits)
-
-
-@njit(nogil=True, cache=True)
-def _parity_chunk(scene, filter_address, words, first, stop, origins, directions, screen, parity):
-    capacity, edge_band, graze = screen
-    odd, clear = parity
-    tracer = _prepare_scratch(scene, words, filter_address)
-    hits = np.empty((4, capacity), np.float32)
-    prims = np.empty(capacity, np.int32)
-    t, u, v, cos = hits[0], hits[1], hits[2], hits[3]
-    rows = (t, prims, u, v, cos)
-    for i in range(first, stop):
-        found, dropped = _trace_one(tracer, origins[i], directions[i], 0.0, np.inf, rows)
-        ok = not dropped
-        for k in range(found):
-            band = edge_band[prims[k]]
-            if min(u[k], v[k], 1.0 - u[k] - v[k]) <= band or cos[k] <= graze:
-                ok = False
-        odd[i] = (found & 1) == 1
-        clear[i] = ok
-
-
-@njit(parallel=True, nogil=True, cache=True)
-def _crossing_parity(scene, filter_address, origins, directions, screen, parity):
-    # screen: (capacity, (primitives,) float32 edge band, float32 graze); parity: (odd, clear)
-    n = origins.shape[0]
-    scratch = chunk_scratch(n, CHUNK, _SCRATCH_WORDS)
-    for c in prange(len(scratch)):
-        first, stop = chunk_span(c, CHUNK, n)
-        _parity_chunk(
-            scene,
-            filter_address,
-            scratch[c],
-            first,
-            stop,
-            origins,
-            directions,
-            screen,
-            parity,
-        )
 
 
 class HitBuffers(NamedTuple):
@@ -369,31 +325,3 @@ def all_hits(
         numba.set_num_threads(threads_for(n, threads))
         _all_hits(scene, FILTER_ADDRESS, Rays(origins, directions, tnear, tfar), hits)
     return hits
-
-
-def crossing_parity(
-    scene: int,
-    origins: np.ndarray,
-    directions: np.ndarray,
-    edge_band: np.ndarray,
-    graze: float,
-    threads: int,
-    capacity: int = 256,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Parity of each ray's surface crossings in ``t >= 0``, and whether it can be trusted.
-
-    ``origins``, ``directions`` (n, 3) float32, ``edge_band`` (primitives,) float32. Returns
-    ``odd`` (n,) bool (an odd number of distinct triangles hit) and ``clear`` (n,) bool: no hit
-    lies within ``edge_band[prim]`` (barycentric) of its triangle's edge, none meets its
-    triangle at |cos| <= ``graze``, and at most ``capacity`` triangles were hit — where any of
-    that fails, the count may be off by an edge or vertex counted twice or not at all, and the
-    caller should ask another direction.
-    """
-    n = len(origins)
-    odd = np.zeros(n, bool)
-    clear = np.zeros(n, bool)
-    if n:
-        numba.set_num_threads(threads_for(n, threads))
-        screen = (capacity, np.ascontiguousarray(edge_band, np.float32), np.float32(graze))
-        _crossing_parity(scene, FILTER_ADDRESS, origins, directions, screen, (odd, clear))
-    return odd, clear

@@ -3,14 +3,13 @@
 ``install()`` for every new mesh (``installed``).
 
 The intersector (``intersector``) and the exact-hit pipeline it runs (``exact_hits``: screen ->
-settle -> decide -> finish), on compiled passes that exist only for those rules: the mesh in
-Embree's local frame (``local_scene``, ``local_frame``) in a coherent tracing order, first hits
-screened for float32 doubt (``screened_nearest``), all hits settled (``settled_hits``), decided
-in float64 near edges (``decided_hits``) and finished in trimesh's order, one hit per point
-where a ray meets the surface (``finished_hits``), with float64 distances to the triangles'
-planes (``plane_distances``), all reading their grouped inputs by name (``hit_inputs``). The
-proximity queries (``proximity``) on Embree's point query with a float64 closest-triangle
-callback.
+settle -> decide -> finish, in one function), on compiled passes that exist only for those rules
+(``hit_passes``: first hits screened for float32 doubt, all hits settled, decided in float64
+near edges and finished in trimesh's order, one hit per point where a ray meets the surface,
+with float64 distances to the triangles' planes, all reading their grouped inputs by name),
+over the mesh and its rays in Embree's local frame in a coherent tracing order
+(``local_frame``). The proximity queries (``proximity``) on Embree's point query with a float64
+closest-triangle callback; ``installed``: every new mesh given both.
 """
 
 from embree_rt.trimesh_ray.installed import install, uninstall

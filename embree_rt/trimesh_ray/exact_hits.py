@@ -12,8 +12,8 @@ passes, each answering for a block of rays before the next runs.
 - **finish** (``finished_hits``): the parts merged by ray, hits at one point made one per
   crossing, each ray cut to its nearest ``max_hits``, in trimesh's order, with the points.
 
-``all_hits`` runs settle -> decide -> finish; ``first_hits`` runs screen, then ``all_hits``
-for the suspect rays.
+``exact_hits`` runs them, one after the other in one function: screen (for the first hit only,
+whose suspect rays then take the other stages), settle, decide, finish.
 """
 
 from __future__ import annotations
@@ -25,18 +25,26 @@ from trimesh import util
 from trimesh.constants import tol
 
 from embree_rt.embree.multihit import HitBuffers
-from embree_rt.trimesh_ray.decided_hits import decided_hits
-from embree_rt.trimesh_ray.finished_hits import finished_hits
-from embree_rt.trimesh_ray.hit_inputs import Tolerances, WorldRays, tolerances, world_rays
+from embree_rt.trimesh_ray.hit_passes import (
+    Tolerances,
+    WorldRays,
+    decided_hits,
+    finished_hits,
+    screened_nearest,
+    settled_hits,
+    tolerances,
+    world_rays,
+)
 from embree_rt.trimesh_ray.local_frame import (
+    BAND_ULPS,
+    EDGE_BAND_SCALE,
+    EPS32,
+    LocalScene,
     boxed_local_points,
     local_rays,
     ordered_local_rays,
     refuse_rays,
 )
-from embree_rt.trimesh_ray.local_scene import BAND_ULPS, EDGE_BAND_SCALE, EPS32, LocalScene
-from embree_rt.trimesh_ray.screened_nearest import screened_nearest
-from embree_rt.trimesh_ray.settled_hits import settled_hits
 
 # trimesh.intersections.planes_lines: a ray and a plane with |cos| at most this do not meet.
 PARALLEL_COS = 1e-5
@@ -58,23 +66,23 @@ FIRST_ROOM = 8  # hits of room a ray on the first trace (rays that overflow it a
 _BLOCK_HITS = 1 << 21
 
 
-def _spliced(hits, rows, again):
-    """``hits``: a multi-hit answer ``(rays (m,) int64, tris (m,) int64, locations (m, 3)
-    float64 or None)`` in trimesh's order (every ray's first hit, rays ascending, then every
-    ray's second ...), with the hits of rays ``rows`` (k,) int64 replaced by ``again``, the
-    answer for those rays alone (its rays index ``rows``), in the same order."""
-    rays, tris, locations = hits
-    keep = ~np.isin(rays, rows)
-    rays = np.concatenate([rays[keep], rows[again[0]]])
-    tris = np.concatenate([tris[keep], again[1]])
+def _spliced(hits: FoundHits, rows: np.ndarray, again: FoundHits):
+    """``hits``, a multi-hit answer in trimesh's order (every ray's first hit, rays ascending,
+    then every ray's second ...), with the hits of rays ``rows`` (k,) int64 replaced by
+    ``again``, the answer for those rays alone (its rays index ``rows``), in the same order.
+    Returns (rays, tris, locations), as ``FoundHits`` has them."""
+    keep = ~np.isin(hits.rays, rows)
+    rays = np.concatenate([hits.rays[keep], rows[again.rays]])
+    tris = np.concatenate([hits.tris[keep], again.tris])
     # a hit's depth: how many hits of its ray come before it (each ray's hits are in order)
     order = np.argsort(rays, kind="stable")
     starts = np.searchsorted(rays[order], rays[order])
     depth = np.empty(len(rays), np.int64)
     depth[order] = np.arange(len(rays)) - starts
     placed = np.lexsort((rays, depth))
+    locations = hits.locations
     if locations is not None:
-        locations = np.concatenate([locations[keep], again[2]])[placed]
+        locations = np.concatenate([locations[keep], again.locations])[placed]
     return rays[placed], tris[placed], locations
 
 
@@ -206,27 +214,18 @@ class TracedRays(NamedTuple):
     embree_near: np.ndarray
 
 
-def traced_rays(
-    scene: LocalScene, origins: np.ndarray, directions: np.ndarray, tnear, reorder: bool, as_given
-) -> TracedRays:
-    """The rays ``origins``, ``directions`` (n, 3) float64 (unit directions) in the local frame,
-    in a coherent order with ``reorder`` on a big mesh (``scene.bounds``; the answers do not
-    depend on it: each ray's hits are computed from its own row alone), with their near
-    distances (``tnear``: see ``RayMeshIntersector.intersects_id``). A row Embree cannot trace
-    is refused, named as the caller gave it (``as_given``: the directions before ``unitize``)."""
-    n = len(origins)
-    given_origins, given_directions = origins, directions
+def traced_rays(scene: LocalScene, query: HitQuery) -> TracedRays:
+    """The rays of ``query`` (``HitQuery``: unit directions) in the local frame, in a coherent
+    order with ``query.reorder`` on a big mesh (``scene.bounds``; the answers do not depend on
+    it: each ray's hits are computed from its own row alone), with their near distances
+    (``query.tnear``: see ``RayMeshIntersector.intersects_id``). A row Embree cannot trace is
+    refused, named as the caller gave it (``query.as_given``: the directions before
+    ``unitize``)."""
+    n = len(query.origins)
+    origins, directions, tnear = query.origins, query.directions, query.tnear
     order = None
-    if reorder and scene.bounds is not None:
-        (
-            order,
-            origins,
-            directions,
-            local_origins,
-            local_directions,
-            magnitude,
-            finite,
-        ) = ordered_local_rays(
+    if query.reorder and scene.bounds is not None:
+        ordered = ordered_local_rays(
             origins,
             directions,
             scene.origin,
@@ -235,53 +234,88 @@ def traced_rays(
             scene.bounds,
             scene.bvh.threads,
         )
+        order, origins, directions = ordered.order, ordered.origins, ordered.directions
+        local = ordered.local
         if tnear is not None and np.ndim(tnear):
             tnear = np.broadcast_to(np.asarray(tnear, np.float64), (n,))[order]
     else:
-        local_origins, local_directions, magnitude, finite = local_rays(
-            origins, directions, scene.origin, scene.scale, scene.extent
-        )
-    if not finite:
-        written = given_directions if as_given is None else as_given
-        refuse_rays(given_origins, written, scene.origin, scene.scale)
-    near, inclusive = _resolve_tnear(scene, magnitude, tnear)
+        local = local_rays(origins, directions, scene.origin, scene.scale, scene.extent)
+    if not local.finite:
+        written = query.directions if query.as_given is None else query.as_given
+        refuse_rays(query.origins, written, scene.origin, scene.scale)
+    near, inclusive = _resolve_tnear(scene, local.magnitude, tnear)
     return TracedRays(
         order,
-        world_rays(origins, directions, magnitude, near, inclusive),
-        local_origins,
-        local_directions,
+        world_rays(origins, directions, local.magnitude, near, inclusive),
+        local.origins,
+        local.directions,
         (near * scene.scale * 0.5).astype(np.float32),
     )
 
 
-def all_hits(
-    scene: LocalScene,
-    origins: np.ndarray,
-    directions: np.ndarray,
-    max_hits: int,
-    tnear,
-    reorder: bool = False,
-    with_locations: bool = False,
-    room: int | None = None,
-    as_given: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Every ray's nearest ``max_hits`` hits in trimesh's order (every ray's first hit, rays
-    ascending, then every ray's second, ...): ``(rays, triangles)`` (k,) int64 and, with
-    ``with_locations``, the points (k, 3) float64 (else None); each ray's hits by distance,
-    then triangle, one hit per crossing of the surface (at an edge or a vertex, the
-    lowest-index triangle there: ``finished_hits``). ``origins``, ``directions`` (n, 3)
-    float64, unit directions; ``reorder``, ``tnear``, ``as_given``: see ``traced_rays``.
+class HitQuery(NamedTuple):
+    """What ``RayMeshIntersector`` asks of the pipeline. ``origins``, ``directions`` (n, 3)
+    float64 rays (unit directions, but for the first hit only: as given); ``tnear``: None, a
+    scalar or (n,) (see ``RayMeshIntersector.intersects_id``); ``max_hits`` the nearest hits
+    kept a ray, or None for the first hit only (its rays screened first); ``with_locations``:
+    also the hit points; ``reorder``: trace big meshes' rays in a coherent order; ``room``:
+    Embree hits recorded a ray (None: ``max_hits`` + 4); ``as_given``: the directions before
+    ``unitize`` (n, 3), to name a bad row as the caller wrote it, or None."""
 
-    ``room``: Embree hits recorded a ray (default ``max_hits`` + 4). Hits at one point
-    become one crossing, so a ray whose recorded hits overflowed it and gave fewer than
-    ``max_hits`` crossings (a ray through a vertex many triangles share) may have more:
-    such rays are traced again with four times the room."""
-    n = len(origins)
-    capacity = max(1, int(max_hits))
+    origins: np.ndarray
+    directions: np.ndarray
+    tnear: object
+    max_hits: int | None
+    with_locations: bool = False
+    reorder: bool = False
+    room: int | None = None
+    as_given: np.ndarray | None = None
+
+
+class FoundHits(NamedTuple):
+    """The pipeline's answer in trimesh's order (every ray's first hit, rays ascending, then
+    every ray's second, ...): ``rays``, ``tris`` (k,) int64 and, when asked, ``locations``
+    (k, 3) float64 (else None). Each ray's hits by distance, then triangle, one hit per
+    crossing of the surface (at an edge or a vertex, the lowest-index triangle there)."""
+
+    rays: np.ndarray
+    tris: np.ndarray
+    locations: np.ndarray | None
+
+
+def exact_hits(scene: LocalScene, query: HitQuery) -> FoundHits:
+    """The hits ``query`` (a ``HitQuery``) asks for, stage after stage (module docstring):
+    screen (the first hit only) -> settle -> decide -> finish.
+
+    ``query.room`` hits are recorded a ray. Hits at one point become one crossing, so a ray
+    whose recorded hits overflowed it and gave fewer than ``max_hits`` crossings (a ray
+    through a vertex many triangles share) may have more: such rays are traced again with four
+    times the room."""
+    n = len(query.origins)
+    if query.max_hits is None:
+        # screen: Embree's nearest hits stand where clear of doubt; the suspect rays (under
+        # 1% on the benchmark's meshes) take the stages below for their one nearest crossing
+        first, suspect, near = _screen(scene, query)
+        again = np.flatnonzero(suspect)
+        if len(again):
+            more = exact_hits(
+                scene,
+                HitQuery(
+                    query.origins[again],
+                    util.unitize(query.directions[again]),
+                    None if near is None else near[again],
+                    max_hits=1,
+                ),
+            )
+            first[again] = -1
+            first[again[more.rays]] = more.tris
+        rays = np.flatnonzero(first >= 0)
+        return FoundHits(rays, first[rays], None)
+    capacity = max(1, int(query.max_hits))
     # room for hits the float64 rules drop (at the origin, along a face) and for edge pairs,
     # so that the nearest `capacity` survive
-    room = capacity + 4 if room is None else room
-    rays = traced_rays(scene, origins, directions, tnear, reorder, as_given)
+    room = capacity + 4 if query.room is None else query.room
+    rays = traced_rays(scene, query)
     rules = tolerances(EDGE_BAND_SCALE, GRAZE_COS, PARALLEL_COS, tol.zero)
     hits = _HitList(scene, 2 * n)
     truncated = []  # positions of rays whose final trace had more hits than its room
@@ -293,10 +327,11 @@ def all_hits(
     for first in range(0, n, block):
         rows = slice(first, min(n, first + block))
         recorded = _trace(scene, rays, rows, first_room)
+        # settle: rays clear of edges and grazing are final here; the others are messy
         messy = _settle(scene, rays, rows, recorded, room > first_room, rules, hits)
-        # Messy rays whose hits all fit are complete: decided from the buffers as traced (a
-        # second trace with more room records the same hits in the same order); the others
-        # are traced again first, below.
+        # decide: messy rays whose hits all fit, from the buffers as traced (a second trace
+        # with more room records the same hits in the same order); the others are traced
+        # again first, below
         overflowed = recorded.more if room > first_room else np.zeros(len(messy), bool)
         if room <= first_room:
             truncated.append(first + np.flatnonzero(messy & recorded.more))
@@ -314,25 +349,61 @@ def all_hits(
     if rays.world.inclusive:
         parts, more = _decide_surfaces_behind(scene, rays, room, rules, parts)
         truncated.append(more)
-    finished = _finish(scene, rays, parts, capacity, origins, directions, with_locations)
+    # finish: one hit per crossing, each ray cut to its nearest `capacity`, in trimesh's order
+    finished = _finish(scene, rays, parts, capacity, query)
     truncated = np.concatenate(truncated) if truncated else np.zeros(0, np.int64)
     if rays.order is not None:
         truncated = rays.order[truncated]
-    short = truncated[np.bincount(finished[0], minlength=n)[truncated] < capacity]
+    short = truncated[np.bincount(finished.rays, minlength=n)[truncated] < capacity]
     if not len(short):
         return finished
+    tnear = query.tnear
     if tnear is not None and np.ndim(tnear):
         tnear = np.broadcast_to(tnear, (n,))[short]
-    again = all_hits(
+    again = exact_hits(
         scene,
-        origins[short],
-        directions[short],
-        capacity,
-        tnear,
-        with_locations=with_locations,
-        room=4 * room,
+        HitQuery(
+            query.origins[short],
+            query.directions[short],
+            tnear,
+            capacity,
+            with_locations=query.with_locations,
+            room=4 * room,
+        ),
     )
-    return _spliced(finished, short, again)
+    return FoundHits(*_spliced(finished, short, again))
+
+
+def _screen(scene: LocalScene, query: HitQuery) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Stage screen: (n,) int64 the nearest triangle each ray of ``query`` hits as Embree
+    finds it (-1: none), (n,) bool which of those are suspect (near an edge, grazing, at the
+    origin, or starting on a surface behind it: ``surfaces_behind``), and the rays' near
+    distances (n,) float64 (None: the default, a few float32 ulps)."""
+    origins, directions = query.origins, query.directions
+    near = None
+    if query.tnear is not None:
+        near = np.broadcast_to(np.asarray(query.tnear, dtype=np.float64), (len(origins),))
+        if not np.isfinite(near).all() or (near < 0).any():
+            raise ValueError("tnear: must be finite and >= 0")
+    prim, suspect = screened_nearest(
+        scene.bvh,
+        origins,
+        directions,
+        shift=scene.origin,
+        scale=scene.scale,
+        extent=scene.extent,
+        bounds=scene.bounds,
+        near=near,
+        near_ulps=_TNEAR_ULPS,
+        altitude=scene.min_altitude,
+        floor_altitude=scene.floor_altitude,
+        band_ulps=BAND_ULPS,
+        graze=GRAZE_COS,
+        near_factor=4.0,
+    )
+    if near is not None:
+        suspect[surfaces_behind(scene, origins, directions, near)[0]] = True
+    return prim.astype(np.int64), suspect, near
 
 
 def _trace(
@@ -452,70 +523,27 @@ def _finish(
     rays: TracedRays,
     parts: tuple[np.ndarray, np.ndarray, np.ndarray],
     capacity: int,
-    origins: np.ndarray,
-    directions: np.ndarray,
-    with_locations: bool,
-):
+    query: HitQuery,
+) -> FoundHits:
     """Stage finish: ``finished_hits`` of the hits ``parts`` (rays, tris, distance) of the
-    rays ``origins``, ``directions`` as the caller gave them."""
-    return finished_hits(
-        *parts,
-        rays.order,
-        len(origins),
-        capacity,
-        scene.fans().canonical,
-        scene.planes,
-        scene.extent / scene.scale,
-        PARALLEL_COS,
-        origins,
-        directions,
-        with_locations,
-        scene.scratch,
-        scene.bvh.threads,
-    )
-
-
-def first_hits(scene: LocalScene, origins: np.ndarray, directions: np.ndarray, tnear) -> np.ndarray:
-    """(n,) int64: the first triangle each of the rays ``origins``, ``directions`` (n, 3)
-    float64 (directions not necessarily unit) hits, -1 for none. Embree's nearest-hit query
-    answers, in one compiled pass with the frame change, every ray whose hit lies clear of
-    edges, of grazing and of the origin (``screened_nearest``; on big meshes in the order
-    of where the rays enter the mesh's box, which changes no answer, see
-    ``embree_rt.trimesh_ray.screened_nearest``); the others (under 1% on the benchmark's meshes)
-    go through ``all_hits``, which decides them in float64."""
-    near = None
-    if tnear is not None:
-        near = np.broadcast_to(np.asarray(tnear, dtype=np.float64), (len(origins),))
-        if not np.isfinite(near).all() or (near < 0).any():
-            raise ValueError("tnear: must be finite and >= 0")
-    prim, suspect = screened_nearest(
-        scene.bvh,
-        origins,
-        directions,
-        shift=scene.origin,
-        scale=scene.scale,
-        extent=scene.extent,
-        bounds=scene.bounds,
-        near=near,
-        near_ulps=_TNEAR_ULPS,
-        altitude=scene.min_altitude,
-        floor_altitude=scene.floor_altitude,
-        band_ulps=BAND_ULPS,
-        graze=GRAZE_COS,
-        near_factor=4.0,
-    )
-    if near is not None:
-        suspect[surfaces_behind(scene, origins, directions, near)[0]] = True
-    first = prim.astype(np.int64)
-    again = np.flatnonzero(suspect)
-    if len(again):
-        more = all_hits(
-            scene,
-            origins[again],
-            util.unitize(directions[again]),
-            1,
-            None if near is None else near[again],
+    rays of ``query``, as the caller gave them."""
+    found_rays, found_tris, distance = parts
+    return FoundHits(
+        *finished_hits(
+            rays=found_rays,
+            tris=found_tris,
+            distance=distance,
+            order=rays.order,
+            ray_count=len(query.origins),
+            capacity=capacity,
+            canonical=scene.fans().canonical,
+            planes=scene.planes,
+            size=scene.extent / scene.scale,
+            parallel_cos=PARALLEL_COS,
+            origins=query.origins,
+            directions=query.directions,
+            with_locations=query.with_locations,
+            scratch=scene.scratch,
+            threads=scene.bvh.threads,
         )
-        first[again] = -1
-        first[again[more[0]]] = more[1]
-    return first
+    )

@@ -18,7 +18,7 @@ crossing of the surface:
 - A ray through an edge or a vertex meets every triangle there that ``ray_triangle``'s float64
   test accepts (barycentrics within ``tol.zero`` of the triangle). Embree's float32 test may
   accept one or both near an edge, so every Embree hit within float32 reach of an edge
-  (``local_scene``), or grazing its triangle, is decided again in float64 against the triangles
+  (``local_frame``), or grazing its triangle, is decided again in float64 against the triangles
   around it (those sharing a vertex position with it) by ``ray_triangle``'s own formulas
   (``decided_hits``). Triangles meeting only at T-junctions (no shared vertex position) are not
   looked up.
@@ -48,12 +48,9 @@ import numpy as np
 import trimesh
 from trimesh import caching, util
 
-from embree_rt.compiled.work_split import parallel_region
-from embree_rt.embree.multihit import crossing_parity
-from embree_rt.trimesh_ray.exact_hits import GRAZE_COS, all_hits, first_hits
-from embree_rt.trimesh_ray.local_frame import boxed_local_points
-from embree_rt.trimesh_ray.local_scene import LocalScene
-from embree_rt.trimesh_ray.plane_distances import plane_distances
+from embree_rt.trimesh_ray.exact_hits import GRAZE_COS, HitQuery, exact_hits
+from embree_rt.trimesh_ray.hit_passes import crossing_parity, plane_distances
+from embree_rt.trimesh_ray.local_frame import LocalScene, boxed_local_points
 
 # trimesh.ray.ray_util.contains_points's first direction, then two more for rays that pass too
 # near an edge or along a face to trust their parity.
@@ -90,7 +87,7 @@ def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray, np.nd
 
 def _plane_distance(scene, origins, directions, rays, tris):
     """float64 distance along each ray to its triangle's plane, and |cos| of the angle between
-    ray and normal, trimesh's planes_lines formula (compiled: ``plane_distances``)."""
+    ray and normal, trimesh's planes_lines formula (compiled: ``hit_passes.plane_distances``)."""
     return plane_distances(scene.planes, origins, directions, rays, tris)
 
 
@@ -143,9 +140,8 @@ class RayMeshIntersector:
         """
         if not multiple_hits:
             origins, given_directions = _ray_arrays(ray_origins, ray_directions)
-            first = first_hits(self._scene, origins, given_directions, tnear)
-            rays = np.flatnonzero(first >= 0)
-            tris = first[rays]
+            first = exact_hits(self._scene, HitQuery(origins, given_directions, tnear, None))
+            rays, tris = first.rays, first.tris
             if not return_locations:
                 return tris, rays
             directions = util.unitize(given_directions[rays])
@@ -154,16 +150,16 @@ class RayMeshIntersector:
             )[0]
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions, given_directions = _as_rays(ray_origins, ray_directions)
-        rays, tris, locations = all_hits(
-            self._scene,
+        query = HitQuery(
             origins,
             directions,
-            max_hits,
             tnear,
-            reorder=True,
+            max(1, int(max_hits)),
             with_locations=return_locations,
+            reorder=True,
             as_given=given_directions,
         )
+        rays, tris, locations = exact_hits(self._scene, query)
         if return_locations:
             return tris, rays, locations
         return tris, rays
@@ -186,7 +182,10 @@ class RayMeshIntersector:
         """(n,) int32 (as trimesh's embree backend): the first triangle each ray hits, -1 for
         none (on an edge, the lowest index of the triangles there)."""
         origins, directions = _ray_arrays(ray_origins, ray_directions)
-        return first_hits(self._scene, origins, directions, tnear).astype(np.int32)
+        found = exact_hits(self._scene, HitQuery(origins, directions, tnear, None))
+        first = np.full(len(origins), -1, np.int32)
+        first[found.rays] = found.tris
+        return first
 
     def intersects_any(self, ray_origins, ray_directions, *, tnear=0.0) -> np.ndarray:
         """(n,) bool: whether each ray hits the mesh."""
@@ -219,15 +218,7 @@ class RayMeshIntersector:
             # of a pass shares its direction (a broadcast row, no (n, 3) copy)
             origins = local if k == 0 else local[pending]
             directions = np.broadcast_to(direction.astype(np.float32), (len(pending), 3))
-            with parallel_region:
-                odd, clear = crossing_parity(
-                    scene.bvh.committed_scene(),
-                    origins,
-                    directions,
-                    band,
-                    GRAZE_COS,
-                    scene.bvh.threads,
-                )
+            odd, clear = crossing_parity(scene.bvh, origins, directions, band, GRAZE_COS)
             last = k == len(_CONTAINS_DIRECTIONS) - 1
             votes[pending] += odd
             settled = clear | last

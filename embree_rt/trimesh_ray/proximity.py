@@ -502,7 +502,7 @@ class ProximityQuery:
     def _closest(self, points: np.ndarray):
         scene = self._scene
         answers = closest_points(
-            scene.bvh.scene_address(),
+            scene.bvh.committed_scene(),
             scene.table,
             points,
             scene.shift,

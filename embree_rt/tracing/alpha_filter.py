@@ -10,37 +10,33 @@ the hits on what is not there, so the traversal goes on past them: the next surf
 the same query, exactly as if the hole were in the mesh. Only geometries that need it get a
 filter: every other triangle, sphere and instance is traced as before, at no cost.
 
-The filter is a numba ``cfunc`` (``void(const RTCFilterFunctionNArguments*)``, rtcore_geometry.h:
-{int* valid @0, geometryUserPtr @8, context* @16, RTCRayN* @24, RTCHitN* @32, N u32 @40}; the
-ray and hit are structures of arrays, field k of lane i at 4-byte word k·N + i; for an
-instanced geometry both are in the mesh's own space). Its per-geometry data is one block of
+The filter is a numba ``cfunc`` (``void(const RTCFilterFunctionNArguments*)``, read by the
+Embree layer's layout: ``multihit``'s ``FILTER_*`` and ``HITN_*`` words; for an instanced
+geometry the ray and hit are in the mesh's own space). Its per-geometry data is one block of
 8-byte words (``BLOCK_*``) that the geometry's user pointer points at. The texture is read by
 ``embree_rt.textures``' own wrap rules, compiled.
 """
 
 from __future__ import annotations
 
-import ctypes
-from dataclasses import dataclass
-
 import numpy as np
 from numba import carray, cfunc, njit, types
 
 from embree_rt.compiled import pointers
+from embree_rt.embree import GeometryFilter
+from embree_rt.embree.kernels import RAY_DIR
+from embree_rt.embree.multihit import (
+    FILTER_HIT,
+    FILTER_N,
+    FILTER_RAY,
+    FILTER_USER,
+    FILTER_VALID,
+    HITN_NG,
+    HITN_PRIM_ID,
+    HITN_U,
+    HITN_V,
+)
 from embree_rt.textures import REPEAT, reduce_coordinate, wrap_texel
-
-# RTCFilterFunctionNArguments in 8-byte words
-ARG_VALID = 0
-ARG_USER = 1
-ARG_RAY = 3
-ARG_HIT = 4
-ARG_N = 5
-# RTCRayN / RTCHitN fields (4-byte words, times N)
-RAY_DIR = 4
-HIT_NG = 0
-HIT_U = 3
-HIT_V = 4
-HIT_PRIM = 5
 
 # The data block, in 8-byte words (floats as float32 in the low half of their word).
 BLOCK_FLAGS = 0
@@ -103,13 +99,13 @@ def texture_alpha(texels_address, height, width, wrap_s, wrap_t, nearest, u, v):
 @njit(cache=True)
 def _filter(address, shadow):
     args = carray(pointers.words64(address), 6)
-    n = np.int64(args[ARG_N] & 0xFFFFFFFF)
-    valid = carray(pointers.ints(args[ARG_VALID]), n)
-    block_address = args[ARG_USER]
+    n = np.int64(args[FILTER_N] & 0xFFFFFFFF)
+    valid = carray(pointers.ints(args[FILTER_VALID]), n)
+    block_address = args[FILTER_USER]
     block = carray(pointers.words64(block_address), BLOCK_WORDS)
-    ray = carray(pointers.floats(args[ARG_RAY]), 12 * n)
-    hit = carray(pointers.floats(args[ARG_HIT]), 9 * n)
-    hit_words = carray(pointers.ints(args[ARG_HIT]), 9 * n)
+    ray = carray(pointers.floats(args[FILTER_RAY]), 12 * n)
+    hit = carray(pointers.floats(args[FILTER_HIT]), 9 * n)
+    hit_words = carray(pointers.ints(args[FILTER_HIT]), 9 * n)
     flags = block[BLOCK_FLAGS]
     cutoff = _float_word(block_address, BLOCK_CUTOFF)
     if flags & FLAG_BLEND and shadow:
@@ -120,9 +116,9 @@ def _filter(address, shadow):
             continue
         if flags & FLAG_ONE_SIDED and not shadow:
             facing = (
-                ray[RAY_DIR * n + lane] * hit[HIT_NG * n + lane]
-                + ray[(RAY_DIR + 1) * n + lane] * hit[(HIT_NG + 1) * n + lane]
-                + ray[(RAY_DIR + 2) * n + lane] * hit[(HIT_NG + 2) * n + lane]
+                ray[RAY_DIR * n + lane] * hit[HITN_NG * n + lane]
+                + ray[(RAY_DIR + 1) * n + lane] * hit[(HITN_NG + 1) * n + lane]
+                + ray[(RAY_DIR + 2) * n + lane] * hit[(HITN_NG + 2) * n + lane]
             )
             if facing > 0.0:  # the ray meets the back of the surface
                 valid[lane] = 0
@@ -131,9 +127,9 @@ def _filter(address, shadow):
             continue
         alpha = np.float64(_float_word(block_address, BLOCK_ALPHA))
         if block[BLOCK_UV] != 0 or block[BLOCK_VERTEX_ALPHA] != 0:
-            prim = np.int64(hit_words[HIT_PRIM * n + lane])
-            u = np.float64(hit[HIT_U * n + lane])
-            v = np.float64(hit[HIT_V * n + lane])
+            prim = np.int64(hit_words[HITN_PRIM_ID * n + lane])
+            u = np.float64(hit[HITN_U * n + lane])
+            v = np.float64(hit[HITN_V * n + lane])
             w = 1.0 - u - v
             corners = carray(pointers.ints(block[BLOCK_FACES] + 12 * prim), 3)
             if block[BLOCK_VERTEX_ALPHA] != 0:
@@ -181,30 +177,6 @@ def _occluded_filter(address):
     _filter(address, True)
 
 
-@dataclass
-class TriangleFilter:
-    """The filter data of one triangle geometry, and the arrays it points at (kept alive here
-    for as long as Embree may call the filter). Make it with ``triangle_filter``."""
-
-    block: np.ndarray
-    keep: tuple
-    shadows: bool  # whether shadow rays need the filter too (cutouts do, one-sidedness not)
-
-    def install(self, lib: ctypes.CDLL, geometry: int) -> None:
-        """Set the filters and user pointer on an Embree triangle geometry (before commit)."""
-        for name in (
-            "rtcSetGeometryIntersectFilterFunction",
-            "rtcSetGeometryOccludedFilterFunction",
-            "rtcSetGeometryUserData",
-        ):
-            getattr(lib, name).argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-            getattr(lib, name).restype = None
-        lib.rtcSetGeometryUserData(geometry, self.block.ctypes.data)
-        lib.rtcSetGeometryIntersectFilterFunction(geometry, _intersect_filter.address)
-        if self.shadows:
-            lib.rtcSetGeometryOccludedFilterFunction(geometry, _occluded_filter.address)
-
-
 def triangle_filter(
     faces: np.ndarray,
     *,
@@ -217,7 +189,7 @@ def triangle_filter(
     wrap: tuple[int, int] = (REPEAT, REPEAT),
     nearest: bool = False,
     vertex_alpha: np.ndarray | None = None,
-) -> TriangleFilter | None:
+) -> GeometryFilter | None:
     """The filter of a triangle mesh, or None when it needs none (two-sided and opaque).
 
     ``faces`` (f, 3) int; ``alpha_mode`` "OPAQUE", "MASK" (cut out below ``cutoff``) or
@@ -253,4 +225,6 @@ def triangle_filter(
         keep.append(vertex_alpha)
         block[BLOCK_VERTEX_ALPHA] = vertex_alpha.ctypes.data
         block[BLOCK_VERTICES] = len(vertex_alpha)
-    return TriangleFilter(block, tuple(keep), shadows=cutout)
+    # one-sidedness leaves shadow rays unfiltered: a one-sided wall casts its shadow both ways
+    occluded = _occluded_filter.address if cutout else 0
+    return GeometryFilter(block, _intersect_filter.address, occluded, tuple(keep))
