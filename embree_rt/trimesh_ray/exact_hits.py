@@ -264,7 +264,7 @@ class HitQuery(NamedTuple):
 
     origins: np.ndarray
     directions: np.ndarray
-    tnear: object
+    tnear: float | np.ndarray | None
     max_hits: int | None
     with_locations: bool = False
     reorder: bool = False
