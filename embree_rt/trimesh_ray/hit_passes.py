@@ -480,8 +480,9 @@ def screened_nearest(
 # trimesh computes it), hits at the origin or along a face are dropped, and the rest are sorted by
 # (distance, triangle). A ray with a hit within ``band_scale * magnitude / altitude`` (barycentric)
 # of an edge, at |cos| <= ``graze``, or that overflowed its buffer (when a retrace with more room
-# follows) is *messy*: left to the caller's float64 path. In NumPy this pass was a dozen passes
-# and gathers over every hit, more than the traversal itself on small meshes.
+# follows) is *messy*: left to the caller's float64 path. Compiled because in NumPy this pass
+# takes a dozen passes and gathers over every hit, more than the traversal itself on small
+# meshes.
 #
 # In parallel over chunks of rays, with an output layout that does not depend on the thread
 # count: each chunk writes its hits into its own range of a scratch array (sized by the hits the
@@ -655,8 +656,9 @@ def settled_hits(
 # not met along its plane, sorted by (distance, triangle). Rays with no suspect hit (whose
 # buffers overflowed and were traced again) go through the same pass, with nothing to test.
 #
-# In NumPy these were a dozen passes with gathers, uniques and sorts over every candidate pair
-# (about 10 µs a ray, a tenth of an all-hits query on the 1.3M-triangle icosphere). Such rays
+# Compiled because in NumPy this takes a dozen passes with gathers, uniques and sorts over
+# every candidate pair (about 10 µs a ray, a tenth of an all-hits query on the 1.3M-triangle
+# icosphere). Such rays
 # are 1-2% of a batch, but each reads a few dozen scattered table rows (fetched ahead, see
 # ``pointers.prefetch``): in parallel over chunks of rays, each writing its own ranges, so the
 # output is the same on any number of threads.
@@ -924,8 +926,9 @@ def decided_hits(
 # ``intersects_first`` does, not the parity of a point (``contains_points`` recasts every ray
 # that passes within float32 reach of an edge instead of counting it).
 #
-# In NumPy these were a stable argsort by ray and its gathers, the point merging's passes, the
-# ranks, the cut and a counting sort by rank: about a tenth of an all-hits query on a small mesh.
+# Compiled because in NumPy this takes a stable argsort by ray and its gathers, the point
+# merging's passes, the ranks, the cut and a counting sort by rank: about a tenth of an
+# all-hits query on a small mesh.
 # Here: a counting sort by ray (stable, so each ray's hits keep their order), which also returns
 # rays traced in another order (``local_frame.ordered_local_rays``) to the given one — reading
 # the hits in traced order and *storing* each to its ray's next slot, where gathering them by ray

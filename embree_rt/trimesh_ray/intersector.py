@@ -85,12 +85,6 @@ def _as_rays(ray_origins, ray_directions) -> tuple[np.ndarray, np.ndarray, np.nd
         return origins, util.unitize(directions), directions
 
 
-def _plane_distance(scene, origins, directions, rays, tris):
-    """float64 distance along each ray to its triangle's plane, and |cos| of the angle between
-    ray and normal, trimesh's planes_lines formula (compiled: ``hit_passes.plane_distances``)."""
-    return plane_distances(scene.planes, origins, directions, rays, tris)
-
-
 class RayMeshIntersector:
     """Ray queries on a ``trimesh.Trimesh`` through embree_rt's BVH (see the module docstring).
 
@@ -145,9 +139,10 @@ class RayMeshIntersector:
             if not return_locations:
                 return tris, rays
             directions = util.unitize(given_directions[rays])
-            distance = _plane_distance(
-                self._scene, origins[rays], directions, np.arange(len(rays)), tris
-            )[0]
+            # float64, trimesh's planes_lines formula
+            distance, _ = plane_distances(
+                self._scene.planes, origins[rays], directions, np.arange(len(rays)), tris
+            )
             return tris, rays, origins[rays] + directions * distance[:, None]
         origins, directions, given_directions = _as_rays(ray_origins, ray_directions)
         query = HitQuery(

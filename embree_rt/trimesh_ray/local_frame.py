@@ -449,9 +449,15 @@ def box(bounds: np.ndarray) -> Box:
     return Box(lower, upper, box_cells(lower, upper))
 
 
+# -- the mesh in the local frame --------------------------------------------------------------
+# The mesh as ``RayMeshIntersector`` holds it in Embree: in the local frame, with the tables its
+# float64 rules read (planes, triangles, smallest altitudes, the faces around each vertex position)
+# and working space kept from query to query.
+
+
 class MeshTables(NamedTuple):
     """The mesh's per-triangle tables: ``planes`` (triangles, 6) float64, each triangle's first
-    vertex and unit normal in one C-contiguous row (``plane_distances``); ``triangles``
+    vertex and unit normal in one C-contiguous row (``hit_passes.plane_distances``); ``triangles``
     (triangles, 3, 3) float64; ``altitude`` (triangles,) float64 smallest local altitude (0:
     degenerate) and ``floor_altitude`` its minimum."""
 
@@ -470,11 +476,6 @@ class Fans(NamedTuple):
     starts: np.ndarray
     faces: np.ndarray
 
-
-# -- the mesh in the local frame --------------------------------------------------------------
-# The mesh as ``RayMeshIntersector`` holds it in Embree: in the local frame, with the tables its
-# float64 rules read (planes, triangles, smallest altitudes, the faces around each vertex position)
-# and working space kept from query to query.
 
 EPS32 = float(np.finfo(np.float32).eps)
 # Embree's float32 barycentrics and distances err by a few ulps of the largest coordinate
