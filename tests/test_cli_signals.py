@@ -128,8 +128,11 @@ def session_members(session: int) -> list[int]:
     return members
 
 
-INTERRUPTED = (signal.SIGINT, 130, "embree-rt: interrupted\n")
-TERMINATED = (signal.SIGTERM, 143, "embree-rt: terminated\n")
+# (the signal, how many times it is sent, the exit code, stderr)
+INTERRUPTED = (signal.SIGINT, 1, 130, "embree-rt: interrupted\n")
+TERMINATED = (signal.SIGTERM, 1, 143, "embree-rt: terminated\n")
+# an impatient user's Ctrl-C Ctrl-C: the second lands in the clean-up the first began
+INTERRUPTED_TWICE = (signal.SIGINT, 2, 130, "embree-rt: interrupted\n")
 HERE = ["random", "--count", "200000", "--width", "1920", "--height", "1080", "--spp", "16"]
 SMALL = [*HERE[:3], "--width", "64", "--height", "32", "--spp", "1"]
 FIELD = ["random", "--count", "2000", "--width", "320", "--height", "180", "--spp", "2"]
@@ -146,6 +149,7 @@ SERVE = ["serve", "--port", "0"]
 CASES = [
     ("rendering here", HERE, INTERRUPTED),
     ("rendering here", HERE, TERMINATED),
+    ("rendering here", HERE, INTERRUPTED_TWICE),
     ("writing here", SMALL, INTERRUPTED),
     ("writing here", SMALL, TERMINATED),
     ("starting", CLUSTER, INTERRUPTED),
@@ -153,6 +157,7 @@ CASES = [
     ("building", CLUSTER, INTERRUPTED),
     ("rendering", [*CLUSTER, *BATCHES], INTERRUPTED),
     ("rendering", [*CLUSTER, *BATCHES], TERMINATED),
+    ("rendering", [*CLUSTER, *BATCHES], INTERRUPTED_TWICE),
     ("writing", CLUSTER, TERMINATED),
     ("building bricks", BRICKS, INTERRUPTED),
     ("rendering bricks", [*BRICKS, *BATCHES], TERMINATED),
@@ -163,6 +168,7 @@ CASES = [
     ("writing on a scheduler", ON_SCHEDULER, TERMINATED),
     ("serving", SERVE, INTERRUPTED),
     ("serving", SERVE, TERMINATED),
+    ("serving", SERVE, INTERRUPTED_TWICE),
     ("rendering for a client", SERVE, INTERRUPTED),
     ("rendering for a client", SERVE, TERMINATED),
 ]
@@ -253,9 +259,12 @@ def client_rendering(announcement: str) -> Iterator[None]:
         yield
 
 
-@pytest.mark.parametrize(
-    ("phase", "command", "ending"), CASES, ids=[f"{c[0]}-{c[2][0].name}" for c in CASES]
-)
+def case_id(phase: str, command: list[str], ending: tuple) -> str:
+    signum, times = ending[:2]
+    return f"{phase}-{signum.name}" + ("-twice" if times == 2 else "")
+
+
+@pytest.mark.parametrize(("phase", "command", "ending"), CASES, ids=[case_id(*c) for c in CASES])
 def test_a_signal_in_any_phase_ends_the_command_in_one_line_and_leaves_the_old_image(
     request: pytest.FixtureRequest,
     rendered_here: Callable[[list[str]], np.ndarray],
@@ -264,7 +273,7 @@ def test_a_signal_in_any_phase_ends_the_command_in_one_line_and_leaves_the_old_i
     command: list[str],
     ending: tuple,
 ) -> None:
-    signum, code, line = ending
+    signum, times, code, line = ending
     output = tmp_path / "out.npy"
     output.write_bytes(b"the image of an earlier render")
     scheduler = None
@@ -290,7 +299,9 @@ def test_a_signal_in_any_phase_ends_the_command_in_one_line_and_leaves_the_old_i
             if phase == "rendering here":  # well into the render, its threads busy
                 time.sleep(1.0)
             sent = time.monotonic()
-            os.killpg(process.pid, signum)  # as a terminal's Ctrl-C: the whole group
+            for _ in range(times):
+                os.killpg(process.pid, signum)  # as a terminal's Ctrl-C: the whole group
+                time.sleep(0.3)
             _, stderr = process.communicate(timeout=TIMEOUT_S)
         finally:
             if process.poll() is None:
