@@ -650,7 +650,7 @@ def test_an_unreadable_mesh_path_is_one_line_naming_its_key(tmp_path: Path, case
     assert not (tmp_path / "out.png").exists()
 
 
-@pytest.mark.parametrize("case", ["directory", "FIFO", "symlink loop"])
+@pytest.mark.parametrize("case", ["directory", "FIFO", "symlink loop", "over-long name"])
 def test_a_scene_or_mesh_file_argument_that_is_no_file_is_one_line(
     tmp_path: Path, case: str
 ) -> None:
@@ -659,7 +659,9 @@ def test_a_scene_or_mesh_file_argument_that_is_no_file_is_one_line(
         name = make(tmp_path, "given" + suffix)
         code, stderr = _main(tmp_path, "render", name, "-o", "out.png")
         assert code == 2, stderr
-        assert stderr == f"embree-rt: error: {name}: (file): {problem}\n"
+        # the problem's words, then (an over-long name) its lengths, on the one line
+        assert stderr.startswith(f"embree-rt: error: {name}: (file): {problem}"), stderr
+        assert stderr.count("\n") == 1 and stderr.endswith("\n"), stderr
 
 
 def test_a_file_without_read_permission_is_said_so(
