@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import stat
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from functools import cache, partial
@@ -341,13 +342,16 @@ def check_output_path(path: str | os.PathLike, encoding: Encoding = DEFAULT_ENCO
     check_image_name(target, encoding)
     directory = target.parent
     try:
-        if not directory.is_dir():
-            raise ValueError(f"{target}: directory {directory} does not exist")
+        # os.stat, not is_dir: a loop of links or a file in the path is said as what it is
+        if not stat.S_ISDIR(os.stat(directory).st_mode):
+            raise ValueError(f"{target}: {directory} is not a directory")
         if not os.access(directory, os.W_OK | os.X_OK):
             raise ValueError(f"{target}: directory {directory} is not writable")
         if target.is_dir():
             raise ValueError(f"{target}: is a directory")
         longest = os.pathconf(directory, "PC_NAME_MAX")
+    except FileNotFoundError:
+        raise ValueError(f"{target}: directory {directory} does not exist") from None
     except OSError as error:  # a path too long for the system, a directory that cannot be read
         raise ValueError(f"{target}: {error.strerror or error}") from None
     name = len(os.fsencode(target.name))

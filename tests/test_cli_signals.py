@@ -1,8 +1,11 @@
-"""Ctrl-C and SIGTERM sent to a real render, in each of its phases: on this machine rendering
+"""Ctrl-C and SIGTERM sent to a real command, in each of its phases: on this machine rendering
 and writing the image; on a ``--cluster local:2`` starting the cluster, the workers building,
-rendering (as tasks, and as bricks), writing. Each must end the command promptly with exit code
-130 (SIGINT) or 143 (SIGTERM) and one line on stderr, close the cluster (no worker outlives the
-command), and leave the image that was there before as it was, with no temporary file.
+rendering, writing, as tasks and as bricks (``--partition``); on an external scheduler (``dask
+scheduler`` and a worker this test starts) rendering and writing; ``serve`` serving, and rendering
+for a client. Each must end the command promptly with exit code 130 (SIGINT) or 143 (SIGTERM)
+and one line on stderr, close the cluster it started (no worker outlives the command), and leave
+the image that was there before as it was, with no temporary file. An external scheduler is not
+the command's to close: it and its worker keep running, and render the next command's image.
 
 The signal is sent, as a terminal's Ctrl-C is, to the command's whole process group, once the
 command has reached the phase: a small hook (``PHASED``, test code, run in the command's own
@@ -12,13 +15,21 @@ too soon to be caught (a progress update, the image's write), waits there for th
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import signal
+import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
+import cloudpickle  # distributed's own dependency
+import distributed
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -58,10 +69,40 @@ elif phase == "building":  # batches sent, the workers building their BVH on the
         reached()
         return render_frames(self, *args, **kwargs)
     distributed.ClusterRenderer.render_frames = building
-elif phase in ("rendering", "rendering bricks"):  # the first batch back, the rest rendering
+elif phase == "building bricks":  # the bricks being made on their workers
+    from embree_rt.bricks import cluster
+    build = cluster.DaskBricks.build
+    def building(self):
+        reached()
+        return build(self)
+    cluster.DaskBricks.build = building
+elif phase == "serving":  # the server up, no client
+    from embree_rt.web import serve
+    startup = serve.AnnouncingServer.startup
+    async def started(self, *args, **kwargs):
+        await startup(self, *args, **kwargs)
+        reached()
+    serve.AnnouncingServer.startup = started
+elif phase == "rendering for a client":  # a tab's full render under way, its next batch due
+    from embree_rt.web import preview
+    full_render = preview.PreviewSession.full_render
+    def rendering(self, generation, progress):
+        def reported(done, total):
+            if done < total and not getattr(reported, "seen", False):
+                reported.seen = True
+                reached()
+                time.sleep(1.0)
+            progress(done, total)
+        return full_render(self, generation, reported)
+    preview.PreviewSession.full_render = rendering
+elif phase.startswith("rendering"):  # some batches back, the rest rendering
     @contextlib.contextmanager
     def progress_bar(total, quiet):
-        yield lambda state: wait_for_the_signal()
+        def show(state):
+            assert state.done < state.total, "the render ended before the signal could come"
+            if state.done:
+                wait_for_the_signal()
+        yield show
     distributed.progress_bar = progress_bar
 elif phase.startswith("writing"):  # the image half written
     def write_half(image, handle, encoding=None):
@@ -87,63 +128,214 @@ def session_members(session: int) -> list[int]:
     return members
 
 
-INTERRUPTED = (signal.SIGINT, 130, "embree-rt: interrupted\n")
-TERMINATED = (signal.SIGTERM, 143, "embree-rt: terminated\n")
+# (the signal, how many times it is sent, the exit code, stderr)
+INTERRUPTED = (signal.SIGINT, 1, 130, "embree-rt: interrupted\n")
+TERMINATED = (signal.SIGTERM, 1, 143, "embree-rt: terminated\n")
+# an impatient user's Ctrl-C Ctrl-C: the second lands in the clean-up the first began
+INTERRUPTED_TWICE = (signal.SIGINT, 2, 130, "embree-rt: interrupted\n")
 HERE = ["random", "--count", "200000", "--width", "1920", "--height", "1080", "--spp", "16"]
-CLUSTER = [
-    *("random", "--count", "2000", "--width", "320", "--height", "180", "--spp", "2"),
-    *("--cluster", "local:2"),
-]
+SMALL = [*HERE[:3], "--width", "64", "--height", "32", "--spp", "1"]
+FIELD = ["random", "--count", "2000", "--width", "320", "--height", "180", "--spp", "2"]
+BATCHES = ["--spp", "16"]  # a few batches of 2^18 samples: some back while the rest render
+CLUSTER = [*FIELD, "--cluster", "local:2"]
+BRICKS = [*CLUSTER, "--partition", "2"]
+SCHEDULER = "tcp://the external scheduler"  # replaced by the address of ``external_scheduler``
+ON_SCHEDULER = [*FIELD, "--scheduler", SCHEDULER]
+SERVE = ["serve", "--port", "0"]
 # (phase, command line without its output and --quiet, the signal and what it must end in):
-# every phase once, the two signals taking turns, a few cases all told (a cluster takes 10 s
-# and more to start on two busy cores); SIGINT and SIGTERM share the command's one path out
+# every phase, the two signals taking turns where one path out serves both, both where they
+# take different paths (Dask's start and teardown, uvicorn's handlers); a few seconds a case (a
+# cluster takes 5 s and more to start on two busy cores, and holds a signal until it has)
 CASES = [
     ("rendering here", HERE, INTERRUPTED),
     ("rendering here", HERE, TERMINATED),
-    ("writing here", [*HERE[:3], "--width", "64", "--height", "32", "--spp", "1"], INTERRUPTED),
-    ("writing here", [*HERE[:3], "--width", "64", "--height", "32", "--spp", "1"], TERMINATED),
+    ("rendering here", HERE, INTERRUPTED_TWICE),
+    ("writing here", SMALL, INTERRUPTED),
+    ("writing here", SMALL, TERMINATED),
+    ("starting", CLUSTER, INTERRUPTED),
     ("starting", CLUSTER, TERMINATED),
     ("building", CLUSTER, INTERRUPTED),
-    ("rendering bricks", [*CLUSTER, "--partition", "2"], TERMINATED),
-    ("writing", CLUSTER, INTERRUPTED),
+    ("rendering", [*CLUSTER, *BATCHES], INTERRUPTED),
+    ("rendering", [*CLUSTER, *BATCHES], TERMINATED),
+    ("rendering", [*CLUSTER, *BATCHES], INTERRUPTED_TWICE),
+    ("writing", CLUSTER, TERMINATED),
+    ("building bricks", BRICKS, INTERRUPTED),
+    ("rendering bricks", [*BRICKS, *BATCHES], TERMINATED),
+    ("writing bricks", BRICKS, INTERRUPTED),
+    ("rendering on a scheduler", [*ON_SCHEDULER, *BATCHES], INTERRUPTED),
+    ("rendering on a scheduler", [*ON_SCHEDULER, *BATCHES], TERMINATED),
+    ("writing on a scheduler", ON_SCHEDULER, INTERRUPTED),
+    ("writing on a scheduler", ON_SCHEDULER, TERMINATED),
+    ("serving", SERVE, INTERRUPTED),
+    ("serving", SERVE, TERMINATED),
+    ("serving", SERVE, INTERRUPTED_TWICE),
+    ("rendering for a client", SERVE, INTERRUPTED),
+    ("rendering for a client", SERVE, TERMINATED),
 ]
 
 
-@pytest.mark.parametrize(
-    ("phase", "command", "ending"), CASES, ids=[f"{c[0]}-{c[2][0].name}" for c in CASES]
-)
-def test_a_signal_in_any_phase_ends_the_render_in_one_line_and_leaves_the_old_image(
-    tmp_path: Path, phase: str, command: list[str], ending: tuple
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def external_scheduler() -> Iterator[tuple[str, list[subprocess.Popen]]]:
+    """``dask scheduler`` and one ``dask worker`` (importing this checkout), each in a session
+    of its own, as a cluster someone else runs: a signal to the command's group never reaches
+    them. Yields the scheduler's address and the two processes."""
+    address = f"tcp://127.0.0.1:{free_port()}"
+    dask = Path(sys.executable).parent / "dask"
+    environment = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+        "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
+    }
+    commands = [
+        [dask, "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1]],
+        [dask, "worker", address, "--nthreads", "1", "--memory-limit", "0", "--host", "127.0.0.1"],
+    ]
+    started = [
+        subprocess.Popen(
+            [*command, "--no-dashboard"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+            env=environment,
+        )
+        for command in commands
+    ]
+    try:
+        with distributed.Client(address, timeout=TIMEOUT_S) as client:
+            client.wait_for_workers(1, timeout=TIMEOUT_S)
+        yield address, started
+    finally:
+        for process in reversed(started):
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGTERM)
+                try:
+                    process.wait(timeout=15)
+                except subprocess.TimeoutExpired:
+                    os.killpg(process.pid, signal.SIGKILL)
+                    process.wait()
+
+
+@pytest.fixture(scope="module")
+def rendered_here(tmp_path_factory: pytest.TempPathFactory) -> Callable[[list[str]], np.ndarray]:
+    """The image a command renders on this machine (without its ``--scheduler``), each
+    command's once."""
+    images: dict[tuple[str, ...], np.ndarray] = {}
+
+    def render(command: list[str]) -> np.ndarray:
+        at = command.index("--scheduler")
+        here = (*command[:at], *command[at + 2 :])
+        if here not in images:
+            output = tmp_path_factory.mktemp("here") / "here.npy"
+            result = subprocess.run(
+                [sys.executable, "-m", "embree_rt", *here, "-o", str(output), "--quiet"],
+                capture_output=True,
+                text=True,
+                timeout=TIMEOUT_S,
+                cwd=ROOT,
+            )
+            assert result.returncode == 0, result.stderr
+            images[here] = np.load(output)
+        return images[here]
+
+    return render
+
+
+@contextmanager
+def client_rendering(announcement: str) -> Iterator[None]:
+    """A preview tab of the server that printed ``announcement``: connected, its full render
+    asked for, the connection held open while inside."""
+    from websockets.sync.client import connect
+
+    url = re.search(r"at http://([^/ ]+)/ ", announcement).group(1)
+    with connect(f"ws://{url}/ws/preview", open_timeout=TIMEOUT_S) as tab:
+        assert json.loads(tab.recv(timeout=TIMEOUT_S))["type"] == "scene"
+        tab.send(json.dumps({"type": "render"}))
+        yield
+
+
+def case_id(phase: str, command: list[str], ending: tuple) -> str:
+    signum, times = ending[:2]
+    return f"{phase}-{signum.name}" + ("-twice" if times == 2 else "")
+
+
+@pytest.mark.parametrize(("phase", "command", "ending"), CASES, ids=[case_id(*c) for c in CASES])
+def test_a_signal_in_any_phase_ends_the_command_in_one_line_and_leaves_the_old_image(
+    request: pytest.FixtureRequest,
+    rendered_here: Callable[[list[str]], np.ndarray],
+    tmp_path: Path,
+    phase: str,
+    command: list[str],
+    ending: tuple,
 ) -> None:
-    signum, code, line = ending
+    signum, times, code, line = ending
     output = tmp_path / "out.npy"
     output.write_bytes(b"the image of an earlier render")
+    scheduler = None
+    if SCHEDULER in command:
+        scheduler, dask_processes = request.getfixturevalue("external_scheduler")
+        command = [scheduler if word == SCHEDULER else word for word in command]
+    written = [] if command[0] == "serve" else ["-o", str(output), "--quiet"]
     process = subprocess.Popen(
-        [sys.executable, "-c", PHASED, phase, *command, "-o", str(output), "--quiet"],
+        [sys.executable, "-c", PHASED, phase, *command, *written],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         cwd=ROOT,
         start_new_session=True,
     )
-    try:
-        assert process.stdout.readline() == "PHASE\n", process.communicate(timeout=TIMEOUT_S)
-        if phase == "rendering here":  # well into the render, its threads busy
-            time.sleep(1.0)
-        sent = time.monotonic()
-        os.killpg(process.pid, signum)  # as a terminal's Ctrl-C: the whole group
-        _, stderr = process.communicate(timeout=TIMEOUT_S)
-    finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
+    with ExitStack() as stack:
+        try:
+            while (said := process.stdout.readline()) != "PHASE\n":
+                served = said.startswith("embree-rt: serving ")
+                assert served, process.communicate(timeout=TIMEOUT_S)
+                if phase == "rendering for a client":
+                    stack.enter_context(client_rendering(said))
+            if phase == "rendering here":  # well into the render, its threads busy
+                time.sleep(1.0)
+            sent = time.monotonic()
+            for _ in range(times):
+                os.killpg(process.pid, signum)  # as a terminal's Ctrl-C: the whole group
+                time.sleep(0.3)
+            _, stderr = process.communicate(timeout=TIMEOUT_S)
+        finally:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
     assert process.returncode == code, stderr
     assert stderr == line
     assert time.monotonic() - sent < 30  # promptly, not after the whole render
     assert [p.name for p in tmp_path.iterdir()] == ["out.npy"]  # no temporary file
     assert output.read_bytes() == b"the image of an earlier render"
-    # the cluster was closed: no worker outlives the command
+    # the cluster the command started was closed: no worker outlives the command
     deadline = time.monotonic() + 15
     while session_members(process.pid) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert session_members(process.pid) == []
+    if scheduler is not None:  # not the command's to close, and left as it was
+        assert all(p.poll() is None for p in dask_processes)
+        again = subprocess.run(
+            [sys.executable, "-m", "embree_rt", *command, *written],
+            capture_output=True,
+            text=True,
+            timeout=TIMEOUT_S,
+            cwd=ROOT,
+        )
+        assert (again.returncode, again.stderr) == (0, "")
+        assert np.array_equal(np.load(output), rendered_here(command))
+        # the worker cannot import this test module: the function goes by value
+        cloudpickle.register_pickle_by_value(sys.modules[__name__])
+        with distributed.Client(scheduler, timeout=TIMEOUT_S) as client:
+            # nothing of the two renders left on the worker: no task, no scene's renderer held
+            assert client.run(held_on_worker) == {w: (0, []) for w in client.nthreads()}
+
+
+def held_on_worker(dask_worker: distributed.Worker) -> tuple[int, list[str]]:
+    """The tasks a worker holds, and the scene renderers (plugins) it keeps."""
+    scenes = [name for name in dask_worker.plugins if name.startswith("embree-rt-scene-")]
+    return len(dask_worker.state.tasks), scenes

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -649,7 +650,7 @@ def test_an_unreadable_mesh_path_is_one_line_naming_its_key(tmp_path: Path, case
     assert not (tmp_path / "out.png").exists()
 
 
-@pytest.mark.parametrize("case", ["directory", "FIFO", "symlink loop"])
+@pytest.mark.parametrize("case", ["directory", "FIFO", "symlink loop", "over-long name"])
 def test_a_scene_or_mesh_file_argument_that_is_no_file_is_one_line(
     tmp_path: Path, case: str
 ) -> None:
@@ -658,7 +659,9 @@ def test_a_scene_or_mesh_file_argument_that_is_no_file_is_one_line(
         name = make(tmp_path, "given" + suffix)
         code, stderr = _main(tmp_path, "render", name, "-o", "out.png")
         assert code == 2, stderr
-        assert stderr == f"embree-rt: error: {name}: (file): {problem}\n"
+        # the problem's words, then (an over-long name) its lengths, on the one line
+        assert stderr.startswith(f"embree-rt: error: {name}: (file): {problem}"), stderr
+        assert stderr.count("\n") == 1 and stderr.endswith("\n"), stderr
 
 
 def test_a_file_without_read_permission_is_said_so(
@@ -689,6 +692,82 @@ def test_an_output_that_is_no_file_is_refused_and_left_alone(tmp_path: Path, cas
     assert stderr == f"embree-rt: error: {name}: {problem}\n"
     assert not (tmp_path / name).is_file()  # the FIFO or the link is still there, not replaced
     assert (tmp_path / name).is_symlink() or (tmp_path / name).is_fifo()
+
+
+# case: (what makes the output path in a folder and returns it, the problem)
+OUTPUT_PATHS = {
+    "a directory": (lambda folder: _make_directory(folder, "out.png"), "out.png: is a directory"),
+    "over-long name": (lambda folder: "o" * 300 + ".png", "name too long"),
+    "over-long folder": (lambda folder: "o" * 300 + "/out.png", "name too long"),
+    "a FIFO as its folder": (
+        lambda folder: _make_fifo(folder, "pipe") + "/out.png",
+        "out.png: pipe is not a directory",
+    ),
+    "a loop in the path": (
+        lambda folder: _make_symlink_loop(folder, "loop") + "/out.png",
+        "out.png: Too many levels of symbolic links",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(OUTPUT_PATHS))
+def test_an_output_path_the_os_refuses_is_one_line_before_any_work(
+    tmp_path: Path, case: str
+) -> None:
+    make, problem = OUTPUT_PATHS[case]
+    name = make(tmp_path)
+    before = sorted(tmp_path.iterdir())
+    scene = ROOT / "scenes" / "three_spheres.toml"
+    code, stderr = _main(tmp_path, "render", str(scene), "-o", name, "--width", "8")
+    assert code == 2, stderr
+    assert stderr.startswith(f"embree-rt: error: {name}: ") and stderr.count("\n") == 1, stderr
+    assert problem.lower() in stderr.lower(), stderr
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def _without_permission_overrides() -> list[str]:
+    """What runs a command under the file modes: as root, whom no mode bit stops, the command
+    runs without the capabilities that let root past them (util-linux's setpriv drops them from
+    the bounding set, so the process root's ``exec`` makes never has them); otherwise as is."""
+    if os.geteuid() != 0:
+        return []
+    return [shutil.which("setpriv"), "--bounding-set=-dac_override,-dac_read_search"]
+
+
+def test_paths_without_permission_are_one_line_naming_them(tmp_path: Path) -> None:
+    """A scene, a mesh it names and an output's folder the modes forbid, each refused in one
+    line before any work. Real modes (not a stand-in for the check): root runs the command
+    without its capabilities to pass them."""
+    scene = _mesh_scene(tmp_path, "locked.obj")
+    locked = tmp_path / "locked.obj"
+    locked.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    shut = tmp_path / "shut"
+    shut.mkdir()
+    unreadable_scene = tmp_path / "unreadable.toml"
+    unreadable_scene.write_text("[[lights]]\nposition = [0, 5, 0]\n")
+    cases = [
+        (scene, "out.png", f"scene.toml: meshes[6].file: {locked}: no permission to read it"),
+        (unreadable_scene, "out.png", "unreadable.toml: (file): no permission to read it"),
+        (scene, "shut/out.png", "shut/out.png: directory shut is not writable"),
+    ]
+    for path, mode in ((locked, 0o000), (unreadable_scene, 0o000), (shut, 0o500)):
+        path.chmod(mode)
+    try:
+        command = [*_without_permission_overrides(), sys.executable, "-m", "embree_rt", "render"]
+        for given, output, problem in cases:
+            result = subprocess.run(
+                [*command, given.name, "-o", output, "--width", "8", "--height", "8"],
+                capture_output=True,
+                text=True,
+                timeout=300,
+                cwd=tmp_path,
+            )
+            assert result.returncode == 2, result.stderr
+            assert result.stderr == f"embree-rt: error: {problem}\n"
+            assert not (tmp_path / output).exists() and list(shut.iterdir()) == []
+    finally:
+        for path in (locked, unreadable_scene, shut):
+            path.chmod(0o700)
 
 
 def test_a_ply_whose_vertices_overflow_its_float_type_is_one_line(tmp_path: Path) -> None:

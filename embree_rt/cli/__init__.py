@@ -23,7 +23,7 @@ from embree_rt.cli.errors import (
     EXIT_INTERRUPTED,
     EXIT_TERMINATED,
     Terminated,
-    sigterm_as_interrupt,
+    interrupting_signals,
 )
 from embree_rt.cli.parser import SPHERE_CHOICES, build_parser
 from embree_rt.errors import InputError
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exit_:
         return int(exit_.code or 0)
     try:
-        with sigterm_as_interrupt(), one_line_warnings():
+        with interrupting_signals(), one_line_warnings():
             run_command(args)
         sys.stdout.flush()  # here, where a closed pipe is caught, not at the interpreter's exit
     except Terminated:

@@ -66,8 +66,11 @@ def run(job: Job, timeline: Timeline) -> None:
 @contextmanager
 def connected(distributed, where: OnDask) -> Iterator[object]:
     """A client on the job's cluster, closed afterwards. Ctrl-C and SIGTERM while the cluster
-    starts are held until it has started and then raised inside the ``with``, which closes
-    it: a cluster interrupted half-way is left to Dask's exit hook, which fails on it."""
+    starts or closes are held until it has started or closed (and then raised: once inside the
+    ``with``, which closes it; after the close, unless a signal is what is closing it): a
+    cluster interrupted half-way is left to Dask's exit hook, which fails on it, and a second
+    Ctrl-C cutting its close was seen to leave new worker processes starting, which the
+    signal ended mid-import, each with a traceback."""
     connection = distributed.connect(where.cluster, where.scheduler, timeout_s=where.timeout_s)
     with signals_held() as held:
         client = connection.__enter__()
@@ -77,15 +80,20 @@ def connected(distributed, where: OnDask) -> Iterator[object]:
     except BaseException as error:
         if isinstance(error, KeyboardInterrupt):
             silence_teardown()
-        try:
-            connection.__exit__(type(error), error, error.__traceback__)
-        except Exception:
-            # A cluster whose workers the signal ended too (SIGTERM to the process group)
-            # fails to close cleanly; what ended the command is the signal, not that.
-            raise error from None
+        with signals_held() as held:
+            try:
+                connection.__exit__(type(error), error, error.__traceback__)
+            except Exception:
+                # A cluster whose workers the signal ended too (SIGTERM to the process group)
+                # fails to close cleanly; what ended the command is the signal, not that.
+                raise error from None
+        if not isinstance(error, KeyboardInterrupt):
+            held.raise_held()
         raise
     else:
-        connection.__exit__(None, None, None)
+        with signals_held() as held:
+            connection.__exit__(None, None, None)
+        held.raise_held()
 
 
 def silence_teardown() -> None:
@@ -106,7 +114,7 @@ def released(renderer) -> Iterator[None]:
     except BaseException as error:
         if isinstance(error, KeyboardInterrupt):
             silence_teardown()
-        with suppress(Exception):
+        with suppress(Exception), signals_held():  # a second Ctrl-C: the first is ending it
             renderer.release()
         raise
     renderer.release()

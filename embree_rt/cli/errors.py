@@ -30,23 +30,32 @@ class Terminated(KeyboardInterrupt):
 
 
 @contextmanager
-def sigterm_as_interrupt() -> Iterator[None]:
-    """While inside, SIGTERM raises ``Terminated`` in the main thread (once: a second SIGTERM
-    during the clean-up is ignored rather than interrupting it). Off the main thread, where
-    Python cannot take signals, nothing changes."""
+def interrupting_signals() -> Iterator[None]:
+    """While inside, SIGINT raises KeyboardInterrupt and SIGTERM ``Terminated`` in the main
+    thread, the first of them only: from then on both are ignored, inside and after, since the
+    command is ending. A second Ctrl-C (an impatient user's) would otherwise cut the clean-up
+    the first began, or land after the command's one line, as the interpreter exits, and end
+    the process by the signal itself instead of the command's exit code. Off the main thread,
+    where Python cannot take signals, nothing changes."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    received = False
 
-    def terminate(signum, frame) -> None:
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        raise Terminated
+    def end(signum, frame) -> None:
+        nonlocal received
+        received = True
+        for number in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(number, signal.SIG_IGN)
+        raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGTERM, terminate)
+    previous = {number: signal.signal(number, end) for number in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if not received:
+            for number, handler in previous.items():
+                signal.signal(number, handler)
 
 
 class HeldSignals:
