@@ -2,8 +2,8 @@
 
 Which library reads what (chosen by coverage and speed, see ``docs/particles.md``):
 MDAnalysis reads the molecular formats with topologies (PDB, PQR, GRO, Mol2, LAMMPS data, and
-DCD/XTC/TRR trajectories over a topology such as PSF), naming elements, types, PQR's radii and
-the box; ASE reads the materials formats (XYZ and extended XYZ, VASP POSCAR/CONTCAR, CIF) with
+DCD/XTC/TRR trajectories over a topology such as PSF, and PDBx/mmCIF through gemmi), naming
+elements, types, PQR's radii and the box; ASE reads the materials formats (XYZ and extended XYZ, VASP POSCAR/CONTCAR, CIF) with
 their per-atom arrays; ``gsd`` reads HOOMD's GSD; LAMMPS text dumps are read by NumPy
 (``lammps_dump``). A ``.gz``, ``.bz2`` or ``.xz`` copy is decompressed to a temporary file and
 read as the file it holds.
@@ -14,6 +14,7 @@ from __future__ import annotations
 import bz2
 import gzip
 import lzma
+import re
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -45,11 +46,16 @@ MDA_FORMATS = {
     ".lmp": "DATA",
     ".psf": "PSF",
 }
+# A ``.cif`` holding an ``_atom_site.Cartn_x`` column is PDBx/mmCIF (macromolecules, read by
+# MDAnalysis through gemmi); any other ``.cif`` is a crystallographic CIF (read by ASE).
+MMCIF_SUFFIXES = (".mmcif", ".mcif")
+MMCIF_MARK = re.compile(rb"^_atom_site\.cartn_x\b", re.IGNORECASE | re.MULTILINE)
 TRAJECTORY_SUFFIXES = (".dcd", ".xtc", ".trr")
 DUMP_SUFFIXES = (".lammpstrj", ".dump")
 GSD_SUFFIXES = (".gsd",)
 PARTICLE_SUFFIXES = (
     *ASE_FORMATS,
+    *MMCIF_SUFFIXES,
     *MDA_FORMATS,
     *TRAJECTORY_SUFFIXES,
     *DUMP_SUFFIXES,
@@ -122,6 +128,9 @@ def _read(path: Path, plain: Path, frame: int, topology: Path | None) -> Particl
         return _read_dump(path, plain, frame)
     if suffix in GSD_SUFFIXES:
         return _read_gsd(path, plain, frame)
+    if suffix in MMCIF_SUFFIXES or (suffix == ".cif" and is_mmcif(plain)):
+        _require("gemmi")  # MDAnalysis's mmCIF reader stands on it
+        return _read_mdanalysis(path, plain, frame, None, file_format="MMCIF")
     if suffix in ASE_FORMATS or name in ASE_NAMES:
         return _read_ase(path, plain, ASE_FORMATS.get(suffix) or ASE_NAMES[name], frame)
     if suffix in TRAJECTORY_SUFFIXES and topology is None:
@@ -129,6 +138,12 @@ def _read(path: Path, plain: Path, frame: int, topology: Path | None) -> Particl
             path, "(file)", f"a {suffix} trajectory holds no atoms' names: give --topology FILE"
         )
     return _read_mdanalysis(path, plain, frame, topology)
+
+
+def is_mmcif(plain: Path) -> bool:
+    """Whether the CIF ``plain`` is PDBx/mmCIF: its atoms in an ``_atom_site.Cartn_x``
+    column (a crystallographic CIF names ``_atom_site_fract_x``)."""
+    return MMCIF_MARK.search(plain.read_bytes()) is not None
 
 
 def _require(module: str):
@@ -139,7 +154,7 @@ def _require(module: str):
     except ImportError:
         raise InputError(
             f"reading particle files needs {module}: "
-            + install_hint("particles", "ase MDAnalysis gsd matplotlib")
+            + install_hint("particles", "ase MDAnalysis gsd matplotlib gemmi")
         ) from None
 
 
