@@ -3,16 +3,17 @@
 Which library reads what (chosen by coverage and speed, see ``docs/particles.md``):
 MDAnalysis reads the molecular formats with topologies (PDB, PQR, GRO, Mol2, LAMMPS data, and
 DCD/XTC/TRR trajectories over a topology such as PSF, and PDBx/mmCIF through gemmi), naming
-elements, types, PQR's radii and the box; ASE reads the materials formats (XYZ and extended XYZ, VASP POSCAR/CONTCAR, CIF) with
-their per-atom arrays; ``gsd`` reads HOOMD's GSD; LAMMPS text dumps are read by NumPy
-(``lammps_dump``). A ``.gz``, ``.bz2`` or ``.xz`` copy is decompressed to a temporary file and
-read as the file it holds.
+elements, types, PQR's radii and the box; ASE reads the materials formats (XYZ and extended
+XYZ, VASP POSCAR/CONTCAR, CIF) with their per-atom arrays; ``gsd`` reads HOOMD's GSD; LAMMPS
+text dumps are read by NumPy (``lammps_dump``). A ``.gz``, ``.bz2`` or ``.xz`` copy is
+decompressed to a temporary file and read as the file it holds.
 """
 
 from __future__ import annotations
 
 import bz2
 import gzip
+import itertools
 import lzma
 import re
 import shutil
@@ -277,19 +278,30 @@ def _read_mdanalysis(
     mda = _require("MDAnalysis")
     import warnings
 
+    file_format = file_format or MDA_FORMATS.get(plain.suffix.lower())
+
+    claimed = None if topology is not None else header_count(plain, file_format)
+    if claimed is not None:
+        check_count(str(path), "(header)", claimed)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # its guesses of missing attributes, said per file
             if topology is not None:
                 universe = mda.Universe(str(topology), str(plain))
             else:
-                file_format = file_format or MDA_FORMATS.get(plain.suffix.lower())
                 options = {}
                 if file_format == "DATA":
                     options["atom_style"] = data_atom_style(path, plain)
                 universe = mda.Universe(str(plain), format=file_format, **options)
     except Exception as error:  # MDAnalysis's parsers raise ValueError, OSError, EOFError...
         raise ParticleFileError(path, "(file)", _one_line(error)) from None
+    if claimed is not None and claimed != len(universe.atoms):
+        raise ParticleFileError(
+            path,
+            "(header)",
+            f"claims {claimed:,} particles but the file holds {len(universe.atoms):,} "
+            "(a truncated file?)",
+        )
     count = len(universe.trajectory)
     _frame_problem(path, frame, count)
     try:
@@ -323,6 +335,24 @@ def _read_mdanalysis(
         result.box = np.asarray(triclinic_vectors(universe.dimensions), np.float64)
     result.source = universe
     return result
+
+
+def header_count(plain: Path, file_format: str | None) -> int | None:
+    """The particle count the header of a GRO (its second line), LAMMPS data (``N atoms``)
+    or Mol2 (the line after ``@<TRIPOS>MOLECULE``'s name) file claims; None for another
+    format or a header that states none. Read before MDAnalysis, which allocates by it."""
+    if file_format not in ("GRO", "DATA", "MOL2"):
+        return None
+    with open(plain, "rb") as handle:
+        head = [line.partition(b"#")[0].split() for line in itertools.islice(handle, 200)]
+    if file_format == "GRO":
+        words = head[1] if len(head) > 1 else []
+    elif file_format == "DATA":
+        words = next((w for w in head if len(w) == 2 and w[1] == b"atoms"), [])
+    else:
+        at = next((i for i, w in enumerate(head) if w[:1] == [b"@<TRIPOS>MOLECULE"]), None)
+        words = head[at + 2] if at is not None and at + 2 < len(head) else []
+    return int(words[0]) if words and words[0].isdigit() else None
 
 
 # MDAnalysis's per-atom attributes kept as properties, by the names they take.
