@@ -213,6 +213,52 @@ def test_dump_rgb_columns_in_0_255_and_out_of_range(tmp_path):
         particle_look(frame, ParticleLook(color_columns=("c_rgb[1]", "c_rgb[2]", "blue")))
 
 
+def test_color_columns_in_a_scene_file_and_on_the_command_line(tmp_path):
+    from embree_rt.scene.loader import load_scene
+
+    atoms = triclinic_atoms()
+    rgb = np.random.default_rng(9).uniform(0, 1, (len(atoms), 3))
+    atoms.set_array("color", rgb)
+    ase_io.write(tmp_path / "c.xyz", atoms, format="extxyz")
+    expected = np.rint(ase_io.read(tmp_path / "c.xyz").get_array("color") * 255).astype(np.uint8)
+    for value in ('"color"', '["color_x", "color_y", "color_z"]'):
+        (tmp_path / "s.toml").write_text(
+            f'[[particles]]\nfile = "c.xyz"\ncolor_columns = {value}\n'
+        )
+        np.testing.assert_array_equal(load_scene(tmp_path / "s.toml").sphere_colors, expected)
+    (tmp_path / "s.toml").write_text('[[particles]]\nfile = "c.xyz"\ncolor_columns = ["a", "b"]\n')
+    with pytest.raises(ParticleFileError.__mro__[1], match="color_columns: expected 3 column"):
+        load_scene(tmp_path / "s.toml")
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "embree_rt",
+            "render",
+            "c.xyz",
+            "-o",
+            "o.png",
+            "--color-columns",
+            "colour",
+            "--width",
+            "16",
+            "--height",
+            "16",
+        ],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        "embree-rt: error: c.xyz: --color-columns: no column 'colour_x' in the file (it has: "
+        "color_x, color_y, color_z)"
+    ]
+    assert not (tmp_path / "o.png").exists()
+
+
 # -- a material per type -----------------------------------------------------------------------
 
 

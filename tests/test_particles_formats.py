@@ -240,4 +240,9 @@ def test_trajectory_over_a_psf_topology(tmp_path, suffix):
         assert frame.frame_count == 3 and len(frame) == 3
         np.testing.assert_array_equal(frame.positions, expected.atoms.positions.astype(np.float64))
     assert list(frame.elements) == ["O", "H", "H"]  # guessed from the PSF's names
+    packed = trajectory.with_name(trajectory.name + ".gz")
+    packed.write_bytes(gzip.compress(trajectory.read_bytes()))
+    np.testing.assert_array_equal(
+        read_particles(packed, frame=2, topology=psf).positions, frame.positions
+    )
     assert list(frame.types) == ["OT", "HT", "HT"]
