@@ -209,6 +209,8 @@ def test_dump_rgb_columns_in_0_255_and_out_of_range(tmp_path):
     path.write_text(header + "0 4\n" * 3 + columns + rows.replace("255 0 10", "256 0 10"))
     with pytest.raises(ParticleFileError, match=r"particle 0: colour \[256.0, 0.0, 10.0\]"):
         particle_look(read_particles(path), ParticleLook(color_columns=names))
+    with pytest.raises(ParticleFileError, match="--color-columns: give it or --color"):
+        particle_look(frame, ParticleLook(color_columns=names, color_by="type"))
     with pytest.raises(ParticleFileError, match="no column 'blue'"):
         particle_look(frame, ParticleLook(color_columns=("c_rgb[1]", "c_rgb[2]", "blue")))
 

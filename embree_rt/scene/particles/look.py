@@ -91,6 +91,10 @@ def particle_look(frame: ParticleFrame, look: ParticleLook) -> tuple[np.ndarray,
     radii = np.asarray(radii, np.float64) * look.radius_scale
     by = look.color_by or kind
     if look.color_columns:
+        if look.color is not None or look.color_by is not None:
+            raise ParticleFileError(
+                frame.path, "--color-columns", "give it or --color / --color-by, not both"
+            )
         colors = rgb_colors(frame, look.color_columns)
     elif look.color is not None:
         colors = np.broadcast_to(to_srgb8(np.asarray(look.color)[None]), (len(frame), 3)).copy()
