@@ -86,7 +86,8 @@ def make(kind: str, folder: Path) -> tuple[str, list[str], str]:
         return "t.xyz", [], "t.xyz"
     if kind == "count_mismatch":
         water_trajectory(folder)
-        return "w.dcd", ["--topology", "big.pdb"], "number of atoms"
+        problem = "frames hold 3 atoms but the topology big.pdb has 9"
+        return "w.dcd", ["--topology", "big.pdb"], problem
     if kind == "past_end_dcd":
         water_trajectory(folder)
         return "w.dcd", ["--topology", "w.pdb", "--frame", "2"], "frame 2: past the end"
@@ -147,7 +148,7 @@ def test_bad_particle_file_one_line_exit_2_output_kept(tmp_path, kind):
     assert sorted(p.name for p in tmp_path.iterdir() if p.suffix == ".png") == ["o.png"]
 
 
-def test_count_mismatch_names_both_counts_or_the_trajectory(tmp_path):
+def test_count_mismatch_names_the_trajectory_and_both_counts(tmp_path):
     """The trajectory's atom count against its topology's: the line names the trajectory."""
     name, extra, _ = make("count_mismatch", tmp_path)
     done = run("info", name, *extra, cwd=tmp_path)

@@ -287,12 +287,16 @@ def _read_mdanalysis(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # its guesses of missing attributes, said per file
             if topology is not None:
-                universe = mda.Universe(str(topology), str(plain))
+                universe = mda.Universe(str(topology))
+                _check_trajectory_count(path, plain, topology, len(universe.atoms))
+                universe.load_new(str(plain))
             else:
                 options = {}
                 if file_format == "DATA":
                     options["atom_style"] = data_atom_style(path, plain)
                 universe = mda.Universe(str(plain), format=file_format, **options)
+    except ParticleFileError:
+        raise
     except Exception as error:  # MDAnalysis's parsers raise ValueError, OSError, EOFError...
         raise ParticleFileError(path, "(file)", _one_line(error)) from None
     if claimed is not None and claimed != len(universe.atoms):
@@ -335,6 +339,21 @@ def _read_mdanalysis(
         result.box = np.asarray(triclinic_vectors(universe.dimensions), np.float64)
     result.source = universe
     return result
+
+
+def _check_trajectory_count(path: Path, plain: Path, topology: Path, atoms: int) -> None:
+    """Refuse a trajectory whose frames hold another number of atoms than its topology's
+    ``atoms`` (read from the trajectory's header by MDAnalysis's own reader)."""
+    from MDAnalysis.coordinates.core import reader
+
+    with reader(str(plain)) as frames:
+        count = frames.n_atoms
+    if count != atoms:
+        raise ParticleFileError(
+            path,
+            "(file)",
+            f"its frames hold {count:,} atoms but the topology {topology.name} has {atoms:,}",
+        )
 
 
 def header_count(plain: Path, file_format: str | None) -> int | None:
