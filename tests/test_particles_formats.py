@@ -246,3 +246,32 @@ def test_trajectory_over_a_psf_topology(tmp_path, suffix):
         read_particles(packed, frame=2, topology=psf).positions, frame.positions
     )
     assert list(frame.types) == ["OT", "HT", "HT"]
+
+
+def test_lammps_data_styles_full_and_charge(tmp_path):
+    """MDAnalysis's writer with charges writes the 7 columns of style full (no comment: the
+    style detected from the count); style charge is named by hand (its 6 columns are also
+    molecular's)."""
+    water = MDAnalysis.Universe.empty(3, trajectory=True)
+    water.add_TopologyAttr("types", ["1", "2", "2"])
+    water.add_TopologyAttr("masses", [15.9994, 1.008, 1.008])
+    water.add_TopologyAttr("charges", [-0.8, 0.4, 0.4])
+    for name in ("bonds", "angles", "dihedrals", "impropers"):
+        water.add_TopologyAttr(name, [])
+    water.atoms.positions = WATER + 2.0
+    water.dimensions = [10, 10, 10, 90, 90, 90]
+    path = tmp_path / "full.data"
+    water.atoms.write(str(path))
+    expected = universe(path, format="DATA", atom_style="id resid type charge x y z").atoms
+    frame = read_particles(path)
+    np.testing.assert_array_equal(frame.positions, expected.positions.astype(np.float64))
+    np.testing.assert_array_equal(frame.properties["charge"], expected.charges)
+    charge = tmp_path / "charge.data"
+    charge.write_text(
+        "LAMMPS data\n\n2 atoms\n1 atom types\n\n0 10 xlo xhi\n0 10 ylo yhi\n0 10 zlo zhi\n\n"
+        "Atoms # charge\n\n1 1 -0.5 1.0 2.0 3.0\n2 1 0.5 4.0 5.0 6.0\n"
+    )
+    frame = read_particles(charge)
+    expected = universe(charge, format="DATA", atom_style="id type charge x y z").atoms
+    np.testing.assert_array_equal(frame.positions, expected.positions.astype(np.float64))
+    np.testing.assert_array_equal(frame.properties["charge"], [-0.5, 0.5])
