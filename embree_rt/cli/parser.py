@@ -384,7 +384,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_particle_flags(info)
     info.add_argument("--json", action="store_true", help="a particle file's summary as JSON")
     serve = commands.add_parser("serve", help="the 2D ray demo and a live preview in a browser")
-    serve.add_argument("scene", nargs="?", help="scene file (default: the showcase)")
+    serve.add_argument(
+        "scene", nargs="?", help="scene, particle or mesh file (default: the showcase)"
+    )
     serve.add_argument("--host", default="127.0.0.1", help="address to listen on")
     serve.add_argument("--port", type=int_at_least(0), default=8000, help="0: any free port")
     return parser

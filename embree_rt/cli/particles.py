@@ -19,6 +19,14 @@ def color_triple(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
+def material_of(text: str) -> tuple[str, str]:
+    """``TYPE=MATERIAL``: a type (or element) and a material's name."""
+    label, sep, material = text.partition("=")
+    if not sep or not label.strip() or not material.strip():
+        raise argparse.ArgumentTypeError(f"expected TYPE=MATERIAL, got {text!r}")
+    return label.strip(), material.strip()
+
+
 def add_particle_flags(parser: argparse.ArgumentParser) -> None:
     """The flags of a particle file (ignored for scene and mesh files)."""
     group = parser.add_argument_group("particle files (XYZ, LAMMPS, PDB, GRO, GSD, ...)")
@@ -44,6 +52,20 @@ def add_particle_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--radius", type=float, metavar="R", help="one radius for all particles")
     group.add_argument("--radius-scale", type=float, default=1.0, metavar="S", help="radii times S")
     group.add_argument(
+        "--color-columns",
+        nargs="+",
+        metavar="COLUMN",
+        help="R G B columns (or one (n, 3) array, e.g. extended XYZ's color), 0..1 or 0..255",
+    )
+    group.add_argument(
+        "--material-of",
+        action="append",
+        type=material_of,
+        metavar="TYPE=MATERIAL",
+        help="a material for one type (repeatable; default: matte)",
+    )
+    group.add_argument("--box", action="store_true", help="draw the simulation box as thin lines")
+    group.add_argument(
         "--follow",
         action="store_true",
         help="with --frames: frame each frame on its own bounds (default: the first frame's)",
@@ -65,6 +87,9 @@ PARTICLE_FLAG_DEFAULTS = {
     "radius_scale": 1.0,
     "json": False,
     "follow": False,
+    "color_columns": None,
+    "material_of": None,
+    "box": False,
 }
 
 
@@ -94,6 +119,7 @@ def particle_scene(args: argparse.Namespace):
         value_range=tuple(args.range) if args.range else None,
         radius=args.radius,
         radius_scale=args.radius_scale,
+        color_columns=tuple(args.color_columns) if args.color_columns else None,
     )
     try:
         return Scene.from_particles(
@@ -105,6 +131,8 @@ def particle_scene(args: argparse.Namespace):
             select=args.select,
             wrap=args.wrap,
             floor=not args.no_floor,
+            materials=dict(args.material_of or ()),
+            box=args.box,
         )
     except ValueError as error:
         if isinstance(error, InputError):

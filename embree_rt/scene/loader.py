@@ -176,6 +176,8 @@ class _ParticlesEntry:
     wrap: bool
     material: str
     look: object  # a particles.look.ParticleLook (imported where a scene has particles)
+    materials: dict[str, str] | None = None  # a material a type
+    box: bool = False
 
 
 @dataclass
@@ -582,12 +584,44 @@ class SceneReader:
                 value_range=table.pair("range") if table.has("range") else None,
                 radius=table.number("radius", None, low=0.0, low_open=True),
                 radius_scale=table.number("radius_scale", 1.0, low=0.0, low_open=True),
+                color_columns=self._color_columns(table),
             ),
+            materials=self._type_materials(table),
+            box=table.boolean("box", False),
         )
         if entry.up not in ("x", "y", "z"):
             raise table.error("up", f"expected x, y or z, got {entry.up!r}")
         table.finish()
         return entry
+
+    def _color_columns(self, table: Table) -> tuple[str, ...] | None:
+        """A ``[[particles]]`` entry's ``color_columns``: 3 column names, or 1 array's name."""
+        value = table.raw("color_columns")
+        if value is None:
+            return None
+        if isinstance(value, str):
+            value = [value]
+        if (
+            not isinstance(value, list)
+            or len(value) not in (1, 3)
+            or not all(isinstance(v, str) for v in value)
+        ):
+            raise table.error("color_columns", "expected 3 column names, or 1 array's name")
+        return tuple(value)
+
+    def _type_materials(self, table: Table) -> dict[str, str] | None:
+        """A ``[[particles]]`` entry's ``materials``: a table of type -> material name."""
+        materials = table.table("materials")
+        if materials is None:
+            return None
+        out = {}
+        for label in materials.data:
+            name = materials.string(str(label), required=True)
+            if name not in self.scene.materials:
+                raise materials.error(str(label), f"undefined material {name!r}")
+            out[str(label)] = name
+        materials.finish()
+        return out
 
     def _mesh(self, table: Table) -> _MeshEntry:
         entry = _MeshEntry(
@@ -696,6 +730,8 @@ class SceneReader:
                 select=entry.select,
                 wrap=entry.wrap,
                 material=entry.material,
+                materials=entry.materials,
+                box=entry.box,
             )
         except SceneError as error:
             raise SceneError(self.path, entry.key, str(error)) from None

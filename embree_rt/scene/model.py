@@ -283,19 +283,25 @@ class Scene:
         select: str | None = None,
         wrap: bool = False,
         floor: bool = True,
+        *,
+        materials: dict[str, str] | None = None,
+        box: bool = False,
     ) -> Scene:
         """Frame ``frame`` of the particle file ``path`` (a trajectory over ``topology``)
         rendered on its own: one sphere a particle, coloured and sized by ``look``
         (``embree_rt.scene.particles.ParticleLook``; default: by element, else by type), the
         file's ``up`` axis ("x", "y" or "z") upward, ``select`` keeping a subset (MDAnalysis's
-        selection language), ``wrap`` putting positions into the periodic box; framed from the
-        bounds under the default rig, a floor under it unless ``floor`` is False. Raises
+        selection language), ``wrap`` putting positions into the periodic box, ``materials``
+        a material a type, ``box`` drawing the simulation box (``add_particles``); framed from
+        the bounds under the default rig, a floor under it unless ``floor`` is False. Raises
         ``SceneError`` naming the file and the problem."""
         from embree_rt.scene.particles import read_particles
 
         particles = read_particles(path, frame=frame, topology=topology)
         scene = cls()
-        scene.add_particles(particles, look=look, up=up, select=select, wrap=wrap)
+        scene.add_particles(
+            particles, look=look, up=up, select=select, wrap=wrap, materials=materials, box=box
+        )
         scene.stage_particles(floor)
         return scene
 
@@ -307,20 +313,42 @@ class Scene:
         select: str | None = None,
         wrap: bool = False,
         material: str = "matte",
+        *,
+        materials: dict[str, str] | None = None,
+        box: bool = False,
     ) -> None:
         """Add a ``ParticleFrame``, an ``ase.Atoms`` or an MDAnalysis ``AtomGroup`` as
-        spheres of ``material`` (see ``from_particles`` for the rest)."""
-        from embree_rt.scene.particles.to_scene import particle_spheres
+        spheres of ``material``, or of ``materials[type]`` for the types it names (elements
+        where the particles have no types); ``box`` adds the simulation box's 12 edges as thin
+        round curves (see ``from_particles`` for the rest). ``SceneError`` for a type no
+        particle has or a file without a box."""
+        from embree_rt.scene.particles.box import BOX_COLOR
+        from embree_rt.scene.particles.to_scene import (
+            box_lines,
+            particle_materials,
+            particle_spheres,
+            prepared,
+        )
 
-        centers, radii, colors, note = particle_spheres(particles, look, up, select, wrap)
-        self.add_spheres(centers, radii, material, colors=colors)
+        frame = prepared(particles, select)
+        centers, radii, colors, note = particle_spheres(frame, look, up, None, wrap)
+        names = particle_materials(frame, materials, material)
+        edges = box_lines(frame, up) if box else None
+        self.add_spheres(centers, radii, names, colors=colors)
+        if edges is not None:
+            points, radius = edges
+            starts = np.arange(0, len(points), 2)
+            self.add_curves(points, radius, "matte", starts=starts, color=BOX_COLOR)
         self.notes.append(note)
 
     def stage_particles(self, floor: bool = True) -> None:
-        """Camera, lights and floor framed on the spheres (as a mesh file's are)."""
+        """Camera, lights and floor framed on the spheres and curves (a box, bonds), as a mesh
+        file's are."""
         from embree_rt.scene.model_file import stage_spheres
 
-        self._stage(stage_spheres(self.sphere_centers, self.sphere_radii), floor)
+        centers = [self.sphere_centers, *(curves.points for curves in self.curves)]
+        radii = [self.sphere_radii, *(curves.radii for curves in self.curves)]
+        self._stage(stage_spheres(np.concatenate(centers), np.concatenate(radii)), floor)
 
     @classmethod
     def from_trimesh(cls, loaded: trimesh.Trimesh | trimesh.Scene, floor: bool = True) -> Scene:

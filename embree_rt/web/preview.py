@@ -22,7 +22,6 @@ from embree_rt.batches import worker_count
 from embree_rt.camera import camera_frame, camera_problem, sample_rays
 from embree_rt.film import Film, FilmBlock, tonemap
 from embree_rt.integrator import Integrator
-from embree_rt.scene.loader import read_document
 from embree_rt.scene.model import Scene
 from embree_rt.scene.writer import inline_short_arrays
 
@@ -198,10 +197,9 @@ class PreviewSession:
         return inline_short_arrays(tomli_w.dumps(document))
 
 
-def session_factory(scene: Scene, scene_path: Path):
-    """A function making a fresh ``PreviewSession`` of ``scene``, loaded from ``scene_path``."""
-    document = read_document(scene_path)
-    folder = scene_path.parent
+def session_factory(scene: Scene, document: dict, folder: Path):
+    """A function making a fresh ``PreviewSession`` of ``scene``, whose scene file's content
+    is ``document`` (its relative paths from ``folder``)."""
 
     def new_session() -> PreviewSession:
         return PreviewSession(scene, document, folder)

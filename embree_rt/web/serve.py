@@ -12,6 +12,7 @@ import numpy as np
 import uvicorn
 
 from embree_rt.errors import InputError
+from embree_rt.scene.model import Scene
 from embree_rt.web.messages import MAX_MESSAGE_BYTES
 
 # The scene shown when none is given: the seed article's showcase, shipped with the package.
@@ -52,15 +53,37 @@ def _warm_up(session) -> None:
     session.close()
 
 
-def serve(scene_path: str | None, host: str, port: int) -> None:
-    """Serve the pages for the scene file ``scene_path`` (None: the showcase) until Ctrl-C."""
+def served_scene(path: Path) -> tuple[Scene, dict]:
+    """The scene ``serve`` shows of ``path`` and the scene file's content it is edited and
+    downloaded as: a scene file as it is; a particle or mesh file as ``render`` makes it
+    (framed on its bounds, the default rig, a floor), the document naming the file in a
+    ``[[particles]]`` or ``[[meshes]]`` entry beside that camera, lights and floor."""
     from embree_rt.scene import load_scene
+    from embree_rt.scene.loader import read_document
+    from embree_rt.scene.meshes import MESH_SUFFIXES
+    from embree_rt.scene.particles.read import is_particle_file
+    from embree_rt.scene.writer import look_document
+
+    if is_particle_file(path):
+        scene, key = Scene.from_particles(path), "particles"
+    elif path.suffix.lower() in MESH_SUFFIXES:
+        scene, key = Scene.from_file(path), "meshes"
+    else:
+        return load_scene(path), read_document(path)
+    size = {"width": scene.render.width, "height": scene.render.height}
+    return scene, {"render": size, **look_document(scene), key: [{"file": path.name}]}
+
+
+def serve(scene_path: str | None, host: str, port: int) -> None:
+    """Serve the pages for the scene, particle or mesh file ``scene_path`` (None: the
+    showcase) until Ctrl-C."""
     from embree_rt.web.app import create_app
     from embree_rt.web.preview import session_factory
 
     path = Path(scene_path) if scene_path is not None else _default_scene()
-    scene = load_scene(path)  # a bad file is one line and exit 2, before the port is taken
-    new_session = session_factory(scene, path)
+    # a bad file is one line and exit 2, before the port is taken
+    scene, document = served_scene(path)
+    new_session = session_factory(scene, document, path.parent)
     listener, loopback = listen(host, port)
     with listener:
         _warm_up(new_session())

@@ -28,7 +28,9 @@ class ParticleLook:
     the file names elements, else type); ``color``: one sRGB colour (0..1) for all, overriding
     ``color_by``; ``colormap`` and ``value_range`` (low, high; None: the frame's own) for a
     property; ``radius`` one radius for all (else the file's radius column, else by element or
-    type), times ``radius_scale``."""
+    type), times ``radius_scale``; ``color_columns`` names the red, green and blue columns
+    (or one (n, 3) array, read as its ``_x _y _z`` columns) that give each particle its own
+    sRGB colour, overriding ``color_by``."""
 
     color_by: str | None = None
     color: tuple[float, float, float] | None = None
@@ -36,6 +38,7 @@ class ParticleLook:
     value_range: tuple[float, float] | None = None
     radius: float | None = None
     radius_scale: float = 1.0
+    color_columns: tuple[str, ...] | None = None
 
 
 def to_srgb8(colors: np.ndarray) -> np.ndarray:
@@ -87,7 +90,13 @@ def particle_look(frame: ParticleFrame, look: ParticleLook) -> tuple[np.ndarray,
         radii = np.full(len(frame), float(look.radius))
     radii = np.asarray(radii, np.float64) * look.radius_scale
     by = look.color_by or kind
-    if look.color is not None:
+    if look.color_columns:
+        if look.color is not None or look.color_by is not None:
+            raise ParticleFileError(
+                frame.path, "--color-columns", "give it or --color / --color-by, not both"
+            )
+        colors = rgb_colors(frame, look.color_columns)
+    elif look.color is not None:
         colors = np.broadcast_to(to_srgb8(np.asarray(look.color)[None]), (len(frame), 3)).copy()
     elif by == kind:
         colors = to_srgb8(label_colors)
@@ -104,6 +113,35 @@ def particle_look(frame: ParticleFrame, look: ParticleLook) -> tuple[np.ndarray,
             frame.path, "--color-by", f"no property {by!r} in the file (it has: {known})"
         )
     return colors, radii
+
+
+def rgb_colors(frame: ParticleFrame, names: tuple[str, ...]) -> np.ndarray:
+    """(n, 3) uint8 sRGB from the frame's three ``names`` columns (red, green, blue), or from
+    one name's ``_x _y _z`` columns (an extended XYZ ``color`` array). The data say their
+    range: all values within 0..1 are fractions, else 0..255 (``ParticleFileError`` beyond,
+    below 0, or not finite)."""
+    if len(names) == 1:
+        names = tuple(f"{names[0]}_{axis}" for axis in "xyz")
+    if len(names) != 3:
+        raise ParticleFileError(frame.path, "--color-columns", "expected 3 column names, or 1")
+    missing = [name for name in names if name not in frame.properties]
+    if missing:
+        known = ", ".join(frame.properties) or "none"
+        raise ParticleFileError(
+            frame.path, "--color-columns", f"no column {missing[0]!r} in the file (it has: {known})"
+        )
+    values = np.stack([frame.properties[name] for name in names], axis=1)
+    bad = ~(np.isfinite(values) & (values >= 0) & (values <= 255)).all(axis=1)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise ParticleFileError(
+            frame.path,
+            "--color-columns",
+            f"particle {row}: colour {values[row].tolist()} is not within 0..1 or 0..255",
+        )
+    if values.max(initial=0.0) <= 1.0:
+        return to_srgb8(values)
+    return np.rint(values).astype(np.uint8)
 
 
 def label_look(path: str, kind: str, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

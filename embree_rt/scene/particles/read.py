@@ -2,18 +2,20 @@
 
 Which library reads what (chosen by coverage and speed, see ``docs/particles.md``):
 MDAnalysis reads the molecular formats with topologies (PDB, PQR, GRO, Mol2, LAMMPS data, and
-DCD/XTC/TRR trajectories over a topology such as PSF), naming elements, types, PQR's radii and
-the box; ASE reads the materials formats (XYZ and extended XYZ, VASP POSCAR/CONTCAR, CIF) with
-their per-atom arrays; ``gsd`` reads HOOMD's GSD; LAMMPS text dumps are read by NumPy
-(``lammps_dump``). A ``.gz``, ``.bz2`` or ``.xz`` copy is decompressed to a temporary file and
-read as the file it holds.
+DCD/XTC/TRR trajectories over a topology such as PSF, and PDBx/mmCIF through gemmi), naming
+elements, types, PQR's radii and the box; ASE reads the materials formats (XYZ and extended
+XYZ, VASP POSCAR/CONTCAR, CIF) with their per-atom arrays; ``gsd`` reads HOOMD's GSD; LAMMPS
+text dumps are read by NumPy (``lammps_dump``). A ``.gz``, ``.bz2`` or ``.xz`` copy is
+decompressed to a temporary file and read as the file it holds.
 """
 
 from __future__ import annotations
 
 import bz2
 import gzip
+import itertools
 import lzma
+import re
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -45,11 +47,16 @@ MDA_FORMATS = {
     ".lmp": "DATA",
     ".psf": "PSF",
 }
+# A ``.cif`` holding an ``_atom_site.Cartn_x`` column is PDBx/mmCIF (macromolecules, read by
+# MDAnalysis through gemmi); any other ``.cif`` is a crystallographic CIF (read by ASE).
+MMCIF_SUFFIXES = (".mmcif", ".mcif")
+MMCIF_MARK = re.compile(rb"^_atom_site\.cartn_x\b", re.IGNORECASE | re.MULTILINE)
 TRAJECTORY_SUFFIXES = (".dcd", ".xtc", ".trr")
 DUMP_SUFFIXES = (".lammpstrj", ".dump")
 GSD_SUFFIXES = (".gsd",)
 PARTICLE_SUFFIXES = (
     *ASE_FORMATS,
+    *MMCIF_SUFFIXES,
     *MDA_FORMATS,
     *TRAJECTORY_SUFFIXES,
     *DUMP_SUFFIXES,
@@ -122,6 +129,9 @@ def _read(path: Path, plain: Path, frame: int, topology: Path | None) -> Particl
         return _read_dump(path, plain, frame)
     if suffix in GSD_SUFFIXES:
         return _read_gsd(path, plain, frame)
+    if suffix in MMCIF_SUFFIXES or (suffix == ".cif" and is_mmcif(plain)):
+        _require("gemmi")  # MDAnalysis's mmCIF reader stands on it
+        return _read_mdanalysis(path, plain, frame, None, file_format="MMCIF")
     if suffix in ASE_FORMATS or name in ASE_NAMES:
         return _read_ase(path, plain, ASE_FORMATS.get(suffix) or ASE_NAMES[name], frame)
     if suffix in TRAJECTORY_SUFFIXES and topology is None:
@@ -129,6 +139,12 @@ def _read(path: Path, plain: Path, frame: int, topology: Path | None) -> Particl
             path, "(file)", f"a {suffix} trajectory holds no atoms' names: give --topology FILE"
         )
     return _read_mdanalysis(path, plain, frame, topology)
+
+
+def is_mmcif(plain: Path) -> bool:
+    """Whether the CIF ``plain`` is PDBx/mmCIF: its atoms in an ``_atom_site.Cartn_x``
+    column (a crystallographic CIF names ``_atom_site_fract_x``)."""
+    return MMCIF_MARK.search(plain.read_bytes()) is not None
 
 
 def _require(module: str):
@@ -139,7 +155,7 @@ def _require(module: str):
     except ImportError:
         raise InputError(
             f"reading particle files needs {module}: "
-            + install_hint("particles", "ase MDAnalysis gsd matplotlib")
+            + install_hint("particles", "ase MDAnalysis gsd matplotlib gemmi")
         ) from None
 
 
@@ -262,19 +278,34 @@ def _read_mdanalysis(
     mda = _require("MDAnalysis")
     import warnings
 
+    file_format = file_format or MDA_FORMATS.get(plain.suffix.lower())
+
+    claimed = None if topology is not None else header_count(plain, file_format)
+    if claimed is not None:
+        check_count(str(path), "(header)", claimed)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # its guesses of missing attributes, said per file
             if topology is not None:
-                universe = mda.Universe(str(topology), str(plain))
+                universe = mda.Universe(str(topology))
+                _check_trajectory_count(path, plain, topology, len(universe.atoms))
+                universe.load_new(str(plain))
             else:
-                file_format = file_format or MDA_FORMATS.get(plain.suffix.lower())
                 options = {}
                 if file_format == "DATA":
                     options["atom_style"] = data_atom_style(path, plain)
                 universe = mda.Universe(str(plain), format=file_format, **options)
+    except ParticleFileError:
+        raise
     except Exception as error:  # MDAnalysis's parsers raise ValueError, OSError, EOFError...
         raise ParticleFileError(path, "(file)", _one_line(error)) from None
+    if claimed is not None and claimed != len(universe.atoms):
+        raise ParticleFileError(
+            path,
+            "(header)",
+            f"claims {claimed:,} particles but the file holds {len(universe.atoms):,} "
+            "(a truncated file?)",
+        )
     count = len(universe.trajectory)
     _frame_problem(path, frame, count)
     try:
@@ -308,6 +339,39 @@ def _read_mdanalysis(
         result.box = np.asarray(triclinic_vectors(universe.dimensions), np.float64)
     result.source = universe
     return result
+
+
+def _check_trajectory_count(path: Path, plain: Path, topology: Path, atoms: int) -> None:
+    """Refuse a trajectory whose frames hold another number of atoms than its topology's
+    ``atoms`` (read from the trajectory's header by MDAnalysis's own reader)."""
+    from MDAnalysis.coordinates.core import reader
+
+    with reader(str(plain)) as frames:
+        count = frames.n_atoms
+    if count != atoms:
+        raise ParticleFileError(
+            path,
+            "(file)",
+            f"its frames hold {count:,} atoms but the topology {topology.name} has {atoms:,}",
+        )
+
+
+def header_count(plain: Path, file_format: str | None) -> int | None:
+    """The particle count the header of a GRO (its second line), LAMMPS data (``N atoms``)
+    or Mol2 (the line after ``@<TRIPOS>MOLECULE``'s name) file claims; None for another
+    format or a header that states none. Read before MDAnalysis, which allocates by it."""
+    if file_format not in ("GRO", "DATA", "MOL2"):
+        return None
+    with open(plain, "rb") as handle:
+        head = [line.partition(b"#")[0].split() for line in itertools.islice(handle, 200)]
+    if file_format == "GRO":
+        words = head[1] if len(head) > 1 else []
+    elif file_format == "DATA":
+        words = next((w for w in head if len(w) == 2 and w[1] == b"atoms"), [])
+    else:
+        at = next((i for i, w in enumerate(head) if w[:1] == [b"@<TRIPOS>MOLECULE"]), None)
+        words = head[at + 2] if at is not None and at + 2 < len(head) else []
+    return int(words[0]) if words and words[0].isdigit() else None
 
 
 # MDAnalysis's per-atom attributes kept as properties, by the names they take.

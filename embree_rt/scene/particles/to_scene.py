@@ -3,8 +3,11 @@ so the file's up axis is the renderer's +y, coloured and sized (``look``)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
+from embree_rt.scene.particles.box import box_edges, box_radius
 from embree_rt.scene.particles.errors import ParticleFileError
 from embree_rt.scene.particles.frame import ParticleFrame
 from embree_rt.scene.particles.look import ParticleLook, particle_look
@@ -74,6 +77,45 @@ def selected(frame: ParticleFrame, expression: str) -> ParticleFrame:
     if len(indices) == 0:
         raise ParticleFileError(frame.path, "--select", f"{expression!r} keeps no particles")
     return frame.subset(np.sort(indices))
+
+
+def prepared(particles, select: str | None = None) -> ParticleFrame:
+    """The ``ParticleFrame`` of ``particles`` (``as_frame``), ``select`` keeping a subset."""
+    frame = as_frame(particles)
+    return selected(frame, select) if select else frame
+
+
+def particle_materials(
+    frame: ParticleFrame, materials: Mapping[str, str] | None, default: str
+) -> np.ndarray | str:
+    """Each particle's material name: ``materials`` maps a type (an element where the file
+    names no types) to a material's name, the rest take ``default``. Returns ``default`` itself
+    when ``materials`` is empty, else (n,) str. ``ParticleFileError`` for a key no particle
+    has (a mistyped type would otherwise change nothing unnoticed)."""
+    if not materials:
+        return default
+    kind, labels = ("type", frame.types) if frame.types is not None else frame.labels()
+    present = set(np.unique(labels).tolist())
+    missing = sorted(set(materials) - present)
+    if missing:
+        raise ParticleFileError(
+            frame.path,
+            "materials",
+            f"no particle of {kind} {missing[0]!r} (the {kind}s: {', '.join(sorted(present))})",
+        )
+    names = np.full(len(frame), default, dtype=object)
+    for label, material in materials.items():
+        names[labels == label] = material
+    return names.astype(str)
+
+
+def box_lines(frame: ParticleFrame, up: str = "z") -> tuple[np.ndarray, float]:
+    """(24, 3) float64 end points of the frame's box edges in the renderer's world (pairs:
+    ``box.box_edges``) and their radius. ``ParticleFileError`` when the file gives no box."""
+    if frame.box is None or abs(np.linalg.det(frame.box)) == 0:
+        raise ParticleFileError(frame.path, "--box", "the file gives no simulation box")
+    edges = box_edges(frame.box, frame.origin)
+    return edges @ UP_ROTATIONS[up].T, box_radius(frame.box)
 
 
 def wrapped(frame: ParticleFrame) -> np.ndarray:
