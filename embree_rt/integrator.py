@@ -340,6 +340,8 @@ class Integrator(Closing):
         d = rays.directions
         normal, face_normal, entering = self.facing_the_ray(d, surfaces)
         hits = self.hit_materials(surfaces)
+        if self.materials.outlined:
+            self._blacken_outlines(rays.weight, d, normal, hits.outline)
         ambient_share, diffuse_share, reflect_share = hits.shares()
         self._absorb_inside(rays.weight, surfaces.t, hits.absorption, entering)
         offset = surface_offset(surfaces.scale)
@@ -410,6 +412,16 @@ class Integrator(Closing):
         share = open_shares(self.geometry.occluded_rays, outside, normal, sample, ao, seed)
         share[~lit] = np.float32(1.0)
         return share
+
+    @staticmethod
+    def _blacken_outlines(weight, d, normal, width) -> None:
+        """Outlines: the hits on the outline of their material's ``width`` (k,) float32
+        (``shading.on_outline`` of the rays ``d`` (3, k) against their ``normal`` (3, k)
+        turned to them) show black: their ``weight`` (3, k) is zeroed in place, so they add
+        nothing and spawn no children."""
+        cosine = shading.dot(d, normal)
+        np.negative(cosine, out=cosine)
+        weight[:, shading.on_outline(cosine, width)] = np.float32(0.0)
 
     @staticmethod
     def _absorb_inside(weight, t, absorption, entering) -> None:

@@ -69,6 +69,7 @@ MATERIAL_NUMBERS = (
     "transparency",
     "ior",
     "attenuation_distance",
+    "outline",
 )
 MATERIAL_FLAGS = ("metallic", "unlit")
 

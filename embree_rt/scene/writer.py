@@ -157,7 +157,8 @@ def look_document(scene: Scene) -> dict:
 
 def _material_dict(material) -> dict:
     fields = asdict(material)
-    # Keys a material leaves at their defaults (no glow, no absorption, lit) are not written.
+    # Keys a material leaves at their defaults (no glow, no absorption, lit, no outline) are not
+    # written.
     for name, default in asdict(Material()).items():
         if name in _OPTIONAL_MATERIAL_KEYS and fields[name] == default:
             del fields[name]
@@ -167,7 +168,13 @@ def _material_dict(material) -> dict:
     return {"preset": "matte", **fields}
 
 
-_OPTIONAL_MATERIAL_KEYS = ("emission", "attenuation_color", "attenuation_distance", "unlit")
+_OPTIONAL_MATERIAL_KEYS = (
+    "emission",
+    "attenuation_color",
+    "attenuation_distance",
+    "unlit",
+    "outline",
+)
 
 
 def save_scene(scene: Scene, path: str | Path) -> None:
