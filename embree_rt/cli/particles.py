@@ -44,6 +44,15 @@ def add_particle_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--radius", type=float, metavar="R", help="one radius for all particles")
     group.add_argument("--radius-scale", type=float, default=1.0, metavar="S", help="radii times S")
     group.add_argument(
+        "--bonds",
+        action="store_true",
+        help="sticks between bonded atoms (the file's bonds, else guessed from distances)",
+    )
+    group.add_argument("--bond-radius", type=float, metavar="R", help="the sticks' radius")
+    group.add_argument(
+        "--licorice", action="store_true", help="bonds, and atoms of the sticks' radius"
+    )
+    group.add_argument(
         "--follow",
         action="store_true",
         help="with --frames: frame each frame on its own bounds (default: the first frame's)",
@@ -65,6 +74,9 @@ PARTICLE_FLAG_DEFAULTS = {
     "radius_scale": 1.0,
     "json": False,
     "follow": False,
+    "bonds": False,
+    "bond_radius": None,
+    "licorice": False,
 }
 
 
@@ -82,11 +94,16 @@ def particle_scene(args: argparse.Namespace):
     """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say."""
     from embree_rt.errors import InputError
     from embree_rt.scene.model import Scene
+    from embree_rt.scene.particles.bonds import BondLook
     from embree_rt.scene.particles.look import ParticleLook
 
-    for flag, value in (("--radius", args.radius), ("--radius-scale", args.radius_scale)):
+    sizes = (("--radius", args.radius), ("--radius-scale", args.radius_scale))
+    for flag, value in (*sizes, ("--bond-radius", args.bond_radius)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise InputError(f"{flag}: expected a positive number, got {value:g}")
+    bonds = args.bonds or args.licorice  # (licorice is sticks and atoms of one radius)
+    if args.bond_radius is not None and not bonds:
+        raise InputError("--bond-radius: sets the sticks' radius, so it needs --bonds")
     look = ParticleLook(
         color_by=args.color_by,
         color=args.color,
@@ -105,6 +122,7 @@ def particle_scene(args: argparse.Namespace):
             select=args.select,
             wrap=args.wrap,
             floor=not args.no_floor,
+            bonds=BondLook(args.bond_radius, args.licorice) if bonds else None,
         )
     except ValueError as error:
         if isinstance(error, InputError):

@@ -283,19 +283,21 @@ class Scene:
         select: str | None = None,
         wrap: bool = False,
         floor: bool = True,
+        bonds=None,
     ) -> Scene:
         """Frame ``frame`` of the particle file ``path`` (a trajectory over ``topology``)
         rendered on its own: one sphere a particle, coloured and sized by ``look``
         (``embree_rt.scene.particles.ParticleLook``; default: by element, else by type), the
         file's ``up`` axis ("x", "y" or "z") upward, ``select`` keeping a subset (MDAnalysis's
-        selection language), ``wrap`` putting positions into the periodic box; framed from the
-        bounds under the default rig, a floor under it unless ``floor`` is False. Raises
+        selection language), ``wrap`` putting positions into the periodic box, ``bonds`` (a
+        ``BondLook``) drawing its bonds as sticks; framed from the bounds under the default
+        rig, a floor under it unless ``floor`` is False. Raises
         ``SceneError`` naming the file and the problem."""
         from embree_rt.scene.particles import read_particles
 
         particles = read_particles(path, frame=frame, topology=topology)
         scene = cls()
-        scene.add_particles(particles, look=look, up=up, select=select, wrap=wrap)
+        scene.add_particles(particles, look=look, up=up, select=select, wrap=wrap, bonds=bonds)
         scene.stage_particles(floor)
         return scene
 
@@ -307,14 +309,32 @@ class Scene:
         select: str | None = None,
         wrap: bool = False,
         material: str = "matte",
+        bonds=None,
     ) -> None:
         """Add a ``ParticleFrame``, an ``ase.Atoms`` or an MDAnalysis ``AtomGroup`` as
-        spheres of ``material`` (see ``from_particles`` for the rest)."""
-        from embree_rt.scene.particles.to_scene import particle_spheres
+        spheres of ``material`` (see ``from_particles`` for the rest), and with ``bonds`` (an
+        ``embree_rt.scene.particles.bonds.BondLook``) its bonds as sticks."""
+        from embree_rt.scene.particles import bonds as bond_sticks
+        from embree_rt.scene.particles.to_scene import (
+            UP_ROTATIONS,
+            as_frame,
+            particle_spheres,
+            selected,
+        )
 
-        centers, radii, colors, note = particle_spheres(particles, look, up, select, wrap)
+        frame = as_frame(particles)
+        if select:
+            frame = selected(frame, select)
+        centers, radii, colors, note = particle_spheres(frame, look, up, None, wrap)
+        notes = [note]
+        if bonds is not None:
+            drawn = (centers, radii, colors)
+            radii, bond_note = bond_sticks.add_bonds(
+                self, frame, drawn, bonds, UP_ROTATIONS[up], material
+            )
+            notes.append(bond_note)
         self.add_spheres(centers, radii, material, colors=colors)
-        self.notes.append(note)
+        self.notes.extend(notes)
 
     def stage_particles(self, floor: bool = True) -> None:
         """Camera, lights and floor framed on the spheres (as a mesh file's are)."""
