@@ -53,6 +53,11 @@ def add_particle_flags(parser: argparse.ArgumentParser) -> None:
         "--licorice", action="store_true", help="bonds, and atoms of the sticks' radius"
     )
     group.add_argument(
+        "--legend",
+        action="store_true",
+        help="draw what the colours mean (a colour bar or a key) in the image's corner",
+    )
+    group.add_argument(
         "--follow",
         action="store_true",
         help="with --frames: frame each frame on its own bounds (default: the first frame's)",
@@ -77,6 +82,7 @@ PARTICLE_FLAG_DEFAULTS = {
     "bonds": False,
     "bond_radius": None,
     "licorice": False,
+    "legend": False,
 }
 
 
@@ -123,6 +129,7 @@ def particle_scene(args: argparse.Namespace):
             wrap=args.wrap,
             floor=not args.no_floor,
             bonds=BondLook(args.bond_radius, args.licorice) if bonds else None,
+            legend=args.legend,
         )
     except ValueError as error:
         if isinstance(error, InputError):
@@ -181,7 +188,8 @@ def render_particle_frames(args: argparse.Namespace) -> None:
         apply_to_scene(scene, list(args.settings), str(args.scene))
         result = render(scene, threads=args.threads, spheres=args.spheres, quiet=True)
         path = paths[number]
-        writing(path, lambda result=result, path=path: result.save(path, encoding))
+        framed = encoding._replace(legend=scene.legend)
+        writing(path, lambda result=result, path=path, framed=framed: result.save(path, framed))
     if not args.quiet:
         print(
             f"embree-rt: {len(todo)} frames ({len(paths) - len(todo)} already on disk) of "

@@ -12,6 +12,7 @@ import numpy as np
 from embree_rt.ambient_occlusion import AmbientOcclusion
 from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.film import Look
+from embree_rt.legend import Legend
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.errors import SceneError
@@ -246,6 +247,8 @@ class Scene:
     # What the scene's maker found and chose, one line each (a mesh file rendered on its own:
     # whose camera and lights, where the floor is), for ``embree-rt info``.
     notes: list[str] = field(default_factory=list)
+    # What the particles' colours mean (``legend.Legend``), when a legend was asked for.
+    legend: Legend | None = None
 
     @classmethod
     def from_file(cls, path, floor: bool = True) -> Scene:
@@ -284,20 +287,24 @@ class Scene:
         wrap: bool = False,
         floor: bool = True,
         bonds=None,
+        legend: bool = False,
     ) -> Scene:
         """Frame ``frame`` of the particle file ``path`` (a trajectory over ``topology``)
         rendered on its own: one sphere a particle, coloured and sized by ``look``
         (``embree_rt.scene.particles.ParticleLook``; default: by element, else by type), the
         file's ``up`` axis ("x", "y" or "z") upward, ``select`` keeping a subset (MDAnalysis's
         selection language), ``wrap`` putting positions into the periodic box, ``bonds`` (a
-        ``BondLook``) drawing its bonds as sticks; framed from the bounds under the default
-        rig, a floor under it unless ``floor`` is False. Raises
+        ``BondLook``) drawing its bonds as sticks, ``legend`` recording what the colours mean
+        (``Scene.legend``); framed from the bounds under the default rig, a floor under it
+        unless ``floor`` is False. Raises
         ``SceneError`` naming the file and the problem."""
         from embree_rt.scene.particles import read_particles
 
         particles = read_particles(path, frame=frame, topology=topology)
         scene = cls()
-        scene.add_particles(particles, look=look, up=up, select=select, wrap=wrap, bonds=bonds)
+        scene.add_particles(
+            particles, look=look, up=up, select=select, wrap=wrap, bonds=bonds, legend=legend
+        )
         scene.stage_particles(floor)
         return scene
 
@@ -310,10 +317,12 @@ class Scene:
         wrap: bool = False,
         material: str = "matte",
         bonds=None,
+        legend: bool = False,
     ) -> None:
         """Add a ``ParticleFrame``, an ``ase.Atoms`` or an MDAnalysis ``AtomGroup`` as
         spheres of ``material`` (see ``from_particles`` for the rest), and with ``bonds`` (an
-        ``embree_rt.scene.particles.bonds.BondLook``) its bonds as sticks."""
+        ``embree_rt.scene.particles.bonds.BondLook``) its bonds as sticks; with ``legend``,
+        what their colours mean becomes ``Scene.legend``."""
         from embree_rt.scene.particles import bonds as bond_sticks
         from embree_rt.scene.particles.to_scene import (
             UP_ROTATIONS,
@@ -335,6 +344,11 @@ class Scene:
             notes.append(bond_note)
         self.add_spheres(centers, radii, material, colors=colors)
         self.notes.extend(notes)
+        if legend:
+            from embree_rt.scene.particles.key import particle_legend
+            from embree_rt.scene.particles.look import ParticleLook
+
+            self.legend = particle_legend(frame, look or ParticleLook())
 
     def stage_particles(self, floor: bool = True) -> None:
         """Camera, lights and floor framed on the spheres (as a mesh file's are)."""
