@@ -395,6 +395,7 @@ class SceneReader:
         ao = AmbientOcclusion(
             samples=table.integer("samples", current.samples, low=0, high=4096),
             distance=table.number("distance", current.distance, low=0, low_open=True),
+            bounces=table.boolean("bounces", current.bounces),
         )
         table.finish()
         self._check(table, ao_problem(ao))

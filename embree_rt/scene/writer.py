@@ -27,8 +27,11 @@ def scene_document(scene: Scene, path: Path) -> dict:
         del document["render"]["background"]
     if not scene.render.ao.samples:  # off: files without ambient occlusion stay as they were
         del document["render"]["ao"]
-    elif math.isinf(scene.render.ao.distance):  # unlimited: the key left out
-        del document["render"]["ao"]["distance"]
+    else:
+        if math.isinf(scene.render.ao.distance):  # unlimited: the key left out
+            del document["render"]["ao"]["distance"]
+        if not scene.render.ao.bounces:  # the default: the key left out
+            del document["render"]["ao"]["bounces"]
     if scene.animation is not None:
         document["animation"] = animation_document(scene.animation)
     if len(scene.sphere_radii):
