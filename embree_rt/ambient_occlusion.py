@@ -19,15 +19,20 @@ from embree_rt.sampling import uniform_pair
 
 # The hash dimension of ambient occlusion's directions (the camera's jitter is dimension 0).
 AO_DIMENSION = 7
+# The hash dimensions between ambient occlusion's directions at one bounce and the next: far
+# past every dimension the camera and AO draw at one depth.
+BOUNCE_DIMENSIONS = 1000
 
 
 @dataclass(frozen=True)
 class AmbientOcclusion:
     """A render's ambient occlusion: ``samples`` rays a camera-ray hit (0: off), each blocked
-    by what lies within ``distance`` world units (inf: anything)."""
+    by what lies within ``distance`` world units (inf: anything); with ``bounces`` the hits of
+    reflected and refracted rays take it too (else they keep the plain ambient term)."""
 
     samples: int = 0
     distance: float = math.inf
+    bounces: bool = False
 
 
 def ao_problem(ao: AmbientOcclusion) -> tuple[str, str] | None:
@@ -59,17 +64,18 @@ def orthonormal_frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def hemisphere_directions(
-    normal: np.ndarray, sample_index: np.ndarray, samples: int, seed: int
+    normal: np.ndarray, sample_index: np.ndarray, samples: int, seed: int, bounce: int = 0
 ) -> np.ndarray:
     """(3, k * samples) float32 unit directions, cosine-weighted about each of the (3, k)
     float32 unit ``normal`` columns: hit i's ``samples`` directions are columns
     ``i * samples .. i * samples + samples - 1``, drawn at hash indices
     ``sample_index[i] * samples + j`` ((k,) int64 the hits' camera sample indices) of
-    dimension ``AO_DIMENSION`` (Malley's method: a uniform point on the unit disc lifted to
-    the hemisphere)."""
+    dimension ``AO_DIMENSION`` at the camera rays' hits, ``BOUNCE_DIMENSIONS`` more at each
+    ``bounce`` after them (a reflected hit's directions independent of its camera hit's)
+    (Malley's method: a uniform point on the unit disc lifted to the hemisphere)."""
     k = normal.shape[1]
     index = (np.asarray(sample_index, np.int64)[:, None] * samples + np.arange(samples)).ravel()
-    u1, u2 = uniform_pair(seed, index, AO_DIMENSION)
+    u1, u2 = uniform_pair(seed, index, AO_DIMENSION + BOUNCE_DIMENSIONS * bounce)
     radius = np.sqrt(u1)
     phi = np.float32(2.0 * math.pi) * u2
     local_x = radius * np.cos(phi)
@@ -104,15 +110,21 @@ def open_share(blocked: np.ndarray, samples: int) -> np.ndarray:
 
 
 def open_shares(
-    occluded, points: np.ndarray, normal: np.ndarray, sample_index: np.ndarray, ao, seed: int
+    occluded,
+    points: np.ndarray,
+    normal: np.ndarray,
+    sample_index: np.ndarray,
+    ao,
+    seed: int,
+    bounce: int = 0,
 ) -> np.ndarray:
     """(k,) float32 open share of the hemisphere over each of the k ``points`` (3, k) float32
     (already off their surfaces) about the unit ``normal`` (3, k) float32 (facing the side the
     point is seen from), ``ao`` an ``AmbientOcclusion`` with samples > 0: its rays in one
     occlusion batch through ``occluded(origins, directions, distance)`` ((3, n) float32 each ->
     (n,) bool), the directions of ``hemisphere_directions`` at the (k,) int64 camera
-    ``sample_index`` and ``seed``."""
+    ``sample_index``, ``seed`` and ``bounce`` (0: camera rays' hits)."""
     samples = ao.samples
-    directions = hemisphere_directions(normal, sample_index, samples, seed)
+    directions = hemisphere_directions(normal, sample_index, samples, seed, bounce)
     origins = np.repeat(points, samples, axis=1)
     return open_share(occluded(origins, directions, float(ao.distance)), samples)

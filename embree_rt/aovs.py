@@ -406,6 +406,7 @@ def save_with_aovs(
     if camera is not None:
         record = _camera_json(camera)
         files.append((camera_json_path(target), lambda handle: handle.write(record)))
+    files += film.legend_sidecar(target, encoding)
     film.write_atomically(files)
     return [side for side, _ in files[1:]]
 

@@ -22,6 +22,7 @@ import numpy as np
 from embree_rt.batches import worker_count
 from embree_rt.choices import BACKGROUNDS, TONEMAPS, TRANSFERS
 from embree_rt.compiled import display_codes, film_sums
+from embree_rt.legend import Legend, draw_legend
 
 GAMMA = 2.2
 # zlib level of 8-bit PNGs (Pillow's default is 6). Measured with Pillow 13 on zlib-ng 2.3 on a
@@ -57,12 +58,15 @@ class Encoding(NamedTuple):
     ``look`` the tone mapping (``Look``; None: the default); ``background`` one of
     ``BACKGROUNDS``: other than "sky", the image carries a 4th channel, the share of each
     pixel's camera rays that met something (its colour channels hold nothing where they did
-    not), and the background goes where they did not (``composite``)."""
+    not), and the background goes where they did not (``composite``); ``legend`` what the
+    colours mean (``legend.Legend``): drawn into display images, and written beside every
+    format as a JSON sidecar (``legend_json_path``), None for neither."""
 
     bit_depth: int = 8
     quality: int | None = None
     look: Look | None = None
     background: str = "sky"
+    legend: Legend | None = None
 
 
 DEFAULT_ENCODING = Encoding()
@@ -447,6 +451,8 @@ def _write_display(
         pixels = tonemap(image, look)
     else:
         pixels = quantize(display_values(image, look), encoding.bit_depth)
+    if encoding.legend is not None:
+        pixels = draw_legend(pixels, encoding.legend)
     write_pixels(pixels, handle, suffix, encoding.quality)
 
 
@@ -536,7 +542,22 @@ def save_image(
     image = check_image_shape(image, path, encoding)
     target = Path(path)
     writer = WRITERS[target.suffix.lower()]
-    write_atomically([(target, lambda handle: writer(image, handle, encoding))])
+    files = [(target, lambda handle: writer(image, handle, encoding))]
+    write_atomically(files + legend_sidecar(target, encoding))
+
+
+def legend_json_path(target: Path) -> Path:
+    """The legend sidecar of the image ``target``: ``render.legend.json`` beside ``render.png``."""
+    return target.with_name(f"{target.stem}.legend.json")
+
+
+def legend_sidecar(target: Path, encoding: Encoding) -> list[tuple[Path, Callable]]:
+    """The legend's JSON sidecar of the image ``target`` as ``write_atomically`` takes files
+    (none without a legend)."""
+    if encoding.legend is None:
+        return []
+    record = encoding.legend.json_bytes()
+    return [(legend_json_path(target), lambda handle: handle.write(record))]
 
 
 def temp_path(target: Path) -> Path:

@@ -73,8 +73,9 @@ class RayBatch:
     directions); ``pixel`` (n,) int64; ``weight`` (3, n) float32 throughput. Camera rays'
     origins (the eye) and unit weights are zero-stride views (``camera_batch``): every stage
     reads them as any other, and 1 · x is x, bit for bit. ``sample`` (n,) int64: camera rays'
-    global sample indices (what ambient occlusion draws its directions from); None for the
-    rays spawned at hits, which ambient occlusion does not reach."""
+    global sample indices (what ambient occlusion draws its directions from), carried to the
+    rays spawned at hits when ambient occlusion reaches them (``AmbientOcclusion.bounces``),
+    else None for those."""
 
     origins: np.ndarray
     directions: np.ndarray
@@ -94,6 +95,9 @@ class RayBatch:
             np.concatenate([b.directions for b in batches], axis=1),
             np.concatenate([b.pixel for b in batches]),
             np.concatenate([b.weight for b in batches], axis=1),
+            None
+            if any(b.sample is None for b in batches)
+            else np.concatenate([b.sample for b in batches]),
         )
 
 
@@ -133,6 +137,12 @@ def camera_batch(
         np.broadcast_to(np.float32(1.0), (3, n)),
         sample,
     )
+
+
+def carried(sample: np.ndarray | None, rows: np.ndarray) -> np.ndarray | None:
+    """The (j,) camera sample indices of the children spawned at the hits ``rows`` (j,) of
+    rays whose indices are ``sample`` (k,) int64; None when the rays carry none."""
+    return None if sample is None else sample[rows]
 
 
 def surface_offset(scale: np.ndarray) -> np.ndarray:
@@ -324,7 +334,7 @@ class Integrator(Closing):
                 np.take(rays.weight, rows, axis=1),
                 sample,
             )
-            rays = self._shade(hit_rays, surfaces, work, spawn=depth < max_depth)
+            rays = self._shade(hit_rays, surfaces, work, depth < max_depth, depth)
             depth += 1
             if not len(rays):
                 return
@@ -333,13 +343,16 @@ class Integrator(Closing):
             )
 
     def _shade(
-        self, rays: HitRays, surfaces: SurfaceHits, work: BatchWork, spawn: bool
+        self, rays: HitRays, surfaces: SurfaceHits, work: BatchWork, spawn: bool, depth: int = 0
     ) -> RayBatch:
-        """Light the ``surfaces`` that ``rays`` hit, into ``work``; returns their reflection
-        and refraction children."""
+        """Light the ``surfaces`` that ``rays`` hit at bounce ``depth``, into ``work``; returns
+        their reflection and refraction children (carrying their camera samples when ambient
+        occlusion reaches bounces)."""
         d = rays.directions
         normal, face_normal, entering = self.facing_the_ray(d, surfaces)
         hits = self.hit_materials(surfaces)
+        if self.materials.outlined:
+            self._blacken_outlines(rays.weight, d, normal, hits.outline)
         ambient_share, diffuse_share, reflect_share = hits.shares()
         self._absorb_inside(rays.weight, surfaces.t, hits.absorption, entering)
         offset = surface_offset(surfaces.scale)
@@ -349,13 +362,17 @@ class Integrator(Closing):
         radiance = ambient_share * hits.color
         radiance *= hits.occlusion  # (x · 1 is x: the bits of unoccluded hits stay)
         if self.ao.samples and rays.sample is not None:  # camera rays' hits: the open share
-            radiance *= self._open_shares(outside, normal, hits.lit, rays.sample, work.seed)
+            radiance *= self._open_shares(
+                outside, normal, hits.lit, rays.sample, work.seed, bounce=depth
+            )
         self._add_direct_light(radiance, outside, normal, d, hits, diffuse_share, work)
         if self.materials.glows:
             radiance += hits.emission
         work.block.add_weighted(rays.pixel, rays.weight, radiance)
         if not spawn:
             return NO_RAYS
+        if not (self.ao.samples and self.ao.bounces):
+            rays = rays._replace(sample=None)
         children = self._refraction_children(
             rays, surfaces, hits, normal, face_normal, entering, offset, reflect_share, work
         )
@@ -402,14 +419,26 @@ class Integrator(Closing):
         sample: np.ndarray,
         seed: int,
         ao: AmbientOcclusion | None = None,
+        bounce: int = 0,
     ) -> np.ndarray:
         """Ambient occlusion's stage: one occlusion batch of ``ao`` (the render's by default)
         rays from the points ``outside`` (3, k) about ``normal`` (3, k); (k,) float32 open
         shares, 1 where not ``lit`` (k,) bool (an unlit colour is not ambient light)."""
         ao = self.ao if ao is None else ao
-        share = open_shares(self.geometry.occluded_rays, outside, normal, sample, ao, seed)
+        occluded = self.geometry.occluded_rays
+        share = open_shares(occluded, outside, normal, sample, ao, seed, bounce)
         share[~lit] = np.float32(1.0)
         return share
+
+    @staticmethod
+    def _blacken_outlines(weight, d, normal, width) -> None:
+        """Outlines: the hits on the outline of their material's ``width`` (k,) float32
+        (``shading.on_outline`` of the rays ``d`` (3, k) against their ``normal`` (3, k)
+        turned to them) show black: their ``weight`` (3, k) is zeroed in place, so they add
+        nothing and spawn no children."""
+        cosine = shading.dot(d, normal)
+        np.negative(cosine, out=cosine)
+        weight[:, shading.on_outline(cosine, width)] = np.float32(0.0)
 
     @staticmethod
     def _absorb_inside(weight, t, absorption, entering) -> None:
@@ -449,6 +478,7 @@ class Integrator(Closing):
             np.take(rays.directions, through, axis=1),
             rays.pixel[through],
             np.take(weight, keep, axis=1),
+            carried(rays.sample, through),
         )
 
     @staticmethod
@@ -490,7 +520,8 @@ class Integrator(Closing):
         if len(keep) < len(glass):  # (when every ray is kept, its arrays are the children's)
             refracted = np.take(refracted, keep, axis=1)
             weight = np.take(weight, keep, axis=1)
-        return [RayBatch(inside, refracted, rays.pixel[through], weight)]
+        sample = carried(rays.sample, through)
+        return [RayBatch(inside, refracted, rays.pixel[through], weight, sample)]
 
     @staticmethod
     def _reflection_children(rays, outside, normal, hits, reflect_share, work) -> RayBatch:
@@ -508,7 +539,8 @@ class Integrator(Closing):
             return NO_RAYS
         work.rays["reflection"] += len(keep)
         if len(keep) == len(weight[0]):  # every hit reflects: no gathers
-            return RayBatch(outside, shading.reflect(rays.directions, normal), rays.pixel, weight)
+            reflected = shading.reflect(rays.directions, normal)
+            return RayBatch(outside, reflected, rays.pixel, weight, rays.sample)
         normal_kept = np.take(normal, keep, axis=1)
         reflected = shading.reflect(
             np.take(rays.directions, keep, axis=1), normal_kept, out=normal_kept
@@ -518,6 +550,7 @@ class Integrator(Closing):
             reflected,
             rays.pixel[keep],
             np.take(weight, keep, axis=1),
+            carried(rays.sample, keep),
         )
 
     def _add_direct_light(

@@ -29,6 +29,11 @@ class Material:
     (glTF's KHR_materials_volume; the default, an infinite distance, absorbs nothing).
     ``unlit`` surfaces show their colour as it is, with no lighting, shadow, reflection or
     transmission (glTF's KHR_materials_unlit).
+
+    ``outline`` in [0, 1] (0, the default, draws none) blackens the rim of each sphere and tube
+    where the surface turns away from the camera (fresnel's outline), as a share of its radius:
+    a hit is on the outline when its projected distance from the silhouette is below
+    ``outline · radius`` (``shading.on_outline``).
     """
 
     color: RGB = (0.8, 0.8, 0.8)
@@ -44,13 +49,14 @@ class Material:
     attenuation_color: RGB = (1.0, 1.0, 1.0)
     attenuation_distance: float = math.inf
     unlit: bool = False
+    outline: float = 0.0
 
     def __post_init__(self) -> None:
         """The one place a material's ranges are checked (a scene file's reader reports these
         under its keys): raises ``FieldError`` naming the field."""
         if len(self.color) != 3 or any(float(c) < 0.0 for c in self.color):
             raise FieldError("color", f"expected three non-negative numbers, got {self.color!r}")
-        for name in ("ambient", "diffuse", "specular", "reflectivity", "transparency"):
+        for name in ("ambient", "diffuse", "specular", "reflectivity", "transparency", "outline"):
             if (problem := range_problem(float(getattr(self, name)), 0.0, 1.0)) is not None:
                 raise FieldError(name, problem)
         if (problem := range_problem(self.shininess, 0.0, low_open=True)) is not None:
@@ -157,6 +163,7 @@ class MaterialTable:
     emission: np.ndarray
     absorption: np.ndarray
     unlit: np.ndarray
+    outline: np.ndarray
 
     @classmethod
     def from_materials(cls, materials: list[Material]) -> MaterialTable:
@@ -176,12 +183,18 @@ class MaterialTable:
             emission=np.array([m.emission for m in materials], np.float32).reshape(-1, 3),
             absorption=np.array([m.absorption for m in materials], np.float32).reshape(-1, 3),
             unlit=np.array([m.unlit for m in materials], bool),
+            outline=column("outline"),
         )
 
     @property
     def glows(self) -> bool:
         """Whether any material gives off light of its own (``emission``)."""
         return bool(self.emission.any())
+
+    @property
+    def outlined(self) -> bool:
+        """Whether any material draws an outline."""
+        return bool(self.outline.any())
 
 
 @dataclass
@@ -196,7 +209,8 @@ class HitMaterials:
     specular and transparency are zero: it shows its colour alone); ``emission`` and
     ``absorption`` (3, k) float32 (``Material.absorption``); ``occlusion`` (k,) float32 the
     share of ambient light that reaches each point (glTF occlusion maps) and ``coverage`` (k,)
-    float32 the share of each ray a see-through surface stops (glTF BLEND alpha). Columns the
+    float32 the share of each ray a see-through surface stops (glTF BLEND alpha); ``outline``
+    (k,) float32 ``Material.outline``. Columns the
     same for every hit (no material glows, none absorbs, no map occludes, every surface is
     opaque) are zero-stride views of that value: read like any other, written over only after
     ``np.array`` (the ``HitLooks`` that vary them make them so)."""
@@ -215,6 +229,7 @@ class HitMaterials:
     absorption: np.ndarray
     occlusion: np.ndarray
     coverage: np.ndarray
+    outline: np.ndarray
 
     def __len__(self) -> int:
         return len(self.ambient)
@@ -255,6 +270,11 @@ class HitMaterials:
             absorption=vectors(table.absorption, bool((table.absorption > 0).any())),
             occlusion=np.broadcast_to(np.float32(1.0), (k,)),
             coverage=np.broadcast_to(np.float32(1.0), (k,)),
+            outline=(
+                np.take(table.outline, material)
+                if table.outlined
+                else np.broadcast_to(np.float32(0.0), (k,))
+            ),
         )
         if table.unlit.any():
             hits.specular[~lit] = 0.0

@@ -159,6 +159,18 @@ def power(base: np.ndarray, exponent: np.ndarray) -> np.ndarray:
     return np.exp(result, out=result)
 
 
+def on_outline(cosine: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """(n,) bool: which hits lie on the outline of ``width`` (n,) float32 in [0, 1], a share of
+    the radius, given the (n,) float32 cosines ``-d·N`` between each ray and its surface's
+    normal turned to it.
+
+    Seen along d, a sphere's (or a tube's cross-section's) point of normal N lies ``r·sin θ``
+    from its centre, ``cos θ = -d·N``: within ``width · r`` of the silhouette exactly when
+    ``sin θ > 1 - width``, i.e. ``cos² θ < width · (2 - width)``. Width 0 outlines nothing."""
+    width = np.asarray(width, np.float32)
+    return cosine * cosine < width * (np.float32(2.0) - width)
+
+
 def _as_columns(rgb: np.ndarray) -> np.ndarray:
     """An RGB given as (3,) or (3, n), as something that broadcasts against (3, n)."""
     rgb = np.asarray(rgb, np.float32)

@@ -109,6 +109,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
         "compiled",
         "errors",
         "film",
+        "legend",
         "materials",
         "memory",
         "sampling",

@@ -48,7 +48,7 @@ def plan_frames(job: Job, scene: Scene) -> FramePlan:
     animation = scene.animation
     frames = frames_of(job, animation)
     paths = output_paths(job.output.pattern, frames)
-    encoding = output_encoding(job.output)._replace(look=scene.render.look())
+    encoding = output_encoding(job.output)._replace(look=scene.render.look(), legend=scene.legend)
     if frames is not None:  # the directories a pattern names (shots/f_{frame:04d}.png) are made
         for directory in sorted({Path(path).parent for path in paths.values()}):
             try:

@@ -225,6 +225,14 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
         help="the display curve: a 2.2 power, or sRGB's piecewise curve "
         "(render.transfer)" + SCENE_DEFAULT + ", else gamma2.2",
     )
+    parser.add_argument(
+        "--ao-bounces",
+        action=SetKey,
+        key="render.ao.bounces",
+        nargs=0,
+        const=True,
+        help="ambient occlusion at reflected and refracted hits too (render.ao.bounces = true)",
+    )
     for flag, projection in (("--ortho", "orthographic"), ("--perspective", "perspective")):
         parser.add_argument(
             flag,

@@ -65,6 +65,19 @@ def add_particle_flags(parser: argparse.ArgumentParser) -> None:
         help="a material for one type (repeatable; default: matte)",
     )
     group.add_argument("--box", action="store_true", help="draw the simulation box as thin lines")
+        "--bonds",
+        action="store_true",
+        help="sticks between bonded atoms (the file's bonds, else guessed from distances)",
+    )
+    group.add_argument("--bond-radius", type=float, metavar="R", help="the sticks' radius")
+    group.add_argument(
+        "--licorice", action="store_true", help="bonds, and atoms of the sticks' radius"
+    )
+    group.add_argument(
+        "--legend",
+        action="store_true",
+        help="draw what the colours mean (a colour bar or a key) in the image's corner",
+    )
     group.add_argument(
         "--follow",
         action="store_true",
@@ -90,6 +103,10 @@ PARTICLE_FLAG_DEFAULTS = {
     "color_columns": None,
     "material_of": None,
     "box": False,
+    "bonds": False,
+    "bond_radius": None,
+    "licorice": False,
+    "legend": False,
 }
 
 
@@ -107,11 +124,16 @@ def particle_scene(args: argparse.Namespace):
     """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say."""
     from embree_rt.errors import InputError
     from embree_rt.scene.model import Scene
+    from embree_rt.scene.particles.bonds import BondLook
     from embree_rt.scene.particles.look import ParticleLook
 
-    for flag, value in (("--radius", args.radius), ("--radius-scale", args.radius_scale)):
+    sizes = (("--radius", args.radius), ("--radius-scale", args.radius_scale))
+    for flag, value in (*sizes, ("--bond-radius", args.bond_radius)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise InputError(f"{flag}: expected a positive number, got {value:g}")
+    bonds = args.bonds or args.licorice  # (licorice is sticks and atoms of one radius)
+    if args.bond_radius is not None and not bonds:
+        raise InputError("--bond-radius: sets the sticks' radius, so it needs --bonds")
     look = ParticleLook(
         color_by=args.color_by,
         color=args.color,
@@ -133,6 +155,8 @@ def particle_scene(args: argparse.Namespace):
             floor=not args.no_floor,
             materials=dict(args.material_of or ()),
             box=args.box,
+            bonds=BondLook(args.bond_radius, args.licorice) if bonds else None,
+            legend=args.legend,
         )
     except ValueError as error:
         if isinstance(error, InputError):
@@ -191,7 +215,8 @@ def render_particle_frames(args: argparse.Namespace) -> None:
         apply_to_scene(scene, list(args.settings), str(args.scene))
         result = render(scene, threads=args.threads, spheres=args.spheres, quiet=True)
         path = paths[number]
-        writing(path, lambda result=result, path=path: result.save(path, encoding))
+        framed = encoding._replace(legend=scene.legend)
+        writing(path, lambda result=result, path=path, framed=framed: result.save(path, framed))
     if not args.quiet:
         print(
             f"embree-rt: {len(todo)} frames ({len(paths) - len(todo)} already on disk) of "

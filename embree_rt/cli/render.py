@@ -55,7 +55,7 @@ def render_still(job: Job, scene) -> tuple[int, float]:
         quiet=job.quiet,
         aovs=job.output.aovs or (),
     )
-    encoding = output_encoding(job.output)
+    encoding = output_encoding(job.output)._replace(legend=scene.legend)
     path = job.output.pattern
     check_output(path, job.output.aovs, encoding)  # again: the directory may have gone meanwhile
     written: list[Path] = []

@@ -69,6 +69,7 @@ MATERIAL_NUMBERS = (
     "transparency",
     "ior",
     "attenuation_distance",
+    "outline",
 )
 MATERIAL_FLAGS = ("metallic", "unlit")
 
@@ -396,6 +397,7 @@ class SceneReader:
         ao = AmbientOcclusion(
             samples=table.integer("samples", current.samples, low=0, high=4096),
             distance=table.number("distance", current.distance, low=0, low_open=True),
+            bounces=table.boolean("bounces", current.bounces),
         )
         table.finish()
         self._check(table, ao_problem(ao))

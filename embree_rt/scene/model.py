@@ -12,6 +12,7 @@ import numpy as np
 from embree_rt.ambient_occlusion import AmbientOcclusion
 from embree_rt.camera import Camera, Vec3, camera_problem
 from embree_rt.film import Look
+from embree_rt.legend import Legend
 from embree_rt.materials import PRESETS, RGB, Checker, Material
 from embree_rt.scene.animation import Animation
 from embree_rt.scene.errors import SceneError
@@ -246,6 +247,8 @@ class Scene:
     # What the scene's maker found and chose, one line each (a mesh file rendered on its own:
     # whose camera and lights, where the floor is), for ``embree-rt info``.
     notes: list[str] = field(default_factory=list)
+    # What the particles' colours mean (``legend.Legend``), when a legend was asked for.
+    legend: Legend | None = None
 
     @classmethod
     def from_file(cls, path, floor: bool = True) -> Scene:
@@ -286,21 +289,33 @@ class Scene:
         *,
         materials: dict[str, str] | None = None,
         box: bool = False,
+        bonds=None,
+        legend: bool = False,
     ) -> Scene:
         """Frame ``frame`` of the particle file ``path`` (a trajectory over ``topology``)
         rendered on its own: one sphere a particle, coloured and sized by ``look``
         (``embree_rt.scene.particles.ParticleLook``; default: by element, else by type), the
         file's ``up`` axis ("x", "y" or "z") upward, ``select`` keeping a subset (MDAnalysis's
         selection language), ``wrap`` putting positions into the periodic box, ``materials``
-        a material a type, ``box`` drawing the simulation box (``add_particles``); framed from
-        the bounds under the default rig, a floor under it unless ``floor`` is False. Raises
+        a material a type, ``box`` drawing the simulation box (``add_particles``), ``bonds`` (a
+        ``BondLook``) drawing its bonds as sticks, ``legend`` recording what the colours mean
+        (``Scene.legend``); framed from the bounds under the default rig, a floor under it
+        unless ``floor`` is False. Raises
         ``SceneError`` naming the file and the problem."""
         from embree_rt.scene.particles import read_particles
 
         particles = read_particles(path, frame=frame, topology=topology)
         scene = cls()
         scene.add_particles(
-            particles, look=look, up=up, select=select, wrap=wrap, materials=materials, box=box
+            particles,
+            look=look,
+            up=up,
+            select=select,
+            wrap=wrap,
+            materials=materials,
+            box=box,
+            bonds=bonds,
+            legend=legend,
         )
         scene.stage_particles(floor)
         return scene
@@ -316,14 +331,20 @@ class Scene:
         *,
         materials: dict[str, str] | None = None,
         box: bool = False,
+        bonds=None,
+        legend: bool = False,
     ) -> None:
         """Add a ``ParticleFrame``, an ``ase.Atoms`` or an MDAnalysis ``AtomGroup`` as
         spheres of ``material``, or of ``materials[type]`` for the types it names (elements
         where the particles have no types); ``box`` adds the simulation box's 12 edges as thin
-        round curves (see ``from_particles`` for the rest). ``SceneError`` for a type no
-        particle has or a file without a box."""
+        round curves; with ``bonds`` (an ``embree_rt.scene.particles.bonds.BondLook``) its
+        bonds as sticks; with ``legend``, what their colours mean becomes ``Scene.legend`` (see
+        ``from_particles`` for the rest). ``SceneError`` for a type no particle has or a file
+        without a box."""
+        from embree_rt.scene.particles import bonds as bond_sticks
         from embree_rt.scene.particles.box import BOX_COLOR
         from embree_rt.scene.particles.to_scene import (
+            UP_ROTATIONS,
             box_lines,
             particle_materials,
             particle_spheres,
@@ -334,12 +355,24 @@ class Scene:
         centers, radii, colors, note = particle_spheres(frame, look, up, None, wrap)
         names = particle_materials(frame, materials, material)
         edges = box_lines(frame, up) if box else None
+        notes = [note]
+        if bonds is not None:
+            drawn = (centers, radii, colors)
+            radii, bond_note = bond_sticks.add_bonds(
+                self, frame, drawn, bonds, UP_ROTATIONS[up], material
+            )
+            notes.append(bond_note)
         self.add_spheres(centers, radii, names, colors=colors)
         if edges is not None:
             points, radius = edges
             starts = np.arange(0, len(points), 2)
             self.add_curves(points, radius, "matte", starts=starts, color=BOX_COLOR)
-        self.notes.append(note)
+        self.notes.extend(notes)
+        if legend:
+            from embree_rt.scene.particles.key import particle_legend
+            from embree_rt.scene.particles.look import ParticleLook
+
+            self.legend = particle_legend(frame, look or ParticleLook())
 
     def stage_particles(self, floor: bool = True) -> None:
         """Camera, lights and floor framed on the spheres and curves (a box, bonds), as a mesh

@@ -27,8 +27,11 @@ def scene_document(scene: Scene, path: Path) -> dict:
         del document["render"]["background"]
     if not scene.render.ao.samples:  # off: files without ambient occlusion stay as they were
         del document["render"]["ao"]
-    elif math.isinf(scene.render.ao.distance):  # unlimited: the key left out
-        del document["render"]["ao"]["distance"]
+    else:
+        if math.isinf(scene.render.ao.distance):  # unlimited: the key left out
+            del document["render"]["ao"]["distance"]
+        if not scene.render.ao.bounces:  # the default: the key left out
+            del document["render"]["ao"]["bounces"]
     if scene.animation is not None:
         document["animation"] = animation_document(scene.animation)
     if len(scene.sphere_radii):
@@ -157,7 +160,8 @@ def look_document(scene: Scene) -> dict:
 
 def _material_dict(material) -> dict:
     fields = asdict(material)
-    # Keys a material leaves at their defaults (no glow, no absorption, lit) are not written.
+    # Keys a material leaves at their defaults (no glow, no absorption, lit, no outline) are not
+    # written.
     for name, default in asdict(Material()).items():
         if name in _OPTIONAL_MATERIAL_KEYS and fields[name] == default:
             del fields[name]
@@ -167,7 +171,13 @@ def _material_dict(material) -> dict:
     return {"preset": "matte", **fields}
 
 
-_OPTIONAL_MATERIAL_KEYS = ("emission", "attenuation_color", "attenuation_distance", "unlit")
+_OPTIONAL_MATERIAL_KEYS = (
+    "emission",
+    "attenuation_color",
+    "attenuation_distance",
+    "unlit",
+    "outline",
+)
 
 
 def save_scene(scene: Scene, path: str | Path) -> None:

@@ -16,7 +16,8 @@ class ParticleFrame:
     ``radii`` (n,) float64 from the file's radius or diameter column (PQR's radius), or None;
     ``properties`` other per-particle columns, name -> (n,) float64; ``box`` (3, 3) float64
     cell vectors as rows, or None; ``origin`` (3,) float64 the box's lowest corner;
-    ``frame`` this frame's number and ``frame_count`` how many the file holds.
+    ``frame`` this frame's number and ``frame_count`` how many the file holds; ``bonds``
+    (m, 2) int64 the particles the file says are bonded, or None when it lists none.
     """
 
     path: str
@@ -29,6 +30,7 @@ class ParticleFrame:
     origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
     frame: int = 0
     frame_count: int = 1
+    bonds: np.ndarray | None = None
     # The reader library's own object (an MDAnalysis Universe), for its selection language.
     source: object | None = field(default=None, repr=False)
 
@@ -61,4 +63,15 @@ class ParticleFrame:
             origin=self.origin,
             frame=self.frame,
             frame_count=self.frame_count,
+            bonds=None if self.bonds is None else kept_bonds(self.bonds, keep, len(self)),
         )
+
+
+def kept_bonds(bonds: np.ndarray, keep: np.ndarray, count: int) -> np.ndarray:
+    """(m', 2) int64: the ``bonds`` (m, 2) among ``count`` particles whose two particles
+    ``keep`` (count,) bool or (k,) int picks, renumbered as the kept particles are."""
+    number = np.full(count, -1, np.int64)
+    kept = np.arange(count)[keep]
+    number[kept] = np.arange(len(kept))
+    renumbered = number[np.asarray(bonds, np.int64)].reshape(-1, 2)
+    return renumbered[(renumbered >= 0).all(axis=1)]

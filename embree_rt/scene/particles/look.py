@@ -176,11 +176,18 @@ def colormap_colors(
     except KeyError:
         raise ValueError(f"--colormap: unknown colormap {colormap!r}") from None
     values = np.asarray(values, np.float64)
-    if value_range is None:
-        finite = values[np.isfinite(values)]
-        low, high = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
-    else:
-        low, high = value_range
+    low, high = colormap_range(values, value_range)
     span = high - low
     scaled = (values - low) / span if span > 0 else np.full(len(values), 0.5)
     return to_srgb8(cmap(np.clip(scaled, 0.0, 1.0))[:, :3])
+
+
+def colormap_range(
+    values: np.ndarray, value_range: tuple[float, float] | None
+) -> tuple[float, float]:
+    """(low, high) a colormap spans over (n,) float64 ``values``: ``value_range``, else the
+    values' own finite range (0, 1 when none is finite)."""
+    if value_range is not None:
+        return float(value_range[0]), float(value_range[1])
+    finite = values[np.isfinite(values)]
+    return (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)

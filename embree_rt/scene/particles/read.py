@@ -207,6 +207,8 @@ def _read_gsd(path: Path, plain: Path, frame: int) -> ParticleFrame:
         diameter = np.asarray(particles.diameter, np.float64)
         if snapshot.particles.diameter is not None and np.any(diameter != 1.0):
             result.radii = diameter / 2.0
+        if snapshot.bonds.N:
+            result.bonds = np.asarray(snapshot.bonds.group, np.int64).reshape(-1, 2)
         for name in ("charge", "mass"):
             values = getattr(particles, name)
             if values is not None:
@@ -337,6 +339,8 @@ def _read_mdanalysis(
         from MDAnalysis.lib.mdamath import triclinic_vectors
 
         result.box = np.asarray(triclinic_vectors(universe.dimensions), np.float64)
+    if hasattr(atoms, "bonds") and len(atoms.bonds):
+        result.bonds = np.asarray(atoms.bonds.indices, np.int64).reshape(-1, 2)
     result.source = universe
     return result
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from embree_rt.scene.particles.box import box_edges, box_radius
 from embree_rt.scene.particles.errors import ParticleFileError
-from embree_rt.scene.particles.frame import ParticleFrame
+from embree_rt.scene.particles.frame import ParticleFrame, kept_bonds
 from embree_rt.scene.particles.look import ParticleLook, particle_look
 
 # Rotations (det +1) taking a file's up axis to the renderer's +y (its floor is y = height).
@@ -46,6 +46,8 @@ def as_frame(particles) -> ParticleFrame:
             frame.elements = np.char.capitalize(np.asarray(atoms.elements, dtype=str))
         if hasattr(atoms, "radii"):
             frame.radii = np.asarray(atoms.radii, np.float64)
+        if hasattr(atoms, "bonds") and len(atoms.bonds):
+            frame.bonds = kept_bonds(atoms.bonds.indices, atoms.indices, len(atoms.universe.atoms))
         frame.source = atoms.universe
         return frame
     raise TypeError(
