@@ -342,6 +342,12 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
     parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
+    parser.add_argument(
+        "--no-refit",
+        action="store_true",
+        help="a trajectory's frames: build each frame's BVH anew (default: refit while the "
+        "particles stay the same)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,200 @@
+"""The frames of a particle trajectory, each an image: which frames are to be rendered, each
+frame's scene read and prepared, one BVH refitted while the particles stay the same, and the
+reading of frame k+1 and the writing of frame k-1 overlapped with the rendering of frame k.
+
+Memory stays bounded whatever the trajectory's length: at most three frames are alive at once,
+one being read, one being rendered and one being written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from embree_rt.scene.model import Scene
+
+
+@dataclass
+class FrameCounts:
+    """How each rendered frame got its BVH: ``refitted`` (the spheres moved in the last
+    frame's BVH) or ``rebuilt`` (a BVH built for it)."""
+
+    refitted: int = 0
+    rebuilt: int = 0
+
+
+def same_particles(last: Scene, scene: Scene) -> bool:
+    """Whether ``scene`` differs from ``last`` only in its spheres' centres (and camera), so a
+    BVH of ``last``'s spheres can be refitted to it: the same count, radii, materials and
+    colours, lights, floor, materials and render settings, and no other geometry."""
+
+    def same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+        if a is None or b is None:
+            return a is b
+        return a.shape == b.shape and bool(np.array_equal(a, b))
+
+    return (
+        same(last.sphere_radii, scene.sphere_radii)
+        and same(last.sphere_materials, scene.sphere_materials)
+        and same(last.sphere_colors, scene.sphere_colors)
+        and last.lights == scene.lights
+        and last.floor == scene.floor
+        and last.materials == scene.materials
+        and last.background == scene.background
+        and last.render == scene.render
+        and not (scene.meshes or scene.instances or scene.curves)
+        and not (last.meshes or last.instances or last.curves)
+    )
+
+
+@dataclass(frozen=True)
+class FrameRendering:
+    """How the frames are rendered: ``spheres`` and ``threads`` as ``Renderer`` takes them;
+    ``refit`` moves the spheres of the last frame's BVH when the particles are the same
+    (analytic spheres only); ``overlap`` reads and writes in threads beside the render."""
+
+    spheres: str = "analytic"
+    threads: int | None = None
+    refit: bool = True
+    overlap: bool = True
+
+
+def render_frames(
+    numbers: Sequence[int],
+    read: Callable[[int], Scene],
+    write: Callable[[int, object], None],
+    how: FrameRendering = FrameRendering(),
+) -> FrameCounts:
+    """Render frame ``read(n)`` for each of ``numbers`` in order and hand its
+    ``api.RenderResult`` to ``write(n, result)``; returns how many frames were refitted and
+    rebuilt. With ``how.overlap``, frame k+1 is read and frame k-1 written (each in a thread of
+    its own) while frame k renders: the images are the same as without, and at most three
+    frames are alive. An error in any stage is raised here, after the other stages stop."""
+    from embree_rt.api import Renderer, require_memory
+
+    counts = FrameCounts()
+    renderer: Renderer | None = None
+    refit = how.refit and how.spheres == "analytic"
+
+    def render(scene: Scene):
+        nonlocal renderer
+        if renderer is not None and refit and same_particles(renderer.scene, scene):
+            renderer.update_spheres(scene.sphere_centers, scene.sphere_radii)
+            counts.refitted += 1
+        else:
+            if renderer is not None:
+                renderer.close()
+                renderer = None
+            require_memory(scene, scene.render, spheres=how.spheres, threads=how.threads)
+            renderer = Renderer(scene, spheres=how.spheres, threads=how.threads, movable=refit)
+            counts.rebuilt += 1
+        return renderer.render(camera=scene.camera)
+
+    try:
+        if not how.overlap:
+            for number in numbers:
+                write(number, render(read(number)))
+            return counts
+        with (
+            ThreadPoolExecutor(1, thread_name_prefix="frame-read") as reader,
+            ThreadPoolExecutor(1, thread_name_prefix="frame-write") as writer,
+        ):
+            reading: Future | None = reader.submit(read, numbers[0]) if numbers else None
+            written: Future | None = None
+            try:
+                for index, number in enumerate(numbers):
+                    scene = reading.result()
+                    following = index + 1 < len(numbers)
+                    reading = reader.submit(read, numbers[index + 1]) if following else None
+                    result = render(scene)
+                    del scene
+                    if written is not None:
+                        written.result()  # frame k-1 on disk before frame k is handed over
+                    written = writer.submit(write, number, result)
+                    del result
+                if written is not None:
+                    written.result()
+            finally:
+                # The frame read ahead is dropped; a frame already rendered is still written
+                # (the executor waits for it), as it would be without overlap.
+                if reading is not None:
+                    reading.cancel()
+        return counts
+    finally:
+        if renderer is not None:
+            renderer.close()
+
+
+def prepared_frame(args: argparse.Namespace, number: int, staged: Scene | None) -> Scene:
+    """The scene of frame ``number`` of the particle file ``args.scene`` as the flags draw it,
+    with the camera, lights and floor of ``staged`` (the first frame's) unless ``--follow``,
+    and ``-D`` settings applied."""
+    from embree_rt.cli.particles import particle_scene
+    from embree_rt.scene.settings import apply_to_scene
+
+    frame_args = copy.copy(args)
+    frame_args.frame = number
+    scene = particle_scene(frame_args)
+    if staged is not None and not args.follow:
+        scene.camera, scene.lights, scene.floor = staged.camera, staged.lights, staged.floor
+    apply_to_scene(scene, list(args.settings), str(args.scene))
+    return scene
+
+
+def render_trajectory(args: argparse.Namespace) -> None:
+    """``embree-rt render TRAJECTORY -o shots/f_{frame:04d}.png [--frames A:B[:STEP]]``: each
+    frame an image, on this machine, the camera, lights and floor of the first frame unless
+    ``--follow``; frames on disk skipped unless ``--overwrite``; the BVH refitted between
+    frames of the same particles unless ``--no-refit``."""
+    from embree_rt.cli.checks import check_library, output_encoding, writing
+    from embree_rt.cli.errors import UsageError
+    from embree_rt.cli.frame_paths import output_paths
+    from embree_rt.cli.particles import particle_scene, trajectory_range
+    from embree_rt.film import check_output_path
+    from embree_rt.scene.particles import read_particles
+
+    for flag, given in (("--cluster", args.cluster), ("--scheduler", args.scheduler)):
+        if given:
+            raise UsageError(f"{flag}: particle trajectories are rendered on this machine")
+    if args.aov is not None:
+        raise UsageError("--aov: AOVs are written for still images, not trajectory frames")
+    count = read_particles(args.scene, frame=0, topology=args.topology).frame_count
+    frames = trajectory_range(args.scene, args.frames, count)
+    paths = output_paths(args.output, frames)
+    encoding = output_encoding(args)
+    for directory in sorted({Path(path).parent for path in paths.values()}):
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise UsageError(f"-o: cannot make the directory {directory}: {error}") from None
+    for path in paths.values():
+        try:
+            check_output_path(path, encoding)
+        except (ValueError, RuntimeError) as error:
+            raise UsageError(str(error)) from None
+    todo = [f for f, path in paths.items() if args.overwrite or not Path(path).exists()]
+    check_library()
+    first = copy.copy(args)
+    first.frame = frames[0]
+    staged = particle_scene(first)
+
+    def write(number: int, result) -> None:
+        path = paths[number]
+        writing(path, lambda: result.save(path, encoding))
+
+    how = FrameRendering(spheres=args.spheres, threads=args.threads, refit=not args.no_refit)
+    counts = render_frames(todo, lambda n: prepared_frame(args, n, staged), write, how)
+    if not args.quiet:
+        print(
+            f"embree-rt: {len(todo)} frames ({counts.refitted} refitted, {counts.rebuilt} "
+            f"rebuilt; {len(paths) - len(todo)} already on disk) of {args.scene} -> "
+            f"{args.output}",
+            file=sys.stderr,
+        )
