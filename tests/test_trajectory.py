@@ -153,3 +153,55 @@ def test_memory_is_flat_over_a_thousand_tiny_frames():
         tracemalloc.stop()
     assert (counts.refitted, counts.rebuilt) == (999, 1)
     assert held[999] - held[500] < 200 * 1024, held
+
+
+def decoded(path: Path) -> list[np.ndarray]:
+    """The (h, w, 3) uint8 frames of a video, decoded by the reader library (Pillow for GIF,
+    imageio-ffmpeg's ffmpeg for the others)."""
+    if path.suffix == ".gif":
+        from PIL import Image, ImageSequence
+
+        with Image.open(path) as gif:
+            return [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(gif)]
+    import imageio_ffmpeg
+
+    reader = imageio_ffmpeg.read_frames(str(path))
+    meta = reader.__next__()
+    width, height = meta["size"]
+    return [np.frombuffer(f, np.uint8).reshape(height, width, 3) for f in reader]
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4", ".webm"])
+def test_video_frames_are_the_trajectory_frames(tmp_path, suffix):
+    """Each decoded frame is nearest to the PNG of its own frame among all the frames' PNGs:
+    the video holds the frames in order, and they differ as the positions do."""
+    from PIL import Image
+
+    write_moving_dump(tmp_path / "d.lammpstrj", frames=FRAMES, count=60)
+    flags = ["--width", "40", "--height", "30", "--spp", "1", "--threads", "2"]
+    dump = str(tmp_path / "d.lammpstrj")
+    assert main(["render", dump, "-o", str(tmp_path / "f_{frame}.png"), *flags]) in (0, None)
+    pngs = [np.asarray(Image.open(tmp_path / f"f_{k}.png"), np.float64) for k in range(FRAMES)]
+    video = tmp_path / f"v{suffix}"
+    assert main(["render", dump, "-o", str(video), "--fps", "5", "--quality", "100", *flags]) in (
+        0,
+        None,
+    )
+    frames = decoded(video)
+    assert len(frames) == FRAMES
+    for k, frame in enumerate(frames):
+        distances = [np.abs(frame - png).mean() for png in pngs]
+        assert int(np.argmin(distances)) == k, distances
+    assert [p.name for p in tmp_path.iterdir() if "partial" in p.name] == []
+
+
+def test_an_interrupted_video_leaves_no_file(tmp_path):
+    from embree_rt.video import VideoWriter
+
+    (tmp_path / "old.gif").write_bytes(b"kept")
+    for name in ("v.mp4", "old.gif"):
+        with pytest.raises(KeyboardInterrupt), VideoWriter(tmp_path / name, 10) as video:
+            video.add(np.zeros((8, 8, 3), np.uint8))
+            raise KeyboardInterrupt
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.gif"]
+    assert (tmp_path / "old.gif").read_bytes() == b"kept"

@@ -348,6 +348,13 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         help="a trajectory's frames: build each frame's BVH anew (default: refit while the "
         "particles stay the same)",
     )
+    parser.add_argument(
+        "--fps",
+        type=float,
+        default=24.0,
+        metavar="N",
+        help="frames per second of a video (-o ending in .mp4, .webm or .gif)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:

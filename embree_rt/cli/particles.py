@@ -66,6 +66,7 @@ PARTICLE_FLAG_DEFAULTS = {
     "json": False,
     "follow": False,
     "no_refit": False,
+    "fps": 24.0,
 }
 
 

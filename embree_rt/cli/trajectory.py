@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from embree_rt.scene.model import Scene
+from embree_rt.video import DEFAULT_FPS, is_video
 
 
 @dataclass
@@ -167,30 +168,36 @@ def render_trajectory(args: argparse.Namespace) -> None:
         raise UsageError("--aov: AOVs are written for still images, not trajectory frames")
     count = read_particles(args.scene, frame=0, topology=args.topology).frame_count
     frames = trajectory_range(args.scene, args.frames, count)
-    paths = output_paths(args.output, frames)
-    encoding = output_encoding(args)
-    for directory in sorted({Path(path).parent for path in paths.values()}):
-        try:
-            directory.mkdir(parents=True, exist_ok=True)
-        except OSError as error:
-            raise UsageError(f"-o: cannot make the directory {directory}: {error}") from None
-    for path in paths.values():
-        try:
-            check_output_path(path, encoding)
-        except (ValueError, RuntimeError) as error:
-            raise UsageError(str(error)) from None
-    todo = [f for f, path in paths.items() if args.overwrite or not Path(path).exists()]
-    check_library()
     first = copy.copy(args)
     first.frame = frames[0]
     staged = particle_scene(first)
-
-    def write(number: int, result) -> None:
-        path = paths[number]
-        writing(path, lambda: result.save(path, encoding))
-
     how = FrameRendering(spheres=args.spheres, threads=args.threads, refit=not args.no_refit)
-    counts = render_frames(todo, lambda n: prepared_frame(args, n, staged), write, how)
+    if is_video(args.output):
+        counts = render_video(args, frames, staged, how)
+        todo, paths = list(frames), dict.fromkeys(frames, args.output)
+    else:
+        if args.fps != DEFAULT_FPS:
+            raise UsageError("--fps: only for a video (-o ending in .mp4, .webm or .gif)")
+        paths = output_paths(args.output, frames)
+        encoding = output_encoding(args)
+        for directory in sorted({Path(path).parent for path in paths.values()}):
+            try:
+                directory.mkdir(parents=True, exist_ok=True)
+            except OSError as error:
+                raise UsageError(f"-o: cannot make the directory {directory}: {error}") from None
+        for path in paths.values():
+            try:
+                check_output_path(path, encoding)
+            except (ValueError, RuntimeError) as error:
+                raise UsageError(str(error)) from None
+        todo = [f for f, path in paths.items() if args.overwrite or not Path(path).exists()]
+        check_library()
+
+        def write(number: int, result) -> None:
+            path = paths[number]
+            writing(path, lambda: result.save(path, encoding))
+
+        counts = render_frames(todo, lambda n: prepared_frame(args, n, staged), write, how)
     if not args.quiet:
         print(
             f"embree-rt: {len(todo)} frames ({counts.refitted} refitted, {counts.rebuilt} "
@@ -198,3 +205,46 @@ def render_trajectory(args: argparse.Namespace) -> None:
             f"{args.output}",
             file=sys.stderr,
         )
+
+
+def render_video(
+    args: argparse.Namespace, frames: range, staged: Scene, how: FrameRendering
+) -> FrameCounts:
+    """The frames of ``args.scene`` as one video at ``args.output`` (``video.VideoWriter``,
+    ``--fps``, ``--quality``), checked before any frame renders; an existing video is kept
+    unless ``--overwrite``."""
+    from embree_rt.cli.checks import check_library, writing
+    from embree_rt.cli.errors import UsageError
+    from embree_rt.scene.settings import apply_to_scene
+    from embree_rt.video import VideoWriter, check_video
+
+    path = Path(args.output)
+    if path.exists() and not args.overwrite:
+        raise UsageError(f"-o: {path} exists (--overwrite to replace it)")
+    if not path.parent.is_dir():
+        raise UsageError(f"-o: {path}: no directory {path.parent}")
+    sized = copy.copy(staged)
+    apply_to_scene(sized, list(args.settings), str(args.scene))
+    try:
+        check_video(path, sized.render.width, sized.render.height, args.fps)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    check_library()
+
+    def make() -> FrameCounts:
+        with VideoWriter(path, args.fps, args.quality) as video:
+            return render_frames(
+                frames,
+                lambda n: prepared_frame(args, n, staged),
+                lambda n, result: video.add(result.to_srgb8()),
+                how,
+            )
+
+    counts = FrameCounts()
+
+    def run() -> None:
+        nonlocal counts
+        counts = make()
+
+    writing(str(path), run)
+    return counts
