@@ -60,9 +60,7 @@ def render_dump(tmp_path: Path, out: str, *flags: str) -> list[Path]:
             "30",
             "--spp",
             "1",
-            "--threads",
-            "2",
-            *flags,
+            *(flags or ("--threads", "2")),
         ]
     )
     assert code in (0, None)
@@ -73,7 +71,7 @@ def test_refitted_frames_are_fresh_builds_bitwise(tmp_path, capsys):
     write_moving_dump(tmp_path / "d.lammpstrj")
     refitted = render_dump(tmp_path, "refit")
     assert f"{FRAMES - 1} refitted, 1 rebuilt" in capsys.readouterr().err
-    rebuilt = render_dump(tmp_path, "rebuild", "--no-refit")
+    rebuilt = render_dump(tmp_path, "rebuild", "--no-refit", "--threads", "2")
     assert f"0 refitted, {FRAMES} rebuilt" in capsys.readouterr().err
     assert len(refitted) == len(rebuilt) == FRAMES
     images = [np.load(path) for path in refitted]
@@ -205,3 +203,27 @@ def test_an_interrupted_video_leaves_no_file(tmp_path):
             raise KeyboardInterrupt
     assert sorted(p.name for p in tmp_path.iterdir()) == ["old.gif"]
     assert (tmp_path / "old.gif").read_bytes() == b"kept"
+
+
+def test_frames_on_a_dask_cluster_are_the_local_frames_bitwise(tmp_path, capsys):
+    """local:2 gives each worker a contiguous run of frames (a BVH built once, then refitted):
+    one rebuild a worker, and every image the local run's (a frame's image depends on its
+    scene alone, not on the tree nor on which process renders it)."""
+    write_moving_dump(tmp_path / "d.lammpstrj")
+    here = render_dump(tmp_path, "here", "--threads", "1")
+    capsys.readouterr()
+    code = main(
+        [
+            "render",
+            str(tmp_path / "d.lammpstrj"),
+            "-o",
+            str(tmp_path / "dask" / "f_{frame:02d}.npy"),
+            *["--width", "40", "--height", "30", "--spp", "1", "--cluster", "local:2"],
+        ]
+    )
+    assert code in (0, None)
+    assert f"{FRAMES - 2} refitted, 2 rebuilt" in capsys.readouterr().err
+    there = sorted((tmp_path / "dask").glob("f_*.npy"))
+    assert [p.name for p in there] == [p.name for p in here]
+    for a, b in zip(here, there, strict=True):
+        np.testing.assert_array_equal(np.load(a), np.load(b))

@@ -161,9 +161,9 @@ def render_trajectory(args: argparse.Namespace) -> None:
     from embree_rt.film import check_output_path
     from embree_rt.scene.particles import read_particles
 
-    for flag, given in (("--cluster", args.cluster), ("--scheduler", args.scheduler)):
-        if given:
-            raise UsageError(f"{flag}: particle trajectories are rendered on this machine")
+    on_dask = args.cluster is not None or args.scheduler is not None
+    if on_dask and is_video(args.output):
+        raise UsageError("--cluster, --scheduler: a video is encoded on this machine: write PNGs")
     if args.aov is not None:
         raise UsageError("--aov: AOVs are written for still images, not trajectory frames")
     count = read_particles(args.scene, frame=0, topology=args.topology).frame_count
@@ -193,11 +193,15 @@ def render_trajectory(args: argparse.Namespace) -> None:
         todo = [f for f, path in paths.items() if args.overwrite or not Path(path).exists()]
         check_library()
 
-        def write(number: int, result) -> None:
-            path = paths[number]
-            writing(path, lambda: result.save(path, encoding))
+        if on_dask:
+            counts = render_on_dask(args, todo, staged, paths, encoding)
+        else:
 
-        counts = render_frames(todo, lambda n: prepared_frame(args, n, staged), write, how)
+            def write(number: int, result) -> None:
+                path = paths[number]
+                writing(path, lambda: result.save(path, encoding))
+
+            counts = render_frames(todo, lambda n: prepared_frame(args, n, staged), write, how)
     if not args.quiet:
         print(
             f"embree-rt: {len(todo)} frames ({counts.refitted} refitted, {counts.rebuilt} "
@@ -248,3 +252,70 @@ def render_video(
 
     writing(str(path), run)
     return counts
+
+
+def render_on_dask(
+    args: argparse.Namespace, numbers: list[int], staged: Scene, paths: dict, encoding
+) -> FrameCounts:
+    """Frames ``numbers`` on the cluster of ``--cluster``/``--scheduler``: one contiguous run
+    of frames a worker (``render_run``), so each keeps its BVH, refitted, from frame to frame,
+    the particle file read and the images written by the worker (the paths resolved here: a
+    ``--scheduler``'s workers must see this machine's files). The images are those of a run on
+    this machine: a frame's image depends on its scene alone."""
+    from embree_rt.cli.cluster import connected, quiet_dask
+    from embree_rt.cli.job import where_of
+
+    where = where_of(args)
+    view = Scene(camera=staged.camera, lights=staged.lights, floor=staged.floor)
+    on_worker = copy.copy(args)
+    on_worker.scene = str(Path(args.scene).resolve())
+    if args.topology is not None:
+        on_worker.topology = str(Path(args.topology).resolve())
+    files = {n: str(Path(paths[n]).resolve()) for n in numbers}
+    counts = FrameCounts()
+    if not numbers:
+        return counts
+    from embree_rt import distributed
+
+    with quiet_dask(), connected(distributed, where) as client:
+        workers = max(1, len(client.nthreads()))
+        runs = [list(run) for run in np.array_split(numbers, workers) if len(run)]
+        futures = [
+            client.submit(
+                render_run,
+                on_worker,
+                [int(n) for n in run],
+                view,
+                {int(n): files[int(n)] for n in run},
+                encoding,
+                pure=False,
+            )
+            for run in runs
+        ]
+        for done in client.gather(futures):
+            counts.refitted += done.refitted
+            counts.rebuilt += done.rebuilt
+    return counts
+
+
+def render_run(
+    args: argparse.Namespace, numbers: list[int], view: Scene, files: dict[int, str], encoding
+) -> FrameCounts:
+    """On a Dask worker: frames ``numbers`` of ``args.scene`` (read here), seen as ``view``'s
+    camera, lights and floor (unless ``--follow``), each written to ``files[n]``; one BVH
+    refitted along the run unless ``--no-refit``; the worker's own threads."""
+    from embree_rt.cli.checks import writing
+
+    try:
+        import distributed
+
+        threads = max(1, int(getattr(distributed.get_worker().state, "nthreads", 1)))
+    except (ImportError, ValueError, AttributeError):
+        threads = 1
+
+    def write(number: int, result) -> None:
+        path = files[number]
+        writing(path, lambda: result.save(path, encoding))
+
+    how = FrameRendering(spheres=args.spheres, threads=threads, refit=not args.no_refit)
+    return render_frames(numbers, lambda n: prepared_frame(args, n, view), write, how)
