@@ -227,3 +227,48 @@ def test_frames_on_a_dask_cluster_are_the_local_frames_bitwise(tmp_path, capsys)
     assert [p.name for p in there] == [p.name for p in here]
     for a, b in zip(here, there, strict=True):
         np.testing.assert_array_equal(np.load(a), np.load(b))
+
+
+def test_views_from_a_cameras_file_are_the_stills_of_those_cameras(tmp_path, capsys):
+    """``--cameras``: view k is the still the API renders of the same file seen by camera k
+    (bitwise: one machine, one scene, the same camera), written with its camera data; a bad key
+    is refused naming the file and the camera, exit 2, nothing written."""
+    import json
+
+    write_moving_dump(tmp_path / "d.lammpstrj")
+    cameras = [
+        {"position": [0.0, -30.0, 10.0], "look_at": [5.0, 5.0, 5.0]},
+        {"position": [30.0, 0.0, 10.0], "look_at": [5.0, 5.0, 5.0], "fov": 30.0},
+    ]
+    (tmp_path / "cams.json").write_text(json.dumps({"cameras": cameras}))
+    size = ["--width", "40", "--height", "30", "--spp", "1", "--threads", "2"]
+    dump = str(tmp_path / "d.lammpstrj")
+    pattern = str(tmp_path / "views" / "v_{view:02d}.npz")
+    argv = ["render", dump, "--cameras", str(tmp_path / "cams.json"), "-o", pattern, *size]
+    assert main([*argv, "--aov", "depth"]) in (0, None)
+    assert "2 views" in capsys.readouterr().err
+    scene = rt.Scene.from_particles(dump, up="z")
+    for k, camera in enumerate(cameras):
+        with np.load(tmp_path / "views" / f"v_{k:02d}.npz") as view:
+            expected = rt.render(
+                scene,
+                camera=rt.Camera(**camera),
+                width=40,
+                height=30,
+                spp=1,
+                threads=2,
+            )
+            np.testing.assert_array_equal(view["beauty"], expected.image)
+            assert view["depth"].shape == (30, 40)
+    (tmp_path / "bad.json").write_text(json.dumps({"cameras": [{"fovv": 3}]}))
+    bad = [
+        "render",
+        dump,
+        "--cameras",
+        str(tmp_path / "bad.json"),
+        "-o",
+        str(tmp_path / "b_{view}.png"),
+    ]
+    assert main(bad) == 2
+    assert "bad.json: cameras[0].fovv: unknown key" in capsys.readouterr().err
+    assert not list(tmp_path.glob("b_*"))

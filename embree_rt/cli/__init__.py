@@ -100,6 +100,11 @@ def run_command(args) -> None:
         from embree_rt.cli.job import job_from_args
 
         job = job_from_args(args)
+        if getattr(args, "cameras", None) is not None:
+            from embree_rt.cli.views import run_views
+
+            run_views(job, args, timeline)
+            return
         if job.reads_trajectory:
             from embree_rt.cli.particles import render_particle_frames
 

@@ -355,6 +355,11 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="frames per second of a video (-o ending in .mp4, .webm or .gif)",
     )
+    parser.add_argument(
+        "--cameras",
+        metavar="FILE",
+        help="a JSON/TOML file of cameras: render each view to -o's {view} pattern",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
