@@ -24,13 +24,17 @@ def is_video(path: str | os.PathLike) -> bool:
     return Path(path).suffix.lower() in VIDEO_SUFFIXES
 
 
-def check_video(path: str | os.PathLike, width: int, height: int, fps: float) -> None:
+def check_video(
+    path: str | os.PathLike, width: int, height: int, fps: float, quality: int | None = None
+) -> None:
     """Raise ValueError naming ``path`` for what the video could not be written with: no
-    encoder installed (the ``video`` extra), a frame rate not positive, or an odd size for
-    H.264/VP9 (their 4:2:0 colour halves the size)."""
+    encoder installed (the ``video`` extra), a frame rate not positive and finite, a quality
+    outside 1..100, or an odd size for H.264/VP9 (their 4:2:0 colour halves the size)."""
     suffix = Path(path).suffix.lower()
-    if not fps > 0:
+    if not 0 < fps < float("inf"):
         raise ValueError(f"--fps: expected a positive number, got {fps:g}")
+    if quality is not None and not 1 <= quality <= 100:
+        raise ValueError(f"--quality: expected 1 to 100 for a video, got {quality}")
     if suffix in FFMPEG_CODECS:
         try:
             import imageio_ffmpeg  # noqa: F401

@@ -343,19 +343,6 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
     parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
     parser.add_argument(
-        "--no-refit",
-        action="store_true",
-        help="a trajectory's frames: build each frame's BVH anew (default: refit while the "
-        "particles stay the same)",
-    )
-    parser.add_argument(
-        "--fps",
-        type=float,
-        default=24.0,
-        metavar="N",
-        help="frames per second of a video (-o ending in .mp4, .webm or .gif)",
-    )
-    parser.add_argument(
         "--cameras",
         metavar="FILE",
         help="a JSON/TOML file of cameras: render each view to -o's {view} pattern",

@@ -48,6 +48,19 @@ def add_particle_flags(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="with --frames: frame each frame on its own bounds (default: the first frame's)",
     )
+    group.add_argument(
+        "--no-refit",
+        action="store_true",
+        help="a trajectory's frames: build each frame's BVH anew (default: refit while the "
+        "particles stay the same)",
+    )
+    group.add_argument(
+        "--fps",
+        type=float,
+        default=24.0,
+        metavar="N",
+        help="frames per second of a trajectory's video (-o ending in .mp4, .webm or .gif)",
+    )
 
 
 # The particle flags and their defaults: given for another kind of file, they are refused.

@@ -230,7 +230,7 @@ def render_video(
     sized = copy.copy(staged)
     apply_to_scene(sized, list(args.settings), str(args.scene))
     try:
-        check_video(path, sized.render.width, sized.render.height, args.fps)
+        check_video(path, sized.render.width, sized.render.height, args.fps, args.quality)
     except ValueError as error:
         raise UsageError(str(error)) from None
     check_library()
