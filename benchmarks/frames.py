@@ -7,6 +7,8 @@ included), median of ``--repeats``, the variants in turns:
 
 - ``gsd`` / ``dump``: ``embree-rt render FILE -o DIR/f_{frame:04d}.png`` (refit, overlap);
 - ``gsd_no_refit``: the same with ``--no-refit`` (a BVH built every frame);
+- ``pipeline_overlap`` / ``pipeline_sequential``: the frames pipeline from Python on the GSD
+  file, with and without reading and writing beside the render;
 - ``loop_this`` / ``loop_base``: a Python loop over the same positions, one ``render`` (a fresh
   BVH) and one PNG a frame, through the Python API that both this tree and ``--base`` (the
   release before this work, which reads no particle files) have; ``--base`` is its checkout,
@@ -60,6 +62,27 @@ for k in range(frames):
     scene.lights = [rt.PointLight(position=tuple(centre + size), intensity=3.0 * size * size)]
     result = rt.render(scene, width=width, height=height, spp=1)
     result.save(f"{out}/f_{k:04d}.png")
+"""
+
+# The frames pipeline through Python, overlapped or not: what reading and writing beside the
+# render save (the command line always overlaps).
+PIPELINE = """
+import sys
+import embree_rt as rt
+from embree_rt.cli.trajectory import FrameRendering, render_frames
+path, out, width, height, frames, overlap = sys.argv[1:7]
+first = rt.Scene.from_particles(path, frame=0)
+def read(n):
+    scene = rt.Scene.from_particles(path, frame=n)
+    scene.camera, scene.lights, scene.floor = first.camera, first.lights, first.floor
+    scene.render = scene.render.with_overrides(width=int(width), height=int(height), spp=1)
+    return scene
+render_frames(
+    range(int(frames)),
+    read,
+    lambda n, result: result.save(f"{out}/f_{n:04d}.png"),
+    FrameRendering(overlap=overlap == "1"),
+)
 """
 
 
@@ -116,6 +139,12 @@ def command(variant: str, paths: dict[str, Path], out: Path, frames: int, args) 
             str(args.height),
             str(frames),
         ]
+    if variant.startswith("pipeline"):
+        overlap = "1" if variant == "pipeline_overlap" else "0"
+        return [
+            *[sys.executable, "-c", PIPELINE, str(paths["gsd"]), str(out)],
+            *[str(args.width), str(args.height), str(frames), overlap],
+        ]
     source = paths["dump" if variant == "dump" else "gsd"]
     extra = ["--no-refit"] if variant == "gsd_no_refit" else []
     pattern = str(out / "f_{frame:04d}.png")
@@ -153,7 +182,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--base", default="/work/wt/base", help="checkout of the release before")
     args = parser.parse_args()
-    variants = ["gsd", "dump", "gsd_no_refit", "loop_this"]
+    variants = ["gsd", "dump", "gsd_no_refit", "pipeline_overlap", "pipeline_sequential"]
+    variants.append("loop_this")
     if args.base and Path(args.base, "embree_rt").is_dir():
         variants.append("loop_base")
     with tempfile.TemporaryDirectory() as name:
