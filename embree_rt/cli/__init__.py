@@ -106,9 +106,9 @@ def run_command(args) -> None:
             run_views(job, args, timeline)
             return
         if job.reads_trajectory:
-            from embree_rt.cli.particles import render_particle_frames
+            from embree_rt.cli.trajectory import render_trajectory
 
-            render_particle_frames(args)
+            render_trajectory(args)
             return
         if job.on_dask:
             from embree_rt.cli import cluster as runner

@@ -127,14 +127,6 @@ def particle_scene(args: argparse.Namespace):
         raise InputError(f"{args.scene}: {error}") from None
 
 
-def render_particle_frames(args: argparse.Namespace) -> None:
-    """``embree-rt render TRAJECTORY -o shots/f_{frame:04d}.png``: the frames pipeline
-    (``cli.trajectory``)."""
-    from embree_rt.cli.trajectory import render_trajectory
-
-    render_trajectory(args)
-
-
 def trajectory_range(path: str, text: str | None, count: int) -> range:
     """Frames ``A:B[:STEP]`` (B excluded; either end may be left out) or ``A`` of a file of
     ``count`` frames; ``ParticleFileError`` naming the file for a range past its end."""
