@@ -1,6 +1,7 @@
-"""The frames of a particle trajectory, each an image: which frames are to be rendered, each
-frame's scene read and prepared, one BVH refitted while the particles stay the same, and the
-reading of frame k+1 and the writing of frame k-1 overlapped with the rendering of frame k.
+"""The frames of a particle trajectory, each an image or all one video: which frames are to be
+rendered, each frame's scene read and prepared, one BVH refitted while the particles stay the
+same, the reading of frame k+1 and the writing of frame k-1 overlapped with the rendering of
+frame k, and contiguous runs of frames on Dask workers.
 
 Memory stays bounded whatever the trajectory's length: at most three frames are alive at once,
 one being read, one being rendered and one being written.
@@ -223,6 +224,8 @@ def render_video(
     from embree_rt.video import VideoWriter, check_video
 
     path = Path(args.output)
+    if args.bit_depth != 8:
+        raise UsageError(f"--bit-depth: {path.suffix} frames are 8 bits a channel")
     if path.exists() and not args.overwrite:
         raise UsageError(f"-o: {path} exists (--overwrite to replace it)")
     if not path.parent.is_dir():
