@@ -118,6 +118,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
         "textures",
         "transforms",
         "version",
+        "video",
     ),
     "embree": ("embree",),
     "scene": ("scene",),

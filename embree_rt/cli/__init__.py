@@ -100,10 +100,15 @@ def run_command(args) -> None:
         from embree_rt.cli.job import job_from_args
 
         job = job_from_args(args)
-        if job.reads_trajectory:
-            from embree_rt.cli.particles import render_particle_frames
+        if getattr(args, "cameras", None) is not None:
+            from embree_rt.cli.views import run_views
 
-            render_particle_frames(args)
+            run_views(job, args, timeline)
+            return
+        if job.reads_trajectory:
+            from embree_rt.cli.trajectory import render_trajectory
+
+            render_trajectory(args)
             return
         if job.on_dask:
             from embree_rt.cli import cluster as runner

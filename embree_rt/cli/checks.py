@@ -22,7 +22,7 @@ def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) 
     those of the AOV files beside it, as bad input: every ValueError it raises is about the
     path, its RuntimeError about OpenEXR missing for ``.exr``."""
     try:
-        if "{frame" in path:  # its directories are made, and checked, once the frames are known
+        if "{frame" in path or "{view" in path:  # directories made once the frames are known
             check_image_name(path, encoding or Encoding())
             return
         check_output_path(path, encoding or Encoding())

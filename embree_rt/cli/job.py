@@ -153,8 +153,12 @@ class Job:
     @property
     def reads_trajectory(self) -> bool:
         """Whether a particle file's frames are each an image (``cli.particles``)."""
+        from embree_rt.video import is_video
+
         return (
-            isinstance(self.source, ParticleFile) and self.output is not None and self.output.framed
+            isinstance(self.source, ParticleFile)
+            and self.output is not None
+            and (self.output.framed or is_video(self.output.pattern))
         )
 
 
@@ -241,7 +245,10 @@ def job_from_args(args: argparse.Namespace) -> Job:
     )
     if output.aovs is not None and output.framed:
         raise UsageError(AOVS_ONLY_STILLS_HERE)
-    check_output(output.pattern, output.aovs, output_encoding(output))
+    from embree_rt.video import is_video
+
+    if not (isinstance(source, ParticleFile) and is_video(output.pattern)):  # cli.trajectory's
+        check_output(output.pattern, output.aovs, output_encoding(output))
     if isinstance(source, RandomField) and source.save_scene is not None:
         target = Path(source.save_scene)
         if target.suffix.lower() not in SCENE_SUFFIXES:

@@ -350,6 +350,11 @@ def add_render_flags(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--frames", metavar="A:B", help="an animation's frames A to B-1 only")
     parser.add_argument("--overwrite", action="store_true", help="render frames already on disk")
+    parser.add_argument(
+        "--cameras",
+        metavar="FILE",
+        help="a JSON/TOML file of cameras: render each view to -o's {view} pattern",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:

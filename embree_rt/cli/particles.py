@@ -65,6 +65,7 @@ def add_particle_flags(parser: argparse.ArgumentParser) -> None:
         help="a material for one type (repeatable; default: matte)",
     )
     group.add_argument("--box", action="store_true", help="draw the simulation box as thin lines")
+    group.add_argument(
         "--bonds",
         action="store_true",
         help="sticks between bonded atoms (the file's bonds, else guessed from distances)",
@@ -82,6 +83,19 @@ def add_particle_flags(parser: argparse.ArgumentParser) -> None:
         "--follow",
         action="store_true",
         help="with --frames: frame each frame on its own bounds (default: the first frame's)",
+    )
+    group.add_argument(
+        "--no-refit",
+        action="store_true",
+        help="a trajectory's frames: build each frame's BVH anew (default: refit while the "
+        "particles stay the same)",
+    )
+    group.add_argument(
+        "--fps",
+        type=float,
+        default=24.0,
+        metavar="N",
+        help="frames per second of a trajectory's video (-o ending in .mp4, .webm or .gif)",
     )
 
 
@@ -107,6 +121,8 @@ PARTICLE_FLAG_DEFAULTS = {
     "bond_radius": None,
     "licorice": False,
     "legend": False,
+    "no_refit": False,
+    "fps": 24.0,
 }
 
 
@@ -162,67 +178,6 @@ def particle_scene(args: argparse.Namespace):
         if isinstance(error, InputError):
             raise
         raise InputError(f"{args.scene}: {error}") from None
-
-
-def render_particle_frames(args: argparse.Namespace) -> None:
-    """``embree-rt render TRAJECTORY -o shots/f_{frame:04d}.png [--frames A:B[:STEP]]``: each
-    frame an image, on this machine, the camera, lights and floor of the first frame unless
-    ``--follow``; frames on disk skipped unless ``--overwrite``."""
-    import copy
-    import sys
-    from pathlib import Path
-
-    from embree_rt.api import render
-    from embree_rt.cli.checks import check_library, output_encoding, writing
-    from embree_rt.cli.errors import UsageError
-    from embree_rt.cli.frame_paths import output_paths
-    from embree_rt.film import check_output_path
-    from embree_rt.scene.particles import read_particles
-    from embree_rt.scene.settings import apply_to_scene
-
-    for flag, given in (("--cluster", args.cluster), ("--scheduler", args.scheduler)):
-        if given:
-            raise UsageError(f"{flag}: particle trajectories are rendered on this machine")
-    if args.aov is not None:
-        raise UsageError("--aov: AOVs are written for still images, not trajectory frames")
-    count = read_particles(args.scene, frame=0, topology=args.topology).frame_count
-    frames = trajectory_range(args.scene, args.frames, count)
-    paths = output_paths(args.output, frames)
-    encoding = output_encoding(args)
-    for directory in sorted({Path(path).parent for path in paths.values()}):
-        try:
-            directory.mkdir(parents=True, exist_ok=True)
-        except OSError as error:
-            raise UsageError(f"-o: cannot make the directory {directory}: {error}") from None
-    for path in paths.values():
-        try:
-            check_output_path(path, encoding)
-        except (ValueError, RuntimeError) as error:
-            raise UsageError(str(error)) from None
-    todo = [f for f, path in paths.items() if args.overwrite or not Path(path).exists()]
-    check_library()
-    staged = None
-    for number in todo:
-        frame_args = copy.copy(args)
-        frame_args.frame = number
-        scene = particle_scene(frame_args)
-        if staged is None:
-            first = copy.copy(args)
-            first.frame = frames[0]
-            staged = scene if number == frames[0] else particle_scene(first)
-        if not args.follow:
-            scene.camera, scene.lights, scene.floor = staged.camera, staged.lights, staged.floor
-        apply_to_scene(scene, list(args.settings), str(args.scene))
-        result = render(scene, threads=args.threads, spheres=args.spheres, quiet=True)
-        path = paths[number]
-        framed = encoding._replace(legend=scene.legend)
-        writing(path, lambda result=result, path=path, framed=framed: result.save(path, framed))
-    if not args.quiet:
-        print(
-            f"embree-rt: {len(todo)} frames ({len(paths) - len(todo)} already on disk) of "
-            f"{args.scene} -> {args.output}",
-            file=sys.stderr,
-        )
 
 
 def trajectory_range(path: str, text: str | None, count: int) -> range:
