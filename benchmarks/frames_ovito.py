@@ -10,7 +10,8 @@ shadows, as a fresh process (exec to exit, imports included) by:
 - ``tachyon`` and ``ospray``: OVITO's ``Viewport.render_anim`` with its ``TachyonRenderer`` /
   ``OSPRayRenderer`` set as in ``particles.py`` (1 spp, one refinement, no denoising).
 
-The sides take turns (A, B, C, A, B, C, ...) after one discarded run each; reported per side:
+The sides take turns (A, B, C, A, B, C, ...) after one discarded run each (unless
+``--no-warm-up``); reported per side:
 whole-process seconds and frames per second (median of ``--repeats``), the first frame's
 latency (process start to the first PNG on disk) and the steady state's seconds a frame (the
 PNGs' modification times, first to last, over FRAMES - 1), and the per-turn ratios of the
@@ -90,9 +91,11 @@ def frames_run(
     return FramesRun(done.seconds, done.peak_mb, written[0] - started, steady, summary)
 
 
-def in_turns(sides: dict[str, Callable[[int], FramesRun]], repeats: int, frames: int) -> dict:
+def in_turns(
+    sides: dict[str, Callable[[int], FramesRun]], repeats: int, frames: int, warm_up: bool = True
+) -> dict:
     """One discarded run a side, then ``repeats`` turns; medians and per-turn ratios."""
-    for side in sides.values():
+    for side in sides.values() if warm_up else ():
         side(-1)
     runs: dict[str, list[FramesRun]] = {name: [] for name in sides}
     for turn in range(repeats):
@@ -138,6 +141,10 @@ def main() -> None:
         choices=["embree_rt", "tachyon", "ospray"],
     )  # fmt: skip
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument(
+        "--no-warm-up", dest="warm_up", action="store_false",
+        help="time from the first run (the files already in the disk cache, numba's cache made)",
+    )  # fmt: skip
     parser.add_argument("--width", type=int, default=1920)
     parser.add_argument("--height", type=int, default=1080)
     parser.add_argument("--ovito-python", default=sys.executable)
@@ -160,7 +167,7 @@ def main() -> None:
                 )  # fmt: skip
 
             sides = {name: side(name) for name in args.sides}
-            result[kind] = in_turns(sides, args.repeats, args.frames)
+            result[kind] = in_turns(sides, args.repeats, args.frames, args.warm_up)
     result["load_average_end"] = load_average()
     print(json.dumps(result))
 

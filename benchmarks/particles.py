@@ -32,7 +32,8 @@ median of the per-turn ratios (above 1: embree_rt is faster).
 
 OVITO runs in its own interpreter (``--ovito-python``; default this one), as it brings its own
 Qt and ~600 MB (``pip install -e '.[bench]'``; its renderers need Debian's ``libvulkan1
-mesa-vulkan-drivers``). Each side's first run is discarded (disk caches, numba's cache). Load
+mesa-vulkan-drivers``). Each side's first run is discarded (disk caches, numba's cache) unless
+``--no-warm-up``. Load
 average at the start and the end are in the JSON. Generated files live in ``--folder`` (a
 temporary folder unless given; kept when given, and reused when already there).
 
@@ -299,10 +300,10 @@ def ovito_command(ovito_python: str, *args: object) -> list[str]:
     return [ovito_python, "-c", OVITO_SCRIPT, *(str(a) for a in args)]
 
 
-def in_turns(sides: dict[str, Callable[[int], Run]], repeats: int) -> dict:
+def in_turns(sides: dict[str, Callable[[int], Run]], repeats: int, warm_up: bool = True) -> dict:
     """Each side run once, discarded, then ``repeats`` turns of every side in order: each
     side's runs, medians and per-turn ratios to ``embree_rt`` (others' seconds / ours)."""
-    for side in sides.values():
+    for side in sides.values() if warm_up else ():
         side(-1)
     runs: dict[str, list[Run]] = {name: [] for name in sides}
     for turn in range(repeats):
@@ -427,6 +428,10 @@ def main() -> None:
     parser.add_argument("--counts", type=int, nargs="*", default=[100_000, 1_000_000, 10_000_000])
     parser.add_argument("--formats", nargs="*", default=["gsd", "dump"], choices=["gsd", "dump"])
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument(
+        "--no-warm-up", dest="warm_up", action="store_false",
+        help="time from the first run (the files already in the disk cache, numba's cache made)",
+    )  # fmt: skip
     parser.add_argument("--width", type=int, default=1920)
     parser.add_argument("--height", type=int, default=1080)
     parser.add_argument("--read-count", type=int, default=10_000_000)
@@ -456,7 +461,7 @@ def main() -> None:
                         print(f"render {kind} {count:,}", file=sys.stderr)
                         sides = render_sides(args.ovito_python, path, images, size)
                         entry = {"count": count, "format": kind}
-                        result["render"].append(entry | in_turns(sides, args.repeats))
+                        result["render"].append(entry | in_turns(sides, args.repeats, args.warm_up))
         if "read" not in args.skip:
             path = write_files(args.ovito_python, folder, args.read_count)["dump"]
             print(f"read dump {args.read_count:,}", file=sys.stderr)
@@ -472,7 +477,9 @@ def main() -> None:
 
                 return timed
 
-            read = in_turns({n: keeping(n, s) for n, s in sides.items()}, args.repeats)
+            read = in_turns(
+                {n: keeping(n, s) for n, s in sides.items()}, args.repeats, args.warm_up
+            )
             read_seconds(read, outputs)
             pairs = zip(read["ovito"]["read_s"], read["embree_rt"]["read_s"], strict=True)
             read["read_ovito_over_embree_rt"] = round(
@@ -488,7 +495,7 @@ def main() -> None:
                 embree_render_command(path, images / f"plain{turn}.png", size, light)
             )
             ao = {"count": args.ao_count, "samples": args.ao_samples} | in_turns(
-                sides, args.repeats
+                sides, args.repeats, args.warm_up
             )
             with_ao, plain = ao["embree_rt"]["summary"], ao["embree_rt_no_ao"]["summary"]
             extra_rays = args.ao_samples * camera_hits(path, images / "ids.npz", size, light)
