@@ -390,9 +390,8 @@ def camera_hits(path: Path, npz: Path, size: tuple[int, int], light: tuple) -> i
         return int(np.count_nonzero(arrays["object_id"] >= 0))
 
 
-def huge(folder: Path, count: int, size: tuple[int, int]) -> dict:
-    """An N-particle GSD written by gsd itself, ``embree-rt info`` on it, and its render under
-    ``/usr/bin/time -v``."""
+def write_huge_gsd(folder: Path, count: int) -> Path:
+    """An N-particle GSD under ``folder``, written by gsd itself unless there already."""
     import gsd.hoomd
     import numpy as np
 
@@ -409,6 +408,13 @@ def huge(folder: Path, count: int, size: tuple[int, int]) -> dict:
         with gsd.hoomd.open(path, "w") as trajectory:
             trajectory.append(frame)
         del frame
+    return path
+
+
+def huge(folder: Path, count: int, size: tuple[int, int]) -> dict:
+    """An N-particle GSD (``write_huge_gsd``), ``embree-rt info`` on it, and its render under
+    ``/usr/bin/time -v``."""
+    path = write_huge_gsd(folder, count)
     info = run([*embree_rt(), "info", str(path)])
     command = embree_render_command(path, folder / "huge.png", size, key_light(path))
     timed = run(["/usr/bin/time", "-v", *command])
