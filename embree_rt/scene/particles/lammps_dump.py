@@ -78,11 +78,19 @@ def read_dump_frame(path: str, data: bytes, offsets: list[int], index: int) -> P
 
 def _box(path: str, where: str, lines: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
     """(3, 3) cell vectors as rows and (3,) origin of a dump's ``BOX BOUNDS`` lines (orthogonal
-    or triclinic ``xy xz yz``, whose bounds LAMMPS writes as the tilted box's extent)."""
+    or triclinic ``xy xz yz``, whose bounds LAMMPS writes as the tilted box's extent; or a
+    general triclinic box, ``BOX BOUNDS abc origin``: each line a cell vector and one
+    coordinate of the origin, as LAMMPS since 2024 and OVITO 3.10+'s exporter write it)."""
     try:
         numbers = np.array([[float(v) for v in line.split()] for line in lines[1:4]])
     except ValueError:
         raise ParticleFileError(path, where, "the box bounds are not numbers") from None
+    if b"abc origin" in lines[0]:
+        if numbers.shape != (3, 4):
+            raise ParticleFileError(
+                path, where, "the 'abc origin' box bounds are not 3 lines of 4 numbers"
+            )
+        return np.ascontiguousarray(numbers[:, :3]), np.ascontiguousarray(numbers[:, 3])
     if numbers.shape not in ((3, 2), (3, 3)):
         raise ParticleFileError(path, where, "the box bounds are not 3 lines of 2 or 3 numbers")
     low, high = numbers[:, 0].copy(), numbers[:, 1].copy()
