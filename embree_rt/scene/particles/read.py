@@ -178,44 +178,71 @@ def _read_dump(path: Path, plain: Path, frame: int) -> ParticleFrame:
 
 
 def _read_gsd(path: Path, plain: Path, frame: int) -> ParticleFrame:
-    hoomd = _require("gsd.hoomd")
+    """A GSD frame read chunk by chunk (gsd's file layer): only what the file stores, its
+    count checked before any array of that size is read. A chunk a frame lacks is frame 0's,
+    else HOOMD's default, as ``gsd.hoomd`` does; ``gsd.hoomd``'s own frames would hold every
+    attribute at its default (~290 bytes a particle), which a 1e8-particle file cannot afford."""
+    layer = _require("gsd.fl")
     try:
-        trajectory = hoomd.open(str(plain), "r")
+        trajectory = layer.open(str(plain), "r")
     except Exception as error:  # gsd raises RuntimeError or OSError on a damaged file
         raise ParticleFileError(path, "(file)", f"not a readable GSD file: {error}") from None
     with trajectory:
-        _frame_problem(path, frame, len(trajectory))
-        snapshot = trajectory[frame]
-        particles = snapshot.particles
-        count = int(particles.N)
+        frame_count = int(trajectory.nframes)
+        _frame_problem(path, frame, frame_count)
+
+        def chunk(name: str) -> np.ndarray | None:
+            for where in (frame, 0):
+                if trajectory.chunk_exists(frame=where, name=name):
+                    return trajectory.read_chunk(frame=where, name=name)
+            return None
+
+        stored_count = chunk("particles/N")
+        count = int(stored_count[0]) if stored_count is not None else 0
         check_count(str(path), f"frame {frame}", count)
-        positions = np.asarray(particles.position, np.float64).reshape(-1, 3)
-        names = np.asarray(particles.types, dtype=str)
-        typeid = np.asarray(particles.typeid, np.int64)
-        box_numbers = np.asarray(snapshot.configuration.box, np.float64)
+        position = chunk("particles/position")
+        positions = (
+            np.zeros((count, 3)) if position is None else np.asarray(position, np.float64)
+        ).reshape(-1, 3)
+        stored_types = chunk("particles/types")
+        names = (
+            np.array(["A"])
+            if stored_types is None
+            else np.array([bytes(row).rstrip(b"\0").decode() for row in stored_types], dtype=str)
+        )
+        typeid = chunk("particles/typeid")
+        typeid = np.zeros(count, np.int64) if typeid is None else np.asarray(typeid, np.int64)
+        stored_box = chunk("configuration/box")
+        box_numbers = (
+            np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+            if stored_box is None
+            else np.asarray(stored_box, np.float64)
+        )
         lx, ly, lz, xy, xz, yz = box_numbers
         box = np.array([[lx, 0, 0], [xy * ly, ly, 0], [xz * lz, yz * lz, lz]])
         result = ParticleFrame(
             path=str(path),
             positions=positions,
-            types=names[typeid] if len(names) else np.full(count, "A"),
+            types=names[typeid],
             box=box,
             origin=-box.sum(axis=0) / 2.0,
             frame=frame,
-            frame_count=len(trajectory),
+            frame_count=frame_count,
         )
-        diameter = np.asarray(particles.diameter, np.float64)
-        if snapshot.particles.diameter is not None and np.any(diameter != 1.0):
-            result.radii = diameter / 2.0
-        if snapshot.bonds.N:
-            result.bonds = np.asarray(snapshot.bonds.group, np.int64).reshape(-1, 2)
+        diameter = chunk("particles/diameter")
+        if diameter is not None and np.any(diameter != 1.0):
+            result.radii = np.asarray(diameter, np.float64) / 2.0
+        bond_count = chunk("bonds/N")
+        if bond_count is not None and int(bond_count[0]):
+            result.bonds = np.asarray(chunk("bonds/group"), np.int64).reshape(-1, 2)
         for name in ("charge", "mass"):
-            values = getattr(particles, name)
+            values = chunk(f"particles/{name}")
             if values is not None:
                 result.properties[name] = np.asarray(values, np.float64)
-        velocity = getattr(particles, "velocity", None)
+        velocity = chunk("particles/velocity")
         if velocity is not None:
-            for axis, values in zip("xyz", np.asarray(velocity, np.float64).T, strict=True):
+            columns = np.asarray(velocity, np.float64).reshape(-1, 3).T
+            for axis, values in zip("xyz", columns, strict=True):
                 result.properties[f"v{axis}"] = values
         return result
 
