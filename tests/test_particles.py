@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from particle_samples import MOL2
 from tolerances import position_atol
 
 ase_io = pytest.importorskip("ase.io")
@@ -91,24 +92,6 @@ def test_extended_xyz_frames_differ(tmp_path):
     frames = [read_particles(path, frame=k) for k in (0, 1)]
     assert frames[0].frame_count == 2
     np.testing.assert_allclose(frames[1].positions - frames[0].positions, 1.5, atol=1e-9)
-
-
-MOL2 = """@<TRIPOS>MOLECULE
-water
-3 2 1 0 0
-SMALL
-USER_CHARGES
-
-@<TRIPOS>ATOM
-      1 O1          0.0000    0.0000    0.1173 O.3     1  HOH1        0.0000
-      2 H1          0.0000    0.7572   -0.4692 H       1  HOH1        0.0000
-      3 H2          0.0000   -0.7572   -0.4692 H       1  HOH1        0.0000
-@<TRIPOS>BOND
-     1     1     2    1
-     2     1     3    1
-@<TRIPOS>SUBSTRUCTURE
-     1 HOH1        1 RESIDUE    0 **** ROOT      0
-"""
 
 
 def test_mol2_by_hand_matches_mdanalysis(tmp_path):

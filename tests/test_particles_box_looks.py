@@ -303,44 +303,16 @@ def test_command_line_box_material_and_colour_columns(tmp_path):
     write_two_types(path)
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
     flags = ["--width", "32", "--height", "24", "--spp", "1", "--quiet"]
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "embree_rt",
-            "render",
-            "d.lammpstrj",
-            "-o",
-            "o.png",
-            "--box",
-            "--material-of",
-            "2=mirror",
-            *flags,
-        ],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-    )
+
+    def render(output: str, *given: str) -> subprocess.CompletedProcess:
+        command = [sys.executable, "-m", "embree_rt", "render", "d.lammpstrj", "-o", output]
+        return subprocess.run(
+            [*command, *given, *flags], cwd=tmp_path, env=env, capture_output=True, text=True
+        )
+
+    done = render("o.png", "--box", "--material-of", "2=mirror")
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "o.png").stat().st_size > 0
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "embree_rt",
-            "render",
-            "d.lammpstrj",
-            "-o",
-            "p.png",
-            "--material-of",
-            "2",
-            *flags,
-        ],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-    )
+    done = render("p.png", "--material-of", "2")
     assert done.returncode == 2 and "expected TYPE=MATERIAL" in done.stderr
     assert not (tmp_path / "p.png").exists()

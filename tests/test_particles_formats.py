@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from particle_samples import MOL2
 
 ase_io = pytest.importorskip("ase.io")
 import ase.build  # noqa: E402
@@ -147,23 +148,6 @@ def make_dump(folder: Path) -> tuple[Path, np.ndarray]:
     )
     return path, ase_io.read(path, format="lammps-dump-text", index=0).get_positions()
 
-
-MOL2 = """@<TRIPOS>MOLECULE
-water
-3 2 1 0 0
-SMALL
-USER_CHARGES
-
-@<TRIPOS>ATOM
-      1 O1          0.0000    0.0000    0.1173 O.3     1  HOH1        0.0000
-      2 H1          0.0000    0.7572   -0.4692 H       1  HOH1        0.0000
-      3 H2          0.0000   -0.7572   -0.4692 H       1  HOH1        0.0000
-@<TRIPOS>BOND
-     1     1     2    1
-     2     1     3    1
-@<TRIPOS>SUBSTRUCTURE
-     1 HOH1        1 RESIDUE    0 **** ROOT      0
-"""
 
 MAKERS = {
     "xyz": make_xyz,
