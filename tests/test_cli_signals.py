@@ -31,6 +31,7 @@ import cloudpickle  # distributed's own dependency
 import distributed
 import numpy as np
 import pytest
+from process_groups import stop
 
 ROOT = Path(__file__).resolve().parent.parent
 TIMEOUT_S = 180
@@ -212,13 +213,7 @@ def external_scheduler() -> Iterator[tuple[str, list[subprocess.Popen]]]:
         yield address, started
     finally:
         for process in reversed(started):
-            if process.poll() is None:
-                os.killpg(process.pid, signal.SIGTERM)
-                try:
-                    process.wait(timeout=15)
-                except subprocess.TimeoutExpired:
-                    os.killpg(process.pid, signal.SIGKILL)
-                    process.wait()
+            stop(process)
 
 
 @pytest.fixture(scope="module")

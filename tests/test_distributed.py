@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from process_groups import stop
 
 distributed = pytest.importorskip("distributed")  # the test extra installs it: CI runs these
 
@@ -300,17 +301,6 @@ def run_cli(*args: str, env: dict[str, str] | None = None) -> subprocess.Complet
         cwd=ROOT,
         env={**os.environ, **(env or {})},
     )
-
-
-def stop(process: subprocess.Popen) -> None:
-    """End a process group this test started (the dask command and its worker children)."""
-    if process.poll() is None:
-        os.killpg(process.pid, signal.SIGTERM)
-        try:
-            process.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
 
 
 ORBIT = "\n[animation]\nframes = 6\norbit = 60.0\n"
