@@ -645,7 +645,7 @@ def small_bvh():
 )
 def test_ray_validation(small_bvh, method, arguments, argument, row):
     call_arguments = {"origins": good() + np.array([0, 0, 5]), "directions": good(), **arguments}
-    expect_error(lambda: getattr(small_bvh, method)(**call_arguments), argument, row)
+    expect_error(lambda: getattr(small_bvh, method)(Rays(**call_arguments)), argument, row)
 
 
 def test_window_with_tnear_beyond_tfar_is_empty(parts):
