@@ -25,6 +25,8 @@ import sys
 import time
 from pathlib import Path
 
+from embree_rt.embree import Rays
+
 
 def _status_kib(field: str) -> int:
     for line in Path("/proc/self/status").read_text().splitlines():
@@ -61,14 +63,14 @@ def measure(count: int, kind: str, quality: str, compact: bool, width: int, heig
             times.append(time.perf_counter() - began)
         return min(times), result
 
-    primary_s, hits = best_of(lambda: bvh.intersect(origins.T, directions.T))
+    primary_s, hits = best_of(lambda: bvh.intersect(Rays(origins.T, directions.T)))
     hit = np.flatnonzero(hits.geom_id >= 0)
     points = origins.T[hit] + directions.T[hit] * hits.t[hit, None]
     light = np.asarray(scene.lights[0].position, np.float32)
     to_light = light - points
     normal = hits.normal[hit]
     points += normal / np.linalg.norm(normal, axis=1)[:, None] * np.float32(1e-3)
-    shadow_s, blocked = best_of(lambda: bvh.occluded(points, to_light, 0.0, 1.0))
+    shadow_s, blocked = best_of(lambda: bvh.occluded(Rays(points, to_light, 0.0, 1.0)))
     bvh.close()
     return {
         "count": count,

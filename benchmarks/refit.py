@@ -23,6 +23,7 @@ import time
 
 import numpy as np
 
+from embree_rt.embree import Rays
 from embree_rt.embree.bvh import BVH
 
 
@@ -59,7 +60,7 @@ def main() -> None:
         traces = {}
         for name in ("moved", "fresh") if frame % 2 else ("fresh", "moved"):
             tree = moving if name == "moved" else fresh
-            traces[name] = timed(lambda tree=tree: tree.intersect(origins, directions))
+            traces[name] = timed(lambda tree=tree: tree.intersect(Rays(origins, directions)))
         same = bool(np.array_equal(traces["moved"][1].t, traces["fresh"][1].t)) and bool(
             np.array_equal(traces["moved"][1].prim_id, traces["fresh"][1].prim_id)
         )

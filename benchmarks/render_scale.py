@@ -34,7 +34,7 @@ import numpy as np
 
 from embree_rt import Renderer, film, integrator
 from embree_rt.compiled.camera_rays import sample_rays
-from embree_rt.embree import kernels
+from embree_rt.embree import Rays, kernels
 from embree_rt.integrator import DEFAULT_BATCH_SIZE
 from embree_rt.scene import random_field
 from embree_rt.tracing import camera_query, segments
@@ -127,17 +127,17 @@ def _replay(bvh, log: list) -> float:
         np.ascontiguousarray(origins[:, :64]),
         np.ascontiguousarray(directions[:, :64]),
     )
-    bvh.intersect(origins.T, directions.T)
-    bvh.intersect(origins.T, directions.T, coherent=True)
-    bvh.occluded(origins.T, directions.T)
+    bvh.intersect(Rays(origins.T, directions.T))
+    bvh.intersect(Rays(origins.T, directions.T), coherent=True)
+    bvh.occluded(Rays(origins.T, directions.T))
     elapsed = 0.0
     for kind, origins, directions, tfar, coherent in log:
         start = time.perf_counter()
         # The log holds rays as (3, n) columns; the BVH takes (n, 3) views of them.
         if kind == "intersect":
-            bvh.intersect(origins.T, directions.T, coherent=coherent)
+            bvh.intersect(Rays(origins.T, directions.T), coherent=coherent)
         else:
-            bvh.occluded(origins.T, directions.T, 0.0, tfar)
+            bvh.occluded(Rays(origins.T, directions.T, 0.0, tfar))
         elapsed += time.perf_counter() - start
     return elapsed
 

@@ -54,7 +54,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 import numpy as np
 
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 
 ALL_THREADS = numba.config.NUMBA_NUM_THREADS
 KINDS = ("point", "user")
@@ -318,8 +318,8 @@ def time_in_turns(bvhs: dict, primary: tuple, shadow: tuple, repeat: int) -> dic
     CPU seconds (``primary_cpu_s``, ``shadow_cpu_s``: all threads; time spent descheduled on a
     busy machine does not count) and the last answers (``hits``, ``blocked``)."""
     queries = {
-        "primary": lambda bvh: bvh.intersect(*primary, coherent=True),
-        "shadow": lambda bvh: bvh.occluded(shadow[0], shadow[1], 0.0, shadow[2]),
+        "primary": lambda bvh: bvh.intersect(Rays(*primary), coherent=True),
+        "shadow": lambda bvh: bvh.occluded(Rays(shadow[0], shadow[1], 0.0, shadow[2])),
     }
     runs = {kind: {f"{q}{unit}": [] for q in queries for unit in ("_s", "_cpu_s")} for kind in bvhs}
     for _ in range(repeat):
@@ -379,11 +379,11 @@ def bench_count(count: int, args: argparse.Namespace, rows: list[dict]) -> None:
             bvhs[kind], builds[kind] = build(kind, threads, centers, radii, ground_mesh)
         # one set of shadow rays for both kinds: from the native spheres' primary hits
         rows_hit, *shadow = shadow_rays(
-            origins, directions, bvhs["point"].intersect(origins, directions), light
+            origins, directions, bvhs["point"].intersect(Rays(origins, directions)), light
         )
         for bvh in bvhs.values():  # load the kernels for these array layouts outside the clock
-            bvh.intersect(origins[:64], directions[:64])
-            bvh.occluded(shadow[0][:64], shadow[1][:64], 0.0, shadow[2][:64])
+            bvh.intersect(Rays(origins[:64], directions[:64]))
+            bvh.occluded(Rays(shadow[0][:64], shadow[1][:64], 0.0, shadow[2][:64]))
         runs = time_in_turns(bvhs, (origins, directions), shadow, args.repeat)
         for kind in KINDS:
             run = runs[kind]
@@ -467,12 +467,12 @@ def best_seconds(call, repeat: int) -> tuple[float, object]:
 
 
 def measure(bvh: BVH, origins, directions, light, repeat: int) -> dict:
-    bvh.intersect(origins[:64], directions[:64])
-    bvh.occluded(origins[:64], directions[:64])
-    seconds, hits = best_seconds(lambda: bvh.intersect(origins, directions), repeat)
+    bvh.intersect(Rays(origins[:64], directions[:64]))
+    bvh.occluded(Rays(origins[:64], directions[:64]))
+    seconds, hits = best_seconds(lambda: bvh.intersect(Rays(origins, directions)), repeat)
     _, s_origins, s_directions, s_tfar = shadow_rays(origins, directions, hits, light)
     s_seconds, blocked = best_seconds(
-        lambda: bvh.occluded(s_origins, s_directions, 0.0, s_tfar), repeat
+        lambda: bvh.occluded(Rays(s_origins, s_directions, 0.0, s_tfar)), repeat
     )
     return {
         "rays": len(origins),

@@ -39,6 +39,8 @@ import json
 import os
 import time
 
+from embree_rt.embree import Rays
+
 # ray_triangle's NumPy calls wake OpenBLAS's worker threads, which then busy-wait on the other
 # core for a while: the backend timed next (ours, on two threads) lost that core (measured:
 # first hits on the height field 33 ms alone, 52-56 ms right after ray_triangle). One BLAS
@@ -132,19 +134,19 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
             bvh = BVH(threads=threads, lanes=1, robust=robust)
             bvh.add_triangles(local_vertices, scene.faces)
             bvh.commit()
-            bvh.intersect(local_origins[:10], local_directions[:10])
+            bvh.intersect(Rays(local_origins[:10], local_directions[:10]))
             key = f"bare_{'robust' if robust else 'plain'}_{threads}t"
-            runs[key] = lambda bvh=bvh: bvh.intersect(local_origins, local_directions)
+            runs[key] = lambda bvh=bvh: bvh.intersect(Rays(local_origins, local_directions))
             if robust:
                 runs[f"{key}_entry_ordered"] = lambda bvh=bvh: bvh.intersect(
-                    ordered_origins, ordered_directions
+                    Rays(ordered_origins, ordered_directions)
                 )
     # all hits: the bare traversal with the recording filter, as RayMeshIntersector's scene
     # holds it (8 hits of room a ray, as its first trace), beside trimesh's embreex
     runs["all_hits_trimesh_embreex"] = lambda: theirs.intersects_location(origins, directions)
     runs["all_hits_embree_rt"] = lambda: ours.intersects_location(origins, directions)
     runs["all_hits_bare_2t"] = lambda: scene.bvh.all_hits(
-        local_origins, local_directions, 0.0, np.inf, 8
+        Rays(local_origins, local_directions, 0.0, np.inf), 8
     )
     # and on the rays in the order intersects_location traces them in on big meshes (by the
     # middle of each ray's path through the box)
@@ -157,7 +159,7 @@ def ceiling(name: str, mesh: trimesh.Trimesh, n: int, turns: int) -> dict:
         mesh.bounds,
         2,
     ).local[:2]
-    runs["all_hits_bare_2t_segment_ordered"] = lambda: scene.bvh.all_hits(*segment, 0.0, np.inf, 8)
+    runs["all_hits_bare_2t_segment_ordered"] = lambda: scene.bvh.all_hits(Rays(*segment), 8)
     rates: dict[str, list[float]] = {key: [] for key in runs}
     for _ in range(turns):
         for key, run in runs.items():

@@ -93,7 +93,7 @@ from traversal import shadow_rays  # run as a script: benchmarks/ is on sys.path
 import embree_rt
 from embree_rt import Renderer
 from embree_rt.camera import camera_frame
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 
 DEBIAN_LLVM = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
 MITSUBA_VARIANT = "llvm_ad_rgb"
@@ -440,7 +440,7 @@ def distance_errors(origins, directions, ours, theirs, ours_t, theirs_t, field) 
 
 def our_labels(bvh: BVH, sphere_geometry: int, origins, directions, tfar=np.inf):
     """``labels`` and t (n,) float32 of embree_rt's nearest hits."""
-    hits = bvh.intersect(origins, directions, 0.0, tfar)
+    hits = bvh.intersect(Rays(origins, directions, 0.0, tfar))
     return labels(hits.hit, hits.geom_id == sphere_geometry, hits.prim_id), hits.t
 
 
@@ -575,9 +575,9 @@ def bench_count(count: int, args, mi, dr) -> dict:
     build["embree_rt_bvh_s"] = round(time.perf_counter() - start, 4)
     light = np.asarray(light_position(side))
     with bvh:
-        hits = bvh.intersect(origins, directions)  # also compiles / warms the kernels
+        hits = bvh.intersect(Rays(origins, directions))  # also compiles / warms the kernels
         s_origins, s_directions, s_tfar = unit_shadow_rays(origins, directions, hits, light)
-        blocked = bvh.occluded(s_origins, s_directions, 0.0, s_tfar)
+        blocked = bvh.occluded(Rays(s_origins, s_directions, 0.0, s_tfar))
         intersect_theirs = occluded_theirs = None
         if mi is not None:
             primary = mitsuba_rays(mi, dr, origins, directions)
@@ -616,13 +616,13 @@ def bench_count(count: int, args, mi, dr) -> dict:
         for kind, ours, theirs_call, rays in (
             (
                 "primary",
-                lambda: bvh.intersect(origins, directions, coherent=True),
+                lambda: bvh.intersect(Rays(origins, directions), coherent=True),
                 intersect_theirs,
                 len(origins),
             ),
             (
                 "shadow",
-                lambda: bvh.occluded(s_origins, s_directions, 0.0, s_tfar),
+                lambda: bvh.occluded(Rays(s_origins, s_directions, 0.0, s_tfar)),
                 occluded_theirs,
                 len(s_origins),
             ),
@@ -720,7 +720,7 @@ def bench_instances(count: int, args, mi, dr, directory: Path) -> dict:
         row["build_speed_vs_mitsuba"] = round(their_build_s / build_s, 1)
     progress(f"built: {row}")
     with bvh:
-        hits = bvh.intersect(origins, directions)  # warms the kernels
+        hits = bvh.intersect(Rays(origins, directions))  # warms the kernels
         intersect_theirs = None
         if theirs is not None:
             primary = mitsuba_rays(mi, dr, origins, directions)
@@ -743,7 +743,7 @@ def bench_instances(count: int, args, mi, dr, directory: Path) -> dict:
                 "same_answer_fraction": float((both_miss | both_hit).mean()),
             }
         ours_s, theirs_s = in_turns(
-            lambda: bvh.intersect(origins, directions), intersect_theirs, args.repeat
+            lambda: bvh.intersect(Rays(origins, directions)), intersect_theirs, args.repeat
         )
         row["primary"] = {"rays": len(origins), **summary(ours_s, theirs_s, len(origins))}
         bvh.child.close()

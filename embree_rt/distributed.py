@@ -31,7 +31,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import dask
 import distributed
@@ -260,6 +260,32 @@ class ClusterProgress(Progress):
     frames_done: int = 0
 
 
+class FrameRequest(NamedTuple):
+    """What a cluster renderer's ``render_frames`` is asked: each ``(label, camera)`` of
+    ``cameras`` rendered with ``settings`` and handed to ``on_frame(label, image)`` (a (height,
+    width, 3) float32 linear image) when it is done; ``progress``, if given, called with the
+    render's ``ClusterProgress`` as batches come in."""
+
+    settings: RenderSettings
+    cameras: Sequence[tuple[object, Camera]]
+    on_frame: Callable[[object, np.ndarray], None]
+    progress: Callable[[ClusterProgress], None] | None = None
+
+    @property
+    def frame_samples(self) -> int:
+        """Camera samples of one frame."""
+        return self.settings.width * self.settings.height * self.settings.spp
+
+    def started(self, workers: int = 0) -> ClusterProgress:
+        """The progress of a render of every frame that has not begun."""
+        return ClusterProgress(total=self.frame_samples * len(self.cameras), workers=workers)
+
+    def report(self, state: ClusterProgress) -> None:
+        """Show ``state`` to ``progress``, if there is one."""
+        if self.progress is not None:
+            self.progress(state)
+
+
 @dataclass
 class _Frame:
     """One image in flight: its label, its film and the batches not yet added."""
@@ -271,8 +297,8 @@ class _Frame:
 
 class FrameRenderer:
     """What the cluster renderers (``ClusterRenderer``, ``bricks.PartitionedRenderer``) build on
-    their own ``render_frames(settings, cameras, on_frame, progress)``, which renders each
-    ``(label, camera)`` and calls ``on_frame(label, image)``, their ``release()``, which frees
+    their own ``render_frames(request)``, which renders each ``(label, camera)`` of a
+    ``FrameRequest`` and calls its ``on_frame(label, image)``, their ``release()``, which frees
     what the workers hold, and their ``stats``, the frames' ``RenderStats`` added up."""
 
     def render(
@@ -283,7 +309,9 @@ class FrameRenderer:
     ) -> np.ndarray:
         """One (height, width, 3) float32 linear image seen by ``camera``."""
         images = []
-        self.render_frames(settings, [(0, camera)], lambda _, image: images.append(image), progress)
+        self.render_frames(
+            FrameRequest(settings, [(0, camera)], lambda _, image: images.append(image), progress)
+        )
         return images[0]
 
     def render_once(
@@ -352,24 +380,19 @@ class ClusterRenderer(FrameRenderer):
         """Renderer builds per worker address (each worker that has taken a batch: 1)."""
         return self.client.run(_plugin_builds, name=plugin_name(self.key))
 
-    def render_frames(
-        self,
-        settings: RenderSettings,
-        cameras: Sequence[tuple[object, Camera]],
-        on_frame: Callable[[object, np.ndarray], None],
-        progress: Callable[[ClusterProgress], None] | None = None,
-    ) -> None:
-        """Render each ``(label, camera)`` and call ``on_frame(label, image)`` as each finishes
-        (in any order). On any exception, Ctrl-C included, the batches not done are cancelled."""
+    def render_frames(self, request: FrameRequest) -> None:
+        """Render each of the ``request``'s frames and hand it to its ``on_frame`` as each
+        finishes (in any order). On any exception, Ctrl-C included, the batches not done are
+        cancelled."""
+        settings = request.settings
         frames = [
             (label, camera_frame(camera, settings.width, settings.height))
-            for label, camera in cameras
+            for label, camera in request.cameras
         ]
-        total = settings.width * settings.height * settings.spp
-        state = ClusterProgress(total=total * len(frames))
+        state = request.started()
         workers = self._wait_for_workers(state)
         threads = sum(workers.values())
-        batches = batch_ranges(total, self.batch_size, settings.spp, threads)
+        batches = batch_ranges(request.frame_samples, self.batch_size, settings.spp, threads)
         # The next frame's batches are queued while the last of this one's run, so no worker
         # waits between frames; no more than that (memory: a film per frame in flight).
         queued = 4 * threads
@@ -426,12 +449,11 @@ class ClusterRenderer(FrameRenderer):
                     state.done += result.count * settings.spp
                     image.pending -= 1
                     if image.pending == 0:
-                        on_frame(image.label, image.film.image(settings.spp))
+                        request.on_frame(image.label, image.film.image(settings.spp))
                         state.frames_done += 1
                 top_up()
                 state.stats.render_s = self.stats.render_s = time.perf_counter() - began
-                if progress is not None:
-                    progress(state)
+                request.report(state)
         finally:
             if in_flight:
                 self.client.cancel(list(in_flight), force=True)

@@ -21,7 +21,7 @@ import numpy as np
 from embree_rt.ambient_occlusion import plane_blocks
 from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
-from embree_rt.embree import BVH, spheres_in_spatial_order
+from embree_rt.embree import BVH, Rays, spheres_in_spatial_order
 from embree_rt.mesh_attributes import (
     HitLooks,
     MeshColors,
@@ -617,7 +617,7 @@ class SceneGeometry(Closing):
         """(n,) bool: whether any surface, floor included, lies on each ray from ``origins``
         along ``directions`` ((3, n) float32) within ``distance`` (inf: any): one occlusion
         batch (ambient occlusion's)."""
-        blocked = self.bvh.occluded(origins.T, directions.T, 0.0, np.float32(distance))
+        blocked = self.bvh.occluded(Rays(origins.T, directions.T, 0.0, np.float32(distance)))
         return blocked | plane_blocks(origins, directions, self.labels.plane_y, distance)
 
     def toward_lights(

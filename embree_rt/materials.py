@@ -143,13 +143,13 @@ class Checker:
     size: float = 1.0
 
 
-@dataclass(frozen=True)
-class MaterialTable:
-    """Materials as arrays indexed by material id, so shading gathers per hit with one take.
-
-    ``color``, ``emission`` and ``absorption`` (m, 3) float32; the scalar fields (m,) float32;
-    ``metallic`` and ``unlit`` (m,) bool.
-    """
+@dataclass
+class MaterialColumns:
+    """What shading reads of ``Material``, as arrays with one entry a material
+    (``MaterialTable``) or a hit (``HitMaterials``): ``color``, ``emission`` and ``absorption``
+    linear RGB (``Material.absorption``), the numbers ``ambient``, ``diffuse``, ``specular``,
+    ``shininess``, ``reflectivity``, ``transparency``, ``ior`` and ``outline`` float32,
+    ``metallic`` bool."""
 
     color: np.ndarray
     ambient: np.ndarray
@@ -162,28 +162,39 @@ class MaterialTable:
     metallic: np.ndarray
     emission: np.ndarray
     absorption: np.ndarray
-    unlit: np.ndarray
     outline: np.ndarray
+
+
+# The numbers every material and every hit has its own of: taken from the table alike.
+_NUMBERS = ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior")
+
+
+@dataclass
+class MaterialTable(MaterialColumns):
+    """Materials as arrays indexed by material id, so shading gathers per hit with one take.
+
+    ``color``, ``emission`` and ``absorption`` (m, 3) float32; the numbers (m,) float32;
+    ``metallic`` and ``unlit`` (m,) bool.
+    """
+
+    unlit: np.ndarray
 
     @classmethod
     def from_materials(cls, materials: list[Material]) -> MaterialTable:
-        def column(name: str) -> np.ndarray:
-            return np.array([getattr(m, name) for m in materials], np.float32)
+        def column(name: str, dtype: type = np.float32) -> np.ndarray:
+            return np.array([getattr(m, name) for m in materials], dtype)
+
+        def rgb(name: str) -> np.ndarray:
+            return column(name).reshape(-1, 3)
 
         return cls(
-            color=np.array([m.color for m in materials], np.float32).reshape(-1, 3),
-            ambient=column("ambient"),
-            diffuse=column("diffuse"),
-            specular=column("specular"),
-            shininess=column("shininess"),
-            reflectivity=column("reflectivity"),
-            transparency=column("transparency"),
-            ior=column("ior"),
-            metallic=np.array([m.metallic for m in materials], bool),
-            emission=np.array([m.emission for m in materials], np.float32).reshape(-1, 3),
-            absorption=np.array([m.absorption for m in materials], np.float32).reshape(-1, 3),
-            unlit=np.array([m.unlit for m in materials], bool),
+            color=rgb("color"),
+            **{name: column(name) for name in _NUMBERS},
+            metallic=column("metallic", bool),
+            emission=rgb("emission"),
+            absorption=rgb("absorption"),
             outline=column("outline"),
+            unlit=column("unlit", bool),
         )
 
     @property
@@ -198,7 +209,7 @@ class MaterialTable:
 
 
 @dataclass
-class HitMaterials:
+class HitMaterials(MaterialColumns):
     """The material of each of k hits, one column per hit, made once per bounce
     (``HitMaterials.gather``, then what the hits show of their own written over it: a mesh's
     textures and colours, the floor's checker): what every shading stage reads.
@@ -215,21 +226,9 @@ class HitMaterials:
     opaque) are zero-stride views of that value: read like any other, written over only after
     ``np.array`` (the ``HitLooks`` that vary them make them so)."""
 
-    color: np.ndarray
-    ambient: np.ndarray
-    diffuse: np.ndarray
-    specular: np.ndarray
-    shininess: np.ndarray
-    reflectivity: np.ndarray
-    transparency: np.ndarray
-    ior: np.ndarray
-    metallic: np.ndarray
     lit: np.ndarray
-    emission: np.ndarray
-    absorption: np.ndarray
     occlusion: np.ndarray
     coverage: np.ndarray
-    outline: np.ndarray
 
     def __len__(self) -> int:
         return len(self.ambient)
@@ -257,13 +256,7 @@ class HitMaterials:
         lit = ~np.take(table.unlit, material)
         hits = cls(
             color=color,
-            ambient=np.take(table.ambient, material),
-            diffuse=np.take(table.diffuse, material),
-            specular=np.take(table.specular, material),
-            shininess=np.take(table.shininess, material),
-            reflectivity=np.take(table.reflectivity, material),
-            transparency=np.take(table.transparency, material),
-            ior=np.take(table.ior, material),
+            **{name: np.take(getattr(table, name), material) for name in _NUMBERS},
             metallic=np.take(table.metallic, material),
             lit=lit,
             emission=vectors(table.emission, table.glows),

@@ -20,6 +20,8 @@ import trimesh
 from tolerances import assert_close, ray_t_atol
 from trimesh.ray.ray_triangle import ray_triangle_id
 
+from embree_rt.embree import Rays
+
 # Relative size of the band, around every decision boundary, inside which float32 Embree and a
 # float64 reference may legitimately disagree.
 AMBIGUITY = 1e-5
@@ -541,4 +543,4 @@ def occluded_or_below_plane(
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (np.float32(plane_y) - origins[:, 1]) / dy
     crossed = (dy != 0) & (t >= np.maximum(near, np.float32(0))) & (t <= far) & (t != np.inf)
-    return bvh.occluded(origins, directions, tnear, tfar) | crossed
+    return bvh.occluded(Rays(origins, directions, tnear, tfar)) | crossed

@@ -11,6 +11,7 @@ import trimesh
 from numba import njit
 from trimesh.constants import tol
 
+from embree_rt.embree import Rays
 from embree_rt.trimesh_ray import RayMeshIntersector, exact_hits, local_frame
 from embree_rt.trimesh_ray.hit_passes import (
     decided_hits,
@@ -151,7 +152,10 @@ def test_settled_decided_and_finished_hits_are_the_same_on_one_thread_and_two():
     )
     near = 16 * np.finfo(np.float32).eps * magnitude / scene.scale
     result = scene.bvh.all_hits(
-        local_origins, local_directions, (near * scene.scale * 0.5).astype(np.float32), np.inf, 4
+        Rays(
+            local_origins, local_directions, (near * scene.scale * 0.5).astype(np.float32), np.inf
+        ),
+        4,
     )
     rays = world_rays(origins, directions, magnitude, near, False)
     rules = tolerances(8 * np.finfo(np.float32).eps, 1e-3, 1e-5, tol.zero)

@@ -19,7 +19,7 @@ from bvh_reference import (
 )
 from tolerances import assert_close, position_atol
 
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 from embree_rt.embree.bvh import SPHERE_KINDS
 from embree_rt.tracing.records import HitLabels, intersect_records
 
@@ -107,7 +107,7 @@ def test_instance_array_equals_the_baked_mesh_with_mirrors_and_non_uniform_scale
         array_gid = top.add_instances(child, matrices)
         top.commit()
         assert array_gid != 0 and top.instance_count == 21
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
     ref, copy = reference_for(origins, directions, baked, baked_faces, instance, local, matrices)
     sure = assert_hits_match(
         hits, ref, mesh_gid, array_gid, triangles=True, normal_cos=0.9995, min_hit_fraction=0.15
@@ -135,7 +135,7 @@ def test_hit_records_of_an_instance_array():
         child.commit()
         array_gid = top.add_instances(child, matrices)
         top.commit()
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
         table = HitLabels(
             geometry_label=np.full(top.geometry_count, -7, np.int64),
             geometry_scale=np.zeros(top.geometry_count, np.float32),
@@ -183,7 +183,7 @@ def test_two_children_in_one_array():
         second.commit()
         array_gid = top.add_instances([first, second], matrices, child_index=which)
         top.commit()
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
         child_of_hit = top.instance_children(hits.inst_id, hits.inst_prim_id)
     ref, copy = reference_for(origins, directions, baked, baked_faces, instance, local, matrices)
     sure = assert_hits_match(
@@ -213,7 +213,7 @@ def test_a_child_of_analytic_spheres(kind):
         child.commit()
         array_gid = top.add_instances(child, matrices)
         top.commit()
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
     ref = sphere_hits(origins, directions, world_centers, world_radii)
     copy = np.where(ref.hit, ref.prim_id // len(radii), -1)
     ref.prim_id = np.where(ref.hit, ref.prim_id % len(radii), -1)
@@ -238,7 +238,7 @@ def test_arrays_beside_single_instances_and_top_level_geometry():
         top.commit()
         origins = np.array([[0, 0, -20], [0, 0, 20], [10, 0, 20], [20, 0, 20], [50, 0, 20.0]])
         directions = np.array([[0, 0, 1], [0, 0, -1], [0, 0, -1], [0, 0, -1], [0, 0, -1.0]])
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
     np.testing.assert_array_equal(hits.geom_id, [spheres, 0, 0, 0, -1])
     np.testing.assert_array_equal(hits.inst_id, [-1, single, array_gid, array_gid, -1])
     np.testing.assert_array_equal(hits.inst_prim_id, [-1, -1, 0, 1, -1])

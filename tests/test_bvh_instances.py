@@ -19,7 +19,7 @@ from bvh_reference import (
 )
 from tolerances import assert_close, ray_t_atol
 
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 from embree_rt.embree.bvh import SPHERE_KINDS
 
 
@@ -53,7 +53,7 @@ def test_one_instance_equals_the_baked_mesh(kind, which):
         top.commit()
         assert inst_gid != 0
         origins, directions = world_rays(np.random.default_rng(21 + which), baked)
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
     ref = triangle_hits(origins, directions, baked, faces)
     # the reference normal is the baked face's (v1 - v0) x (v2 - v0): sign included
     assert_hits_match(
@@ -73,7 +73,7 @@ def test_many_instances_of_one_mesh_report_which_instance():
         baked = np.concatenate([transform_points(m, vertices) for m in TRANSFORMS])
         baked_faces = np.concatenate([faces + k * len(vertices) for k in range(len(TRANSFORMS))])
         origins, directions = world_rays(np.random.default_rng(22), baked, 4000)
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
     ref = triangle_hits(origins, directions, baked, baked_faces)
     copy = np.where(ref.hit, ref.prim_id // len(faces), 0)
     ref.prim_id = np.where(ref.hit, ref.prim_id % len(faces), -1)
@@ -101,7 +101,7 @@ def test_instanced_spheres_become_ellipsoids(which, kind):
         top.commit()
         world_box = transform_points(matrix, np.r_[centers - 0.6, centers + 0.6])
         origins, directions = world_rays(rng, world_box, 3000)
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
     local_origins = transform_points(inverse, origins)
     local_directions = directions @ inverse[:3, :3].T
     ref = sphere_hits(local_origins, local_directions, centers, radii)
@@ -123,7 +123,7 @@ def test_child_with_two_geometries_reports_the_inner_geometry_id(kind):
         top.commit()
         origins = np.array([[0.0, 0.0, 20.0], [5.1, 0.05, 20.0], [0.0, 0.0, -20.0]])
         directions = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0]])
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
     np.testing.assert_array_equal(hits.geom_id, [sphere_gid, mesh_gid, direct_gid])
     np.testing.assert_array_equal(hits.inst_id, [inst_gid, inst_gid, -1])
     assert_close(
@@ -153,6 +153,6 @@ def test_top_level_keeps_its_instanced_bvh_alive():
     baked = transform_points(TRANSFORMS[0], float32_exact(ico.vertices))
     origins, directions = world_rays(np.random.default_rng(24), baked, 1000)
     with top:
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
     ref = triangle_hits(origins, directions, baked, ico.faces)
     assert_hits_match(hits, ref, mesh_gid, inst_gid, triangles=True, normal_cos=0.9995)

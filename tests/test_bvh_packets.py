@@ -9,7 +9,7 @@ import trimesh
 from bvh_reference import float32_exact, near_triangle_edge, sphere_hits, triangle_hits
 from tolerances import assert_close, assert_vectors_close, coordinate_scale, ray_t_atol
 
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 from embree_rt.embree.bvh import SPHERE_KINDS
 
 RNG = np.random.default_rng(3)
@@ -63,11 +63,11 @@ def test_packet_and_single_ray_queries_agree(
     bvh, mesh_gid = _scene(kind)
     with bvh:
         bvh.lanes = lanes
-        packet_hits = bvh.intersect(origins, directions, 0.0, tfar, coherent=coherent)
-        packet_blocked = bvh.occluded(origins, directions, 0.0, tfar, coherent=coherent)
+        packet_hits = bvh.intersect(Rays(origins, directions, 0.0, tfar), coherent=coherent)
+        packet_blocked = bvh.occluded(Rays(origins, directions, 0.0, tfar), coherent=coherent)
         bvh.lanes = 1
-        single_hits = bvh.intersect(origins, directions, 0.0, tfar)
-        single_blocked = bvh.occluded(origins, directions, 0.0, tfar)
+        single_hits = bvh.intersect(Rays(origins, directions, 0.0, tfar))
+        single_blocked = bvh.occluded(Rays(origins, directions, 0.0, tfar))
     assert 0.1 < single_hits.hit.mean() < 0.9  # both hits and misses are exercised
 
     # The two paths run different Embree code, which rounds differently again on each ISA: a

@@ -35,7 +35,7 @@ from tolerances import (
     ray_t_atol,
 )
 
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 from embree_rt.tracing.segments import occluded_toward, toward_lights
 
 KINDS = ("spheres", "triangles", "instances")
@@ -163,7 +163,7 @@ def test_nearest_hit_matches_reference(parts, kinds):
     origins, directions = rays(31, 2500)
     bvh, ids = parts.build(kinds)
     with bvh:
-        hits = bvh.intersect(origins, directions)
+        hits = bvh.intersect(Rays(origins, directions))
     ref, geom, inst, winner = parts.reference(kinds, ids, origins, directions)
     ref.ambiguous |= our_triangle_edge_hits(hits, ids)
     sure = assert_hits_match(
@@ -196,11 +196,11 @@ def test_occluded_agrees_with_reference_and_intersect(parts, kinds):
         reach = np.where(first.hit, first.t, 60.0 / np.linalg.norm(directions, axis=1))
         tnear = float32_exact(reach * rng.uniform(0.0, 0.4, len(reach)))
         tfar = float32_exact(reach * rng.uniform(0.5, 1.5, len(reach)))
-        blocked = bvh.occluded(origins, directions, tnear=tnear, tfar=tfar)
-        hits = bvh.intersect(origins, directions, tnear=tnear, tfar=tfar)
+        blocked = bvh.occluded(Rays(origins, directions, tnear=tnear, tfar=tfar))
+        hits = bvh.intersect(Rays(origins, directions, tnear=tnear, tfar=tfar))
         # origins lie 25 from the centre and directions are 0.2..5 long: tfar = 8 cuts the box
-        scalar_blocked = bvh.occluded(origins, directions, tfar=8.0)
-        scalar_hits = bvh.intersect(origins, directions, tfar=8.0)
+        scalar_blocked = bvh.occluded(Rays(origins, directions, tfar=8.0))
+        scalar_hits = bvh.intersect(Rays(origins, directions, tfar=8.0))
     ref, *_ = parts.reference(kinds, ids, origins, directions, tnear, tfar)
     sure = ~(ref.ambiguous | our_triangle_edge_hits(hits, ids))
     assert sure.mean() > 0.99
@@ -238,7 +238,7 @@ def test_occluded_toward_answers_what_occluded_answers_on_the_same_segments(part
         origins = points[:, rows].T.copy()
         directions = (target[:, None] - points[:, rows]).T.copy()
         expected = occluded_or_below_plane(bvh, origins, directions, 0.0, 1.0, -4.0)
-        hits = bvh.intersect(origins, directions, 0.0, 1.0)
+        hits = bvh.intersect(Rays(origins, directions, 0.0, 1.0))
     below = origins[:, 1] < -4.0  # these cross the plane on their way up to the target
     assert 0.1 < below.mean() < 0.3 and blocked[below].all()
     assert 0.2 < blocked[~below].mean() < 0.8  # both answers are exercised
@@ -330,8 +330,8 @@ def test_empty_scene_misses_everything():
     origins, directions = rays(34, 100)
     with BVH() as bvh:
         bvh.commit()
-        hits = bvh.intersect(origins, directions)
-        blocked = bvh.occluded(origins, directions)
+        hits = bvh.intersect(Rays(origins, directions))
+        blocked = bvh.occluded(Rays(origins, directions))
     assert np.all(np.isinf(hits.t)) and np.all(hits.t > 0)
     for name in ("geom_id", "prim_id", "inst_id"):
         assert np.all(getattr(hits, name) == -1), name
@@ -341,8 +341,8 @@ def test_empty_scene_misses_everything():
 def test_zero_rays(parts):
     bvh, _ = parts.build()
     with bvh:
-        hits = bvh.intersect(np.zeros((0, 3)), np.zeros((0, 3)))
-        blocked = bvh.occluded(np.zeros((0, 3)), np.zeros((0, 3)))
+        hits = bvh.intersect(Rays(np.zeros((0, 3)), np.zeros((0, 3))))
+        blocked = bvh.occluded(Rays(np.zeros((0, 3)), np.zeros((0, 3))))
     assert hits.t.shape == (0,) and hits.prim_id.shape == (0,) and hits.normal.shape == (0, 3)
     assert blocked.shape == (0,)
 
@@ -354,8 +354,8 @@ def test_one_thread_and_two_threads_give_identical_results(parts):
     for threads in (1, 2):
         bvh, _ = parts.build(threads=threads)
         with bvh:
-            hits = bvh.intersect(origins, directions, tnear=tnear)
-            blocked = bvh.occluded(origins, directions, tnear=tnear, tfar=8.0)
+            hits = bvh.intersect(Rays(origins, directions, tnear=tnear))
+            blocked = bvh.occluded(Rays(origins, directions, tnear=tnear, tfar=8.0))
         results.append((hits, blocked))
     (a, blocked_a), (b, blocked_b) = results
     hit = np.isfinite(a.t)
@@ -376,12 +376,12 @@ def test_batch_equals_one_ray_at_a_time(parts):
     tnear = float32_exact(np.random.default_rng(38).uniform(0, 2, 40))
     bvh, ids = parts.build()
     with bvh:
-        batch = bvh.intersect(origins, directions, tnear=tnear)
-        batch_blocked = bvh.occluded(origins, directions, tnear=tnear, tfar=30.0)
+        batch = bvh.intersect(Rays(origins, directions, tnear=tnear))
+        batch_blocked = bvh.occluded(Rays(origins, directions, tnear=tnear, tfar=30.0))
         assert 5 < np.isfinite(batch.t).sum() < 38
         for i in range(len(origins)):
-            one = bvh.intersect(origins[i : i + 1], directions[i : i + 1], tnear=tnear[i])
-            blocked = bvh.occluded(origins[i : i + 1], directions[i : i + 1], tnear[i], 30.0)
+            one = bvh.intersect(Rays(origins[i : i + 1], directions[i : i + 1], tnear=tnear[i]))
+            blocked = bvh.occluded(Rays(origins[i : i + 1], directions[i : i + 1], tnear[i], 30.0))
             for name in ("geom_id", "prim_id", "inst_id"):
                 assert getattr(one, name)[0] == getattr(batch, name)[i], (name, i)
             assert blocked[0] == batch_blocked[i], i
@@ -416,13 +416,13 @@ def test_scalar_window_equals_the_same_window_per_ray(parts):
     origins, directions = rays(39, 3000)
     bvh, _ = parts.build()
     with bvh:
-        scalar = bvh.intersect(origins, directions, tnear=1.5, tfar=9.0)
+        scalar = bvh.intersect(Rays(origins, directions, tnear=1.5, tfar=9.0))
         per_ray = bvh.intersect(
-            origins, directions, tnear=np.full(3000, 1.5), tfar=np.full(3000, 9.0)
+            Rays(origins, directions, tnear=np.full(3000, 1.5), tfar=np.full(3000, 9.0))
         )
-        blocked = bvh.occluded(origins, directions, tnear=1.5, tfar=9.0)
+        blocked = bvh.occluded(Rays(origins, directions, tnear=1.5, tfar=9.0))
         blocked_per_ray = bvh.occluded(
-            origins, directions, tnear=np.full(3000, 1.5), tfar=np.full(3000, 9.0)
+            Rays(origins, directions, tnear=np.full(3000, 1.5), tfar=np.full(3000, 9.0))
         )
     # Bitwise, on any ISA: a scalar window is broadcast to the very float32 values the per-ray
     # arrays hold, and the rays go through the same kernel either way.
@@ -436,12 +436,12 @@ def test_context_manager_and_close():
         assert isinstance(bvh, BVH)
         bvh.add_spheres([[0.0, 0.0, 0.0]], [1.0])
         bvh.commit()
-        t = bvh.intersect([[0.0, 0.0, 5.0]], [[0.0, 0.0, -1.0]]).t
+        t = bvh.intersect(Rays([[0.0, 0.0, 5.0]], [[0.0, 0.0, -1.0]])).t
         assert_close(t, [4.0], atol=position_atol(5.0))
     other = BVH(threads=1)
     other.add_spheres([[0.0, 0.0, 0.0]], [1.0])
     other.commit()
-    assert other.occluded([[0.0, 0.0, 5.0]], [[0.0, 0.0, -1.0]])[0]
+    assert other.occluded(Rays([[0.0, 0.0, 5.0]], [[0.0, 0.0, -1.0]]))[0]
     other.close()
 
 
@@ -478,8 +478,8 @@ def test_million_spheres_vertical_rays_closed_form(million):
     xy = float32_exact(rng.uniform(0, SIDE, size=(count, 2)))
     origins = np.c_[xy, np.full(count, 5.0)]
     directions = np.tile([0.0, 0.0, -1.0], (count, 1))
-    hits = bvh.intersect(origins, directions)
-    blocked = bvh.occluded(origins, directions, tfar=4.0)
+    hits = bvh.intersect(Rays(origins, directions))
+    blocked = bvh.occluded(Rays(origins, directions, tfar=4.0))
 
     cell = np.floor(xy).astype(np.int64)
     index = cell[:, 0] * SIDE + cell[:, 1]
@@ -501,7 +501,7 @@ def test_million_spheres_vertical_rays_closed_form(million):
     assert np.all(hits.geom_id[both] == gid)
     # every sphere top lies below z = 0.6, i.e. t >= 4.4: nothing is within tfar = 4
     assert not blocked.any()
-    assert np.array_equal(bvh.occluded(origins, directions, tfar=10.0)[sure], hit[sure])
+    assert np.array_equal(bvh.occluded(Rays(origins, directions, tfar=10.0))[sure], hit[sure])
 
 
 def test_million_spheres_oblique_rays_brute_force(million):
@@ -514,7 +514,7 @@ def test_million_spheres_oblique_rays_brute_force(million):
         targets + np.c_[rng.uniform(-60, 60, size=(count, 2)), np.full(count, 150.0)]
     )
     directions = float32_exact((targets - origins) / 150.0)
-    hits = bvh.intersect(origins, directions)
+    hits = bvh.intersect(Rays(origins, directions))
     assert 0.2 < np.isfinite(hits.t).mean() < 0.95
     subset = rng.choice(count, 200, replace=False)
     ref = sphere_hits(origins[subset], directions[subset], centers, radii, ambiguity=1e-6)
@@ -645,16 +645,16 @@ def small_bvh():
 )
 def test_ray_validation(small_bvh, method, arguments, argument, row):
     call_arguments = {"origins": good() + np.array([0, 0, 5]), "directions": good(), **arguments}
-    expect_error(lambda: getattr(small_bvh, method)(**call_arguments), argument, row)
+    expect_error(lambda: getattr(small_bvh, method)(Rays(**call_arguments)), argument, row)
 
 
 def test_window_with_tnear_beyond_tfar_is_empty(parts):
     origins, directions = rays(43, 500)
     bvh, _ = parts.build()
     with bvh:
-        hits = bvh.intersect(origins, directions, tnear=5.0, tfar=4.0)
-        blocked = bvh.occluded(origins, directions, tnear=5.0, tfar=4.0)
-        assert np.isfinite(bvh.intersect(origins, directions, tnear=4.0, tfar=50.0).t).any()
+        hits = bvh.intersect(Rays(origins, directions, tnear=5.0, tfar=4.0))
+        blocked = bvh.occluded(Rays(origins, directions, tnear=5.0, tfar=4.0))
+        assert np.isfinite(bvh.intersect(Rays(origins, directions, tnear=4.0, tfar=50.0)).t).any()
     assert np.all(np.isinf(hits.t)) and np.all(hits.geom_id == -1) and not blocked.any()
 
 
@@ -663,19 +663,17 @@ def test_strided_and_fortran_ordered_inputs_give_the_same_answers(parts):
     tnear = np.random.default_rng(45).uniform(0, 2, 6000)
     bvh, _ = parts.build()
     with bvh:
-        expected = bvh.intersect(origins[::2], directions[::2], tnear=tnear[::2][::2].copy())
+        expected = bvh.intersect(Rays(origins[::2], directions[::2], tnear=tnear[::2][::2].copy()))
         # every other row of a C array, columns of a Fortran array, a strided tnear
         layouts = bvh.intersect(
-            origins[::2],
-            np.asfortranarray(directions[::2]),
-            tnear=tnear[::2][::2],
+            Rays(origins[::2], np.asfortranarray(directions[::2]), tnear=tnear[::2][::2])
         )
         assert np.isfinite(expected.t).mean() > 0.1
         # Bitwise, on any ISA: the layouts are copied into the same contiguous float32 rays
         # before Embree sees them, so the same kernel gets the same bits.
         for name in ("t", "geom_id", "prim_id", "inst_id"):
             assert np.array_equal(getattr(expected, name), getattr(layouts, name)), name
-        blocked = bvh.occluded(origins[::2], np.asfortranarray(directions[::2]), tfar=8.0)
+        blocked = bvh.occluded(Rays(origins[::2], np.asfortranarray(directions[::2]), tfar=8.0))
         assert np.array_equal(
-            blocked, bvh.occluded(origins[::2].copy(), directions[::2].copy(), tfar=8.0)
+            blocked, bvh.occluded(Rays(origins[::2].copy(), directions[::2].copy(), tfar=8.0))
         )

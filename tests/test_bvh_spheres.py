@@ -18,7 +18,7 @@ from bvh_reference import (
 )
 from tolerances import assert_close, position_atol, ray_t_atol
 
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 from embree_rt.embree.bvh import SPHERE_KINDS
 
 
@@ -54,7 +54,7 @@ def field(request):
 
 def test_hits_layout_and_dtypes(field):
     _, _, bvh, gid, origins, directions = field
-    hits = bvh.intersect(origins[:10], directions[:10])
+    hits = bvh.intersect(Rays(origins[:10], directions[:10]))
     assert isinstance(gid, int)
     for name in ("t", "u", "v"):
         assert getattr(hits, name).shape == (10,)
@@ -68,14 +68,14 @@ def test_hits_layout_and_dtypes(field):
 
 def test_random_overlapping_field_matches_quadratic(field):
     centers, radii, bvh, gid, origins, directions = field
-    hits = bvh.intersect(origins, directions)
+    hits = bvh.intersect(Rays(origins, directions))
     ref = sphere_hits(origins, directions, centers, radii)
     assert_hits_match(hits, ref, gid, min_hit_fraction=0.3, min_miss_fraction=0.05)
 
 
 def test_normals_point_outward_from_the_centre(field):
     centers, radii, bvh, _, origins, directions = field
-    hits = bvh.intersect(origins, directions)
+    hits = bvh.intersect(Rays(origins, directions))
     hit = np.isfinite(hits.t)
     point = origins[hit] + hits.t[hit, None].astype(np.float64) * directions[hit]
     outward = unit(point - centers[hits.prim_id[hit]])
@@ -98,7 +98,7 @@ def test_nested_spheres_from_inside_hit_the_far_side_outward(kind):
         # From the common centre: closed form t = 1 / |d| on the innermost sphere, normal ∝ d.
         directions = float32_exact(unit(rng.normal(size=(500, 3))) * rng.uniform(0.3, 3, (500, 1)))
         origins = np.zeros_like(directions)
-        hits = bvh.intersect(origins, directions)
+        hits = bvh.intersect(Rays(origins, directions))
         assert np.all(hits.prim_id == 0)
         assert np.all(hits.geom_id == gid)
         # float32 rounding of coordinates up to the outer radius 3 (the rays leave radially)
@@ -114,7 +114,7 @@ def test_nested_spheres_from_inside_hit_the_far_side_outward(kind):
         inside = unit(rng.normal(size=(3000, 3))) * rng.uniform(0, 2.95, (3000, 1))
         origins = float32_exact(inside)
         directions = float32_exact(unit(rng.normal(size=(3000, 3))))
-        hits = bvh.intersect(origins, directions)
+        hits = bvh.intersect(Rays(origins, directions))
         ref = sphere_hits(origins, directions, centers, radii)
         assert ref.hit.all(), "every ray starts inside the largest sphere"
         assert_hits_match(hits, ref, gid)
@@ -139,7 +139,7 @@ def test_grazing_rays(offset, kind):
     with BVH() as bvh:
         gid = bvh.add_spheres(center[None], [radius], kind=kind)
         bvh.commit()
-        hits = bvh.intersect(origins, directions)
+        hits = bvh.intersect(Rays(origins, directions))
     ref = sphere_hits(origins, directions, center[None], np.array([radius]), ambiguity=0.0)
     assert np.all(ref.hit == (offset < 0))
     agree = np.isfinite(hits.t) == ref.hit
@@ -161,7 +161,7 @@ def test_exactly_tangent_rays_hit_at_the_touching_point_if_at_all(kind):
     with BVH() as bvh:
         bvh.add_spheres(center[None], [1.0], kind=kind)
         bvh.commit()
-        hits = bvh.intersect(origins, float32_exact(direction))
+        hits = bvh.intersect(Rays(origins, float32_exact(direction)))
     hit = np.isfinite(hits.t)
     # touching point at t = 5; a float32 ulp sideways moves the root by ~sqrt(ulp) ~ 1e-3
     np.testing.assert_allclose(hits.t[hit], 5.0, atol=2e-3)
@@ -181,28 +181,28 @@ def test_window_on_a_row_of_spheres_finds_the_next_hit(kind):
             direction = np.array([[direction_length, 0, 0]])
             for t, prim, side in surfaces:
                 t = t / direction_length
-                hits = bvh.intersect(origin, direction, tnear=t - 0.5 / direction_length)
+                hits = bvh.intersect(Rays(origin, direction, tnear=t - 0.5 / direction_length))
                 assert_close(hits.t, [t], atol=ray_t_atol(origin, direction, 21.0))
                 assert hits.prim_id[0] == prim and hits.geom_id[0] == gid
                 assert np.sign(hits.normal[0, 0]) == side and hits.normal[0, 0] != 0
                 assert abs(hits.normal[0, 1]) + abs(hits.normal[0, 2]) < 1e-4
             # tfar just short of the first surface: nothing
-            hits = bvh.intersect(origin, direction, tfar=3.9 / direction_length)
+            hits = bvh.intersect(Rays(origin, direction, tfar=3.9 / direction_length))
             assert np.isinf(hits.t[0]) and hits.prim_id[0] == -1 and hits.geom_id[0] == -1
             # a window between two spheres: nothing
             hits = bvh.intersect(
-                origin, direction, tnear=6.5 / direction_length, tfar=8.5 / direction_length
+                Rays(origin, direction, tnear=6.5 / direction_length, tfar=8.5 / direction_length)
             )
             assert np.isinf(hits.t[0]) and hits.prim_id[0] == -1
         # the window is inclusive of interior hits on both sides: [3.9, 4.1] holds t = 4
-        hits = bvh.intersect(origin, np.array([[1.0, 0, 0]]), tnear=3.9, tfar=4.1)
+        hits = bvh.intersect(Rays(origin, np.array([[1.0, 0, 0]]), tnear=3.9, tfar=4.1))
         assert_close(hits.t, [4.0], atol=position_atol(21.0))
 
 
 def test_scalar_window_skips_the_nearest_hit(field):
     centers, radii, bvh, gid, origins, directions = field
     tnear = 6.0  # origins are 40 away, directions 0.2..5 long: the window cuts through the field
-    hits = bvh.intersect(origins, directions, tnear=tnear, tfar=25.0)
+    hits = bvh.intersect(Rays(origins, directions, tnear=tnear, tfar=25.0))
     ref = sphere_hits(origins, directions, centers, radii, tnear=tnear, tfar=25.0)
     assert_hits_match(hits, ref, gid, min_hit_fraction=0.1, min_miss_fraction=0.1)
 
@@ -215,12 +215,12 @@ def test_per_ray_window_excluding_the_nearest_hit_finds_the_next_one(field):
     # tnear just past the first hit: the next surface (the same sphere's far side, or another)
     tnear = float32_exact(first.t[hit] * (1 + 1e-3))
     tfar = float32_exact(first.t[hit] * np.random.default_rng(5).uniform(1.0, 1.5, hit.sum()))
-    hits = bvh.intersect(o, d, tnear=tnear, tfar=tfar)
+    hits = bvh.intersect(Rays(o, d, tnear=tnear, tfar=tfar))
     ref = sphere_hits(o, d, centers, radii, tnear=tnear, tfar=tfar)
     assert_hits_match(hits, ref, gid, min_hit_fraction=0.3, min_miss_fraction=0.05)
     assert np.all(hits.t[np.isfinite(hits.t)] >= tnear[np.isfinite(hits.t)])
     # per-ray tfar before the first hit: everything misses
-    hits = bvh.intersect(o, d, tfar=float32_exact(first.t[hit] * 0.99))
+    hits = bvh.intersect(Rays(o, d, tfar=float32_exact(first.t[hit] * 0.99)))
     assert np.all(np.isinf(hits.t)) and np.all(hits.geom_id == -1)
 
 
@@ -238,7 +238,7 @@ def test_prim_and_geom_ids_identify_each_sphere(kind):
         assert gid_a != gid_b
         tops = np.r_[first, second] + [0.0, 0.0, 3.0]
         down = np.tile([0.0, 0.0, -1.0], (120, 1))
-        hits = bvh.intersect(tops, down)
+        hits = bvh.intersect(Rays(tops, down))
     assert np.array_equal(hits.geom_id, np.r_[np.full(60, gid_a), np.full(60, gid_b)])
     assert np.array_equal(hits.prim_id, np.r_[np.arange(60), np.arange(60)])
     assert np.all(hits.inst_id == -1)
@@ -256,8 +256,8 @@ def test_float64_float32_and_integer_inputs_agree(kind):
         b.commit()
         origins = np.array([[-5, 0, 0], [3, 0, 10]])
         directions = np.array([[1, 0, 0], [0, 0, -1]])
-        ha = a.intersect(origins, directions)
-        hb = b.intersect(origins.astype(np.float32), directions.astype(np.float32))
+        ha = a.intersect(Rays(origins, directions))
+        hb = b.intersect(Rays(origins.astype(np.float32), directions.astype(np.float32)))
     # Bitwise, on any ISA: float64 and integer inputs are rounded to the same float32 values
     # before Embree sees them, and the same kernel traces them.
     np.testing.assert_array_equal(ha.t, hb.t)
@@ -307,13 +307,13 @@ def test_build_quality_and_compact_change_the_tree_not_the_answers(kind, quality
     other.add_spheres(centers, radii, kind=kind)
     other.commit()
     with reference, other:
-        expected = reference.intersect(origins, directions)
-        got = other.intersect(origins, directions)
+        expected = reference.intersect(Rays(origins, directions))
+        got = other.intersect(Rays(origins, directions))
         np.testing.assert_array_equal(got.prim_id, expected.prim_id)
         np.testing.assert_allclose(got.t, expected.t, rtol=2.0**-20, atol=0.0)  # inf == inf
         np.testing.assert_array_equal(
-            other.occluded(origins, directions, 0.0, 60.0),
-            reference.occluded(origins, directions, 0.0, 60.0),
+            other.occluded(Rays(origins, directions, 0.0, 60.0)),
+            reference.occluded(Rays(origins, directions, 0.0, 60.0)),
         )
 
 

@@ -28,7 +28,7 @@ from tolerances import (
     ray_t_atol,
 )
 
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 
 
 def icosphere():
@@ -71,14 +71,14 @@ def scene(request):
 
 def test_matches_trimesh(scene):
     _, vertices, faces, bvh, gid, origins, directions = scene
-    hits = bvh.intersect(origins, directions)
+    hits = bvh.intersect(Rays(origins, directions))
     ref = triangle_hits(origins, directions, vertices, faces)
     assert_hits_match(hits, ref, gid, triangles=True, min_hit_fraction=0.2, min_miss_fraction=0.05)
 
 
 def test_matches_embreex_on_the_same_mesh(scene):
     _, vertices, faces, bvh, _, origins, directions = scene
-    hits = bvh.intersect(origins, directions)
+    hits = bvh.intersect(Rays(origins, directions))
     theirs = embreex_hits(origins, directions, vertices, faces)
     ours_hit = np.isfinite(hits.t)
     assert ours_hit.mean() > 0.2
@@ -112,7 +112,7 @@ def test_window_past_the_nearest_hit_finds_the_next_surface(scene):
     keep = first.hit & ~first.ambiguous
     o, d = origins[keep], directions[keep]
     tnear = float32_exact(first.t[keep] * (1 + 1e-4))
-    hits = bvh.intersect(o, d, tnear=tnear)
+    hits = bvh.intersect(Rays(o, d, tnear=tnear))
     ref = triangle_hits(o, d, vertices, faces, tnear=tnear)
     # closed meshes: every ray entering leaves again through a back face
     expect_hits = 0.9 if name != "soup" else 0.05
@@ -128,7 +128,7 @@ def test_scalar_window(scene):
     span = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
     # origins sit 3 spans from the centre; directions are 0.2..5 long
     tnear, tfar = 2.8 * span / 5.0, 3.1 * span / 0.5
-    hits = bvh.intersect(origins, directions, tnear=tnear, tfar=tfar)
+    hits = bvh.intersect(Rays(origins, directions, tnear=tnear, tfar=tfar))
     ref = triangle_hits(origins, directions, vertices, faces, tnear=tnear, tfar=tfar)
     assert_hits_match(hits, ref, gid, triangles=True, min_hit_fraction=0.05, min_miss_fraction=0.2)
 
@@ -144,8 +144,8 @@ def test_one_triangle_closed_form(index_dtype):
         flipped.commit()
         origins = np.array([[0.2, 0.3, 1.0], [0.2, 0.3, -2.0], [0.7, 0.7, 1.0]])
         directions = np.array([[0, 0, -1.0], [0, 0, 0.5], [0, 0, -1.0]])
-        a = front.intersect(origins, directions)
-        b = flipped.intersect(origins, directions)
+        a = front.intersect(Rays(origins, directions))
+        b = flipped.intersect(Rays(origins, directions))
     # Exact inputs, but Embree's float32 arithmetic on them still rounds (differently per ISA):
     # t to ulps of the coordinates (up to 5 here), u, v to that over the triangle's height.
     t_atol = ray_t_atol(origins[:2], directions[:2], 5.0)
@@ -176,7 +176,7 @@ def test_two_meshes_report_their_own_geometry_ids():
         normals = face_normals(vertices, faces)
         # a short ray onto each centroid along its normal: nothing else can be in between
         origins = centroids + 1e-4 * normals
-        hits = bvh.intersect(origins, -normals, tfar=2e-4)
+        hits = bvh.intersect(Rays(origins, -normals, tfar=2e-4))
     assert np.array_equal(hits.geom_id, np.r_[np.full(50, gid_a), np.full(50, gid_b)])
     assert np.array_equal(hits.prim_id, np.r_[np.arange(50), np.arange(50)])
     # t = 1e-4 on rays starting up to 12 units out: known to ulps of 12 (~1e-6), not of 1e-4.

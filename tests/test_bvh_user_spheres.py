@@ -23,7 +23,7 @@ from bvh_reference import (
     unit,
 )
 
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 from embree_rt.embree.bvh import SPHERE_KINDS
 
 ULP = 2.0**-23  # one float32 ulp, relative
@@ -79,7 +79,7 @@ def test_distant_small_spheres_match_the_float64_quadratic(layout, kind):
     origins, directions = float32_exact(origins), float32_exact(directions)
     bvh, gid = spheres_bvh(centers, radii, kind)
     with bvh:
-        hits = bvh.intersect(origins, directions)
+        hits = bvh.intersect(Rays(origins, directions))
     # undecidable: within 8 float32 ulps of the ray-to-sphere distance of a decision, plus 8 ulps
     # of the coordinates, which both kinds store in float32
     coordinates = ulps(np.abs(middle).max() + 8, 8)
@@ -110,7 +110,7 @@ def test_user_spheres_are_no_less_robust_than_native_far_away():
     for kind in SPHERE_KINDS:
         bvh, _ = spheres_bvh(centers, radii, kind)
         with bvh:
-            wrong[kind] = wrong_objects(bvh.intersect(origins, directions), ref)
+            wrong[kind] = wrong_objects(bvh.intersect(Rays(origins, directions)), ref)
     # a float32 quadratic errs on ~ulp(1500) / 0.4 of these rays: the sample must be that hard
     # to show anything (native SPHERE_POINT solves in float32)
     assert wrong["point"] >= 10, f"sample too easy: native wrong on {wrong['point']} rays"
@@ -134,7 +134,7 @@ def test_rays_from_inside_distant_spheres_exit_with_the_outward_normal(kind):
     directions = float32_exact(unit(rng.normal(size=(count, 3))) * rng.uniform(0.5, 2, (count, 1)))
     bvh, gid = spheres_bvh(centers, radii, kind)
     with bvh:
-        hits = bvh.intersect(origins, directions)
+        hits = bvh.intersect(Rays(origins, directions))
     ref = sphere_hits(origins, directions, centers, radii, ambiguity=8 * ULP)
     assert np.array_equal(ref.prim_id, which), "the reference exits the sphere it starts in"
     assert np.array_equal(hits.prim_id, which) and np.all(hits.geom_id == gid)
@@ -212,12 +212,12 @@ def test_hits_exactly_on_the_window_bounds_count(lanes):
         cases.append((t0, t0, t0))
     with bvh:
         for tnear, tfar, expected in cases:
-            hits = bvh.intersect(origins, directions, tnear, tfar)
+            hits = bvh.intersect(Rays(origins, directions, tnear, tfar))
             np.testing.assert_array_equal(hits.t, expected)
             hit = np.isfinite(expected)
             assert np.array_equal(hits.prim_id, np.where(hit, np.arange(len(t0)), -1))
             assert np.all(hits.geom_id[hit] == gid)
-            np.testing.assert_array_equal(bvh.occluded(origins, directions, tnear, tfar), hit)
+            np.testing.assert_array_equal(bvh.occluded(Rays(origins, directions, tnear, tfar)), hit)
 
 
 @pytest.mark.parametrize("kind", SPHERE_KINDS)
@@ -229,7 +229,7 @@ def test_reported_t_always_lies_inside_the_window(kind):
     origins, directions = float32_exact(origins), float32_exact(directions)
     bvh, _ = spheres_bvh(centers, radii, kind)
     with bvh:
-        first = bvh.intersect(origins, directions)
+        first = bvh.intersect(Rays(origins, directions))
         hit = np.isfinite(first.t)
         # windows that start or end right at (one ulp around) the first hit, and random ones
         t = np.where(hit, first.t, 30.0)
@@ -237,8 +237,8 @@ def test_reported_t_always_lies_inside_the_window(kind):
             [rng.random(4000) < 0.25, rng.random(4000) < 0.33], [up(t), t], rng.uniform(0, 30, 4000)
         )
         tfar = np.select([rng.random(4000) < 0.3, rng.random(4000) < 0.4], [down(t), t], tnear + 8)
-        hits = bvh.intersect(origins, directions, tnear, tfar)
-        blocked = bvh.occluded(origins, directions, tnear, tfar)
+        hits = bvh.intersect(Rays(origins, directions, tnear, tfar))
+        blocked = bvh.occluded(Rays(origins, directions, tnear, tfar))
     inside = np.isfinite(hits.t)
     assert 0.2 < inside.mean() < 0.8
     t32 = hits.t[inside]
@@ -322,8 +322,8 @@ def packet_field(request):
     field = Field(request.param)
     single = field.build(threads=1)
     single.lanes = 1
-    baseline = single.intersect(field.origins, field.directions, 0.0, field.tfar)
-    baseline_blocked = single.occluded(field.origins, field.directions, 0.0, field.tfar)
+    baseline = single.intersect(Rays(field.origins, field.directions, 0.0, field.tfar))
+    baseline_blocked = single.occluded(Rays(field.origins, field.directions, 0.0, field.tfar))
     yield field, single, baseline, baseline_blocked
     single.close()
     field.child.close()
@@ -362,8 +362,8 @@ def test_every_batch_size_answers_like_single_rays(packet_field, lanes, threads)
         for start, size in BATCHES:
             rows = slice(start, start + size)
             o, d, tfar = field.origins[rows], field.directions[rows], field.tfar[rows]
-            hits = bvh.intersect(o, d, 0.0, tfar)
-            blocked = bvh.occluded(o, d, 0.0, tfar)
+            hits = bvh.intersect(Rays(o, d, 0.0, tfar))
+            blocked = bvh.occluded(Rays(o, d, 0.0, tfar))
             expected = SimpleNamespace(
                 **{
                     name: getattr(baseline, name)[rows]
@@ -401,8 +401,8 @@ def test_occluded_agrees_with_intersect_on_many_windows(packet_field, lanes):
         for _ in range(3):
             tnear = float32_exact(rng.uniform(0, 20, len(field.origins)))
             tfar = float32_exact(tnear + rng.exponential(4, len(field.origins)))
-            hits = bvh.intersect(field.origins, field.directions, tnear, tfar)
-            blocked = bvh.occluded(field.origins, field.directions, tnear, tfar)
+            hits = bvh.intersect(Rays(field.origins, field.directions, tnear, tfar))
+            blocked = bvh.occluded(Rays(field.origins, field.directions, tnear, tfar))
             assert 0.1 < blocked.mean() < 0.9
             differ = blocked != np.isfinite(hits.t)
             if differ.any():
@@ -432,7 +432,7 @@ def test_instanced_user_spheres_report_instance_prim_and_world_normal(lanes):
         )
         origins, directions = rays_toward_box(rng, 3000, boxes.min(0), boxes.max(0), 25.0)
         origins, directions = float32_exact(origins), float32_exact(directions)
-        hits = top.intersect(origins, directions)
+        hits = top.intersect(Rays(origins, directions))
     # the reference per instance in object space, then the nearest over instances
     per_instance = []
     for matrix in TRANSFORMS:
@@ -472,7 +472,7 @@ def test_user_and_native_spheres_agree_on_the_same_rays(distance):
     for kind in SPHERE_KINDS:
         bvh, _ = spheres_bvh(centers, radii, kind)
         with bvh:
-            answers[kind] = bvh.intersect(origins, directions)
+            answers[kind] = bvh.intersect(Rays(origins, directions))
     user, point = answers["user"], answers["point"]
     differ = user.prim_id != point.prim_id
     # the documented exception: rays that graze a sphere or meet two at nearly the same t, to
@@ -524,11 +524,13 @@ def test_storage_order_never_shows_in_the_answers():
     shuffle = rng.permutation(count)
     first, _ = spheres_bvh(centers, radii, "user")
     second, _ = spheres_bvh(centers[shuffle], radii[shuffle], "user")
-    a = first.intersect(origins, directions)
-    b = second.intersect(origins, directions)
+    a = first.intersect(Rays(origins, directions))
+    b = second.intersect(Rays(origins, directions))
     hit = np.isfinite(a.t)
     assert 0.2 < hit.mean() < 0.95
     assert np.array_equal(a.t, b.t, equal_nan=True)
     assert np.array_equal(a.prim_id[hit], shuffle[b.prim_id[hit]])
     assert np.array_equal(a.normal[hit], b.normal[hit])
-    assert np.array_equal(first.occluded(origins, directions), second.occluded(origins, directions))
+    assert np.array_equal(
+        first.occluded(Rays(origins, directions)), second.occluded(Rays(origins, directions))
+    )

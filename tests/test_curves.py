@@ -15,7 +15,7 @@ import pytest
 from tolerances import position_atol
 
 from embree_rt import Camera, PointLight, Scene, render
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 from embree_rt.scene.errors import SceneError
 from embree_rt.scene.loader import load_scene
 from embree_rt.scene.writer import save_scene
@@ -95,7 +95,7 @@ def test_curve_hits_match_a_float64_round_cone_reference(seed: int) -> None:
     with BVH(threads=1) as bvh:
         bvh.add_curves(points, radii, np.arange(4))
         bvh.commit()
-        hits = bvh.intersect(origins.astype(np.float32), directions.astype(np.float32))
+        hits = bvh.intersect(Rays(origins.astype(np.float32), directions.astype(np.float32)))
     o64 = origins.astype(np.float32).astype(np.float64)
     d64 = directions.astype(np.float32).astype(np.float64)
     reference = march(o64, d64, points.astype(np.float32), radii.astype(np.float32), scale)

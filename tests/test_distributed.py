@@ -132,7 +132,7 @@ def test_scene_is_scattered_once_and_built_once_per_worker(cluster) -> None:
     settings = RenderSettings(max_depth=6, seed=11, **SMALL)
     cameras = [(f, camera_at(scene.camera, Animation(3, orbit=30.0), f)) for f in range(3)]
     images = {}
-    bounded(renderer.render_frames, settings, cameras, images.__setitem__)
+    bounded(renderer.render_frames, rd.FrameRequest(settings, cameras, images.__setitem__))
     assert sorted(images) == [0, 1, 2]
     # Three frames of a dozen batches each, spread over both workers: one build on each.
     assert renderer.builds() == dict.fromkeys(client.nthreads(), 1)
@@ -149,12 +149,8 @@ def test_animation_frames_equal_frames_rendered_one_by_one_locally(cluster) -> N
     cameras = [(f, camera_at(scene.camera, animation, f)) for f in frames]
     renderer = rd.ClusterRenderer(SCENES / "showcase.toml", client, batch_size=SMALL_BATCH)
     images = {}
-    bounded(
-        renderer.render_frames,
-        RenderSettings(max_depth=6, seed=0, **SMALL),
-        cameras,
-        images.__setitem__,
-    )
+    settings = RenderSettings(max_depth=6, seed=0, **SMALL)
+    bounded(renderer.render_frames, rd.FrameRequest(settings, cameras, images.__setitem__))
     assert sorted(images) == sorted(frames)
     for f, camera in cameras:
         assert np.array_equal(images[f], local_image(scene, camera)), f"frame {f}"

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 
 
 def _two_triangles():
@@ -24,7 +24,7 @@ def test_filter_records_every_hit_with_embree_fields():
     bvh.commit()
     origins = np.array([[1.0, 0.5, -1], [0.5, 2.0, 5], [3.0, 3.0, -1]], np.float32)
     directions = np.array([[0.1, 0.2, 1.0], [0.0, -0.1, -1.0], [0, 0, 1.0]], np.float32)
-    t, prim, u, v, cos, count, more = bvh.all_hits(origins, directions, capacity=4)
+    t, prim, u, v, cos, count, more = bvh.all_hits(Rays(origins, directions), capacity=4)
     assert count.tolist() == [2, 2, 0] and not more.any()
     for i in range(2):
         d = directions[i].astype(np.float64)
@@ -49,12 +49,12 @@ def test_capacity_keeps_the_nearest_and_says_more_exist():
     bvh.commit()
     origins = np.array([[1.0, 1.0, 10.0], [1.0, 1.0, -1.0]], np.float32)
     directions = np.array([[0, 0, -1.0], [0, 0, 1.0]], np.float32)
-    t, prim, *_, count, more = bvh.all_hits(origins, directions, capacity=3)
+    t, prim, *_, count, more = bvh.all_hits(Rays(origins, directions), capacity=3)
     assert count.tolist() == [3, 3] and more.tolist() == [True, True]
     assert prim[0].tolist() == [5, 4, 3] and prim[1].tolist() == [0, 1, 2]
     np.testing.assert_allclose(t[1], [1, 2, 3])
     # tnear and tfar bound the hits as Embree's own queries do
-    *_, count, _ = bvh.all_hits(origins[1:], directions[1:], tnear=1.5, tfar=4.5, capacity=8)
+    *_, count, _ = bvh.all_hits(Rays(origins[1:], directions[1:], tnear=1.5, tfar=4.5), capacity=8)
     assert count.tolist() == [3]
 
 
@@ -64,4 +64,4 @@ def test_filters_must_be_asked_for():
     bvh.add_triangles(vertices, faces)
     bvh.commit()
     with pytest.raises(RuntimeError, match="filters=True"):
-        bvh.all_hits(np.zeros((1, 3)), np.ones((1, 3)))
+        bvh.all_hits(Rays(np.zeros((1, 3)), np.ones((1, 3))))

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import embree_rt as rt
+from embree_rt.embree import Rays
 from embree_rt.embree.bvh import BVH
 
 SIZE = {"width": 48, "height": 32, "spp": 1, "max_depth": 3, "seed": 2}
@@ -42,7 +43,7 @@ def fresh_hits(centers, radii, kind, origins, directions):
     with BVH() as fresh:
         fresh.add_spheres(centers, radii, kind)
         fresh.commit()
-        return fresh.intersect(origins, directions)
+        return fresh.intersect(Rays(origins, directions))
 
 
 @pytest.mark.parametrize("kind", ["user", "point"])
@@ -54,12 +55,12 @@ def test_refitted_bvh_answers_as_a_fresh_build_over_a_trajectory(kind: str) -> N
         moving.commit()
         for frame in range(1, len(centers)):
             moving.move_spheres(geom_id, centers[frame], radii)
-            hits = moving.intersect(origins, directions)
+            hits = moving.intersect(Rays(origins, directions))
             expected = fresh_hits(centers[frame], radii, kind, origins, directions)
             for name in ("t", "prim_id", "geom_id", "normal"):
                 np.testing.assert_array_equal(getattr(hits, name), getattr(expected, name))
             assert 0.05 < hits.hit.mean() < 0.95  # the rays see spheres and sky
-            occluded = moving.occluded(origins, directions)
+            occluded = moving.occluded(Rays(origins, directions))
             np.testing.assert_array_equal(occluded, hits.hit)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from embree_rt import Scene
+from embree_rt.embree import Rays
 from embree_rt.geometry import SceneGeometry
 from embree_rt.integrator import surface_offset
 
@@ -164,6 +165,6 @@ def test_a_big_ground_sphere_does_not_shadow_itself(mode: str) -> None:
         origins = position + face_normal * offset
         assert geometry.labels.plane_y is None  # no floor: the BVH alone answers
         shadowed = geometry.bvh.occluded(
-            origins, to_light, 0.0, distance_to_light.astype(np.float32)
+            Rays(origins, to_light, 0.0, distance_to_light.astype(np.float32))
         )
     assert not shadowed.any(), f"shadow acne: {shadowed.mean():.0%} of visible points self-shadow"

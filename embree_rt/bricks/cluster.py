@@ -25,7 +25,7 @@ import math
 import os
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -50,16 +50,16 @@ from embree_rt.distributed import (
     NO_WORKERS_TIMEOUT_S,
     POLL_S,
     ClusterError,
-    ClusterProgress,
     FieldRecipe,
     FrameRenderer,
+    FrameRequest,
     SceneFile,
     SceneSource,
     WorkerSceneError,
 )
 from embree_rt.errors import InputError
 from embree_rt.integrator import Integrator, RenderStats
-from embree_rt.scene.model import RenderSettings, Scene, SettingOverrides
+from embree_rt.scene.model import Scene, SettingOverrides
 from embree_rt.sphere_modes import sphere_kind
 
 if TYPE_CHECKING:
@@ -428,25 +428,18 @@ class PartitionedRenderer(FrameRenderer):
         """Bricks (of any scene) held by each worker."""
         return self.client.run(bricks_held)
 
-    def render_frames(
-        self,
-        settings: RenderSettings,
-        cameras: Sequence[tuple[object, Camera]],
-        on_frame: Callable[[object, np.ndarray], None],
-        progress: Callable[[ClusterProgress], None] | None = None,
-    ) -> None:
-        """Render each ``(label, camera)`` in turn and call ``on_frame(label, image)``."""
-        total = settings.width * settings.height * settings.spp
-        state = ClusterProgress(total=total * len(cameras), workers=len(self.client.nthreads()))
-        for label, camera in cameras:
+    def render_frames(self, request: FrameRequest) -> None:
+        """Render each of the ``request``'s frames in turn and hand it to its ``on_frame``."""
+        settings = request.settings
+        state = request.started(workers=len(self.client.nthreads()))
+        for label, camera in request.cameras:
             frame = camera_frame(camera, settings.width, settings.height)
             before = state.done
 
             def show(done: int, _total: int, stats: RenderStats, before=before) -> None:
                 state.done = before + done
                 state.stats = stats
-                if progress is not None:
-                    progress(state)
+                request.report(state)
 
             image, stats = self.integrator.render_image(
                 frame,
@@ -459,7 +452,7 @@ class PartitionedRenderer(FrameRenderer):
                 self.stats.rays[kind] += count
             self.stats.render_s += stats.render_s
             state.frames_done += 1
-            on_frame(label, image)
+            request.on_frame(label, image)
 
 
 def _plan(source: Scene | SceneSource, bricks: int, spheres: str) -> tuple[Scene, BrickPlan, str]:

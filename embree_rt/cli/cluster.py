@@ -43,7 +43,9 @@ def run(job: Job, timeline: Timeline) -> None:
             renderer = tasks_or_bricks(distributed, job, made, client)
             total = settings.width * settings.height * settings.spp * len(plan.cameras)
             with released(renderer), distributed.progress_bar(total, job.quiet) as show:
-                renderer.render_frames(settings, plan.cameras, write, progress=show)
+                renderer.render_frames(
+                    distributed.FrameRequest(settings, plan.cameras, write, progress=show)
+                )
             workers = len(client.nthreads())
             timeline.mark_rendered()
     except MemoryBudgetError as error:

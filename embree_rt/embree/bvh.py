@@ -575,12 +575,12 @@ class BVH(Closing):
             raise RuntimeError("commit() the BVH before querying it")
         _prepare_kernels()
 
-    def query_rays(self, origins, directions, tnear, tfar) -> kernels.Rays:
-        """A query's rays, validated, as the kernels take them (refused before ``commit``)."""
+    def query_rays(self, rays: kernels.Rays) -> kernels.Rays:
+        """``rays`` validated, as the kernels take them (refused before ``commit``)."""
         self._ready_to_query()
-        origins = as_points(origins, "origins")
-        directions = as_points(directions, "directions", len(origins))
-        tnear, tfar = as_ray_bounds(tnear, tfar, len(origins))
+        origins = as_points(rays.origins, "origins")
+        directions = as_points(rays.directions, "directions", len(origins))
+        tnear, tfar = as_ray_bounds(rays.tnear, rays.tfar, len(origins))
         return kernels.Rays(origins, directions, tnear, tfar)
 
     def nearest_hits(self, rays: kernels.Rays, coherent: bool) -> Hits:
@@ -640,19 +640,9 @@ class BVH(Closing):
         instance arrays' (g, ``instance_arrays.ARRAY_COLUMNS``) uint64 table."""
         return self._normal_matrix_table, self._array_table
 
-    def intersect(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-        coherent: bool = False,
-    ) -> Hits:
-        """Nearest hit of each ray ``origins + t * directions`` with ``tnear <= t <= tfar``.
-
-        ``origins``, ``directions`` (n, 3); ``tnear``, ``tfar`` scalars or (n,).
-        """
-        hits = self.nearest_hits(self.query_rays(origins, directions, tnear, tfar), coherent)
+    def intersect(self, rays: kernels.Rays, coherent: bool = False) -> Hits:
+        """Nearest hit of each of the ``rays`` (normals in world space)."""
+        hits = self.nearest_hits(self.query_rays(rays), coherent)
         if self._has_instances:
             world_normals.hits_to_world(
                 hits.inst_id,
@@ -689,17 +679,9 @@ class BVH(Closing):
             self._array_table,
         )
 
-    def occluded(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-        coherent: bool = False,
-    ) -> np.ndarray:
-        """(n,) bool: whether anything lies on each ray within ``[tnear, tfar]``.
-        ``origins``, ``directions`` (n, 3)."""
-        rays = self.query_rays(origins, directions, tnear, tfar)
+    def occluded(self, rays: kernels.Rays, coherent: bool = False) -> np.ndarray:
+        """(n,) bool: whether anything lies on each of the ``rays`` within its bounds."""
+        rays = self.query_rays(rays)
         n = len(rays.origins)
         blocked = np.zeros(n, bool)
         if n:
@@ -708,29 +690,15 @@ class BVH(Closing):
         return blocked
 
     def all_hits(
-        self,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        tnear: float | np.ndarray = 0.0,
-        tfar: float | np.ndarray = np.inf,
-        capacity: int = 16,
-        out: multihit.HitBuffers | None = None,
+        self, rays: kernels.Rays, capacity: int = 16, out: multihit.HitBuffers | None = None
     ) -> multihit.HitBuffers:
-        """Up to ``capacity`` nearest hits of each ray, each primitive once (a ``filters=True``
-        BVH of one geometry, no instances): see ``multihit.all_hits`` for what it returns."""
-        origins, directions, tnear, tfar = self.query_rays(origins, directions, tnear, tfar)
+        """Up to ``capacity`` nearest hits of each of the ``rays``, each primitive once (a
+        ``filters=True`` BVH of one geometry, no instances): see ``multihit.all_hits`` for what
+        it returns."""
+        rays = self.query_rays(rays)
         self._require_filters()
         with parallel_region:
-            return multihit.all_hits(
-                self._live_scene(),
-                origins,
-                directions,
-                tnear,
-                tfar,
-                int(capacity),
-                self.threads,
-                out,
-            )
+            return multihit.all_hits(self._live_scene(), rays, int(capacity), self.threads, out)
 
     def committed_scene(self) -> int:
         """The committed Embree scene's handle (``RTCScene``), for a compiled pass that calls

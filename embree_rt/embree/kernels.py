@@ -76,12 +76,14 @@ class Query(NamedTuple):
 
 class Rays(NamedTuple):
     """n rays ``origins + t * directions``, ``tnear <= t <= tfar``: ``origins``, ``directions``
-    (n, 3) float32, ``tnear``, ``tfar`` (n,) float32."""
+    (n, 3), ``tnear``, ``tfar`` scalars or (n,), as a caller asks the BVH's queries
+    (``BVH.intersect(Rays(origins, directions, tfar=d))``); as the kernels take them
+    (``BVH.query_rays``), (n, 3) and (n,) float32."""
 
     origins: np.ndarray
     directions: np.ndarray
-    tnear: np.ndarray
-    tfar: np.ndarray
+    tnear: float | np.ndarray = 0.0
+    tfar: float | np.ndarray = np.inf
 
 
 class NearestHits(NamedTuple):

@@ -295,33 +295,27 @@ def new_hit_buffers(n: int, capacity: int) -> HitBuffers:
 
 
 def all_hits(
-    scene: int,
-    origins: np.ndarray,
-    directions: np.ndarray,
-    tnear: np.ndarray,
-    tfar: np.ndarray,
-    capacity: int,
-    threads: int,
-    out: HitBuffers | None = None,
+    scene: int, rays: Rays, capacity: int, threads: int, out: HitBuffers | None = None
 ) -> HitBuffers:
     """Up to ``capacity`` nearest hits of each ray, each primitive once, sorted by (t, prim).
 
     ``scene`` is a committed Embree scene built with
-    ``library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS`` (``BVH(filters=True)``); ``origins``,
-    ``directions`` (n, 3) float32, ``tnear``, ``tfar`` (n,) float32 (hits with tnear <= t <=
-    tfar). Returns ``HitBuffers``: ``t`` (n, capacity) float32, ``prim`` (n, capacity) int32,
-    ``u``, ``v`` (n, capacity) float32 barycentrics (weights of the triangle's second and third
-    vertex), ``cos`` (n, capacity) float32 |cos| of the angle between ray and geometric normal,
-    ``count`` (n,) int64 hits kept (row entries past it are undefined), ``more`` (n,) bool: the
-    ray has more hits than ``capacity``. ``out``: ``HitBuffers`` of at least those shapes to
-    fill (their leading n rows are returned), so that a caller tracing
-    block after block reuses memory that is already mapped.
+    ``library.SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS`` (``BVH(filters=True)``); ``rays`` a
+    ``Rays`` as the kernels take them, ``origins``, ``directions`` (n, 3) float32, ``tnear``,
+    ``tfar`` (n,) float32 (hits with tnear <= t <= tfar). Returns ``HitBuffers``: ``t``
+    (n, capacity) float32, ``prim`` (n, capacity) int32, ``u``, ``v`` (n, capacity) float32
+    barycentrics (weights of the triangle's second and third vertex), ``cos`` (n, capacity)
+    float32 |cos| of the angle between ray and geometric normal, ``count`` (n,) int64 hits kept
+    (row entries past it are undefined), ``more`` (n,) bool: the ray has more hits than
+    ``capacity``. ``out``: ``HitBuffers`` of at least those shapes to fill (their leading n rows
+    are returned), so that a caller tracing block after block reuses memory that is already
+    mapped.
     """
-    n = len(origins)
+    n = len(rays.origins)
     if out is None or len(out[0]) < n or out[0].shape[1] != capacity:
         out = new_hit_buffers(n, capacity)
     hits = HitBuffers(*(array[:n] for array in out))
     if n:
         numba.set_num_threads(threads_for(n, threads))
-        _all_hits(scene, FILTER_ADDRESS, Rays(origins, directions, tnear, tfar), hits)
+        _all_hits(scene, FILTER_ADDRESS, rays, hits)
     return hits

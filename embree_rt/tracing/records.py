@@ -22,7 +22,7 @@ import numpy as np
 from numba import carray, njit
 
 from embree_rt.compiled import pointers
-from embree_rt.embree import BVH, Hits
+from embree_rt.embree import BVH, Hits, Rays
 from embree_rt.embree.instance_arrays import (
     ARRAY_CHILD_BOUND,
     ARRAY_CHILD_INDEX,
@@ -341,7 +341,7 @@ def intersect_records(
     with ``ids``, Embree's ids and (u, v) of each hit)."""
     origins = np.ascontiguousarray(origins, np.float32)
     directions = np.ascontiguousarray(directions, np.float32)
-    rays = bvh.query_rays(origins.T, directions.T, tnear, tfar)
+    rays = bvh.query_rays(Rays(origins.T, directions.T, tnear, tfar))
     hits = bvh.nearest_hits(rays, coherent)
     return records_of(bvh, origins, directions, rays.tnear, rays.tfar, hits, labels, ids)
 

@@ -24,6 +24,7 @@ import numpy as np
 from trimesh import util
 from trimesh.constants import tol
 
+from embree_rt.embree import Rays
 from embree_rt.embree.multihit import HitBuffers
 from embree_rt.trimesh_ray.hit_passes import (
     Tolerances,
@@ -111,7 +112,7 @@ def surfaces_behind(scene: LocalScene, origins, directions, near):
     # up to 1 / |cos| times that along a ray near its plane (down to the |cos| at which a ray
     # no longer meets a plane)
     reach = np.float32(band / PARALLEL_COS)
-    behind = scene.bvh.all_hits(local, backwards, 0.0, reach, _BEHIND_ROOM)
+    behind = scene.bvh.all_hits(Rays(local, backwards, 0.0, reach), _BEHIND_ROOM)
     with np.errstate(invalid="ignore", over="ignore"):  # slots past a ray's count are unset
         close = (np.arange(_BEHIND_ROOM)[None, :] < behind.count[:, None]) & (
             behind.t.astype(np.float64) * behind.cos <= band
@@ -414,10 +415,7 @@ def _trace(
     (``multihit.all_hits``), in buffers kept by the scene from query to query with ``keep``."""
     buffers = scene.hit_buffers(room) if keep else None
     recorded = scene.bvh.all_hits(
-        rays.local_origins[rows],
-        rays.local_directions[rows],
-        rays.embree_near[rows],
-        np.inf,
+        Rays(rays.local_origins[rows], rays.local_directions[rows], rays.embree_near[rows], np.inf),
         room,
         out=buffers,
     )

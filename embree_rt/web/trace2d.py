@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from embree_rt import shading
-from embree_rt.embree import BVH
+from embree_rt.embree import BVH, Rays
 from embree_rt.integrator import MIN_WEIGHT, surface_offset
 from embree_rt.materials import PRESETS
 
@@ -138,7 +138,7 @@ def _trace(bvh: BVH, layout: Layout) -> dict[str, np.ndarray]:
     for depth in range(layout.max_depth + 1):
         if len(path) == 0:
             break
-        hits = bvh.intersect(_in_plane(origin[:2]).T, _in_plane(direction[:2]).T)
+        hits = bvh.intersect(Rays(_in_plane(origin[:2]).T, _in_plane(direction[:2]).T))
         leave = _box_exit(
             origin[:2].astype(np.float64),
             direction[:2].astype(np.float64),
