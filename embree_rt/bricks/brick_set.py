@@ -120,8 +120,12 @@ class BrickSet(RaysInNumPy, Closing):
         brick blocks the segment from each ``points[:, rows]`` ((3, n) float32) to ``target``."""
         return self.occluded_toward_each(points, [rows], np.reshape(target, (1, 3)))[0]
 
-    def occluded_rays(
-        self, origins: np.ndarray, directions: np.ndarray, distance: float
+    def occluded_hemispheres(
+        self,
+        points: np.ndarray,
+        frames: tuple[np.ndarray, np.ndarray, np.ndarray],
+        local: np.ndarray,
+        distance: float,
     ) -> np.ndarray:
         """Refused: ambient occlusion's occlusion rays are not routed over bricks (the command
         refuses ``--ao`` with bricks before anything is built)."""
