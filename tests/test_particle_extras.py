@@ -7,6 +7,7 @@ renders trace the same scene); bad values are one line naming the file and key, 
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import gsd.hoomd
@@ -50,15 +51,17 @@ def flags_of(keys: dict) -> list[str]:
 
 
 CASES = [
-    {"box": True, "legend": True},
-    {"bonds": True},
-    {"bonds": True, "bond_radius": 0.12},
-    {"licorice": True, "bond_radius": 0.3},
+    ({"box": True, "legend": True}, ".toml"),
+    ({"bonds": True}, ".json"),
+    ({"bonds": True, "bond_radius": 0.12}, ".toml"),
+    ({"licorice": True, "bond_radius": 0.3}, ".toml"),
 ]
 
 
-@pytest.mark.parametrize("keys", CASES, ids=lambda keys: "+".join(keys))
-def test_scene_file_keys_render_what_the_flags_render(tmp_path, keys):
+@pytest.mark.parametrize(
+    ("keys", "suffix"), CASES, ids=["+".join(keys) + suffix for keys, suffix in CASES]
+)
+def test_scene_file_keys_render_what_the_flags_render(tmp_path, keys, suffix):
     write_chain(tmp_path / "chain.gsd")
     assert main(["render", str(tmp_path / "chain.gsd"), "-o", str(tmp_path / "flags.png"),
                  *flags_of(keys), *SIZE]) == 0  # fmt: skip
@@ -66,9 +69,10 @@ def test_scene_file_keys_render_what_the_flags_render(tmp_path, keys):
     extras = ParticleExtras(**keys)
     framed = Scene.from_particles(tmp_path / "chain.gsd", **extras_arguments(extras))
     document = {**look_document(framed), "particles": [{"file": "chain.gsd", **keys}]}
-    (tmp_path / "s.toml").write_text(tomli_w.dumps(plain_values(document)))
-    assert main(["render", str(tmp_path / "s.toml"), "-o", str(tmp_path / "file.png"),
-                 *SIZE]) == 0  # fmt: skip
+    scene = tmp_path / f"s{suffix}"
+    write = json.dumps if suffix == ".json" else tomli_w.dumps
+    scene.write_text(write(plain_values(document)))
+    assert main(["render", str(scene), "-o", str(tmp_path / "file.png"), *SIZE]) == 0
     flags_image = (tmp_path / "flags.png").read_bytes()
     assert flags_image == (tmp_path / "file.png").read_bytes()
     # ... and the extras show: the image differs from the plain particles'.
