@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -48,6 +49,15 @@ def ao_problem(ao: AmbientOcclusion) -> tuple[str, str] | None:
     if not distance > 0.0:  # (NaN fails too)
         return "distance", f"must be > 0 (inf: unlimited), got {ao.distance!r}"
     return None
+
+
+class HemisphereFrames(NamedTuple):
+    """k surface points' orthonormal frames, right-handed: ``tangent``, ``bitangent`` and the
+    unit ``normal`` (3, k) float32 each (a direction's local x, y and z)."""
+
+    tangent: np.ndarray
+    bitangent: np.ndarray
+    normal: np.ndarray
 
 
 def orthonormal_frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -108,8 +118,8 @@ def open_shares(
     occlusion batch through ``occluded_hemispheres(points, frames, local, distance)`` (the
     tracer's, ``Tracer.occluded_hemispheres`` -> (k * samples,) bool), the directions of
     ``cosine_local_directions`` at the (k,) int64 camera ``sample_index``, ``seed`` and
-    ``bounce`` (0: camera rays' hits) about the frames of ``orthonormal_frames``."""
+    ``bounce`` (0: camera rays' hits) about the ``HemisphereFrames`` of ``orthonormal_frames``."""
     samples = ao.samples
     local = cosine_local_directions(sample_index, samples, seed, bounce)
-    frames = (*orthonormal_frames(normal), normal)
+    frames = HemisphereFrames(*orthonormal_frames(normal), normal)
     return open_share(occluded_hemispheres(points, frames, local, float(ao.distance)), samples)

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from embree_rt.ambient_occlusion import HemisphereFrames
 from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.embree import BVH, spheres_in_spatial_order
@@ -613,7 +614,7 @@ class SceneGeometry(Closing):
     def occluded_hemispheres(
         self,
         points: np.ndarray,
-        frames: tuple[np.ndarray, np.ndarray, np.ndarray],
+        frames: HemisphereFrames,
         local: np.ndarray,
         distance: float,
     ) -> np.ndarray:

@@ -19,6 +19,7 @@ import trimesh
 from embree_rt import Camera, PointLight, Scene, render
 from embree_rt.ambient_occlusion import (
     AmbientOcclusion,
+    HemisphereFrames,
     cosine_local_directions,
     open_shares,
     orthonormal_frames,
@@ -105,7 +106,7 @@ def test_the_query_answers_what_embree_answers_for_the_rays_numpy_forms(distance
             t = (np.float32(geometry.labels.plane_y) - origins[1]) / directions[1]
         expected |= (t > 0) & (t <= np.float32(distance))
         local = cosine_local_directions(index, samples, seed=5)
-        frames = (*orthonormal_frames(normal), normal)
+        frames = HemisphereFrames(*orthonormal_frames(normal), normal)
         blocked = geometry.occluded_hemispheres(points, frames, local, distance)
     np.testing.assert_array_equal(blocked, expected)
     assert 0.05 < blocked.mean() < 0.95  # both answers occur

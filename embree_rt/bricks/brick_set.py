@@ -22,6 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
+from embree_rt.ambient_occlusion import HemisphereFrames
 from embree_rt.bricks.brick import Brick, BrickHits, brick_sphere_mode
 from embree_rt.bricks.contents import scene_brick, without_objects
 from embree_rt.bricks.nearest import nearest_over_bricks
@@ -123,7 +124,7 @@ class BrickSet(RaysInNumPy, Closing):
     def occluded_hemispheres(
         self,
         points: np.ndarray,
-        frames: tuple[np.ndarray, np.ndarray, np.ndarray],
+        frames: HemisphereFrames,
         local: np.ndarray,
         distance: float,
     ) -> np.ndarray:
