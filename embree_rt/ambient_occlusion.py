@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -50,6 +51,15 @@ def ao_problem(ao: AmbientOcclusion) -> tuple[str, str] | None:
     return None
 
 
+class HemisphereFrames(NamedTuple):
+    """k surface points' orthonormal frames, right-handed: ``tangent``, ``bitangent`` and the
+    unit ``normal`` (3, k) float32 each (a direction's local x, y and z)."""
+
+    tangent: np.ndarray
+    bitangent: np.ndarray
+    normal: np.ndarray
+
+
 def orthonormal_frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two (3, k) float32 unit tangents ``t``, ``b`` with (t, b, n) right-handed and
     orthonormal for the (3, k) float32 unit ``normal`` columns (Duff et al. 2017's branchless
@@ -63,43 +73,27 @@ def orthonormal_frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tangent.astype(np.float32, copy=False), bitangent.astype(np.float32, copy=False)
 
 
-def hemisphere_directions(
-    normal: np.ndarray, sample_index: np.ndarray, samples: int, seed: int, bounce: int = 0
+def cosine_local_directions(
+    sample_index: np.ndarray, samples: int, seed: int, bounce: int = 0
 ) -> np.ndarray:
-    """(3, k * samples) float32 unit directions, cosine-weighted about each of the (3, k)
-    float32 unit ``normal`` columns: hit i's ``samples`` directions are columns
+    """(3, k * samples) float32 unit directions (x, y, z) in a frame whose z is the normal,
+    cosine-weighted over its hemisphere: hit i's ``samples`` directions are columns
     ``i * samples .. i * samples + samples - 1``, drawn at hash indices
     ``sample_index[i] * samples + j`` ((k,) int64 the hits' camera sample indices) of
     dimension ``AO_DIMENSION`` at the camera rays' hits, ``BOUNCE_DIMENSIONS`` more at each
     ``bounce`` after them (a reflected hit's directions independent of its camera hit's)
-    (Malley's method: a uniform point on the unit disc lifted to the hemisphere)."""
-    k = normal.shape[1]
+    (Malley's method: a uniform point on the unit disc lifted to the hemisphere). The world's
+    direction of column r is ``t x + b y + n z`` in hit i's frame (``orthonormal_frames``),
+    normalised in float32: the tracer forms it as it traces (``Tracer.occluded_hemispheres``)."""
     index = (np.asarray(sample_index, np.int64)[:, None] * samples + np.arange(samples)).ravel()
     u1, u2 = uniform_pair(seed, index, AO_DIMENSION + BOUNCE_DIMENSIONS * bounce)
     radius = np.sqrt(u1)
     phi = np.float32(2.0 * math.pi) * u2
-    local_x = radius * np.cos(phi)
-    local_y = radius * np.sin(phi)
-    local_z = np.sqrt(np.maximum(np.float32(1.0) - u1, np.float32(0.0)))
-    tangent, bitangent = orthonormal_frames(normal)
-    repeat = np.repeat(np.arange(k), samples)
-    directions = (
-        tangent[:, repeat] * local_x + bitangent[:, repeat] * local_y + normal[:, repeat] * local_z
-    )
-    directions /= np.sqrt(np.sum(directions * directions, axis=0))
-    return directions.astype(np.float32, copy=False)
-
-
-def plane_blocks(
-    origins: np.ndarray, directions: np.ndarray, plane_y: float | None, distance: float
-) -> np.ndarray:
-    """(n,) bool whether the ground plane y = ``plane_y`` (None: none) lies on each ray
-    ``origins + t directions`` ((3, n) float32) with 0 < t <= ``distance``."""
-    if plane_y is None:
-        return np.zeros(origins.shape[1], bool)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (np.float32(plane_y) - origins[1]) / directions[1]
-    return (t > 0) & (t <= distance)
+    local = np.empty((3, len(index)), np.float32)
+    np.multiply(radius, np.cos(phi), out=local[0])
+    np.multiply(radius, np.sin(phi), out=local[1])
+    np.sqrt(np.maximum(np.float32(1.0) - u1, np.float32(0.0)), out=local[2])
+    return local
 
 
 def open_share(blocked: np.ndarray, samples: int) -> np.ndarray:
@@ -110,7 +104,7 @@ def open_share(blocked: np.ndarray, samples: int) -> np.ndarray:
 
 
 def open_shares(
-    occluded,
+    occluded_hemispheres,
     points: np.ndarray,
     normal: np.ndarray,
     sample_index: np.ndarray,
@@ -121,10 +115,11 @@ def open_shares(
     """(k,) float32 open share of the hemisphere over each of the k ``points`` (3, k) float32
     (already off their surfaces) about the unit ``normal`` (3, k) float32 (facing the side the
     point is seen from), ``ao`` an ``AmbientOcclusion`` with samples > 0: its rays in one
-    occlusion batch through ``occluded(origins, directions, distance)`` ((3, n) float32 each ->
-    (n,) bool), the directions of ``hemisphere_directions`` at the (k,) int64 camera
-    ``sample_index``, ``seed`` and ``bounce`` (0: camera rays' hits)."""
+    occlusion batch through ``occluded_hemispheres(points, frames, local, distance)`` (the
+    tracer's, ``Tracer.occluded_hemispheres`` -> (k * samples,) bool), the directions of
+    ``cosine_local_directions`` at the (k,) int64 camera ``sample_index``, ``seed`` and
+    ``bounce`` (0: camera rays' hits) about the ``HemisphereFrames`` of ``orthonormal_frames``."""
     samples = ao.samples
-    directions = hemisphere_directions(normal, sample_index, samples, seed, bounce)
-    origins = np.repeat(points, samples, axis=1)
-    return open_share(occluded(origins, directions, float(ao.distance)), samples)
+    local = cosine_local_directions(sample_index, samples, seed, bounce)
+    frames = HemisphereFrames(*orthonormal_frames(normal), normal)
+    return open_share(occluded_hemispheres(points, frames, local, float(ao.distance)), samples)

@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.ambient_occlusion import plane_blocks
+from embree_rt.ambient_occlusion import HemisphereFrames
 from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
-from embree_rt.embree import BVH, Rays, spheres_in_spatial_order
+from embree_rt.embree import BVH, spheres_in_spatial_order
 from embree_rt.mesh_attributes import (
     HitLooks,
     MeshColors,
@@ -33,7 +33,7 @@ from embree_rt.mesh_attributes import (
 from embree_rt.scene.model import MeshObject, Scene
 from embree_rt.sphere_modes import SPHERE_MODES, sphere_kind
 from embree_rt.textures import SRGB8_TO_LINEAR
-from embree_rt.tracing import segments
+from embree_rt.tracing import hemisphere, segments
 from embree_rt.tracing.camera_query import intersect_camera_records
 from embree_rt.tracing.records import HitLabels, HitRecords, intersect_records
 
@@ -611,14 +611,20 @@ class SceneGeometry(Closing):
         (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``segments.occluded_toward``."""
         return segments.occluded_toward(self.bvh, points, rows, target, self.labels.plane_y)
 
-    def occluded_rays(
-        self, origins: np.ndarray, directions: np.ndarray, distance: float
+    def occluded_hemispheres(
+        self,
+        points: np.ndarray,
+        frames: HemisphereFrames,
+        local: np.ndarray,
+        distance: float,
     ) -> np.ndarray:
-        """(n,) bool: whether any surface, floor included, lies on each ray from ``origins``
-        along ``directions`` ((3, n) float32) within ``distance`` (inf: any): one occlusion
-        batch (ambient occlusion's)."""
-        blocked = self.bvh.occluded(Rays(origins.T, directions.T, 0.0, np.float32(distance)))
-        return blocked | plane_blocks(origins, directions, self.labels.plane_y, distance)
+        """(n,) bool: whether any surface, floor included, lies within ``distance`` (inf: any)
+        on each of ambient occlusion's n rays, made inside the query from the ``points`` (3, k)
+        float32, their ``frames`` and the rays' ``local`` directions (3, n) float32:
+        ``hemisphere.occluded_hemispheres``."""
+        return hemisphere.occluded_hemispheres(
+            self.bvh, points, frames, local, distance, self.labels.plane_y
+        )
 
     def toward_lights(
         self,

@@ -425,7 +425,7 @@ class Integrator(Closing):
         rays from the points ``outside`` (3, k) about ``normal`` (3, k); (k,) float32 open
         shares, 1 where not ``lit`` (k,) bool (an unlit colour is not ambient light)."""
         ao = self.ao if ao is None else ao
-        occluded = self.geometry.occluded_rays
+        occluded = self.geometry.occluded_hemispheres
         share = open_shares(occluded, outside, normal, sample, ao, seed, bounce)
         share[~lit] = np.float32(1.0)
         return share

@@ -144,10 +144,22 @@ def bar_colors(colors: np.ndarray, width: int) -> np.ndarray:
     return np.asarray(colors, np.uint8)[samples]
 
 
+def legend_margin(image_height: int) -> int:
+    """The legend's distance in pixels from the image's edges: 1/40 of its height."""
+    return max(2, image_height // 40)
+
+
+def legend_room(legend: Legend, image_height: int) -> float:
+    """The share of an image ``image_height`` tall that the legend and its margins take from
+    its bottom (at most 0.9): what a framing keeps clear for it."""
+    room = legend_size(legend, image_height) + 2 * legend_margin(image_height)
+    return min(0.9, room / image_height)
+
+
 def legend_corner(shape: tuple[int, ...], patch_shape: tuple[int, ...]) -> tuple[int, int]:
     """(top, left) of a legend patch of ``patch_shape`` in an image of ``shape``: the
-    bottom-right corner, a margin of 1/40 of the image's height from its edges."""
-    margin = max(2, shape[0] // 40)
+    bottom-right corner, ``legend_margin`` from its edges."""
+    margin = legend_margin(shape[0])
     return max(0, shape[0] - patch_shape[0] - margin), max(0, shape[1] - patch_shape[1] - margin)
 
 

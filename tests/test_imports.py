@@ -112,6 +112,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
         "legend",
         "materials",
         "memory",
+        "particle_extras",
         "sampling",
         "shading",
         "sphere_modes",

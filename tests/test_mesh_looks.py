@@ -401,7 +401,7 @@ def test_make_assets_makes_exactly_the_files_in_assets(tmp_path: Path) -> None:
     MAKE.main(tmp_path)
     made = sorted(p.name for p in tmp_path.iterdir())
     # the particle files beside them are assets/make_particles.py's (tests/test_particles.py)
-    particle_files = {"helix.pdb", "membrane.gsd", "packing.lammpstrj"}
+    particle_files = {"helix.pdb", "peptide.pdb", "membrane.gsd", "packing.lammpstrj"}
     kept = [p.name for p in ASSETS.iterdir() if p.suffix != ".py" and p.name not in particle_files]
     assert made == sorted(kept)
     for name in made:

@@ -252,3 +252,25 @@ def test_an_orthographic_camera_is_written_and_read_back(tmp_path) -> None:
     assert again.camera == ORTHO
     save_scene(Scene(), tmp_path / "plain.toml")  # a perspective camera's table as it was
     assert "projection" not in (tmp_path / "plain.toml").read_text()
+
+
+@pytest.mark.parametrize("name", ["front", "top", "iso"])
+@pytest.mark.parametrize("kept", [0.3, 0.6])
+def test_an_orthographic_view_keeps_the_legends_rows_clear(name: str, kept: float) -> None:
+    """``kept_below``: every corner of the box lies in the rows above the kept share of the
+    image (room for a legend there), and the box still fills that part: it touches its top and
+    bottom, or the image's sides, within the framing's margin."""
+    low, high = np.array([-1.0, 0.5, 2.0]), np.array([5.0, 1.5, 2.5])
+    camera = standard_view(Camera(), low, high, name, 16 / 9, True, kept_below=kept)
+    frame = camera_frame(camera, 160, 90)
+    corners = low + np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) * (
+        high - low
+    )
+    relative = corners - frame.origin
+    x, y = relative @ frame.u / frame.half_width, relative @ frame.v / frame.half_height
+    # in image heights from the top: y = 1 is the top row, -1 the bottom one
+    region_low = -1.0 + 2.0 * kept
+    assert y.max() < 1.0 and y.min() > region_low and np.abs(x).max() < 1.0
+    centred = abs((y.max() + y.min()) / 2 - (1.0 + region_low) / 2) < 1e-9
+    fills = max((y.max() - y.min()) / (1.0 - region_low), np.abs(x).max())
+    assert centred and fills > 0.9

@@ -372,12 +372,16 @@ def test_gallery_particle_files_are_what_the_script_makes(tmp_path):
         text=True,
     )
     assert done.returncode == 0, done.stderr
-    for name in ("helix.pdb", "membrane.gsd", "packing.lammpstrj"):
+    for name in ("helix.pdb", "peptide.pdb", "membrane.gsd", "packing.lammpstrj"):
         made, kept = read_particles(tmp_path / name), read_particles(ROOT / "assets" / name)
         np.testing.assert_array_equal(made.positions, kept.positions)
         assert list(made.labels()[1]) == list(kept.labels()[1])
         for key, values in made.properties.items():
             np.testing.assert_array_equal(values, kept.properties[key])
+        made_bonds, kept_bonds = (
+            np.zeros((0, 2)) if f.bonds is None else f.bonds for f in (made, kept)
+        )
+        np.testing.assert_array_equal(made_bonds, kept_bonds)
 
 
 # -- the command line and bad input ------------------------------------------------------------

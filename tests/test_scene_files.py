@@ -1051,7 +1051,7 @@ def test_assets_are_what_make_assets_makes_one_per_format(tmp_path: Path) -> Non
         "zero_normals.obj",
     ]
     # the particle files of the gallery (tests/test_particles.py checks them)
-    particles = ["helix.pdb", "membrane.gsd", "packing.lammpstrj"]
+    particles = ["helix.pdb", "peptide.pdb", "membrane.gsd", "packing.lammpstrj"]
     assert on_disk == sorted([*expected, *looks, *particles])
     document = {"floor": False, "meshes": [{"file": str(ROOT / "assets" / n)} for n in expected]}
     (tmp_path / "assets.json").write_text(json.dumps(document))

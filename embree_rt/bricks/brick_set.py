@@ -22,6 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
+from embree_rt.ambient_occlusion import HemisphereFrames
 from embree_rt.bricks.brick import Brick, BrickHits, brick_sphere_mode
 from embree_rt.bricks.contents import scene_brick, without_objects
 from embree_rt.bricks.nearest import nearest_over_bricks
@@ -120,8 +121,12 @@ class BrickSet(RaysInNumPy, Closing):
         brick blocks the segment from each ``points[:, rows]`` ((3, n) float32) to ``target``."""
         return self.occluded_toward_each(points, [rows], np.reshape(target, (1, 3)))[0]
 
-    def occluded_rays(
-        self, origins: np.ndarray, directions: np.ndarray, distance: float
+    def occluded_hemispheres(
+        self,
+        points: np.ndarray,
+        frames: HemisphereFrames,
+        local: np.ndarray,
+        distance: float,
     ) -> np.ndarray:
         """Refused: ambient occlusion's occlusion rays are not routed over bricks (the command
         refuses ``--ao`` with bricks before anything is built)."""

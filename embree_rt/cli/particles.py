@@ -7,6 +7,13 @@ import argparse
 import json
 import math
 
+from embree_rt.particle_extras import (
+    EXTRA_OPTIONS,
+    ParticleExtras,
+    extras_problem,
+    is_switch,
+)
+
 
 def color_triple(text: str) -> tuple[float, float, float]:
     """``R,G,B`` in 0..1 (sRGB)."""
@@ -25,6 +32,11 @@ def material_of(text: str) -> tuple[str, str]:
     if not sep or not label.strip() or not material.strip():
         raise argparse.ArgumentTypeError(f"expected TYPE=MATERIAL, got {text!r}")
     return label.strip(), material.strip()
+
+
+def flag_name(option: str) -> str:
+    """The command-line flag of a scene file's ``[[particles]]`` key: ``--bond-radius``."""
+    return "--" + option.replace("_", "-")
 
 
 def add_particle_flags(parser: argparse.ArgumentParser) -> None:
@@ -64,21 +76,13 @@ def add_particle_flags(parser: argparse.ArgumentParser) -> None:
         metavar="TYPE=MATERIAL",
         help="a material for one type (repeatable; default: matte)",
     )
-    group.add_argument("--box", action="store_true", help="draw the simulation box as thin lines")
-    group.add_argument(
-        "--bonds",
-        action="store_true",
-        help="sticks between bonded atoms (the file's bonds, else guessed from distances)",
-    )
-    group.add_argument("--bond-radius", type=float, metavar="R", help="the sticks' radius")
-    group.add_argument(
-        "--licorice", action="store_true", help="bonds, and atoms of the sticks' radius"
-    )
-    group.add_argument(
-        "--legend",
-        action="store_true",
-        help="draw what the colours mean (a colour bar or a key) in the image's corner",
-    )
+    for option in EXTRA_OPTIONS:
+        flag = flag_name(option.name)
+        if is_switch(option):
+            group.add_argument(flag, action="store_true", help=option.metadata["help"])
+        else:
+            help, metavar = option.metadata["help"], option.metadata["metavar"]
+            group.add_argument(flag, type=float, metavar=metavar, help=help)
     group.add_argument(
         "--follow",
         action="store_true",
@@ -116,13 +120,9 @@ PARTICLE_FLAG_DEFAULTS = {
     "follow": False,
     "color_columns": None,
     "material_of": None,
-    "box": False,
-    "bonds": False,
-    "bond_radius": None,
-    "licorice": False,
-    "legend": False,
     "no_refit": False,
     "fps": 24.0,
+    **{option.name: option.default for option in EXTRA_OPTIONS},
 }
 
 
@@ -140,16 +140,17 @@ def particle_scene(args: argparse.Namespace):
     """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say."""
     from embree_rt.errors import InputError
     from embree_rt.scene.model import Scene
-    from embree_rt.scene.particles.bonds import BondLook
     from embree_rt.scene.particles.look import ParticleLook
+    from embree_rt.scene.particles.to_scene import extras_arguments
 
     sizes = (("--radius", args.radius), ("--radius-scale", args.radius_scale))
-    for flag, value in (*sizes, ("--bond-radius", args.bond_radius)):
+    for flag, value in sizes:
         if value is not None and not (math.isfinite(value) and value > 0):
             raise InputError(f"{flag}: expected a positive number, got {value:g}")
-    bonds = args.bonds or args.licorice  # (licorice is sticks and atoms of one radius)
-    if args.bond_radius is not None and not bonds:
-        raise InputError("--bond-radius: sets the sticks' radius, so it needs --bonds")
+    extras = ParticleExtras(**{option.name: getattr(args, option.name) for option in EXTRA_OPTIONS})
+    if (problem := extras_problem(extras, flag_name)) is not None:
+        option, text = problem
+        raise InputError(f"{flag_name(option)}: {text}")
     look = ParticleLook(
         color_by=args.color_by,
         color=args.color,
@@ -170,9 +171,7 @@ def particle_scene(args: argparse.Namespace):
             wrap=args.wrap,
             floor=not args.no_floor,
             materials=dict(args.material_of or ()),
-            box=args.box,
-            bonds=BondLook(args.bond_radius, args.licorice) if bonds else None,
-            legend=args.legend,
+            **extras_arguments(extras),
         )
     except ValueError as error:
         if isinstance(error, InputError):

@@ -114,8 +114,13 @@ def staged(made: MadeScene, job: Job) -> MadeScene:
                 job.scene_name, "(file)", f"--view {staging.view}: the scene has nothing to frame"
             )
         aspect = scene.render.width / scene.render.height
+        kept = 0.0
+        if scene.legend is not None:  # the legend's corner kept clear
+            from embree_rt.legend import legend_room
+
+            kept = legend_room(scene.legend, scene.render.height)
         scene.camera = standard_view(
-            scene.camera, *bounds, staging.view, aspect, staging.orthographic
+            scene.camera, *bounds, staging.view, aspect, staging.orthographic, kept
         )
     if staging.headlight:
         from embree_rt.scene.model import PointLight

@@ -172,6 +172,10 @@ def render_trajectory(args: argparse.Namespace) -> None:
     first = copy.copy(args)
     first.frame = frames[0]
     staged = particle_scene(first)
+    if staged.legend is not None and staged.legend.is_bar and args.range is None:
+        # One legend for every frame: each frame coloured on the range it shows, the first's.
+        args = copy.copy(args)
+        args.range = list(staged.legend.value_range)
     how = FrameRendering(spheres=args.spheres, threads=args.threads, refit=not args.no_refit)
     if is_video(args.output):
         counts = render_video(args, frames, staged, how)
@@ -220,6 +224,7 @@ def render_video(
     unless ``--overwrite``."""
     from embree_rt.cli.checks import check_library, writing
     from embree_rt.cli.errors import UsageError
+    from embree_rt.legend import draw_legend
     from embree_rt.scene.settings import apply_to_scene
     from embree_rt.video import VideoWriter, check_video
 
@@ -238,14 +243,16 @@ def render_video(
         raise UsageError(str(error)) from None
     check_library()
 
+    legend = staged.legend  # the first frame's, whose range colours every frame
+
     def make() -> FrameCounts:
         with VideoWriter(path, args.fps, args.quality) as video:
-            return render_frames(
-                frames,
-                lambda n: prepared_frame(args, n, staged),
-                lambda n, result: video.add(result.to_srgb8()),
-                how,
-            )
+
+            def add(number: int, result) -> None:
+                pixels = result.to_srgb8()
+                video.add(pixels if legend is None else draw_legend(pixels, legend))
+
+            return render_frames(frames, lambda n: prepared_frame(args, n, staged), add, how)
 
     counts = FrameCounts()
 

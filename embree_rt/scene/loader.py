@@ -13,7 +13,7 @@ import math
 import os
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +25,7 @@ from embree_rt.choices import BACKGROUNDS
 from embree_rt.errors import FieldError
 from embree_rt.film import TONEMAPS, TRANSFERS
 from embree_rt.materials import PRESETS, Checker, Material
+from embree_rt.particle_extras import EXTRA_OPTIONS, ParticleExtras, extras_problem, is_switch
 from embree_rt.scene.animation_file import read_animation
 from embree_rt.scene.archives import Headers, array_headers, read_archive, unpacked_bytes
 from embree_rt.scene.errors import SceneError, unknown_key_message
@@ -178,7 +179,7 @@ class _ParticlesEntry:
     material: str
     look: object  # a particles.look.ParticleLook (imported where a scene has particles)
     materials: dict[str, str] | None = None  # a material a type
-    box: bool = False
+    extras: ParticleExtras = field(default_factory=ParticleExtras)
 
 
 @dataclass
@@ -243,7 +244,9 @@ class SceneReader:
             scene.floor = self._floor(root)
         self.spheres = [self._sphere(t) for t in root.tables("spheres")]
         self.sphere_arrays = [self._sphere_array(t) for t in root.tables("sphere_arrays")]
-        self.particles = [self._particles(t) for t in root.tables("particles")]
+        self.particles: list[_ParticlesEntry] = []
+        for particles in root.tables("particles"):  # (an entry's legend checks those before it)
+            self.particles.append(self._particles(particles))
         self.meshes = [self._mesh(t) for t in root.tables("meshes")]
         self.instances = [self._instances(t) for t in root.tables("instances")]
         self.curves = [self._curves(t) for t in root.tables("curves")]
@@ -589,12 +592,28 @@ class SceneReader:
                 color_columns=self._color_columns(table),
             ),
             materials=self._type_materials(table),
-            box=table.boolean("box", False),
+            extras=self._particle_extras(table),
         )
         if entry.up not in ("x", "y", "z"):
             raise table.error("up", f"expected x, y or z, got {entry.up!r}")
         table.finish()
         return entry
+
+    def _particle_extras(self, table: Table) -> ParticleExtras:
+        """A ``[[particles]]`` entry's box, bonds and legend: the keys of ``EXTRA_OPTIONS``; one
+        entry's legend at most (an image has one corner for it)."""
+        values = {}
+        for option in EXTRA_OPTIONS:
+            if is_switch(option):
+                values[option.name] = table.boolean(option.name, option.default)
+            else:
+                values[option.name] = table.number(option.name, option.default)
+        extras = ParticleExtras(**values)
+        if (problem := extras_problem(extras)) is not None:
+            raise table.error(*problem)
+        if extras.legend and any(entry.extras.legend for entry in self.particles):
+            raise table.error("legend", "another [[particles]] entry has the legend already")
+        return extras
 
     def _color_columns(self, table: Table) -> tuple[str, ...] | None:
         """A ``[[particles]]`` entry's ``color_columns``: 3 column names, or 1 array's name."""
@@ -722,6 +741,7 @@ class SceneReader:
         """A ``[[particles]]`` entry's file read and added as spheres; a problem in the file
         is reported against the scene file's key."""
         from embree_rt.scene.particles import read_particles
+        from embree_rt.scene.particles.to_scene import extras_arguments
 
         try:
             frame = read_particles(entry.path, frame=entry.frame, topology=entry.topology)
@@ -733,7 +753,7 @@ class SceneReader:
                 wrap=entry.wrap,
                 material=entry.material,
                 materials=entry.materials,
-                box=entry.box,
+                **extras_arguments(entry.extras),
             )
         except SceneError as error:
             raise SceneError(self.path, entry.key, str(error)) from None

@@ -75,6 +75,7 @@ def standard_view(
     name: str,
     aspect: float,
     orthographic: bool = True,
+    kept_below: float = 0.0,
 ) -> Camera:
     """``camera`` turned to the standard view ``name`` (one of ``STANDARD_VIEWS``) of the box
     ``low``..``high`` ((3,) float64 corners), for an image ``aspect`` = width / height wide.
@@ -82,7 +83,9 @@ def standard_view(
     The camera looks at the box's centre along the view's axis from outside the box (its
     near plane, for an orthographic camera, clear of the box by a tenth of its diagonal); an
     orthographic camera's ``view_height`` fits the box's outline, a perspective one keeps its
-    ``fov`` and stands back until every corner of the box is in the picture."""
+    ``fov`` and stands back until every corner of the box is in the picture. An orthographic
+    view keeps the bottom ``kept_below`` share of the image's height clear of the box (room
+    for a legend there), the box framed in the rows above it."""
     if name not in STANDARD_VIEWS:
         raise ValueError(f"view: expected one of {', '.join(STANDARD_VIEWS)}, got {name!r}")
     right, up, back = view_axes(camera.up)
@@ -107,7 +110,9 @@ def standard_view(
     tall = 2.0 * np.abs(corners @ screen_up).max()
     if orthographic:
         distance = 1.1 * radius
-        height = max(tall, across / aspect, 1e-9) / FILL
+        height = max(tall / (1.0 - kept_below), across / aspect, 1e-9) / FILL
+        # the box's centre at the centre of the rows above the kept share
+        center = center - kept_below * height / 2.0 * screen_up
     else:
         # back until every corner is inside the image: a corner ``toward`` by z from the
         # centre and off the axis by x, y needs the eye at least z + |x| / tan(half width) away

@@ -7,6 +7,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from embree_rt.particle_extras import ParticleExtras
+from embree_rt.scene.particles.bonds import BondLook
 from embree_rt.scene.particles.box import box_edges, box_radius
 from embree_rt.scene.particles.errors import ParticleFileError
 from embree_rt.scene.particles.frame import ParticleFrame, kept_bonds
@@ -159,3 +161,11 @@ def particle_spheres(
         f"{frame.frame_count}), coloured by {by}, {up} up"
     )
     return centers, radii, colors, note
+
+
+def extras_arguments(extras: ParticleExtras) -> dict:
+    """``Scene.add_particles``' (and ``from_particles``') ``box``, ``bonds`` and ``legend``
+    arguments of ``extras`` (``particle_extras.ParticleExtras``, as a flag or a scene file's
+    key gives them): one reading for both."""
+    bonds = BondLook(extras.bond_radius, extras.licorice) if extras.draws_bonds else None
+    return {"box": extras.box, "bonds": bonds, "legend": extras.legend}
