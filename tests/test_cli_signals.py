@@ -1,12 +1,13 @@
-"""Ctrl-C and SIGTERM sent to a real command, in each of its phases: on this machine rendering and
-writing the image; on a ``--cluster local:2`` starting the cluster (its worker processes
-importing), the workers building, rendering, writing, as tasks and as bricks (``--partition``);
-on an external scheduler (``dask scheduler`` and a worker this test starts) rendering and
-writing, and bricks building and rendering; ``serve`` serving, and rendering for a client. Each
-must end the command promptly with exit code 130 (SIGINT) or 143 (SIGTERM) and one line on
-stderr, close the cluster it started (no worker outlives the command), and leave the image that
-was there before as it was, with no temporary file. An external scheduler is not the command's
-to close: it and its worker keep running, and render the next command's image.
+"""Ctrl-C and SIGTERM sent to a real command, in each of its phases: parsing its command line; on
+this machine rendering and writing the image; on a ``--cluster local:2`` starting the cluster
+(its worker processes importing), the workers building, rendering, writing, as tasks and as
+bricks (``--partition``); on an external scheduler (``dask scheduler`` and a worker this test
+starts) rendering and writing, and bricks building and rendering; ``serve`` serving, and
+rendering for a client. Each must end the command promptly with exit code 130 (SIGINT) or 143
+(SIGTERM) and one line on stderr, close the cluster it started (no worker outlives the command),
+and leave the image that was there before as it was, with no temporary file. An external
+scheduler is not the command's to close: it and its worker keep running, and render the next
+command's image.
 
 The signal is sent, as a terminal's Ctrl-C is, to the command's whole process group, once the
 command has reached the phase: a small hook (``PHASED``, test code, run in the command's own
@@ -52,7 +53,9 @@ def wait_for_the_signal():
         time.sleep(0.05)
     raise AssertionError("the signal did not come")
 
-if phase == "rendering here":  # the render under way on this machine
+if phase == "parsing":  # the parser being built (the command line's checks import NumPy and more)
+    cli.build_parser = wait_for_the_signal
+elif phase == "rendering here":  # the render under way on this machine
     import embree_rt.cli.render as here
     render = here.render
     def rendering(*args, **kwargs):
@@ -160,6 +163,7 @@ SERVE = ["serve", "--port", "0"]
 # take different paths (Dask's start and teardown, uvicorn's handlers); a few seconds a case (a
 # cluster takes 5 s and more to start on two busy cores, and holds a signal until it has)
 CASES = [
+    ("parsing", SMALL, INTERRUPTED),
     ("rendering here", HERE, INTERRUPTED),
     ("rendering here", HERE, TERMINATED),
     ("rendering here", HERE, INTERRUPTED_TWICE),

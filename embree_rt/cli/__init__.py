@@ -45,17 +45,19 @@ EXIT_BROKEN_PIPE = 141
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command ``argv`` (default: the process's arguments); returns the exit code."""
-    parser = build_parser()
-    if not (sys.argv[1:] if argv is None else argv):  # bare `embree-rt`: what it can do
-        print(parser.format_help(), end="", file=sys.stderr)
-        return EXIT_BAD_INPUT
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exit_:
-        return int(exit_.code or 0)
-    try:
-        with interrupting_signals(), one_line_warnings():
-            run_command(args)
+        # from the start: parsing imports NumPy and the scene model (seconds on a busy machine)
+        with interrupting_signals():
+            parser = build_parser()
+            if not (sys.argv[1:] if argv is None else argv):  # bare `embree-rt`: what it can do
+                print(parser.format_help(), end="", file=sys.stderr)
+                return EXIT_BAD_INPUT
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as exit_:
+                return int(exit_.code or 0)
+            with one_line_warnings():
+                run_command(args)
         sys.stdout.flush()  # here, where a closed pipe is caught, not at the interpreter's exit
     except Terminated:
         print("embree-rt: terminated", file=sys.stderr)
