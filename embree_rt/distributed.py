@@ -27,6 +27,7 @@ import pickle
 import signal
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -83,9 +84,16 @@ class SceneFile:
     path: str
 
     def load(self) -> Scene:
+        """The scene, loaded on a worker with its warnings (the file's ``InputWarning``s, the
+        libraries') silenced: the command and ``render`` load the file on the client first,
+        where they are said (by the command as one line each), and a local cluster's workers
+        write to the command's stderr, where each worker's copy would appear again, in Python's
+        raw two-line form."""
         from embree_rt.scene import load_scene
 
-        return load_scene(self.path)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return load_scene(self.path)
 
     def digest(self) -> bytes:
         """The path, the file's bytes, and the path, size and modification time of each data
@@ -139,7 +147,8 @@ def scene_digest(scene: Scene) -> bytes:
     for array in [*arrays, *([] if scene.sphere_colors is None else [scene.sphere_colors])]:
         array = np.ascontiguousarray(array)
         digest.update(f"{array.dtype.str}{array.shape}".encode())
-        digest.update(memoryview(array).cast("B"))
+        if array.size:  # a memoryview with a zero in its shape cannot be cast to bytes
+            digest.update(memoryview(array).cast("B"))
     empty = replace(
         scene,
         sphere_centers=scene.sphere_centers[:0],
