@@ -124,18 +124,23 @@ def one_line_warnings():
     """Print each ``InputWarning`` (what a file asks for that is rendered differently or left
     out) as one line, ``embree-rt: warning: MESSAGE``; a warning of a library we call (trimesh,
     NumPy, Pillow, Dask) that its caller did not silence as one line too, naming the library,
-    never Python's two-line form with the source line."""
+    never Python's two-line form with the source line. Each line once: a scene file loaded
+    twice (once to plan a cluster's bricks) says its warnings once."""
     from embree_rt.scene.errors import InputWarning
 
     with warnings.catch_warnings():
+        said: set[str] = set()
 
         def show(message, category, filename, lineno, file=None, line=None):
             if issubclass(category, InputWarning):
-                print(f"embree-rt: warning: {message}", file=sys.stderr)
+                text = f"embree-rt: warning: {message}"
             else:
                 where = library_of(filename)
-                text = " ".join(str(message).split())
-                print(f"embree-rt: warning: {where}: {category.__name__}: {text}", file=sys.stderr)
+                words = " ".join(str(message).split())
+                text = f"embree-rt: warning: {where}: {category.__name__}: {words}"
+            if text not in said:
+                said.add(text)
+                print(text, file=sys.stderr)
 
         warnings.showwarning = show
         yield
