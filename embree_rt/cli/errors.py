@@ -8,7 +8,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 
 from embree_rt.errors import InputError
 
@@ -75,7 +75,8 @@ def interrupting_signals() -> Iterator[None]:
         main = threading.main_thread().ident
         while hook in frames_of(sys._current_frames().get(main)):
             time.sleep(0.001)
-        signal.pthread_kill(main, signum)
+        with suppress(ProcessLookupError):  # the process ended meanwhile
+            signal.pthread_kill(main, signum)
 
     previous = {number: signal.signal(number, end) for number in (signal.SIGINT, signal.SIGTERM)}
     unraisable_hook, sys.unraisablehook = sys.unraisablehook, raise_again
