@@ -27,9 +27,11 @@ import pickle
 import signal
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
+from multiprocessing import resource_tracker
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -82,9 +84,16 @@ class SceneFile:
     path: str
 
     def load(self) -> Scene:
+        """The scene, loaded on a worker with its warnings (the file's ``InputWarning``s, the
+        libraries') silenced: the command and ``render`` load the file on the client first,
+        where they are said (by the command as one line each), and a local cluster's workers
+        write to the command's stderr, where each worker's copy would appear again, in Python's
+        raw two-line form."""
         from embree_rt.scene import load_scene
 
-        return load_scene(self.path)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return load_scene(self.path)
 
     def digest(self) -> bytes:
         """The path, the file's bytes, and the path, size and modification time of each data
@@ -138,7 +147,8 @@ def scene_digest(scene: Scene) -> bytes:
     for array in [*arrays, *([] if scene.sphere_colors is None else [scene.sphere_colors])]:
         array = np.ascontiguousarray(array)
         digest.update(f"{array.dtype.str}{array.shape}".encode())
-        digest.update(memoryview(array).cast("B"))
+        if array.size:  # a memoryview with a zero in its shape cannot be cast to bytes
+            digest.update(memoryview(array).cast("B"))
     empty = replace(
         scene,
         sphere_centers=scene.sphere_centers[:0],
@@ -562,32 +572,49 @@ def local_cluster(workers: int, **options) -> distributed.LocalCluster:
     """A ``LocalCluster`` of ``workers`` processes of one thread each, with ``WORKER_CONFIG``
     and no memory limit unless ``memory_limit`` is given (the BVH is memory Dask does not
     manage: a limit would have the nanny kill a worker for holding a big scene; data-parallel
-    bricks are checked against it before they are made), whose workers leave Ctrl-C to this
-    process (``dask_setup``); ``options`` go to ``LocalCluster``.
+    bricks are checked against it before they are made), whose processes never take Ctrl-C
+    (``sigint_blocked_in_new_threads``); ``options`` go to ``LocalCluster``.
 
     With no dashboard the scheduler still serves its health routes over HTTP, by default on
     port 8787, warning when another cluster holds it: here on any free port of 127.0.0.1."""
     scheduler_options = {"dashboard_address": "127.0.0.1:0", **options.pop("scheduler_kwargs", {})}
-    with dask.config.set(WORKER_CONFIG):  # the nannies hand it to their worker processes
+    # the nannies hand the config to their worker processes
+    with dask.config.set(WORKER_CONFIG), sigint_blocked_in_new_threads():
         return distributed.LocalCluster(
             n_workers=workers,
             threads_per_worker=1,
             processes=True,
             dashboard_address=None,
             memory_limit=options.pop("memory_limit", 0),
-            preload=[__name__],
             scheduler_kwargs=scheduler_options,
             **options,
         )
 
 
-def dask_setup(worker: distributed.Worker) -> None:
-    """Run by Dask in each worker process ``local_cluster`` starts (its preload, once the worker
-    has started): SIGINT is ignored there. A terminal's Ctrl-C reaches every process of the
-    command's group; the command alone ends the render, cancelling the batches and closing the
-    cluster, where each worker would die of it printing its own traceback."""
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+@contextmanager
+def sigint_blocked_in_new_threads() -> Iterator[None]:
+    """SIGINT blocked in this thread while inside, and so in every thread started meanwhile
+    (a thread starts with its creator's signal mask) and every process those threads start (a
+    child keeps the mask of the thread that forked it, through exec): a ``LocalCluster`` made
+    inside has its event loop's thread start the worker processes, which then never take
+    SIGINT, not even while Python starts up and imports. A terminal's Ctrl-C reaches every
+    process of the command's group; the command alone ends the render, cancelling the batches
+    and closing the cluster, where each worker would die of it printing its own traceback.
+    This thread's own mask is restored on leaving (a mask is a thread's own), so it takes the
+    Ctrl-C that came meanwhile then; SIGTERM, which the nannies close their workers with, is
+    never blocked.
+
+    multiprocessing's resource tracker, started by the first lock a nanny makes (in the event
+    loop's thread), unblocks SIGINT in the thread that starts it: it is started here first."""
+    if threading.current_thread() is not threading.main_thread():  # Python's signals go there
+        yield
+        return
+    resource_tracker.ensure_running()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 @contextmanager

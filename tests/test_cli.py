@@ -461,6 +461,39 @@ def wait_until_busy(pid: int, cpu_seconds: float, timeout: float = 60.0) -> None
 # -- bad input or a bug: which is which -----------------------------------------------------------
 
 
+def test_a_ctrl_c_raised_inside_a_c_callback_still_ends_the_command(capfd) -> None:
+    """A Ctrl-C whose KeyboardInterrupt is raised in a Python function C code called (ctypes
+    swallows it, "Exception ignored": llvmlite's callbacks as numba compiles the first render's
+    kernels) is raised again once the callback has returned, though more such callbacks follow
+    (a compilation makes many), and nothing is printed of the swallowed one."""
+    import ctypes
+
+    from embree_rt.cli.errors import interrupting_signals
+
+    @ctypes.CFUNCTYPE(None)
+    def interrupted_callback() -> None:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)  # the handler runs here, inside the callback
+
+    @ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_int)
+    def busy_callback(n: int) -> int:
+        return sum(range(n))
+
+    handlers = {number: signal.getsignal(number) for number in (signal.SIGINT, signal.SIGTERM)}
+    callbacks_after = 0
+    try:
+        with pytest.raises(KeyboardInterrupt), interrupting_signals():
+            interrupted_callback()
+            while callbacks_after < 100_000:  # seconds of callbacks, if it is never raised
+                busy_callback(100)
+                callbacks_after += 1
+    finally:
+        for number, handler in handlers.items():
+            signal.signal(number, handler)
+    assert callbacks_after < 100_000
+    assert capfd.readouterr().err == ""
+
+
 def _one_sphere_scene(folder: Path) -> Path:
     scene = folder / "scene.toml"
     # lit: a scene without lights would add a warning line to the stderr these tests read

@@ -73,6 +73,29 @@ def test_a_mesh_file_renders_on_its_own_and_its_warnings_are_one_line_each(tmp_p
     assert not np.array_equal(np.load(bare)[-1], np.load(floored)[-1])
 
 
+def test_each_warning_line_is_said_once(capsys: pytest.CaptureFixture[str]) -> None:
+    """A scene file loaded twice by the command (a cluster's bricks are planned from a second
+    load) says its warnings once, a library's too. "always": Python's own once-per-place
+    record is reset whenever a library changes the warning filters, as many do."""
+    import warnings
+
+    from embree_rt.cli import one_line_warnings
+    from embree_rt.scene.errors import InputWarning
+
+    left_out = "scene.toml: meshes[{}].file: a texture left out"
+    with one_line_warnings():
+        warnings.simplefilter("always")
+        for _ in range(2):
+            warnings.warn(left_out.format(0), InputWarning, stacklevel=1)
+            warnings.warn("overflow encountered in cast", RuntimeWarning, stacklevel=1)
+        warnings.warn(left_out.format(1), InputWarning, stacklevel=1)
+    assert capsys.readouterr().err.splitlines() == [
+        "embree-rt: warning: scene.toml: meshes[0].file: a texture left out",
+        "embree-rt: warning: test_cli_habits.py: RuntimeWarning: overflow encountered in cast",
+        "embree-rt: warning: scene.toml: meshes[1].file: a texture left out",
+    ]
+
+
 def test_info_of_a_mesh_file_says_what_was_chosen(tmp_path: Path) -> None:
     mesh = trimesh.creation.icosphere(subdivisions=1)
     mesh.export(tmp_path / "ball.stl")

@@ -1,11 +1,13 @@
-"""Ctrl-C and SIGTERM sent to a real command, in each of its phases: on this machine rendering
-and writing the image; on a ``--cluster local:2`` starting the cluster, the workers building,
-rendering, writing, as tasks and as bricks (``--partition``); on an external scheduler (``dask
-scheduler`` and a worker this test starts) rendering and writing; ``serve`` serving, and rendering
-for a client. Each must end the command promptly with exit code 130 (SIGINT) or 143 (SIGTERM)
-and one line on stderr, close the cluster it started (no worker outlives the command), and leave
-the image that was there before as it was, with no temporary file. An external scheduler is not
-the command's to close: it and its worker keep running, and render the next command's image.
+"""Ctrl-C and SIGTERM sent to a real command, in each of its phases: parsing its command line; on
+this machine rendering and writing the image; on a ``--cluster local:2`` starting the cluster
+(its worker processes importing), the workers building, rendering, writing, as tasks and as
+bricks (``--partition``); on an external scheduler (``dask scheduler`` and a worker this test
+starts) rendering and writing, and bricks building and rendering; ``serve`` serving, and
+rendering for a client. Each must end the command promptly with exit code 130 (SIGINT) or 143
+(SIGTERM) and one line on stderr, close the cluster it started (no worker outlives the command),
+and leave the image that was there before as it was, with no temporary file. An external
+scheduler is not the command's to close: it and its worker keep running, and render the next
+command's image.
 
 The signal is sent, as a terminal's Ctrl-C is, to the command's whole process group, once the
 command has reached the phase: a small hook (``PHASED``, test code, run in the command's own
@@ -51,26 +53,38 @@ def wait_for_the_signal():
         time.sleep(0.05)
     raise AssertionError("the signal did not come")
 
-if phase == "rendering here":  # the render under way on this machine
+if phase == "parsing":  # the parser being built (the command line's checks import NumPy and more)
+    cli.build_parser = wait_for_the_signal
+elif phase == "rendering here":  # the render under way on this machine
     import embree_rt.cli.render as here
     render = here.render
     def rendering(*args, **kwargs):
         reached()
         return render(*args, **kwargs)
     here.render = rendering
-elif phase == "starting":  # the signal comes while Dask starts the scheduler and workers
-    start = distributed.local_cluster
-    def starting(*args, **kwargs):
-        reached()
-        return start(*args, **kwargs)
-    distributed.local_cluster = starting
+elif phase == "workers starting":  # a worker process importing, Python's Ctrl-C handler set
+    import multiprocessing.context, signal
+    spawn = multiprocessing.context.SpawnProcess.start
+    def catches_ctrl_c(pid):
+        with open(f"/proc/{pid}/status") as status:
+            caught = next(line for line in status if line.startswith("SigCgt:"))
+        return int(caught.split()[1], 16) & (1 << (signal.SIGINT - 1))
+    def spawned(self):
+        spawn(self)
+        while self.is_alive() and not catches_ctrl_c(self.pid):  # not ended by the signal
+            time.sleep(0.005)
+        if not spawned.reached:
+            spawned.reached = True
+            reached()
+    spawned.reached = False
+    multiprocessing.context.SpawnProcess.start = spawned
 elif phase == "building":  # batches sent, the workers building their BVH on the first
     render_frames = distributed.ClusterRenderer.render_frames
     def building(self, *args, **kwargs):
         reached()
         return render_frames(self, *args, **kwargs)
     distributed.ClusterRenderer.render_frames = building
-elif phase == "building bricks":  # the bricks being made on their workers
+elif phase.startswith("building bricks"):  # the bricks being made on their workers
     from embree_rt.bricks import cluster
     build = cluster.DaskBricks.build
     def building(self):
@@ -142,31 +156,34 @@ CLUSTER = [*FIELD, "--cluster", "local:2"]
 BRICKS = [*CLUSTER, "--partition", "2"]
 SCHEDULER = "tcp://the external scheduler"  # replaced by the address of ``external_scheduler``
 ON_SCHEDULER = [*FIELD, "--scheduler", SCHEDULER]
+BRICKS_ON_SCHEDULER = [*ON_SCHEDULER, "--partition", "2"]
 SERVE = ["serve", "--port", "0"]
 # (phase, command line without its output and --quiet, the signal and what it must end in):
-# every phase, the two signals taking turns where one path out serves both, both where they
-# take different paths (Dask's start and teardown, uvicorn's handlers); a few seconds a case (a
-# cluster takes 5 s and more to start on two busy cores, and holds a signal until it has)
+# every phase, the two signals taking turns where one path out serves both (an external
+# scheduler's workers are outside the command's process group: one path), both where they take
+# different paths (a local cluster's start and teardown, uvicorn's handlers); Ctrl-C twice
+# stands for Ctrl-C once where both are sent (the second lands in the first's clean-up, which
+# must end as a single Ctrl-C's does); a few seconds a case (a cluster takes 5 s and more to
+# start on two busy cores, and holds a signal until it has)
 CASES = [
-    ("rendering here", HERE, INTERRUPTED),
+    ("parsing", SMALL, INTERRUPTED),
     ("rendering here", HERE, TERMINATED),
     ("rendering here", HERE, INTERRUPTED_TWICE),
     ("writing here", SMALL, INTERRUPTED),
     ("writing here", SMALL, TERMINATED),
-    ("starting", CLUSTER, INTERRUPTED),
-    ("starting", CLUSTER, TERMINATED),
+    ("workers starting", CLUSTER, INTERRUPTED),
+    ("workers starting", CLUSTER, TERMINATED),
     ("building", CLUSTER, INTERRUPTED),
-    ("rendering", [*CLUSTER, *BATCHES], INTERRUPTED),
     ("rendering", [*CLUSTER, *BATCHES], TERMINATED),
     ("rendering", [*CLUSTER, *BATCHES], INTERRUPTED_TWICE),
     ("writing", CLUSTER, TERMINATED),
     ("building bricks", BRICKS, INTERRUPTED),
     ("rendering bricks", [*BRICKS, *BATCHES], TERMINATED),
     ("writing bricks", BRICKS, INTERRUPTED),
-    ("rendering on a scheduler", [*ON_SCHEDULER, *BATCHES], INTERRUPTED),
     ("rendering on a scheduler", [*ON_SCHEDULER, *BATCHES], TERMINATED),
     ("writing on a scheduler", ON_SCHEDULER, INTERRUPTED),
-    ("writing on a scheduler", ON_SCHEDULER, TERMINATED),
+    ("building bricks on a scheduler", BRICKS_ON_SCHEDULER, TERMINATED),
+    ("rendering bricks on a scheduler", [*BRICKS_ON_SCHEDULER, *BATCHES], INTERRUPTED),
     ("serving", SERVE, INTERRUPTED),
     ("serving", SERVE, TERMINATED),
     ("serving", SERVE, INTERRUPTED_TWICE),
@@ -218,13 +235,17 @@ def external_scheduler() -> Iterator[tuple[str, list[subprocess.Popen]]]:
 
 @pytest.fixture(scope="module")
 def rendered_here(tmp_path_factory: pytest.TempPathFactory) -> Callable[[list[str]], np.ndarray]:
-    """The image a command renders on this machine (without its ``--scheduler``), each
-    command's once."""
+    """The image a command renders on this machine (without its ``--scheduler`` and
+    ``--partition``: bricks render the local image bit for bit), each command's once."""
     images: dict[tuple[str, ...], np.ndarray] = {}
 
     def render(command: list[str]) -> np.ndarray:
-        at = command.index("--scheduler")
-        here = (*command[:at], *command[at + 2 :])
+        here = list(command)
+        for flag in ("--scheduler", "--partition"):
+            if flag in here:
+                at = here.index(flag)
+                del here[at : at + 2]
+        here = tuple(here)
         if here not in images:
             output = tmp_path_factory.mktemp("here") / "here.npy"
             result = subprocess.run(
@@ -326,11 +347,13 @@ def test_a_signal_in_any_phase_ends_the_command_in_one_line_and_leaves_the_old_i
         # the worker cannot import this test module: the function goes by value
         cloudpickle.register_pickle_by_value(sys.modules[__name__])
         with distributed.Client(scheduler, timeout=TIMEOUT_S) as client:
-            # nothing of the two renders left on the worker: no task, no scene's renderer held
-            assert client.run(held_on_worker) == {w: (0, []) for w in client.nthreads()}
+            # nothing of the two renders left on the worker: no task, no scene's renderer, no
+            # brick held
+            assert client.run(held_on_worker) == {w: (0, [], 0) for w in client.nthreads()}
 
 
-def held_on_worker(dask_worker: distributed.Worker) -> tuple[int, list[str]]:
-    """The tasks a worker holds, and the scene renderers (plugins) it keeps."""
+def held_on_worker(dask_worker: distributed.Worker) -> tuple[int, list[str], int]:
+    """The tasks a worker holds, the scene renderers (plugins) it keeps, and its actors (the
+    bricks of ``--partition``)."""
     scenes = [name for name in dask_worker.plugins if name.startswith("embree-rt-scene-")]
-    return len(dask_worker.state.tasks), scenes
+    return len(dask_worker.state.tasks), scenes, len(dask_worker.state.actors)

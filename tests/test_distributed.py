@@ -191,6 +191,46 @@ def test_a_worker_that_cannot_load_the_scene_is_bad_input(cluster, tmp_path: Pat
         bounded(renderer.render, settings, rt.Camera())
 
 
+def test_a_scene_without_spheres_has_a_digest() -> None:
+    """A mesh file rendered on its own on a cluster goes to the workers as a ``Scene`` without
+    spheres; its digest must neither fail (a memoryview of an empty array cannot be cast to
+    bytes) nor match the same scene's with spheres."""
+    field = rt.random_field(3, seed=0)
+    no_spheres = replace(
+        field,
+        sphere_centers=field.sphere_centers[:0],
+        sphere_radii=field.sphere_radii[:0],
+        sphere_materials=field.sphere_materials[:0],
+        sphere_colors=None,
+    )
+    assert rd.scene_digest(no_spheres) == rd.scene_digest(replace(no_spheres))
+    assert rd.scene_digest(no_spheres) != rd.scene_digest(field)
+
+
+def test_a_worker_loads_a_scene_file_without_saying_its_warnings_again(tmp_path: Path) -> None:
+    """The client said them as it loaded the file (the command: one line each); a local
+    cluster's workers write to the command's stderr, in Python's raw form."""
+    import warnings
+
+    from embree_rt.scene import load_scene
+    from embree_rt.scene.errors import InputWarning
+
+    (tmp_path / "tri.obj").write_text(
+        "mtllib tri.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl skin\nf 1/1 2/1 3/1\n"
+    )
+    (tmp_path / "tri.mtl").write_text("newmtl skin\nKd 0.5 0.5 0.5\nmap_Kd missing.png\n")
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text('[[meshes]]\nfile = "tri.obj"\n')
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        on_the_client = load_scene(scene_file)
+        assert [w.category for w in said] == [InputWarning]  # the texture it leaves out
+        said.clear()
+        on_a_worker = rd.SceneFile(str(scene_file)).load()
+    assert said == []
+    assert rd.scene_digest(on_a_worker) == rd.scene_digest(on_the_client)  # the same scene
+
+
 def test_a_data_file_replaced_under_a_live_renderer_is_loaded_again(cluster, tmp_path) -> None:
     # Renderers of one scene share the workers' BVH while any of them lives: a scene file whose
     # sphere array was rewritten is another scene, and must not be rendered from the old BVH.

@@ -725,6 +725,64 @@ def test_an_output_path_the_os_refuses_is_one_line_before_any_work(
     assert sorted(tmp_path.iterdir()) == before
 
 
+def _file_as_folder(folder: Path) -> str:
+    (folder / "f").write_text("")
+    return "f/s.toml"
+
+
+# case: (what makes the path in a folder and returns --save-scene's value, the path the line
+# names, its problem)
+SAVED_SCENE_PATHS = {
+    "a directory": (lambda f: _make_directory(f, "s.toml"), "s.toml", "is a directory, not a file"),
+    "a FIFO": (lambda f: _make_fifo(f, "s.toml"), "s.toml", "is a FIFO (named pipe), not a file"),
+    "a FIFO where its spheres go": (
+        lambda f: _make_fifo(f, "s.spheres.npz").replace(".spheres.npz", ".toml"),
+        "s.spheres.npz",
+        "is a FIFO (named pipe), not a file",
+    ),
+    "a loop of links": (
+        lambda f: _make_symlink_loop(f, "s.toml"),
+        "s.toml",
+        "a loop of symbolic links",
+    ),
+    "a file as its folder": (_file_as_folder, "f/s.toml", "f is not a directory"),
+    "over-long name": (lambda f: "s" * 300 + ".toml", "s" * 300 + ".toml", "the name is too long"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SAVED_SCENE_PATHS))
+def test_a_save_scene_path_the_os_refuses_is_one_line_before_any_work(
+    tmp_path: Path, case: str
+) -> None:
+    """Refused before the field is made: nothing written, not even the spheres beside it, and
+    no write left waiting on a FIFO for a reader."""
+    make, named, problem = SAVED_SCENE_PATHS[case]
+    given = make(tmp_path)
+    before = sorted(tmp_path.iterdir())
+    # a reader on each FIFO: a write that got past the check fails the test, not hangs it
+    readers = [os.open(p, os.O_RDONLY | os.O_NONBLOCK) for p in before if p.is_fifo()]
+    try:
+        code, stderr = _main(
+            tmp_path,
+            "random",
+            "--count",
+            "10",
+            "--save-scene",
+            given,
+            "-o",
+            "out.png",
+            "--width",
+            "8",
+        )
+    finally:
+        for reader in readers:
+            os.close(reader)
+    assert code == 2, stderr
+    assert stderr.startswith(f"embree-rt: error: --save-scene: {named}: {problem}"), stderr
+    assert stderr.count("\n") == 1, stderr
+    assert sorted(tmp_path.iterdir()) == before
+
+
 def _without_permission_overrides() -> list[str]:
     """What runs a command under the file modes: as root, whom no mode bit stops, the command
     runs without the capabilities that let root past them (util-linux's setpriv drops them from

@@ -45,17 +45,19 @@ EXIT_BROKEN_PIPE = 141
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command ``argv`` (default: the process's arguments); returns the exit code."""
-    parser = build_parser()
-    if not (sys.argv[1:] if argv is None else argv):  # bare `embree-rt`: what it can do
-        print(parser.format_help(), end="", file=sys.stderr)
-        return EXIT_BAD_INPUT
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exit_:
-        return int(exit_.code or 0)
-    try:
-        with interrupting_signals(), one_line_warnings():
-            run_command(args)
+        # from the start: parsing imports NumPy and the scene model (seconds on a busy machine)
+        with interrupting_signals():
+            parser = build_parser()
+            if not (sys.argv[1:] if argv is None else argv):  # bare `embree-rt`: what it can do
+                print(parser.format_help(), end="", file=sys.stderr)
+                return EXIT_BAD_INPUT
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as exit_:
+                return int(exit_.code or 0)
+            with one_line_warnings():
+                run_command(args)
         sys.stdout.flush()  # here, where a closed pipe is caught, not at the interpreter's exit
     except Terminated:
         print("embree-rt: terminated", file=sys.stderr)
@@ -122,18 +124,23 @@ def one_line_warnings():
     """Print each ``InputWarning`` (what a file asks for that is rendered differently or left
     out) as one line, ``embree-rt: warning: MESSAGE``; a warning of a library we call (trimesh,
     NumPy, Pillow, Dask) that its caller did not silence as one line too, naming the library,
-    never Python's two-line form with the source line."""
+    never Python's two-line form with the source line. Each line once: a scene file loaded
+    twice (once to plan a cluster's bricks) says its warnings once."""
     from embree_rt.scene.errors import InputWarning
 
     with warnings.catch_warnings():
+        said: set[str] = set()
 
         def show(message, category, filename, lineno, file=None, line=None):
             if issubclass(category, InputWarning):
-                print(f"embree-rt: warning: {message}", file=sys.stderr)
+                text = f"embree-rt: warning: {message}"
             else:
                 where = library_of(filename)
-                text = " ".join(str(message).split())
-                print(f"embree-rt: warning: {where}: {category.__name__}: {text}", file=sys.stderr)
+                words = " ".join(str(message).split())
+                text = f"embree-rt: warning: {where}: {category.__name__}: {words}"
+            if text not in said:
+                said.add(text)
+                print(text, file=sys.stderr)
 
         warnings.showwarning = show
         yield

@@ -3,12 +3,17 @@ library, writes of the user's files, and the input to blame when memory cannot h
 
 from __future__ import annotations
 
+import os
+import stat
+from pathlib import Path
+
 from embree_rt.aovs import aov_paths
 from embree_rt.cli.errors import UsageError
 from embree_rt.embree import EmbreeError
 from embree_rt.embree.library import load_library
 from embree_rt.film import Encoding, check_image_name, check_output_path
-from embree_rt.scene.paths import not_a_file_problem
+from embree_rt.scene.paths import not_a_file_problem, os_error_problem
+from embree_rt.scene.writer import mesh_file, spheres_file
 
 
 def output_encoding(output):
@@ -36,6 +41,29 @@ def check_output(path: str, aovs: tuple[str, ...] | None = None, encoding=None) 
                 raise ValueError(f"{target}: {problem}")
     except (ValueError, RuntimeError) as error:
         raise UsageError(str(error)) from None
+
+
+def check_saved_scene(target: Path, meshes: int) -> None:
+    """``--save-scene``'s file, before any work, as bad input: its directory there and
+    writable, and nothing but a file (a directory, a FIFO that would block the write, a loop of
+    links, a name too long) where it or the files written beside it (its spheres and
+    ``meshes`` meshes) go. ``target``'s suffix is checked by the caller."""
+    where = f"--save-scene: {target}"
+    directory = target.parent
+    try:
+        # os.stat, not is_dir: a loop of links or a file in the path is said as what it is
+        if not stat.S_ISDIR(os.stat(directory).st_mode):
+            raise UsageError(f"{where}: {directory} is not a directory")
+    except FileNotFoundError:
+        raise UsageError(f"{where}: directory {directory} does not exist") from None
+    except OSError as error:
+        raise UsageError(f"{where}: {os_error_problem(error, directory)}") from None
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise UsageError(f"{where}: directory {directory} is not writable")
+    written = [target, spheres_file(target), *(mesh_file(target, i) for i in range(meshes))]
+    for path in written:
+        if (problem := not_a_file_problem(path)) is not None:
+            raise UsageError(f"--save-scene: {path}: {problem}")
 
 
 def check_library() -> None:

@@ -75,7 +75,13 @@ def connected(distributed, where: OnDask) -> Iterator[object]:
     signal ended mid-import, each with a traceback."""
     connection = distributed.connect(where.cluster, where.scheduler, timeout_s=where.timeout_s)
     with signals_held() as held:
-        client = connection.__enter__()
+        try:
+            client = connection.__enter__()
+        except Exception:
+            # SIGTERM to the process group ends the worker processes starting too, and the
+            # cluster fails to start of it: what ended the command is the signal.
+            held.raise_held()
+            raise
     try:
         held.raise_held()
         yield client

@@ -4,9 +4,11 @@ when the fault is ours."""
 from __future__ import annotations
 
 import signal
+import sys
 import threading
+import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 
 from embree_rt.errors import InputError
 
@@ -36,26 +38,68 @@ def interrupting_signals() -> Iterator[None]:
     command is ending. A second Ctrl-C (an impatient user's) would otherwise cut the clean-up
     the first began, or land after the command's one line, as the interpreter exits, and end
     the process by the signal itself instead of the command's exit code. Off the main thread,
-    where Python cannot take signals, nothing changes."""
+    where Python cannot take signals, nothing changes.
+
+    A signal whose exception is raised inside a Python function that C code called (a ctypes
+    callback: llvmlite's, as numba compiles) cannot leave it: ctypes prints it as "Exception
+    ignored" and goes on, and the command would run to its end. Such an exception is taken
+    from ``sys.unraisablehook`` and raised again outside: the signal is sent to the main
+    thread once more, from another thread, so that it arrives once the callback has
+    returned."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    received = False
+    received: int | None = None
+    swallowed = False  # raised in a callback, and sent again
 
     def end(signum, frame) -> None:
-        nonlocal received
-        received = True
+        nonlocal received, swallowed
+        received, swallowed = signum, False
         for number in (signal.SIGINT, signal.SIGTERM):
             signal.signal(number, signal.SIG_IGN)
         raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
 
+    def raise_again(report) -> None:
+        nonlocal swallowed
+        if received is None or not isinstance(report.exc_value, KeyboardInterrupt):
+            unraisable_hook(report)
+            return
+        swallowed = True
+        signal.signal(received, end)
+        hook = sys._getframe()
+        threading.Thread(target=send_again, args=(hook, received), daemon=True).start()
+
+    def send_again(hook, signum: int) -> None:
+        """Send ``signum`` to the main thread once it has left ``hook``'s frame: raised inside
+        the hook, the exception would be lost too."""
+        main = threading.main_thread().ident
+        while hook in frames_of(sys._current_frames().get(main)):
+            time.sleep(0.001)
+        with suppress(ProcessLookupError):  # the process ended meanwhile
+            signal.pthread_kill(main, signum)
+
     previous = {number: signal.signal(number, end) for number in (signal.SIGINT, signal.SIGTERM)}
+    unraisable_hook, sys.unraisablehook = sys.unraisablehook, raise_again
     try:
         yield
     finally:
-        if not received:
+        sys.unraisablehook = unraisable_hook
+        if received is None:
             for number, handler in previous.items():
                 signal.signal(number, handler)
+        elif swallowed:  # left before the signal sent again arrived: it ends the command here
+            for number in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(number, signal.SIG_IGN)
+            raise Terminated if received == signal.SIGTERM else KeyboardInterrupt
+
+
+def frames_of(frame) -> list:
+    """``frame`` and the frames that called it, innermost first."""
+    frames = []
+    while frame is not None:
+        frames.append(frame)
+        frame = frame.f_back
+    return frames
 
 
 class HeldSignals:

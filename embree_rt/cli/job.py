@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
-from embree_rt.cli.checks import check_output, output_encoding
+from embree_rt.cli.checks import check_output, check_saved_scene, output_encoding
 from embree_rt.cli.errors import UsageError
 from embree_rt.cli.frame_paths import frame_range
 from embree_rt.cli.particles import refuse_particle_flags
@@ -253,8 +253,7 @@ def job_from_args(args: argparse.Namespace) -> Job:
         target = Path(source.save_scene)
         if target.suffix.lower() not in SCENE_SUFFIXES:
             raise UsageError(f"--save-scene: {target}: expected a .toml or .json file name")
-        if not target.parent.is_dir():
-            raise UsageError(f"--save-scene: {target}: directory {target.parent} does not exist")
+        check_saved_scene(target, meshes=0 if source.instance is None else 1)
     return Job(
         source=source,
         settings=tuple(args.settings),

@@ -20,6 +20,16 @@ from embree_rt.scene.animation import animation_document
 from embree_rt.scene.model import CurveSet, Scene
 
 
+def spheres_file(path: Path) -> Path:
+    """Where ``save_scene(scene, path)`` writes the scene's sphere arrays."""
+    return path.with_suffix(".spheres.npz")
+
+
+def mesh_file(path: Path, index: int) -> Path:
+    """Where ``save_scene(scene, path)`` writes the scene's ``index``-th distinct mesh."""
+    return path.with_name(f"{path.stem}.mesh{index}.ply")
+
+
 def scene_document(scene: Scene, path: Path) -> dict:
     """The scene as a plain dict in the file schema, writing its bulk data beside ``path``."""
     document: dict = {"render": asdict(scene.render), **look_document(scene)}
@@ -35,7 +45,7 @@ def scene_document(scene: Scene, path: Path) -> dict:
     if scene.animation is not None:
         document["animation"] = animation_document(scene.animation)
     if len(scene.sphere_radii):
-        spheres_path = path.with_suffix(".spheres.npz")
+        spheres_path = spheres_file(path)
         names = np.asarray(scene.material_names)
         colors = {} if scene.sphere_colors is None else {"colors": scene.sphere_colors}
         np.savez_compressed(
@@ -48,9 +58,9 @@ def scene_document(scene: Scene, path: Path) -> dict:
         document["sphere_arrays"] = [{"file": spheres_path.name}]
     files: dict[int, str] = {}  # each distinct mesh written once, for meshes and instances
 
-    def mesh_file(mesh) -> str:
+    def mesh_name(mesh) -> str:
         if id(mesh) not in files:
-            mesh_path = path.with_name(f"{path.stem}.mesh{len(files)}.ply")
+            mesh_path = mesh_file(path, len(files))
             mesh.export(mesh_path)
             files[id(mesh)] = mesh_path.name
         return files[id(mesh)]
@@ -60,7 +70,7 @@ def scene_document(scene: Scene, path: Path) -> dict:
         for placement in scene.meshes:
             entries.append(
                 {
-                    "file": mesh_file(placement.mesh),
+                    "file": mesh_name(placement.mesh),
                     "material": placement.material,
                     "smooth": placement.smooth,
                     "transform": np.asarray(placement.transform, float).tolist(),
@@ -79,7 +89,7 @@ def scene_document(scene: Scene, path: Path) -> dict:
             )
             entries.append(
                 {
-                    "mesh": mesh_file(instances.mesh),
+                    "mesh": mesh_name(instances.mesh),
                     "transforms": placements_path.name,
                     "smooth": instances.smooth,
                 }
