@@ -357,12 +357,13 @@ class Scene:
         edges = box_lines(frame, up) if box else None
         notes = [note]
         if bonds is not None:
-            drawn = (centers, radii, colors)
+            # (the sticks' ends and radius are float64 sums of the centres and radii)
+            drawn = (np.asarray(centers, np.float64), radii, colors)
             radii, bond_note = bond_sticks.add_bonds(
                 self, frame, drawn, bonds, UP_ROTATIONS[up], material
             )
             notes.append(bond_note)
-        self.add_spheres(centers, radii, names, colors=colors)
+        self.add_spheres(centers, radii, names, colors=colors, copy=False)  # (made here)
         if edges is not None:
             points, radius = edges
             starts = np.arange(0, len(points), 2)
@@ -379,9 +380,11 @@ class Scene:
         file's are."""
         from embree_rt.scene.model_file import stage_spheres
 
-        centers = [self.sphere_centers, *(curves.points for curves in self.curves)]
-        radii = [self.sphere_radii, *(curves.radii for curves in self.curves)]
-        self._stage(stage_spheres(np.concatenate(centers), np.concatenate(radii)), floor)
+        centers, radii = self.sphere_centers, self.sphere_radii
+        if self.curves:
+            centers = np.concatenate([centers, *(curves.points for curves in self.curves)])
+            radii = np.concatenate([radii, *(curves.radii for curves in self.curves)])
+        self._stage(stage_spheres(centers, radii), floor)
 
     @classmethod
     def from_trimesh(cls, loaded: trimesh.Trimesh | trimesh.Scene, floor: bool = True) -> Scene:

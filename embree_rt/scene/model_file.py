@@ -232,13 +232,28 @@ def _vec(values: np.ndarray) -> Point:
     return (x, y, z)
 
 
+# Spheres whose bounds are summed at a time (float64 rows that stay in the cache).
+BOUNDS_ROWS = 1 << 16
+
+
+def sphere_bounds(centers: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(3,) float64 lowest and highest corners of the spheres ``centers`` (n, 3) and ``radii``
+    (n,) (any real dtype), each sum formed in float64; a slice of ``BOUNDS_ROWS`` at a time
+    (a minimum of minima is the minimum), so no (n, 3) float64 copy is made."""
+    low, high = np.full(3, np.inf), np.full(3, -np.inf)
+    for start in range(0, len(radii), BOUNDS_ROWS):
+        rows = slice(start, start + BOUNDS_ROWS)
+        part = np.asarray(centers[rows], np.float64)
+        reach = np.asarray(radii[rows], np.float64)[:, None]
+        low = np.minimum(low, (part - reach).min(axis=0))
+        high = np.maximum(high, (part + reach).max(axis=0))
+    return low, high
+
+
 def stage_spheres(centers: np.ndarray, radii: np.ndarray) -> Staging:
     """How to show spheres on their own (a particle file): ``centers`` (n, 3), ``radii`` (n,);
     framed on their bounds, under the default rig."""
-    centers = np.asarray(centers, np.float64)
-    radii = np.asarray(radii, np.float64)
-    low = (centers - radii[:, None]).min(axis=0)
-    high = (centers + radii[:, None]).max(axis=0)
+    low, high = sphere_bounds(centers, radii)
     return Staging(
         [framed_view(low, high)],
         default_lights(low, high),
