@@ -122,3 +122,18 @@ def test_gsd_typeid_past_its_names_is_refused(tmp_path) -> None:
     write_gsd(path, ["A", "B"], np.array([0, 1, 2], np.uint32), np.zeros((3, 3), np.float32))
     with pytest.raises(ParticleFileError, match=r"bad\.gsd: frame 0: particles/typeid 2 is past"):
         read_particles(path)
+
+
+def test_type_palette_is_matplotlibs_tab10() -> None:
+    """Types are coloured by matplotlib's tab10, in the types' natural order, the eleventh
+    taking the first colour again: matplotlib's own floats, bit for bit."""
+    import matplotlib
+
+    from embree_rt.scene.particles.look import TYPE_PALETTE, label_table
+
+    names = np.array([str(i) for i in range(1, 12)])  # natural order: 1, 2, ..., 10, 11
+    colors, _ = label_table("x", "type", np.sort(names))
+    tab10 = np.asarray(matplotlib.colormaps[TYPE_PALETTE].colors, np.float64)[:, :3]
+    by_name = dict(zip(np.sort(names).tolist(), colors, strict=True))
+    expected = tab10[np.arange(11) % 10]
+    np.testing.assert_array_equal(np.array([by_name[n] for n in names]), expected)
