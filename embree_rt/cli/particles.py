@@ -136,8 +136,9 @@ def refuse_particle_flags(args: argparse.Namespace) -> None:
             raise UsageError(f"{flag}: only for particle files, and {args.scene} is not one")
 
 
-def particle_scene(args: argparse.Namespace):
-    """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say."""
+def particle_scene(args: argparse.Namespace, stage: bool = True):
+    """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say (framed unless
+    ``stage`` is False: ``Scene.from_particles``)."""
     from embree_rt.errors import InputError
     from embree_rt.scene.model import Scene
     from embree_rt.scene.particles.bonds import BondLook
@@ -173,6 +174,7 @@ def particle_scene(args: argparse.Namespace):
             box=args.box,
             bonds=BondLook(args.bond_radius, args.licorice) if bonds else None,
             legend=args.legend,
+            stage=stage,
         )
     except ValueError as error:
         if isinstance(error, InputError):

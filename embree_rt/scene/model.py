@@ -291,6 +291,7 @@ class Scene:
         box: bool = False,
         bonds=None,
         legend: bool = False,
+        stage: bool = True,
     ) -> Scene:
         """Frame ``frame`` of the particle file ``path`` (a trajectory over ``topology``)
         rendered on its own: one sphere a particle, coloured and sized by ``look``
@@ -300,7 +301,8 @@ class Scene:
         a material a type, ``box`` drawing the simulation box (``add_particles``), ``bonds`` (a
         ``BondLook``) drawing its bonds as sticks, ``legend`` recording what the colours mean
         (``Scene.legend``); framed from the bounds under the default rig, a floor under it
-        unless ``floor`` is False. Raises
+        unless ``floor`` is False (with ``stage`` False, no framing: the camera, lights and
+        floor stay a new ``Scene``'s, for a trajectory's frames seen as its first). Raises
         ``SceneError`` naming the file and the problem."""
         from embree_rt.scene.particles import read_particles
 
@@ -317,7 +319,8 @@ class Scene:
             bonds=bonds,
             legend=legend,
         )
-        scene.stage_particles(floor)
+        if stage:
+            scene.stage_particles(floor)
         return scene
 
     def add_particles(
