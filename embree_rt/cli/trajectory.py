@@ -38,7 +38,7 @@ def same_particles(last: Scene, scene: Scene) -> bool:
     colours, lights, floor, materials and render settings, and no other geometry."""
 
     def same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
-        if a is None or b is None:
+        if a is None or b is None or a is b:
             return a is b
         return a.shape == b.shape and bool(np.array_equal(a, b))
 
