@@ -8,10 +8,12 @@ camera-like rays traced through both (the order alternating frame to frame). ``m
 ``build_s`` says whether Embree refitted or rebuilt; ``trace_ratio`` (moved / fresh, per
 frame) is the quality a kept tree has lost after the motion so far: the number a rule "rebuild
 when the spheres have moved more than X" is read from. The hits are checked equal (bitwise).
+With ``--kind point`` (Embree's own ``RTC_GEOMETRY_TYPE_SPHERE_POINT``) the same spheres are
+also built as user geometry and traced in turn (``trace_point_over_user``).
 
     python benchmarks/refit.py                              # 1e6 spheres, 8 frames
     python benchmarks/refit.py --count 20000 --frames 3 --rays 20000
-    python benchmarks/refit.py --kind point    # Embree's own point spheres (RTC_..._SPHERE_POINT)
+    python benchmarks/refit.py --kind point    # Embree's point spheres, beside user spheres
 
 Prints one JSON object on stdout.
 """
@@ -61,14 +63,29 @@ def main() -> None:
         fresh = BVH()
         fresh.add_spheres(moved, radii, kind=args.kind)
         build_s, _ = timed(fresh.commit)
-        traces = {}
-        for name in ("moved", "fresh") if frame % 2 else ("fresh", "moved"):
-            tree = moving if name == "moved" else fresh
-            traces[name] = timed(lambda tree=tree: tree.intersect(origins, directions))
+        trees = {"moved": moving, "fresh": fresh}
+        if args.kind == "point":  # the same spheres as user geometry, built and traced in turn
+            trees["user"] = BVH()
+            trees["user"].add_spheres(moved, radii)
+            user_build_s, _ = timed(trees["user"].commit)
+            trees["user"].intersect(origins[:1000], directions[:1000])
+        names = list(trees) if frame % 2 else list(trees)[::-1]
+        traces = {
+            name: timed(lambda tree=trees[name]: tree.intersect(origins, directions))
+            for name in names
+        }
         same = bool(np.array_equal(traces["moved"][1].t, traces["fresh"][1].t)) and bool(
             np.array_equal(traces["moved"][1].prim_id, traces["fresh"][1].prim_id)
         )
         fresh.close()
+        extra = {}
+        if "user" in trees:
+            trees["user"].close()
+            extra = {
+                "build_user_s": round(user_build_s, 4),
+                "trace_user_s": round(traces["user"][0], 4),
+                "trace_point_over_user": round(traces["fresh"][0] / traces["user"][0], 3),
+            }
         rows.append(
             {
                 "frame": frame,
@@ -79,6 +96,7 @@ def main() -> None:
                 "trace_fresh_s": round(traces["fresh"][0], 4),
                 "trace_ratio": round(traces["moved"][0] / traces["fresh"][0], 3),
                 "same_hits": same,
+                **extra,
             }
         )
     moving.close()
