@@ -137,3 +137,39 @@ def test_type_palette_is_matplotlibs_tab10() -> None:
     by_name = dict(zip(np.sort(names).tolist(), colors, strict=True))
     expected = tab10[np.arange(11) % 10]
     np.testing.assert_array_equal(np.array([by_name[n] for n in names]), expected)
+
+
+@pytest.mark.parametrize("follow", [False, True])
+def test_trajectory_frames_are_the_stills_of_their_frames(tmp_path, follow: bool) -> None:
+    """Frame k of a GSD trajectory is the still ``Scene.from_particles(path, frame=k)`` renders,
+    seen by the first frame's camera, lights and floor (by its own with ``--follow``): frames
+    after the first are not framed, yet look as a framed frame would."""
+    import embree_rt as rt
+    from embree_rt.cli import main
+
+    rng = np.random.default_rng(8)
+    start = rng.uniform(-3.0, 3.0, (60, 3)).astype(np.float32)
+    path = tmp_path / "t.gsd"
+    with gsd.hoomd.open(str(path), "w") as trajectory:
+        for k in range(3):
+            frame = gsd.hoomd.Frame()
+            frame.particles.N = len(start)
+            frame.particles.types = ["A", "B"]
+            frame.particles.typeid = (np.arange(len(start)) % 2).astype(np.uint32)
+            frame.particles.position = start * (1.0 + 0.3 * k)  # (the bounds grow)
+            frame.configuration.box = [20, 20, 20, 0, 0, 0]
+            trajectory.append(frame)
+    size = ["--width", "32", "--height", "24", "--spp", "1", "--threads", "2", "--quiet"]
+    flags = ["--follow"] if follow else []
+    out = tmp_path / "f_{frame}.npy"
+    assert main(["render", str(path), "-o", str(out), *size, *flags]) in (0, None)
+    first = Scene.from_particles(path, frame=0)
+    images = []
+    for k in range(3):
+        still = Scene.from_particles(path, frame=k)
+        if not follow:
+            still.camera, still.lights, still.floor = first.camera, first.lights, first.floor
+        expected = rt.render(still, width=32, height=24, spp=1, threads=2).image
+        images.append(np.load(tmp_path / f"f_{k}.npy"))
+        np.testing.assert_array_equal(images[-1], expected)
+    assert not np.array_equal(images[0], images[2])
