@@ -26,9 +26,12 @@ def test_coded_table_is_np_unique_of_the_strings() -> None:
     rng = np.random.default_rng(3)
     codes = rng.choice([0, 1, 2, 3, 5, 6], 1000).astype(np.uint32)
     labelled = coded_table(names, codes)
-    expected_names, expected_codes = np.unique(names[codes], return_inverse=True)
+    expected_names, expected_codes, expected_counts = np.unique(
+        names[codes], return_inverse=True, return_counts=True
+    )
     np.testing.assert_array_equal(labelled.names, expected_names)
     np.testing.assert_array_equal(labelled.codes, expected_codes)
+    np.testing.assert_array_equal(labelled.counts(), expected_counts)
     assert labelled.codes.dtype == np.uint8  # one byte a particle for a few names
     np.testing.assert_array_equal(labelled.values(), names[codes])
     np.testing.assert_array_equal(coded(names[codes]).codes, expected_codes)

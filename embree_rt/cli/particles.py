@@ -210,10 +210,8 @@ def trajectory_range(path: str, text: str | None, count: int) -> range:
 def particle_summary(frame) -> dict:
     """What ``info`` says of a ``ParticleFrame``: count, kinds with their counts, bounds,
     frames, box."""
-    kind, labels = frame.labels()
-    import numpy as np
-
-    names, counts = np.unique(labels, return_counts=True)
+    kind, labelled = frame.label_codes()
+    names, counts = labelled.names, labelled.counts()
     summary = {
         "file": frame.path,
         "particles": len(frame),
@@ -229,10 +227,8 @@ def particle_summary(frame) -> dict:
         else [float(frame.radii.min()), float(frame.radii.max())],
         "properties": sorted(frame.properties),
     }
-    if kind == "element" and frame.types is not None:
-        import numpy as np
-
-        names, counts = np.unique(frame.types, return_counts=True)
+    if kind == "element" and frame.type_labels is not None:
+        names, counts = frame.type_labels.names, frame.type_labels.counts()
         summary["types"] = {str(n): int(c) for n, c in zip(names, counts, strict=True)}
     return summary
 

@@ -22,6 +22,10 @@ class Labels(NamedTuple):
         """(n,) str: each particle's label."""
         return gathered(self.names, self.codes)
 
+    def counts(self) -> np.ndarray:
+        """(k,) int64: how many particles bear each name."""
+        return code_counts(self.codes, len(self.names))
+
 
 def smallest_codes(codes: np.ndarray, count: int) -> np.ndarray:
     """``codes`` (n,) in the smallest unsigned dtype that holds ``count`` distinct codes."""
@@ -51,15 +55,22 @@ def gathered(table: np.ndarray, codes: np.ndarray) -> np.ndarray:
     return out
 
 
+def code_counts(codes: np.ndarray, count: int) -> np.ndarray:
+    """(count,) int64: how many of the (n,) integer ``codes`` (in 0..count-1) are each code,
+    counted in slices of ``GATHER_ROWS``."""
+    counts = np.zeros(count, np.int64)
+    for start in range(0, len(codes), GATHER_ROWS):
+        counts += np.bincount(codes[start : start + GATHER_ROWS], minlength=count)
+    return counts
+
+
 def coded_table(names, codes: np.ndarray) -> Labels:
     """The ``Labels`` of a file's own table: (m,) ``names`` (perhaps unsorted, repeated or
     unused) and (n,) integer ``codes`` in 0..m-1 (a GSD frame's ``types`` and ``typeid``): the
     same as ``coded(names[codes])`` without making the (n,) strings."""
     names = np.asarray(names, dtype=str)
     codes = np.asarray(codes).reshape(-1)
-    used = np.zeros(len(names), bool)
-    for start in range(0, len(codes), GATHER_ROWS):
-        used |= np.bincount(codes[start : start + GATHER_ROWS], minlength=len(names)) > 0
+    used = code_counts(codes, len(names)) > 0
     distinct, renumber = np.unique(names[used], return_inverse=True)
     lookup = np.zeros(len(names), np.int64)
     lookup[used] = renumber.reshape(-1)
