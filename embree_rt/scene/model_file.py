@@ -238,15 +238,19 @@ BOUNDS_ROWS = 1 << 16
 
 def sphere_bounds(centers: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(3,) float64 lowest and highest corners of the spheres ``centers`` (n, 3) and ``radii``
-    (n,) (any real dtype), each sum formed in float64; a slice of ``BOUNDS_ROWS`` at a time
-    (a minimum of minima is the minimum), so no (n, 3) float64 copy is made."""
+    (n,) (any real dtype), each sum formed in float64; ``BOUNDS_ROWS`` at a time in buffers
+    made once and laid out as columns (a minimum of minima is the minimum): no (n, 3) float64
+    copy, and no fresh memory a slice (which the kernel would fault in page by page)."""
     low, high = np.full(3, np.inf), np.full(3, -np.inf)
-    for start in range(0, len(radii), BOUNDS_ROWS):
-        rows = slice(start, start + BOUNDS_ROWS)
-        part = np.asarray(centers[rows], np.float64)
-        reach = np.asarray(radii[rows], np.float64)[:, None]
-        low = np.minimum(low, (part - reach).min(axis=0))
-        high = np.maximum(high, (part + reach).max(axis=0))
+    rows = min(BOUNDS_ROWS, len(radii))
+    wide, reach, ends = np.empty((3, rows)), np.empty(rows), np.empty((3, rows))
+    for start in range(0, len(radii), rows):
+        count = min(rows, len(radii) - start)
+        part, size, end = wide[:, :count], reach[:count], ends[:, :count]
+        part[...] = centers[start : start + count].T
+        size[...] = radii[start : start + count]
+        low = np.minimum(low, np.subtract(part, size, out=end).min(axis=1))
+        high = np.maximum(high, np.add(part, size, out=end).max(axis=1))
     return low, high
 
 
