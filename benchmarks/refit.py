@@ -8,9 +8,12 @@ camera-like rays traced through both (the order alternating frame to frame). ``m
 ``build_s`` says whether Embree refitted or rebuilt; ``trace_ratio`` (moved / fresh, per
 frame) is the quality a kept tree has lost after the motion so far: the number a rule "rebuild
 when the spheres have moved more than X" is read from. The hits are checked equal (bitwise).
+With ``--kind point`` (Embree's own ``RTC_GEOMETRY_TYPE_SPHERE_POINT``) the same spheres are
+also built as user geometry and traced in turn (``trace_point_over_user``).
 
     python benchmarks/refit.py                              # 1e6 spheres, 8 frames
     python benchmarks/refit.py --count 20000 --frames 3 --rays 20000
+    python benchmarks/refit.py --kind point    # Embree's point spheres, beside user spheres
 
 Prints one JSON object on stdout.
 """
@@ -39,6 +42,9 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=8)
     parser.add_argument("--step", type=float, default=1.0)
     parser.add_argument("--rays", type=int, default=500_000)
+    parser.add_argument(
+        "--kind", choices=("user", "point"), default="user", help="user or Embree's point spheres"
+    )
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     centers = rng.uniform(-100.0, 100.0, (args.count, 3)).astype(np.float32)
@@ -47,24 +53,40 @@ def main() -> None:
     directions = rng.normal(0.0, 0.2, (args.rays, 3)).astype(np.float32)
     directions[:, 2] = 1.0
     moving = BVH(movable=True)
-    geom_id = moving.add_spheres(centers, radii)
+    geom_id = moving.add_spheres(centers, radii, kind=args.kind)
     first_build_s, _ = timed(moving.commit)
+    moving.intersect(Rays(origins[:1000], directions[:1000]))  # (the query's compile, not timed)
     rows = []
     moved = centers.copy()
     for frame in range(1, args.frames + 1):
         moved += rng.normal(0.0, args.step * float(radii.mean()), moved.shape).astype(np.float32)
         move_s, _ = timed(lambda moved=moved: moving.move_spheres(geom_id, moved, radii))
         fresh = BVH()
-        fresh.add_spheres(moved, radii)
+        fresh.add_spheres(moved, radii, kind=args.kind)
         build_s, _ = timed(fresh.commit)
-        traces = {}
-        for name in ("moved", "fresh") if frame % 2 else ("fresh", "moved"):
-            tree = moving if name == "moved" else fresh
-            traces[name] = timed(lambda tree=tree: tree.intersect(Rays(origins, directions)))
+        trees = {"moved": moving, "fresh": fresh}
+        if args.kind == "point":  # the same spheres as user geometry, built and traced in turn
+            trees["user"] = BVH()
+            trees["user"].add_spheres(moved, radii)
+            user_build_s, _ = timed(trees["user"].commit)
+            trees["user"].intersect(Rays(origins[:1000], directions[:1000]))
+        names = list(trees) if frame % 2 else list(trees)[::-1]
+        traces = {
+            name: timed(lambda tree=trees[name]: tree.intersect(Rays(origins, directions)))
+            for name in names
+        }
         same = bool(np.array_equal(traces["moved"][1].t, traces["fresh"][1].t)) and bool(
             np.array_equal(traces["moved"][1].prim_id, traces["fresh"][1].prim_id)
         )
         fresh.close()
+        extra = {}
+        if "user" in trees:
+            trees["user"].close()
+            extra = {
+                "build_user_s": round(user_build_s, 4),
+                "trace_user_s": round(traces["user"][0], 4),
+                "trace_point_over_user": round(traces["fresh"][0] / traces["user"][0], 3),
+            }
         rows.append(
             {
                 "frame": frame,
@@ -75,11 +97,13 @@ def main() -> None:
                 "trace_fresh_s": round(traces["fresh"][0], 4),
                 "trace_ratio": round(traces["moved"][0] / traces["fresh"][0], 3),
                 "same_hits": same,
+                **extra,
             }
         )
     moving.close()
     result = {
         "count": args.count,
+        "kind": args.kind,
         "rays": args.rays,
         "step_radii": args.step,
         "first_build_s": round(first_build_s, 4),

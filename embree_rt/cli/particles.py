@@ -136,8 +136,9 @@ def refuse_particle_flags(args: argparse.Namespace) -> None:
             raise UsageError(f"{flag}: only for particle files, and {args.scene} is not one")
 
 
-def particle_scene(args: argparse.Namespace):
-    """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say."""
+def particle_scene(args: argparse.Namespace, stage: bool = True):
+    """The ``Scene`` of the particle file ``args.scene`` drawn as the flags say (framed unless
+    ``stage`` is False: ``Scene.from_particles``)."""
     from embree_rt.errors import InputError
     from embree_rt.scene.model import Scene
     from embree_rt.scene.particles.look import ParticleLook
@@ -172,6 +173,7 @@ def particle_scene(args: argparse.Namespace):
             floor=not args.no_floor,
             materials=dict(args.material_of or ()),
             **extras_arguments(extras),
+            stage=stage,
         )
     except ValueError as error:
         if isinstance(error, InputError):
@@ -207,10 +209,8 @@ def trajectory_range(path: str, text: str | None, count: int) -> range:
 def particle_summary(frame) -> dict:
     """What ``info`` says of a ``ParticleFrame``: count, kinds with their counts, bounds,
     frames, box."""
-    kind, labels = frame.labels()
-    import numpy as np
-
-    names, counts = np.unique(labels, return_counts=True)
+    kind, labelled = frame.label_codes()
+    names, counts = labelled.names, labelled.counts()
     summary = {
         "file": frame.path,
         "particles": len(frame),
@@ -226,10 +226,8 @@ def particle_summary(frame) -> dict:
         else [float(frame.radii.min()), float(frame.radii.max())],
         "properties": sorted(frame.properties),
     }
-    if kind == "element" and frame.types is not None:
-        import numpy as np
-
-        names, counts = np.unique(frame.types, return_counts=True)
+    if kind == "element" and frame.type_labels is not None:
+        names, counts = frame.type_labels.names, frame.type_labels.counts()
         summary["types"] = {str(n): int(c) for n, c in zip(names, counts, strict=True)}
     return summary
 

@@ -38,7 +38,7 @@ def same_particles(last: Scene, scene: Scene) -> bool:
     colours, lights, floor, materials and render settings, and no other geometry."""
 
     def same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
-        if a is None or b is None:
+        if a is None or b is None or a is b:
             return a is b
         return a.shape == b.shape and bool(np.array_equal(a, b))
 
@@ -143,8 +143,10 @@ def prepared_frame(args: argparse.Namespace, number: int, staged: Scene | None) 
 
     frame_args = copy.copy(args)
     frame_args.frame = number
-    scene = particle_scene(frame_args)
-    if staged is not None and not args.follow:
+    own_view = staged is None or args.follow
+    frame_args.legend = False  # (the first frame's legend is the one drawn)
+    scene = particle_scene(frame_args, stage=own_view)
+    if not own_view:
         scene.camera, scene.lights, scene.floor = staged.camera, staged.lights, staged.floor
     apply_to_scene(scene, list(args.settings), str(args.scene))
     return scene

@@ -291,6 +291,7 @@ class Scene:
         box: bool = False,
         bonds=None,
         legend: bool = False,
+        stage: bool = True,
     ) -> Scene:
         """Frame ``frame`` of the particle file ``path`` (a trajectory over ``topology``)
         rendered on its own: one sphere a particle, coloured and sized by ``look``
@@ -300,7 +301,8 @@ class Scene:
         a material a type, ``box`` drawing the simulation box (``add_particles``), ``bonds`` (a
         ``BondLook``) drawing its bonds as sticks, ``legend`` recording what the colours mean
         (``Scene.legend``); framed from the bounds under the default rig, a floor under it
-        unless ``floor`` is False. Raises
+        unless ``floor`` is False (with ``stage`` False, no framing: the camera, lights and
+        floor stay a new ``Scene``'s, for a trajectory's frames seen as its first). Raises
         ``SceneError`` naming the file and the problem."""
         from embree_rt.scene.particles import read_particles
 
@@ -317,7 +319,8 @@ class Scene:
             bonds=bonds,
             legend=legend,
         )
-        scene.stage_particles(floor)
+        if stage:
+            scene.stage_particles(floor)
         return scene
 
     def add_particles(
@@ -357,12 +360,13 @@ class Scene:
         edges = box_lines(frame, up) if box else None
         notes = [note]
         if bonds is not None:
-            drawn = (centers, radii, colors)
+            # (the sticks' ends and radius are float64 sums of the centres and radii)
+            drawn = (np.asarray(centers, np.float64), radii, colors)
             radii, bond_note = bond_sticks.add_bonds(
                 self, frame, drawn, bonds, UP_ROTATIONS[up], material
             )
             notes.append(bond_note)
-        self.add_spheres(centers, radii, names, colors=colors)
+        self.add_spheres(centers, radii, names, colors=colors, copy=False)  # (made here)
         if edges is not None:
             points, radius = edges
             starts = np.arange(0, len(points), 2)
@@ -379,9 +383,11 @@ class Scene:
         file's are."""
         from embree_rt.scene.model_file import stage_spheres
 
-        centers = [self.sphere_centers, *(curves.points for curves in self.curves)]
-        radii = [self.sphere_radii, *(curves.radii for curves in self.curves)]
-        self._stage(stage_spheres(np.concatenate(centers), np.concatenate(radii)), floor)
+        centers, radii = self.sphere_centers, self.sphere_radii
+        if self.curves:
+            centers = np.concatenate([centers, *(curves.points for curves in self.curves)])
+            radii = np.concatenate([radii, *(curves.radii for curves in self.curves)])
+        self._stage(stage_spheres(centers, radii), floor)
 
     @classmethod
     def from_trimesh(cls, loaded: trimesh.Trimesh | trimesh.Scene, floor: bool = True) -> Scene:

@@ -232,13 +232,32 @@ def _vec(values: np.ndarray) -> Point:
     return (x, y, z)
 
 
+# Spheres whose bounds are summed at a time (float64 rows that stay in the cache).
+BOUNDS_ROWS = 1 << 16
+
+
+def sphere_bounds(centers: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(3,) float64 lowest and highest corners of the spheres ``centers`` (n, 3) and ``radii``
+    (n,) (any real dtype), each sum formed in float64; ``BOUNDS_ROWS`` at a time in buffers
+    made once and laid out as columns (a minimum of minima is the minimum): no (n, 3) float64
+    copy, and no fresh memory a slice (which the kernel would fault in page by page)."""
+    low, high = np.full(3, np.inf), np.full(3, -np.inf)
+    rows = min(BOUNDS_ROWS, len(radii))
+    wide, reach, ends = np.empty((3, rows)), np.empty(rows), np.empty((3, rows))
+    for start in range(0, len(radii), rows):
+        count = min(rows, len(radii) - start)
+        part, size, end = wide[:, :count], reach[:count], ends[:, :count]
+        part[...] = centers[start : start + count].T
+        size[...] = radii[start : start + count]
+        low = np.minimum(low, np.subtract(part, size, out=end).min(axis=1))
+        high = np.maximum(high, np.add(part, size, out=end).max(axis=1))
+    return low, high
+
+
 def stage_spheres(centers: np.ndarray, radii: np.ndarray) -> Staging:
     """How to show spheres on their own (a particle file): ``centers`` (n, 3), ``radii`` (n,);
     framed on their bounds, under the default rig."""
-    centers = np.asarray(centers, np.float64)
-    radii = np.asarray(radii, np.float64)
-    low = (centers - radii[:, None]).min(axis=0)
-    high = (centers + radii[:, None]).max(axis=0)
+    low, high = sphere_bounds(centers, radii)
     return Staging(
         [framed_view(low, high)],
         default_lights(low, high),

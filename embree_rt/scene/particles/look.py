@@ -10,7 +10,7 @@ import numpy as np
 
 from embree_rt.scene.errors import warn_input
 from embree_rt.scene.particles.errors import ParticleFileError
-from embree_rt.scene.particles.frame import ParticleFrame
+from embree_rt.scene.particles.frame import ParticleFrame, coded, gathered
 
 # A particle whose element is unknown, and a type's radius when nothing else gives one (LAMMPS'
 # reduced units: particles of diameter 1).
@@ -18,6 +18,20 @@ UNKNOWN_COLOR = (0.75, 0.4, 0.75)
 UNKNOWN_ELEMENT_RADIUS = 1.5
 TYPE_RADIUS = 0.5
 TYPE_PALETTE = "tab10"
+# matplotlib's tab10 (Tableau's ten colours) by their codes, so a file coloured by type does not
+# import matplotlib (~0.3 s) for ten constants; a test holds them to matplotlib's own.
+TYPE_PALETTE_CODES = (
+    "1f77b4",
+    "ff7f0e",
+    "2ca02c",
+    "d62728",
+    "9467bd",
+    "8c564b",
+    "e377c2",
+    "7f7f7f",
+    "bcbd22",
+    "17becf",
+)
 
 
 @dataclass(frozen=True)
@@ -80,15 +94,17 @@ def element_table(symbols: np.ndarray, path: str) -> tuple[np.ndarray, np.ndarra
 
 
 def particle_look(frame: ParticleFrame, look: ParticleLook) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 3) uint8 sRGB colours and (n,) float64 radii of ``frame``'s particles by ``look``.
+    """(n, 3) uint8 sRGB colours and (n,) float64 radii of ``frame``'s particles by ``look``
+    (what depends on a particle's element or type alone computed once a name and gathered).
     Raises ``ParticleFileError`` for a property or label the file does not have."""
-    kind, labels = frame.labels()
-    label_colors, radii = label_look(frame.path, kind, labels)
-    if frame.radii is not None:
-        radii = frame.radii
+    kind, labelled = frame.label_codes()
+    label_colors, label_radii = label_table(frame.path, kind, labelled.names)
     if look.radius is not None:
-        radii = np.full(len(frame), float(look.radius))
-    radii = np.asarray(radii, np.float64) * look.radius_scale
+        radii = np.full(len(frame), float(look.radius)) * look.radius_scale
+    elif frame.radii is not None:
+        radii = np.asarray(frame.radii, np.float64) * look.radius_scale
+    else:
+        radii = gathered(np.asarray(label_radii, np.float64) * look.radius_scale, labelled.codes)
     by = look.color_by or kind
     if look.color_columns:
         if look.color is not None or look.color_by is not None:
@@ -99,12 +115,12 @@ def particle_look(frame: ParticleFrame, look: ParticleLook) -> tuple[np.ndarray,
     elif look.color is not None:
         colors = np.broadcast_to(to_srgb8(np.asarray(look.color)[None]), (len(frame), 3)).copy()
     elif by == kind:
-        colors = to_srgb8(label_colors)
+        colors = gathered(to_srgb8(label_colors), labelled.codes)
     elif by in ("element", "type"):
-        values = frame.elements if by == "element" else frame.types
-        if values is None:
+        other = frame.element_labels if by == "element" else frame.type_labels
+        if other is None:
             raise ParticleFileError(frame.path, "--color-by", f"the file names no {by}s")
-        colors = to_srgb8(label_look(frame.path, by, values)[0])
+        colors = gathered(to_srgb8(label_table(frame.path, by, other.names)[0]), other.codes)
     elif by in frame.properties:
         colors = colormap_colors(frame.properties[by], look.colormap, look.value_range)
     else:
@@ -144,23 +160,28 @@ def rgb_colors(frame: ParticleFrame, names: tuple[str, ...]) -> np.ndarray:
     return np.rint(values).astype(np.uint8)
 
 
+def label_table(path: str, kind: str, names: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 3) float64 sRGB colours and (k,) float64 radii of (k,) distinct ``names`` of
+    ``kind`` ("element": ``element_table``; "type": tab10 in the types' natural order,
+    ``TYPE_RADIUS``)."""
+    if kind == "element":
+        return element_table(names, path)
+    position = {name: i for i, name in enumerate(natural_order(names))}
+    colors = _palette(len(position))[[position[name] for name in names]]
+    return colors, np.full(len(names), TYPE_RADIUS)
+
+
 def label_look(path: str, kind: str, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(n, 3) float64 sRGB colours and (n,) float64 radii of (n,) ``labels`` of ``kind``
-    ("element": ``element_table``; "type": tab10 in the types' natural order, ``TYPE_RADIUS``)."""
-    names, inverse = np.unique(labels, return_inverse=True)
-    if kind == "element":
-        colors, radii = element_table(names, path)
-    else:
-        position = {name: i for i, name in enumerate(natural_order(labels))}
-        colors = _palette(len(position))[[position[name] for name in names]]
-        radii = np.full(len(names), TYPE_RADIUS)
-    return colors[inverse], radii[inverse]
+    (``label_table`` of the distinct labels)."""
+    labelled = coded(labels)
+    colors, radii = label_table(path, kind, labelled.names)
+    return gathered(colors, labelled.codes), gathered(radii, labelled.codes)
 
 
 def _palette(count: int) -> np.ndarray:
-    import matplotlib
-
-    base = np.asarray(matplotlib.colormaps[TYPE_PALETTE].colors, np.float64)[:, :3]
+    codes = TYPE_PALETTE_CODES
+    base = np.array([[int(c[i : i + 2], 16) / 255.0 for i in (0, 2, 4)] for c in codes])
     return base[np.arange(count) % len(base)]
 
 

@@ -11,7 +11,7 @@ from embree_rt.particle_extras import ParticleExtras
 from embree_rt.scene.particles.bonds import BondLook
 from embree_rt.scene.particles.box import box_edges, box_radius
 from embree_rt.scene.particles.errors import ParticleFileError
-from embree_rt.scene.particles.frame import ParticleFrame, kept_bonds
+from embree_rt.scene.particles.frame import ParticleFrame, gathered, kept_bonds
 from embree_rt.scene.particles.look import ParticleLook, particle_look
 
 # Rotations (det +1) taking a file's up axis to the renderer's +y (its floor is y = height).
@@ -20,6 +20,21 @@ UP_ROTATIONS = {
     "y": np.eye(3),
     "z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
 }
+
+
+def turned_up(positions: np.ndarray, up: str) -> np.ndarray:
+    """(n, 3) ``positions`` (n, 3) turned so the file's ``up`` axis is the renderer's +y, in
+    their own dtype: ``positions @ UP_ROTATIONS[up].T`` as NumPy's product gives it in float64,
+    bit for bit. Each rotation's row holds one entry of +-1 and zeros, so a coordinate is one
+    file coordinate or its negation, exact in float32 as in float64, and the product's sum
+    starting from +0 makes a zero +0 (the ``+= 0.0``)."""
+    rotation = UP_ROTATIONS[up]
+    turned = np.empty(positions.shape, positions.dtype)  # (C order, as Embree reads it)
+    for row, column in enumerate(np.argmax(np.abs(rotation), axis=1)):
+        sign = positions.dtype.type(rotation[row, column])
+        np.multiply(positions[:, column], sign, out=turned[:, row])
+    turned += positions.dtype.type(0.0)
+    return turned
 
 
 def as_frame(particles) -> ParticleFrame:
@@ -32,16 +47,14 @@ def as_frame(particles) -> ParticleFrame:
         frame = ParticleFrame(
             path="ase.Atoms",
             positions=np.asarray(particles.get_positions(), np.float64),
-            elements=np.asarray(particles.get_chemical_symbols(), dtype=str),
         )
+        frame.elements = particles.get_chemical_symbols()
         if np.any(particles.cell[:]):
             frame.box = np.asarray(particles.cell[:], np.float64)
         return frame
     if kind == "MDAnalysis":
         atoms = getattr(particles, "atoms", particles)
-        frame = ParticleFrame(
-            path="MDAnalysis.AtomGroup", positions=np.asarray(atoms.positions, np.float64)
-        )
+        frame = ParticleFrame(path="MDAnalysis.AtomGroup", positions=np.asarray(atoms.positions))
         if hasattr(atoms, "types"):
             frame.types = np.asarray(atoms.types, dtype=str)
         if hasattr(atoms, "elements") and np.all(np.asarray(atoms.elements, str) != ""):
@@ -98,8 +111,10 @@ def particle_materials(
     has (a mistyped type would otherwise change nothing unnoticed)."""
     if not materials:
         return default
-    kind, labels = ("type", frame.types) if frame.types is not None else frame.labels()
-    present = set(np.unique(labels).tolist())
+    kind, labelled = frame.label_codes()
+    if frame.type_labels is not None:
+        kind, labelled = "type", frame.type_labels
+    present = set(labelled.names.tolist())
     missing = sorted(set(materials) - present)
     if missing:
         raise ParticleFileError(
@@ -107,10 +122,8 @@ def particle_materials(
             "materials",
             f"no particle of {kind} {missing[0]!r} (the {kind}s: {', '.join(sorted(present))})",
         )
-    names = np.full(len(frame), default, dtype=object)
-    for label, material in materials.items():
-        names[labels == label] = material
-    return names.astype(str)
+    table = np.array([materials.get(name, default) for name in labelled.names.tolist()], str)
+    return gathered(table, labelled.codes)
 
 
 def box_lines(frame: ParticleFrame, up: str = "z") -> tuple[np.ndarray, float]:
@@ -138,8 +151,9 @@ def particle_spheres(
     select: str | None = None,
     wrap: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
-    """(n, 3) float64 centres in the renderer's world, (n,) float64 radii, (n, 3) uint8 sRGB
-    colours of ``particles`` (``as_frame``), and a note saying what was drawn."""
+    """(n, 3) centres in the renderer's world (the positions' dtype, float64 when ``wrap``),
+    (n,) float64 radii, (n, 3) uint8 sRGB colours of ``particles`` (``as_frame``), and a note
+    saying what was drawn."""
     if up not in UP_ROTATIONS:
         raise ValueError(f"up: expected one of x, y, z, got {up!r}")
     frame = as_frame(particles)
@@ -153,8 +167,8 @@ def particle_spheres(
         raise ParticleFileError(
             frame.path, "radius", f"particle {row}: {radii[row]:g} is not positive"
         )
-    centers = positions @ UP_ROTATIONS[up].T
-    kind, _ = frame.labels()
+    centers = turned_up(positions, up)
+    kind, _ = frame.label_codes()
     by = (look.color_by if look else None) or kind
     note = (
         f"particles: {len(frame):,} from {frame.path} (frame {frame.frame} of "
