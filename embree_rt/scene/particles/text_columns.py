@@ -1,0 +1,365 @@
+"""Rows of whitespace-separated fields parsed into columns on all cores (numba): numbers as
+float64 equal bit for bit to Python's ``float()`` of their text, text fields as ``str``.
+
+The body is split into line-aligned chunks, one numba task each: a first pass counts each
+chunk's rows, a second parses them into their rows. A number is parsed exactly where one IEEE
+operation suffices (Clinger's fast path: at most 2^53 as an integer of its digits and a power
+of ten of at most 22, one exact multiply or divide, correctly rounded on every x86-64 ISA as
+numba compiles it without fast-math); any other text (17 significant digits, ``1e300``,
+``nan``, a typo) is handed to NumPy's bytes-to-float64 cast, which is CPython's correctly
+rounded ``float()``, and refused where that refuses it. The text is read in place (a memory
+map of the file), so a frame needs its columns' memory and no copy of its text.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import get_num_threads, njit, prange
+
+# Exact powers of ten: 10^22 is the largest that a float64 holds exactly.
+POWERS_OF_TEN = np.array([10.0**k for k in range(23)])
+MAX_EXACT_MANTISSA = 1 << 53
+# Chunks per numba thread (the last chunks' rows balance uneven lines) and the smallest chunk.
+CHUNKS_PER_THREAD = 4
+MIN_CHUNK_BYTES = 1 << 18
+# Fields that miss the fast path are cast by NumPy this many at a time (bounded memory).
+SLOW_BATCH = 1 << 20
+
+NEWLINE = 10
+
+
+class ColumnsProblem(NamedTuple):
+    """Why rows could not be parsed: ``kind`` "rows" (``found`` rows where ``expected`` were
+    announced), "fields" (the row at byte ``offset`` has ``found`` fields, not ``expected``) or
+    "number" (``text``, field ``field`` of a row, at byte ``offset``, is not a number)."""
+
+    kind: str
+    offset: int
+    found: int = 0
+    expected: int = 0
+    text: str = ""
+    field: int = -1
+
+
+class ColumnsError(ValueError):
+    """Rows that are not ``count`` rows of ``width`` fields; ``problem`` says where."""
+
+    def __init__(self, problem: ColumnsProblem) -> None:
+        super().__init__(problem.kind)
+        self.problem = problem
+
+
+def parse_columns(
+    data: np.ndarray, count: int, is_text: np.ndarray
+) -> tuple[list[np.ndarray], int]:
+    """The ``count`` rows of ``data`` ((m,) uint8, lines of whitespace-separated fields, blank
+    lines ignored), one (count,) array a field: float64, or str where ``is_text`` ((width,)
+    bool) says so. Raises ``ColumnsError`` naming the first problem's byte offset in ``data``.
+    Also returns how many numbers missed the fast path."""
+    width = len(is_text)
+    slots = np.where(is_text, -np.cumsum(is_text), np.cumsum(~is_text) - 1).astype(np.int64)
+    bounds = chunk_bounds(data, _chunk_count(len(data)))
+    rows = count_rows(data, bounds)
+    found = int(rows.sum())
+    if found != count:
+        raise ColumnsError(ColumnsProblem("rows", len(data), found, count))
+    first_row = np.concatenate(([0], np.cumsum(rows)[:-1])).astype(np.int64)
+    numbers = np.empty((int((~is_text).sum()), count), np.float64)
+    text_count = int(is_text.sum())
+    text_start = np.empty((text_count, count), np.int64)
+    text_length = np.empty((text_count, count), np.int32)
+    slow = np.zeros(len(rows), np.int64)
+    problems = np.full((len(rows), 2), -1, np.int64)
+    parse_rows(
+        data, bounds, first_row, slots, POWERS_OF_TEN, numbers, text_start, text_length, slow,
+        problems,
+    )  # fmt: skip
+    bad = np.flatnonzero(problems[:, 0] >= 0)
+    if len(bad):
+        offset, fields = problems[bad[0]]
+        raise ColumnsError(ColumnsProblem("fields", int(offset), int(fields), width))
+    slow_total = int(slow.sum())
+    if slow_total:
+        _cast_slow(data, bounds, first_row, slots, slow, numbers)
+    columns = []
+    for slot in slots:
+        if slot >= 0:
+            columns.append(numbers[slot])
+        else:
+            columns.append(_texts(data, text_start[-1 - slot], text_length[-1 - slot]))
+    return columns, slow_total
+
+
+def _chunk_count(size: int) -> int:
+    return int(max(1, min(get_num_threads() * CHUNKS_PER_THREAD, size // MIN_CHUNK_BYTES)))
+
+
+def _cast_slow(
+    data: np.ndarray,
+    bounds: np.ndarray,
+    first_row: np.ndarray,
+    slots: np.ndarray,
+    slow: np.ndarray,
+    numbers: np.ndarray,
+) -> None:
+    """Fill the numbers that missed the fast path with NumPy's cast of their text, in
+    batches; raises ``ColumnsError`` at the first text that is not a number."""
+    first_slow = np.concatenate(([0], np.cumsum(slow)[:-1])).astype(np.int64)
+    starts = np.empty(int(slow.sum()), np.int64)
+    ends = np.empty_like(starts)
+    rows = np.empty_like(starts)
+    fields = np.empty_like(starts)
+    slow_fields(
+        data, bounds, first_row, slots, POWERS_OF_TEN, slow, first_slow, starts, ends, rows, fields
+    )
+    for at in range(0, len(starts), SLOW_BATCH):
+        part = slice(at, at + SLOW_BATCH)
+        width = int((ends[part] - starts[part]).max())
+        texts = gather(data, starts[part], ends[part] - starts[part], width).view(f"S{width}")[:, 0]
+        try:
+            values = texts.astype(np.float64)
+        except ValueError:
+            for k, text in enumerate(texts):
+                try:
+                    float(text)
+                except ValueError:
+                    shown = text.decode("ascii", "replace")
+                    raise ColumnsError(
+                        ColumnsProblem(
+                            "number", int(starts[at + k]), text=shown, field=int(fields[at + k])
+                        )
+                    ) from None
+            raise
+        numbers[slots[fields[part]], rows[part]] = values
+
+
+def _texts(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    width = max(1, int(lengths.max(initial=0)))
+    return gather(data, starts, lengths, width).view(f"S{width}")[:, 0].astype(str)
+
+
+@njit(cache=True, nogil=True)
+def chunk_bounds(data: np.ndarray, chunks: int) -> np.ndarray:
+    """(chunks + 1,) int64 byte offsets splitting ``data`` after newlines (some chunks may be
+    empty)."""
+    bounds = np.empty(chunks + 1, np.int64)
+    bounds[0] = 0
+    size = len(data)
+    for c in range(1, chunks):
+        at = max(size * c // chunks, bounds[c - 1])
+        while at < size and (at == 0 or data[at - 1] != NEWLINE):
+            at += 1
+        bounds[c] = at
+    bounds[chunks] = size
+    return bounds
+
+
+@njit(inline="always")
+def _is_space(byte: np.uint8) -> bool:
+    return byte == 32 or byte == 9 or byte == 13 or byte == 11 or byte == 12
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def count_rows(data: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """(chunks,) int64: the non-blank lines of each chunk."""
+    chunks = len(bounds) - 1
+    rows = np.zeros(chunks, np.int64)
+    for c in prange(chunks):
+        count = 0
+        filled = False
+        for at in range(bounds[c], bounds[c + 1]):
+            byte = data[at]
+            if byte == NEWLINE:
+                if filled:
+                    count += 1
+                filled = False
+            elif not _is_space(byte):
+                filled = True
+        if filled:
+            count += 1
+        rows[c] = count
+    return rows
+
+
+@njit(inline="always")
+def fast_number(data: np.ndarray, start: int, end: int, powers: np.ndarray) -> tuple[float, bool]:
+    """The float64 of ``data[start:end]`` and True where Clinger's fast path gives it exactly
+    (``[+-]digits[.digits][(e|E)[+-]digits]``, at most 18 significant digits, their integer at
+    most 2^53, the power of ten within 22); else (0.0, False)."""
+    at = start
+    negative = False
+    if data[at] == 45 or data[at] == 43:  # - +
+        negative = data[at] == 45
+        at += 1
+    mantissa = 0
+    significant = 0
+    digits = 0
+    exponent = 0
+    while at < end and 48 <= data[at] <= 57:
+        digit = data[at] - 48
+        if significant > 0 or digit != 0:
+            significant += 1
+            mantissa = mantissa * 10 + digit
+        digits += 1
+        at += 1
+    if at < end and data[at] == 46:  # .
+        at += 1
+        while at < end and 48 <= data[at] <= 57:
+            digit = data[at] - 48
+            if significant > 0 or digit != 0:
+                significant += 1
+                mantissa = mantissa * 10 + digit
+            exponent -= 1
+            digits += 1
+            at += 1
+    if digits == 0 or significant > 18:
+        return 0.0, False
+    if at < end and (data[at] == 101 or data[at] == 69):  # e E
+        at += 1
+        exponent_negative = False
+        if at < end and (data[at] == 45 or data[at] == 43):
+            exponent_negative = data[at] == 45
+            at += 1
+        written = 0
+        exponent_digits = 0
+        while at < end and 48 <= data[at] <= 57 and exponent_digits < 5:
+            written = written * 10 + (data[at] - 48)
+            exponent_digits += 1
+            at += 1
+        if exponent_digits == 0:
+            return 0.0, False
+        exponent += -written if exponent_negative else written
+    if at != end:
+        return 0.0, False
+    if mantissa == 0:
+        return (-0.0 if negative else 0.0), True
+    if mantissa > MAX_EXACT_MANTISSA or exponent > 22 or exponent < -22:
+        return 0.0, False
+    value = float(mantissa)
+    value = value * powers[exponent] if exponent >= 0 else value / powers[-exponent]
+    return (-value if negative else value), True
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def parse_rows(
+    data: np.ndarray,
+    bounds: np.ndarray,
+    first_row: np.ndarray,
+    slots: np.ndarray,
+    powers: np.ndarray,
+    numbers: np.ndarray,
+    text_start: np.ndarray,
+    text_length: np.ndarray,
+    slow: np.ndarray,
+    problems: np.ndarray,
+) -> None:
+    """Each chunk's rows into ``numbers`` ((numeric fields, n) float64, NaN where a number
+    missed the fast path, counted in ``slow``) and ``text_start``/``text_length`` ((text
+    fields, n) int64/int32, where each text field lies in ``data``). ``slots[j]`` is field
+    j's row in ``numbers``, or ``-1 - k`` for row k of the text arrays. A chunk's first line
+    of the wrong field count is left in ``problems[c]`` as (its byte offset, fields found)."""
+    width = len(slots)
+    for c in prange(len(bounds) - 1):
+        row = first_row[c]
+        at = bounds[c]
+        end = bounds[c + 1]
+        slow_count = 0
+        while at < end:
+            line = at
+            field = 0
+            while at < end and data[at] != NEWLINE:
+                if _is_space(data[at]):
+                    at += 1
+                    continue
+                start = at
+                while at < end and data[at] != NEWLINE and not _is_space(data[at]):
+                    at += 1
+                if field < width:
+                    slot = slots[field]
+                    if slot >= 0:
+                        value, exact = fast_number(data, start, at, powers)
+                        if not exact:
+                            value = np.nan
+                            slow_count += 1
+                        numbers[slot, row] = value
+                    else:
+                        text_start[-1 - slot, row] = start
+                        text_length[-1 - slot, row] = at - start
+                field += 1
+            at += 1
+            if field == 0:
+                continue
+            if field != width:
+                problems[c, 0] = line
+                problems[c, 1] = field
+                break
+            row += 1
+        slow[c] = slow_count
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def slow_fields(
+    data: np.ndarray,
+    bounds: np.ndarray,
+    first_row: np.ndarray,
+    slots: np.ndarray,
+    powers: np.ndarray,
+    slow: np.ndarray,
+    first_slow: np.ndarray,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    rows: np.ndarray,
+    fields: np.ndarray,
+) -> None:
+    """Where the numbers that missed the fast path lie (after ``parse_rows`` found every row
+    whole): their byte ranges, rows and fields, chunk ``c``'s ``slow[c]`` from
+    ``first_slow[c]`` on."""
+    for c in prange(len(bounds) - 1):
+        if slow[c] == 0:
+            continue
+        out = first_slow[c]
+        row = first_row[c]
+        at = bounds[c]
+        end = bounds[c + 1]
+        while at < end:
+            field = 0
+            while at < end and data[at] != NEWLINE:
+                if _is_space(data[at]):
+                    at += 1
+                    continue
+                start = at
+                while at < end and data[at] != NEWLINE and not _is_space(data[at]):
+                    at += 1
+                if slots[field] >= 0 and not fast_number(data, start, at, powers)[1]:
+                    starts[out] = start
+                    ends[out] = at
+                    rows[out] = row
+                    fields[out] = field
+                    out += 1
+                field += 1
+            at += 1
+            if field > 0:
+                row += 1
+
+
+@njit(cache=True, nogil=True)
+def gather(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray, width: int) -> np.ndarray:
+    """(n, width) uint8: ``data[starts[i]:starts[i] + lengths[i]]`` each, NUL-padded (as
+    NumPy's ``S`` dtype reads it)."""
+    out = np.zeros((len(starts), width), np.uint8)
+    for i in range(len(starts)):
+        for k in range(min(lengths[i], width)):
+            out[i, k] = data[starts[i] + k]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def line_number(data: np.ndarray, offset: int) -> int:
+    """The 1-based line of byte ``offset`` in ``data``."""
+    lines = 1
+    for at in range(min(offset, len(data))):
+        if data[at] == NEWLINE:
+            lines += 1
+    return lines
