@@ -97,10 +97,10 @@ started = time.perf_counter()
 if name == "embree_rt":
     data = map_file(path)
     body = data.find(b"\\n", data.find(b"ITEM: ATOMS")) + 1
-    parsed, _ = parse_columns(
-        np.frombuffer(data, np.uint8, offset=body), count, np.zeros(width, bool)
-    )
-    table = np.stack(parsed, axis=1)
+    table = parse_columns(
+        np.frombuffer(data, np.uint8, offset=body), count, np.zeros(width, bool),
+        tuple(range(width)),
+    ).block
 elif name == "loadtxt":
     table = np.loadtxt(path, skiprows=9, ndmin=2)
 elif name == "fromstring":

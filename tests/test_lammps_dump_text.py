@@ -75,15 +75,19 @@ def tables(draw) -> tuple[str, list[list[str]]]:
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(table=tables(), chunk_bytes=st.sampled_from([1, 7, 64, 1 << 18]))
 def test_numbers_equal_float_and_loadtxt_bit_for_bit(table, chunk_bytes):
-    """Chunks as small as one byte put chunk bounds inside every row."""
+    """Chunks as small as one byte put chunk bounds inside every row; every other field is
+    parsed into the row-major block (as positions are), the rest into runs of their own."""
     text, rows = table
     width = len(rows[0])
+    together = tuple(range(0, width, 2))
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(text_columns, "MIN_CHUNK_BYTES", chunk_bytes)
-        columns, _ = parse_columns(as_bytes(text), len(rows), np.zeros(width, bool))
+        result = parse_columns(as_bytes(text), len(rows), np.zeros(width, bool), together)
     expected = np.array([[float(field) for field in row] for row in rows])
-    parsed = np.stack(columns, axis=1)
+    parsed = np.stack(result.columns, axis=1)
     assert np.array_equal(bits(parsed), bits(expected)), (text, parsed, expected)
+    assert result.block.flags.c_contiguous
+    assert np.array_equal(bits(result.block), bits(expected[:, list(together)]))
     loaded = np.loadtxt(io.StringIO(text), ndmin=2)
     assert np.array_equal(bits(parsed), bits(loaded))
 
@@ -111,7 +115,7 @@ def test_fast_path_and_cast_both_taken_and_exact():
         "-inf",
         "2.2250738585072011e-308",
     ]
-    columns, slow = parse_columns(as_bytes(" ".join(fields)), 1, np.zeros(len(fields), bool))
+    columns, _, slow = parse_columns(as_bytes(" ".join(fields)), 1, np.zeros(len(fields), bool))
     parsed = np.array([column[0] for column in columns])
     expected = np.array([float(field) for field in fields])
     assert np.array_equal(bits(parsed), bits(expected))
@@ -120,7 +124,7 @@ def test_fast_path_and_cast_both_taken_and_exact():
 
 def test_text_columns_as_written_and_blank_lines_skipped():
     text = "\n  1 C 0.5  \n\n \t \n2 Fe -1.25e+01\n3   Ow 3\n\n"
-    columns, _ = parse_columns(as_bytes(text), 3, np.array([False, True, False]))
+    columns = parse_columns(as_bytes(text), 3, np.array([False, True, False])).columns
     assert columns[0].tolist() == [1.0, 2.0, 3.0]
     assert columns[1].tolist() == ["C", "Fe", "Ow"]
     assert columns[2].tolist() == [0.5, -12.5, 3.0]

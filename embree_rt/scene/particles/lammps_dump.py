@@ -23,7 +23,12 @@ from embree_rt.scene.particles.text_columns import (
 TIMESTEP = b"ITEM: TIMESTEP"
 # Position columns in the order they are preferred: wrapped, unwrapped, scaled (box fractions),
 # scaled unwrapped.
-POSITION_COLUMNS = (("x", "y", "z"), ("xu", "yu", "zu"), ("xs", "ys", "zs"), ("xsu", "ysu", "zsu"))
+POSITION_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("x", "y", "z"),
+    ("xu", "yu", "zu"),
+    ("xs", "ys", "zs"),
+    ("xsu", "ysu", "zsu"),
+)
 STRING_COLUMNS = {"element", "type"}
 
 
@@ -72,8 +77,10 @@ def read_dump_frame(
     box, origin = _box(path, where, lines[box_at : box_at + 4])
     columns = lines[-1].decode("ascii", "replace").split()[2:]
     body = np.frombuffer(data, np.uint8, count=end - body_start, offset=body_start)
-    table = _rows(path, where, body, body_start, data, columns, count)
-    positions = _positions(path, where, table, box, origin)
+    triple = _position_columns(path, where, columns)
+    table, positions = _rows(path, where, body, body_start, data, columns, triple, count)
+    if triple[0].startswith("xs"):
+        positions = origin + positions @ box
     frame = ParticleFrame(
         path=path,
         positions=positions,
@@ -134,19 +141,22 @@ def _rows(
     body_start: int,
     data: bytes | mmap.mmap,
     columns: list[str],
+    triple: tuple[str, str, str],
     count: int,
-) -> dict[str, np.ndarray]:
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """The ``count`` rows of ``columns`` in ``body`` ((m,) uint8, from byte ``body_start`` of
     the file's ``data``), column by column: (n,) float64, or (n,) str for ``element`` and
-    ``type`` (types kept as written, "1", "2", ...)."""
+    ``type`` (types kept as written, "1", "2", ...); and the columns ``triple`` as one (n, 3)
+    float64 array, parsed into it."""
     if not columns:
         raise ParticleFileError(path, where, "'ITEM: ATOMS' names no columns")
     is_text = np.array([name in STRING_COLUMNS for name in columns])
+    together = tuple(columns.index(name) for name in triple)
     try:
-        parsed, _ = parse_columns(body, count, is_text)
+        parsed = parse_columns(body, count, is_text, together)
     except ColumnsError as error:
         raise _problem(path, where, error.problem, body_start, data, columns) from None
-    return dict(zip(columns, parsed, strict=True))
+    return dict(zip(columns, parsed.columns, strict=True)), parsed.block
 
 
 def _problem(
@@ -178,15 +188,11 @@ def _problem(
     return ParticleFileError(path, line, f"column {column!r} holds {problem.text!r}, not a number")
 
 
-def _positions(
-    path: str, where: str, table: dict[str, np.ndarray], box: np.ndarray, origin: np.ndarray
-) -> np.ndarray:
+def _position_columns(path: str, where: str, columns: list[str]) -> tuple[str, str, str]:
+    """The first of ``POSITION_COLUMNS`` whose three names ``columns`` holds."""
     for triple in POSITION_COLUMNS:
-        if all(name in table for name in triple):
-            positions = np.stack([table[name] for name in triple], axis=1)
-            if triple[0].startswith("xs"):
-                positions = origin + positions @ box
-            return positions
+        if all(name in columns for name in triple):
+            return triple
     raise ParticleFileError(
         path, where, "no position columns (x y z, xu yu zu, xs ys zs or xsu ysu zsu)"
     )

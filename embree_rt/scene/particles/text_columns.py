@@ -51,17 +51,37 @@ class ColumnsError(ValueError):
         self.problem = problem
 
 
+class ParsedRows(NamedTuple):
+    """``columns`` one (n,) array a field (float64, or str for text fields); ``block`` the
+    fields asked for together as one (n, k) C-contiguous float64 array (whose columns those
+    fields' entries view); ``slow`` how many numbers missed the fast path."""
+
+    columns: list[np.ndarray]
+    block: np.ndarray
+    slow: int
+
+
 def parse_columns(
-    data: np.ndarray, count: int, is_text: np.ndarray
-) -> tuple[list[np.ndarray], int]:
+    data: np.ndarray, count: int, is_text: np.ndarray, together: tuple[int, ...] = ()
+) -> ParsedRows:
     """The ``count`` rows of ``data`` ((m,) uint8, lines of whitespace-separated fields, blank
-    lines ignored), one (count,) array a field: float64, or str where ``is_text`` ((width,)
-    bool) says so. Raises ``ColumnsError`` naming the first problem's byte offset in ``data``.
-    Also returns how many numbers missed the fast path."""
+    lines ignored), field by field: float64, or str where ``is_text`` ((width,) bool) says so;
+    the numeric fields ``together`` (indexes) written row by row into one (count, k) block, as
+    positions are wanted, so that no copy of them is made. Raises ``ColumnsError`` naming the
+    first problem's byte offset in ``data``."""
     width = len(is_text)
-    slots = np.where(is_text, -np.cumsum(is_text), np.cumsum(~is_text) - 1).astype(np.int64)
+    numeric = [j for j in range(width) if not is_text[j] and j not in together]
+    # Field j's number in row r goes to flat[slots[j] + r * strides[j]]: the block first,
+    # then one run of ``count`` a numeric field; a text field's slot is -1 - its text index.
+    slots = np.zeros(width, np.int64)
+    strides = np.ones(width, np.int64)
+    for k, j in enumerate(together):
+        slots[j], strides[j] = k, len(together)
+    for k, j in enumerate(numeric):
+        slots[j] = (len(together) + k) * count
+    slots[is_text] = -1 - np.arange(int(is_text.sum()))
     bounds = chunk_bounds(data, _chunk_count(len(data)))
-    numbers = np.empty((int((~is_text).sum()), count), np.float64)
+    flat = np.empty((len(together) + len(numeric)) * count, np.float64)
     text_count = int(is_text.sum())
     text_start = np.empty((text_count, count), np.int64)
     text_length = np.empty((text_count, count), np.int32)
@@ -81,8 +101,8 @@ def parse_columns(
             continue
         first_row = np.concatenate(([0], np.cumsum(rows)[:-1])).astype(np.int64)
         parse_rows(
-            data, bounds, first_row, slots, POWERS_OF_TEN, numbers, text_start, text_length,
-            slow, blank, problems,
+            data, bounds, first_row, count, slots, strides, POWERS_OF_TEN, flat, text_start,
+            text_length, slow, blank, problems,
         )  # fmt: skip
         if not blank.any():
             break
@@ -92,14 +112,18 @@ def parse_columns(
         raise ColumnsError(ColumnsProblem("fields", int(offset), int(fields), width))
     slow_total = int(slow.sum())
     if slow_total:
-        _cast_slow(data, bounds, first_row, slots, slow, numbers)
+        _cast_slow(data, bounds, first_row, slots, strides, slow, flat)
+    block = flat[: len(together) * count].reshape(count, len(together))
     columns = []
-    for slot in slots:
-        if slot >= 0:
-            columns.append(numbers[slot])
+    for j in range(width):
+        if is_text[j]:
+            k = -1 - slots[j]
+            columns.append(_texts(data, text_start[k], text_length[k]))
+        elif j in together:
+            columns.append(block[:, together.index(j)])
         else:
-            columns.append(_texts(data, text_start[-1 - slot], text_length[-1 - slot]))
-    return columns, slow_total
+            columns.append(flat[slots[j] : slots[j] + count])
+    return ParsedRows(columns, block, slow_total)
 
 
 def _chunk_count(size: int) -> int:
@@ -111,8 +135,9 @@ def _cast_slow(
     bounds: np.ndarray,
     first_row: np.ndarray,
     slots: np.ndarray,
+    strides: np.ndarray,
     slow: np.ndarray,
-    numbers: np.ndarray,
+    flat: np.ndarray,
 ) -> None:
     """Fill the numbers that missed the fast path with NumPy's cast of their text, in
     batches; raises ``ColumnsError`` at the first text that is not a number."""
@@ -142,7 +167,7 @@ def _cast_slow(
                         )
                     ) from None
             raise
-        numbers[slots[fields[part]], rows[part]] = values
+        flat[slots[fields[part]] + rows[part] * strides[fields[part]]] = values
 
 
 def _texts(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -278,24 +303,25 @@ def parse_rows(
     data: np.ndarray,
     bounds: np.ndarray,
     first_row: np.ndarray,
+    total: int,
     slots: np.ndarray,
+    strides: np.ndarray,
     powers: np.ndarray,
-    numbers: np.ndarray,
+    flat: np.ndarray,
     text_start: np.ndarray,
     text_length: np.ndarray,
     slow: np.ndarray,
     blank: np.ndarray,
     problems: np.ndarray,
 ) -> None:
-    """Each chunk's rows, from row ``first_row[c]`` on, into ``numbers`` ((numeric fields, n)
-    float64, NaN where a number missed the fast path, counted in ``slow``) and
-    ``text_start``/``text_length`` ((text fields, n) int64/int32, where each text field lies
-    in ``data``). ``slots[j]`` is field j's row in ``numbers``, or ``-1 - k`` for row k of the
-    text arrays. Blank lines are counted in ``blank`` (then ``first_row`` may be wrong, and
-    rows past n are not written); a chunk's first line of the wrong field count is left in
+    """Each chunk's rows, from row ``first_row[c]`` on (``total`` rows in all), into ``flat``
+    (float64: field j of row r at ``slots[j] + r * strides[j]``; NaN where a number missed
+    the fast path, counted in ``slow``) and ``text_start``/``text_length`` ((text fields, n)
+    int64/int32, where each text field lies in ``data``; field j's is row ``-1 - slots[j]``).
+    Blank lines are counted in ``blank`` (then ``first_row`` may be wrong, and rows past
+    ``total`` are not written); a chunk's first line of the wrong field count is left in
     ``problems[c]`` as (its byte offset, fields found)."""
     width = len(slots)
-    total = numbers.shape[1] if numbers.shape[0] > 0 else text_start.shape[1]
     for c in prange(len(bounds) - 1):
         row = first_row[c]
         at = bounds[c]
@@ -320,7 +346,7 @@ def parse_rows(
                     if not exact:
                         value = np.nan
                         slow_count += 1
-                    numbers[slot, row] = value
+                    flat[slot + row * strides[field]] = value
                 else:
                     start = at
                     while at < end and not _is_separator(data[at]):
