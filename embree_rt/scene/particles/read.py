@@ -5,8 +5,8 @@ MDAnalysis reads the molecular formats with topologies (PDB, PQR, GRO, Mol2, LAM
 DCD/XTC/TRR trajectories over a topology such as PSF, and PDBx/mmCIF through gemmi), naming
 elements, types, PQR's radii and the box; ASE reads the materials formats (XYZ and extended
 XYZ, VASP POSCAR/CONTCAR, CIF) with their per-atom arrays; ``gsd`` reads HOOMD's GSD; LAMMPS
-text dumps are read by NumPy (``lammps_dump``). A ``.gz``, ``.bz2`` or ``.xz`` copy is
-decompressed to a temporary file and read as the file it holds.
+text dumps are read by a parallel parser of their own (``lammps_dump``). A ``.gz``, ``.bz2`` or
+``.xz`` copy is decompressed to a temporary file and read as the file it holds.
 """
 
 from __future__ import annotations
@@ -167,9 +167,9 @@ def _frame_problem(path: Path, frame: int, count: int) -> None:
 
 
 def _read_dump(path: Path, plain: Path, frame: int) -> ParticleFrame:
-    from embree_rt.scene.particles.lammps_dump import frame_offsets, read_dump_frame
+    from embree_rt.scene.particles.lammps_dump import frame_offsets, map_file, read_dump_frame
 
-    data = plain.read_bytes()
+    data = map_file(plain)
     offsets = frame_offsets(data)
     if not offsets:
         raise ParticleFileError(path, "(file)", "no 'ITEM: TIMESTEP' line: not a LAMMPS dump")

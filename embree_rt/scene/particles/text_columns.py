@@ -1,0 +1,447 @@
+"""Rows of whitespace-separated fields parsed into columns on all cores (numba): numbers as
+float64 equal bit for bit to Python's ``float()`` of their text, text fields as ``str``.
+
+The body is split into line-aligned chunks, one numba task each: a first pass counts each
+chunk's rows, a second parses them into their rows. A number is parsed exactly where one IEEE
+operation suffices (Clinger's fast path: at most 2^53 as an integer of its digits and a power
+of ten of at most 22, one exact multiply or divide, correctly rounded on every x86-64 ISA as
+numba compiles it without fast-math); any other text (17 significant digits, ``1e300``,
+``nan``, a typo) is handed to NumPy's bytes-to-float64 cast, which is CPython's correctly
+rounded ``float()``, and refused where that refuses it. The text is read in place (a memory
+map of the file), so a frame needs its columns' memory and no copy of its text.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import get_num_threads, njit, prange
+
+# Exact powers of ten: 10^22 is the largest that a float64 holds exactly.
+POWERS_OF_TEN = np.array([10.0**k for k in range(23)])
+MAX_EXACT_MANTISSA = 1 << 53
+# Chunks per numba thread (the last chunks' rows balance uneven lines) and the smallest chunk.
+CHUNKS_PER_THREAD = 4
+MIN_CHUNK_BYTES = 1 << 18
+# Fields that miss the fast path are cast by NumPy this many at a time (bounded memory).
+SLOW_BATCH = 1 << 20
+
+NEWLINE = 10
+
+
+class ColumnsProblem(NamedTuple):
+    """Why rows could not be parsed: ``kind`` "rows" (``found`` rows where ``expected`` were
+    announced), "fields" (the row at byte ``offset`` has ``found`` fields, not ``expected``) or
+    "number" (``text``, field ``field`` of a row, at byte ``offset``, is not a number)."""
+
+    kind: str
+    offset: int
+    found: int = 0
+    expected: int = 0
+    text: str = ""
+    field: int = -1
+
+
+class ColumnsError(ValueError):
+    """Rows that are not ``count`` rows of ``width`` fields; ``problem`` says where."""
+
+    def __init__(self, problem: ColumnsProblem) -> None:
+        super().__init__(problem.kind)
+        self.problem = problem
+
+
+class ParsedRows(NamedTuple):
+    """``columns`` one (n,) array a field (float64, or str for text fields); ``block`` the
+    fields asked for together as one (n, k) C-contiguous float64 array (whose columns those
+    fields' entries view); ``slow`` how many numbers missed the fast path."""
+
+    columns: list[np.ndarray]
+    block: np.ndarray
+    slow: int
+
+
+def parse_columns(
+    data: np.ndarray, count: int, is_text: np.ndarray, together: tuple[int, ...] = ()
+) -> ParsedRows:
+    """The ``count`` rows of ``data`` ((m,) uint8, lines of whitespace-separated fields, blank
+    lines ignored), field by field: float64, or str where ``is_text`` ((width,) bool) says so;
+    the numeric fields ``together`` (indexes) written row by row into one (count, k) block, as
+    positions are wanted, so that no copy of them is made. Raises ``ColumnsError`` naming the
+    first problem's byte offset in ``data``."""
+    width = len(is_text)
+    numeric = [j for j in range(width) if not is_text[j] and j not in together]
+    # Field j's number in row r goes to flat[slots[j] + r * strides[j]]: the block first,
+    # then one run of ``count`` a numeric field; a text field's slot is -1 - its text index.
+    slots = np.zeros(width, np.int64)
+    strides = np.ones(width, np.int64)
+    for k, j in enumerate(together):
+        slots[j], strides[j] = k, len(together)
+    for k, j in enumerate(numeric):
+        slots[j] = (len(together) + k) * count
+    slots[is_text] = -1 - np.arange(int(is_text.sum()))
+    bounds = chunk_bounds(data, _chunk_count(len(data)))
+    flat = np.empty((len(together) + len(numeric)) * count, np.float64)
+    text_count = int(is_text.sum())
+    text_start = np.empty((text_count, count), np.int64)
+    text_length = np.empty((text_count, count), np.int32)
+    chunks = len(bounds) - 1
+    slow = np.zeros(chunks, np.int64)
+    blank = np.zeros(chunks, np.int64)
+    problems = np.full((chunks, 2), -1, np.int64)
+    # Rows are first taken as lines (one vectorised pass); a chunk that meets a blank line
+    # sends the parse round again with the rows counted exactly.
+    rows = count_lines(data, bounds)
+    for exact in (False, True):
+        if exact:
+            rows = count_rows(data, bounds)
+        if int(rows.sum()) != count:
+            if exact:
+                raise ColumnsError(ColumnsProblem("rows", len(data), int(rows.sum()), count))
+            continue
+        first_row = np.concatenate(([0], np.cumsum(rows)[:-1])).astype(np.int64)
+        parse_rows(
+            data, bounds, first_row, count, slots, strides, POWERS_OF_TEN, flat, text_start,
+            text_length, slow, blank, problems,
+        )  # fmt: skip
+        if not blank.any():
+            break
+    bad = np.flatnonzero(problems[:, 0] >= 0)
+    if len(bad):
+        offset, fields = problems[bad[0]]
+        raise ColumnsError(ColumnsProblem("fields", int(offset), int(fields), width))
+    slow_total = int(slow.sum())
+    if slow_total:
+        _cast_slow(data, bounds, first_row, slots, strides, slow, flat)
+    block = flat[: len(together) * count].reshape(count, len(together))
+    columns = []
+    for j in range(width):
+        if is_text[j]:
+            k = -1 - slots[j]
+            columns.append(_texts(data, text_start[k], text_length[k]))
+        elif j in together:
+            columns.append(block[:, together.index(j)])
+        else:
+            columns.append(flat[slots[j] : slots[j] + count])
+    return ParsedRows(columns, block, slow_total)
+
+
+def _chunk_count(size: int) -> int:
+    return int(max(1, min(get_num_threads() * CHUNKS_PER_THREAD, size // MIN_CHUNK_BYTES)))
+
+
+def _cast_slow(
+    data: np.ndarray,
+    bounds: np.ndarray,
+    first_row: np.ndarray,
+    slots: np.ndarray,
+    strides: np.ndarray,
+    slow: np.ndarray,
+    flat: np.ndarray,
+) -> None:
+    """Fill the numbers that missed the fast path with NumPy's cast of their text, in
+    batches; raises ``ColumnsError`` at the first text that is not a number."""
+    first_slow = np.concatenate(([0], np.cumsum(slow)[:-1])).astype(np.int64)
+    starts = np.empty(int(slow.sum()), np.int64)
+    ends = np.empty_like(starts)
+    rows = np.empty_like(starts)
+    fields = np.empty_like(starts)
+    slow_fields(
+        data, bounds, first_row, slots, POWERS_OF_TEN, slow, first_slow, starts, ends, rows, fields
+    )
+    for at in range(0, len(starts), SLOW_BATCH):
+        part = slice(at, at + SLOW_BATCH)
+        width = int((ends[part] - starts[part]).max())
+        texts = gather(data, starts[part], ends[part] - starts[part], width).view(f"S{width}")[:, 0]
+        try:
+            values = texts.astype(np.float64)
+        except ValueError:
+            for k, text in enumerate(texts):
+                try:
+                    float(text)
+                except ValueError:
+                    shown = text.decode("ascii", "replace")
+                    raise ColumnsError(
+                        ColumnsProblem(
+                            "number", int(starts[at + k]), text=shown, field=int(fields[at + k])
+                        )
+                    ) from None
+            raise
+        flat[slots[fields[part]] + rows[part] * strides[fields[part]]] = values
+
+
+def _texts(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """(n,) str of the fields at ``starts`` of ``lengths``, each byte a code point (Latin-1,
+    so ASCII as written): NumPy's own bytes-to-str cast took 0.4 s over 1e6 one-letter types."""
+    width = max(1, int(lengths.max(initial=0)))
+    code_points = gather(data, starts, lengths, width).astype(np.uint32)
+    return code_points.view(f"U{width}")[:, 0]
+
+
+@njit(inline="always")
+def _byte(data: np.ndarray, at: int) -> np.uint8:
+    """``data[at]`` for ``at`` known to be in range: an unsigned index spares numba's check of
+    a signed one for a negative value, which made the parse 1.7x slower."""
+    return data[np.uint64(at)]
+
+
+@njit(cache=True, nogil=True)
+def chunk_bounds(data: np.ndarray, chunks: int) -> np.ndarray:
+    """(chunks + 1,) int64 byte offsets splitting ``data`` after newlines (some chunks may be
+    empty)."""
+    bounds = np.empty(chunks + 1, np.int64)
+    bounds[0] = 0
+    size = len(data)
+    for c in range(1, chunks):
+        at = max(size * c // chunks, bounds[c - 1])
+        while at < size and (at == 0 or _byte(data, at - 1) != NEWLINE):
+            at += 1
+        bounds[c] = at
+    bounds[chunks] = size
+    return bounds
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def count_lines(data: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """(chunks,) int64: the lines of each chunk, blank or not. Written so that LLVM
+    vectorises it (a loop from 0 over a slice, the sum of int64s): 5x faster than a loop over
+    ``range(start, end)`` of ``data``."""
+    chunks = len(bounds) - 1
+    lines = np.zeros(chunks, np.int64)
+    for c in prange(chunks):
+        chunk = data[bounds[c] : bounds[c + 1]]
+        count = 0
+        for at in range(len(chunk)):
+            count += np.int64(chunk[at] == NEWLINE)
+        if bounds[c + 1] > bounds[c] and data[bounds[c + 1] - 1] != NEWLINE:
+            count += 1
+        lines[c] = count
+    return lines
+
+
+@njit(inline="always")
+def _is_space(byte: np.uint8) -> bool:
+    return byte == 32 or byte == 9 or byte == 13 or byte == 11 or byte == 12
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def count_rows(data: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """(chunks,) int64: the non-blank lines of each chunk."""
+    chunks = len(bounds) - 1
+    rows = np.zeros(chunks, np.int64)
+    for c in prange(chunks):
+        count = 0
+        filled = False
+        for at in range(bounds[c], bounds[c + 1]):
+            byte = _byte(data, at)
+            if byte == NEWLINE:
+                if filled:
+                    count += 1
+                filled = False
+            elif not _is_space(byte):
+                filled = True
+        if filled:
+            count += 1
+        rows[c] = count
+    return rows
+
+
+@njit(inline="always")
+def _is_separator(byte: np.uint8) -> bool:
+    return byte == NEWLINE or _is_space(byte)
+
+
+@njit(inline="always")
+def scan_number(
+    data: np.ndarray, start: int, limit: int, powers: np.ndarray
+) -> tuple[float, bool, int]:
+    """The field starting at byte ``start`` (ending at a separator or ``limit``): its float64,
+    True where Clinger's fast path gives it exactly (``[+-]digits[.digits][(e|E)[+-]digits]``
+    with at most 18 digits, their integer at most 2^53, the power of ten within 22; else
+    0.0 and False), and the byte after it."""
+    at = start
+    negative = False
+    if _byte(data, at) == 45 or _byte(data, at) == 43:  # - +
+        negative = _byte(data, at) == 45
+        at += 1
+    mantissa = 0
+    digits = 0
+    exponent = 0
+    while at < limit and 48 <= _byte(data, at) <= 57:
+        mantissa = mantissa * 10 + (_byte(data, at) - 48)
+        digits += 1
+        at += 1
+    if at < limit and _byte(data, at) == 46:  # .
+        at += 1
+        while at < limit and 48 <= _byte(data, at) <= 57:
+            mantissa = mantissa * 10 + (_byte(data, at) - 48)
+            exponent -= 1
+            digits += 1
+            at += 1
+    exact = 0 < digits <= 18
+    if at < limit and (_byte(data, at) == 101 or _byte(data, at) == 69):  # e E
+        at += 1
+        exponent_negative = False
+        if at < limit and (_byte(data, at) == 45 or _byte(data, at) == 43):
+            exponent_negative = _byte(data, at) == 45
+            at += 1
+        written = 0
+        exponent_digits = 0
+        while at < limit and 48 <= _byte(data, at) <= 57:
+            written = written * 10 + (_byte(data, at) - 48)
+            exponent_digits += 1
+            at += 1
+        exact = exact and 0 < exponent_digits <= 4
+        exponent += -written if exponent_negative else written
+    if at < limit and not _is_separator(_byte(data, at)):
+        exact = False
+        while at < limit and not _is_separator(_byte(data, at)):
+            at += 1
+    if not exact:
+        return 0.0, False, at
+    if mantissa == 0:
+        return (-0.0 if negative else 0.0), True, at
+    if mantissa > MAX_EXACT_MANTISSA or exponent > 22 or exponent < -22:
+        return 0.0, False, at
+    value = float(mantissa)
+    value = value * powers[exponent] if exponent >= 0 else value / powers[-exponent]
+    return (-value if negative else value), True, at
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def parse_rows(
+    data: np.ndarray,
+    bounds: np.ndarray,
+    first_row: np.ndarray,
+    total: int,
+    slots: np.ndarray,
+    strides: np.ndarray,
+    powers: np.ndarray,
+    flat: np.ndarray,
+    text_start: np.ndarray,
+    text_length: np.ndarray,
+    slow: np.ndarray,
+    blank: np.ndarray,
+    problems: np.ndarray,
+) -> None:
+    """Each chunk's rows, from row ``first_row[c]`` on (``total`` rows in all), into ``flat``
+    (float64: field j of row r at ``slots[j] + r * strides[j]``; NaN where a number missed
+    the fast path, counted in ``slow``) and ``text_start``/``text_length`` ((text fields, n)
+    int64/int32, where each text field lies in ``data``; field j's is row ``-1 - slots[j]``).
+    Blank lines are counted in ``blank`` (then ``first_row`` may be wrong, and rows past
+    ``total`` are not written); a chunk's first line of the wrong field count is left in
+    ``problems[c]`` as (its byte offset, fields found)."""
+    width = len(slots)
+    for c in prange(len(bounds) - 1):
+        row = first_row[c]
+        at = bounds[c]
+        end = bounds[c + 1]
+        slow_count = 0
+        blank_count = 0
+        while at < end:
+            line = at
+            field = 0
+            while at < end and _byte(data, at) != NEWLINE:
+                if _is_space(_byte(data, at)):
+                    at += 1
+                    continue
+                if field >= width or row >= total:
+                    field += 1
+                    while at < end and not _is_separator(_byte(data, at)):
+                        at += 1
+                    continue
+                slot = slots[field]
+                if slot >= 0:
+                    value, exact, at = scan_number(data, at, end, powers)
+                    if not exact:
+                        value = np.nan
+                        slow_count += 1
+                    flat[slot + row * strides[field]] = value
+                else:
+                    start = at
+                    while at < end and not _is_separator(_byte(data, at)):
+                        at += 1
+                    text_start[-1 - slot, row] = start
+                    text_length[-1 - slot, row] = at - start
+                field += 1
+            at += 1
+            if field == 0 or row >= total:
+                blank_count += 1
+                continue
+            if field != width:
+                problems[c, 0] = line
+                problems[c, 1] = field
+                break
+            row += 1
+        slow[c] = slow_count
+        blank[c] = blank_count
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def slow_fields(
+    data: np.ndarray,
+    bounds: np.ndarray,
+    first_row: np.ndarray,
+    slots: np.ndarray,
+    powers: np.ndarray,
+    slow: np.ndarray,
+    first_slow: np.ndarray,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    rows: np.ndarray,
+    fields: np.ndarray,
+) -> None:
+    """Where the numbers that missed the fast path lie (after ``parse_rows`` found every row
+    whole): their byte ranges, rows and fields, chunk ``c``'s ``slow[c]`` from
+    ``first_slow[c]`` on."""
+    for c in prange(len(bounds) - 1):
+        if slow[c] == 0:
+            continue
+        out = first_slow[c]
+        row = first_row[c]
+        at = bounds[c]
+        end = bounds[c + 1]
+        while at < end:
+            field = 0
+            while at < end and _byte(data, at) != NEWLINE:
+                if _is_space(_byte(data, at)):
+                    at += 1
+                    continue
+                start = at
+                exact = True
+                if slots[field] >= 0:
+                    exact, at = scan_number(data, at, end, powers)[1:]
+                else:
+                    while at < end and not _is_separator(_byte(data, at)):
+                        at += 1
+                if not exact:
+                    starts[out] = start
+                    ends[out] = at
+                    rows[out] = row
+                    fields[out] = field
+                    out += 1
+                field += 1
+            at += 1
+            if field > 0:
+                row += 1
+
+
+@njit(cache=True, nogil=True)
+def gather(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray, width: int) -> np.ndarray:
+    """(n, width) uint8: ``data[starts[i]:starts[i] + lengths[i]]`` each, NUL-padded (as
+    NumPy's ``S`` dtype reads it)."""
+    out = np.zeros((len(starts), width), np.uint8)
+    for i in range(len(starts)):
+        for k in range(min(lengths[i], width)):
+            out[i, k] = _byte(data, starts[i] + k)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def line_number(data: np.ndarray, offset: int) -> int:
+    """The 1-based line of byte ``offset`` in ``data``."""
+    lines = 1
+    for at in range(min(offset, len(data))):
+        if _byte(data, at) == NEWLINE:
+            lines += 1
+    return lines
