@@ -14,10 +14,12 @@ from embree_rt.cli.frames import FramePlan, frame_writer, plan_frames, write_tra
 from embree_rt.cli.job import Job
 from embree_rt.cli.sources import prepare_scene
 from embree_rt.cli.summary import Timeline, print_summary
+from embree_rt.compiled.numba_set_up import start_numba_set_up
 
 
 def run(job: Job, timeline: Timeline) -> None:
     """Render ``job`` here (``job.where`` is ``OnThisMachine``) and write its files."""
+    start_numba_set_up()  # on the core left idle while the scene is read or generated
     made = prepare_scene(job, timeline)
     plan = plan_frames(job, made.scene)
     result = None
