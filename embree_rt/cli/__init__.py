@@ -10,6 +10,7 @@ and ``--version`` load neither NumPy nor numba.
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 import traceback
@@ -44,7 +45,22 @@ EXIT_BROKEN_PIPE = 141
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command ``argv`` (default: the process's arguments); returns the exit code."""
+    """Run the command ``argv`` (default: the process's arguments); returns the exit code.
+
+    Run for the process's own arguments (the ``embree-rt`` command, ``python -m embree_rt``),
+    the process ends with the command: what it made is left to the exit (``gc.freeze``), not
+    collected first. The interpreter's last collections walk every object numba and the
+    renderer made, and freeing them took 0.7-1.0 s after the summary line on this project's
+    loaded machine (0.13-0.16 s frozen, as against 0.11-0.13 s for no finalisation at all);
+    exit handlers still run, streams are still flushed, and the files are closed before."""
+    code = exit_code(argv)
+    if argv is None:
+        gc.freeze()
+    return code
+
+
+def exit_code(argv: list[str] | None) -> int:
+    """Run the command ``argv`` (None: the process's arguments); returns its exit code."""
     parser = build_parser()
     if not (sys.argv[1:] if argv is None else argv):  # bare `embree-rt`: what it can do
         print(parser.format_help(), end="", file=sys.stderr)
