@@ -295,26 +295,3 @@ def test_a_particle_file_renders_without_trimesh_or_matplotlib(tmp_path: Path) -
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
     assert (tmp_path / "out.png").is_file()
-
-
-def test_numba_is_set_up_on_a_thread_of_its_own() -> None:
-    """``start_numba_set_up`` does numba's first-kernel set-up (its registries, which import
-    ``numba.np.arraymath``) on the thread it returns, not on the caller's first kernel. Run in
-    a fresh interpreter: this one has set numba up long ago."""
-    import subprocess
-    import sys
-
-    script = (
-        "import sys, threading\n"
-        "from embree_rt.compiled.numba_set_up import start_numba_set_up\n"
-        "assert 'numba.np.arraymath' not in sys.modules\n"
-        "thread = start_numba_set_up()\n"
-        "assert thread is not threading.current_thread() and not thread.daemon\n"
-        "thread.join()\n"
-        "print('numba.np.arraymath' in sys.modules)\n"
-    )
-    done = subprocess.run(
-        [sys.executable, "-c", script], cwd=PACKAGE.parent, capture_output=True, text=True
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "True"

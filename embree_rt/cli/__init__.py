@@ -143,8 +143,8 @@ def run_command(args, ends_process: bool = False) -> None:
             from embree_rt.cli import render as runner
         if ends_process:
             # The modules and settings made so far live as long as the process: out of the
-            # collector's walks, where one full collection of them and of numba's set-up took
-            # 0.15-0.3 s (loaded) in the middle of reading the scene.
+            # collector's walks (one full collection of them and numba's first-kernel set-up
+            # took 0.15-0.3 s, loaded).
             gc.freeze()
         runner.run(job, timeline)
 

@@ -11,17 +11,13 @@ from embree_rt.budget import MemoryBudgetError
 from embree_rt.cli.checks import check_output, memory_key, output_encoding, writing
 from embree_rt.cli.errors import UsageError
 from embree_rt.cli.frames import FramePlan, frame_writer, plan_frames, write_transforms
-from embree_rt.cli.job import Job, RandomField
+from embree_rt.cli.job import Job
 from embree_rt.cli.sources import prepare_scene
 from embree_rt.cli.summary import Timeline, print_summary
-from embree_rt.compiled.numba_set_up import start_numba_set_up
 
 
 def run(job: Job, timeline: Timeline) -> None:
     """Render ``job`` here (``job.where`` is ``OnThisMachine``) and write its files."""
-    if not isinstance(job.source, RandomField):
-        # Reading a file leaves the second core idle; generating a field keeps both busy.
-        start_numba_set_up()
     made = prepare_scene(job, timeline)
     plan = plan_frames(job, made.scene)
     result = None
