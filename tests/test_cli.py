@@ -29,6 +29,7 @@ import trimesh
 from PIL import Image
 
 from embree_rt import load_scene, random_field
+from embree_rt.cli import YOUNG_COLLECTION_OBJECTS
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -649,6 +650,34 @@ def test_the_summary_line_splits_the_whole_wall_time(tmp_path: Path) -> None:
         assert 0.01 < startup < total, line
         # the process's clock ticks are 10 ms; exiting (threads joined, caches closed) is not in it
         assert total <= wall_s + 0.02 and wall_s - total < 1.5, (line, wall_s)
+
+
+def test_the_command_leaves_its_objects_to_the_exit_and_a_caller_s_run_does_not(
+    tmp_path: Path,
+) -> None:
+    """``main()`` for the process's own arguments (the command) freezes what it made
+    (``gc.freeze``: the interpreter's exit then skips collecting it) and collects the youngest
+    generation less often; ``main(argv)`` from a caller that goes on (a test, a notebook)
+    leaves the collector as it was. Each in a fresh
+    interpreter, whose collector has frozen nothing before."""
+    line = ["random", "--count", "50", *TINY, "--quiet", "-o"]
+    for argv, frozen in ((None, True), ("given", False)):
+        out = str(tmp_path / f"{argv}.png")
+        script = (
+            "import gc, sys\n"
+            "from embree_rt.cli import main\n"
+            f"sys.argv = ['embree-rt', *{line!r}, {out!r}]\n"
+            "assert gc.get_freeze_count() == 0\n"
+            f"code = main() if {argv is None} else main(sys.argv[1:])\n"
+            "print(code, gc.get_freeze_count() > 0, gc.get_threshold()[0])\n"
+        )
+        done = subprocess.run(
+            [sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True
+        )
+        assert done.returncode == 0, done.stderr
+        young = YOUNG_COLLECTION_OBJECTS if frozen else 700  # Python's own, left as it was
+        assert done.stdout.split() == ["0", str(frozen), str(young)], (argv, done.stdout)
+        assert Path(out).is_file()
 
 
 def test_the_sphere_flag_offers_exactly_the_geometry_modes() -> None:

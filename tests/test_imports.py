@@ -254,3 +254,45 @@ def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
     assert (tmp_path / "out.png").is_file() and (tmp_path / "three.png").is_file()
+
+
+def test_a_particle_file_renders_without_trimesh_or_matplotlib(tmp_path: Path) -> None:
+    """A particle file coloured by type (a GSD frame of two types) loads, renders and saves
+    without trimesh, the SciPy modules trimesh brings (spatial, optimize, ndimage) or
+    matplotlib: meshes and colormaps are for the paths that read meshes or colour by a
+    property. (``scipy.linalg`` is numba's own: its first kernel checks for BLAS through it.)
+    Run in a fresh interpreter, as the command is."""
+    import subprocess
+    import sys
+
+    import gsd.hoomd
+    import numpy as np
+
+    path = tmp_path / "two_types.gsd"
+    frame = gsd.hoomd.Frame()
+    frame.particles.N = 20
+    frame.particles.position = np.random.default_rng(1).uniform(-3, 3, (20, 3)).astype(np.float32)
+    frame.particles.types = ["A", "B"]
+    frame.particles.typeid = (np.arange(20) % 2).astype(np.uint32)
+    frame.configuration.box = [10.0, 10.0, 10.0, 0.0, 0.0, 0.0]
+    with gsd.hoomd.open(str(path), "w") as trajectory:
+        trajectory.append(frame)
+    script = (
+        "import sys\n"
+        "import embree_rt.cli\n"
+        f"code = embree_rt.cli.main(['render', {str(path)!r}, '--width', '16', '--height', '9',"
+        f" '--spp', '1', '--quiet', '-o', {str(tmp_path / 'out.png')!r}])\n"
+        "assert code == 0, code\n"
+        "heavy = ('trimesh', 'matplotlib', 'scipy.spatial', 'scipy.optimize', 'scipy.ndimage')\n"
+        "print(sorted(m for m in sys.modules if m.startswith(heavy)))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        cwd=PACKAGE.parent,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
+    assert (tmp_path / "out.png").is_file()

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from embree_rt.scene.model import Scene
-from embree_rt.scene.model_file import sphere_bounds
 from embree_rt.scene.particles import ParticleFileError, read_particles
 from embree_rt.scene.particles.frame import coded, coded_table, gathered
 from embree_rt.scene.particles.look import ParticleLook, label_look, particle_look
 from embree_rt.scene.particles.to_scene import UP_ROTATIONS, turned_up
+from embree_rt.scene.staging import sphere_bounds
 
 
 def test_coded_table_is_np_unique_of_the_strings() -> None:
@@ -62,9 +62,9 @@ def test_turned_up_is_the_float64_product_bit_for_bit(up: str, dtype) -> None:
 
 
 def test_sphere_bounds_in_slices_are_the_whole_sums(monkeypatch) -> None:
-    from embree_rt.scene import model_file
+    from embree_rt.scene import staging
 
-    monkeypatch.setattr(model_file, "BOUNDS_ROWS", 5)
+    monkeypatch.setattr(staging, "BOUNDS_ROWS", 5)
     rng = np.random.default_rng(5)
     centers = rng.normal(size=(101, 3)).astype(np.float32) * 100
     radii = rng.uniform(0.1, 3.0, 101).astype(np.float32)

@@ -23,6 +23,7 @@ from embree_rt.cli.errors import UsageError
 from embree_rt.cli.frame_paths import frame_range
 from embree_rt.cli.particles import refuse_particle_flags
 from embree_rt.scene.errors import SceneError
+from embree_rt.scene.mesh_formats import MESH_SUFFIXES
 
 SCENE_SUFFIXES = (".toml", ".json")
 AOVS_ONLY_STILLS_HERE = (
@@ -173,7 +174,6 @@ def source_of(args: argparse.Namespace) -> Source:
     if suffix in SCENE_SUFFIXES:
         refuse_particle_flags(args)
         return SceneFile(path)
-    from embree_rt.scene.meshes import MESH_SUFFIXES  # trimesh: ~1 s to import
     from embree_rt.scene.particles.read import PARTICLE_SUFFIXES, is_particle_file
 
     if suffix in MESH_SUFFIXES:

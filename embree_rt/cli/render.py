@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from embree_rt.api import Renderer, render, require_memory
+from embree_rt.api import Renderer, RenderResult, render, require_memory
 from embree_rt.budget import MemoryBudgetError
 from embree_rt.cli.checks import check_output, memory_key, output_encoding, writing
 from embree_rt.cli.errors import UsageError
@@ -20,6 +20,7 @@ def run(job: Job, timeline: Timeline) -> None:
     """Render ``job`` here (``job.where`` is ``OnThisMachine``) and write its files."""
     made = prepare_scene(job, timeline)
     plan = plan_frames(job, made.scene)
+    result = None
     try:
         if plan.animated:
             if not plan.cameras:
@@ -27,12 +28,15 @@ def run(job: Job, timeline: Timeline) -> None:
                 return
             rays, render_s = render_frames(job, made.scene, plan)
         else:
-            rays, render_s = render_still(job, made.scene)
+            result = render_still(job, made.scene)
+            rays, render_s = result.stats.total_rays, result.stats.render_s
     except MemoryBudgetError as error:
         raise UsageError(f"{memory_key(error, job)}: {error}") from None
     timeline.mark_rendered()
     if plan.animated:
         write_transforms(plan.paths, made.scene)
+    else:
+        write_still(job, made.scene, result)
     if not job.quiet:
         print_summary(
             timeline,
@@ -45,16 +49,19 @@ def run(job: Job, timeline: Timeline) -> None:
         )
 
 
-def render_still(job: Job, scene) -> tuple[int, float]:
-    """Render the still and write it and its AOVs (their paths printed, for scripts to pick
-    up); the rays traced and the seconds spent rendering."""
-    result = render(
+def render_still(job: Job, scene) -> RenderResult:
+    """Render the still (with its AOVs); the summary line's output phase is its writing."""
+    return render(
         scene,
         threads=job.where.threads,
         spheres=job.spheres,
         quiet=job.quiet,
         aovs=job.output.aovs or (),
     )
+
+
+def write_still(job: Job, scene, result: RenderResult) -> None:
+    """Write the still and its AOVs (their paths printed, for scripts to pick up)."""
     encoding = output_encoding(job.output)._replace(legend=scene.legend)
     path = job.output.pattern
     check_output(path, job.output.aovs, encoding)  # again: the directory may have gone meanwhile
@@ -62,7 +69,6 @@ def render_still(job: Job, scene) -> tuple[int, float]:
     writing(path, lambda: written.extend(result.save(path, encoding)))
     for side in written:
         print(side)
-    return result.stats.total_rays, result.stats.render_s
 
 
 def render_frames(job: Job, scene, plan: FramePlan) -> tuple[int, float]:

@@ -315,9 +315,9 @@ class BVH(Closing):
             lib = self._lib
             lib.rtcSetGeometryUserPrimitiveCount(geometry, count)
             lib.rtcSetGeometryUserData(geometry, user_data.ctypes.data)
-            lib.rtcSetGeometryBoundsFunction(geometry, user_spheres.BOUNDS_CALLBACK, None)
-            lib.rtcSetGeometryIntersectFunction(geometry, user_spheres.INTERSECT_CALLBACK)
-            lib.rtcSetGeometryOccludedFunction(geometry, user_spheres.OCCLUDED_CALLBACK)
+            lib.rtcSetGeometryBoundsFunction(geometry, user_spheres.sphere_bounds.address, None)
+            lib.rtcSetGeometryIntersectFunction(geometry, user_spheres.sphere_intersect.address)
+            lib.rtcSetGeometryOccludedFunction(geometry, user_spheres.sphere_occluded.address)
             # A "low" scene builds each geometry on its own with the geometry's quality: the
             # same "low" makes that Embree's Morton builder. A movable one is built once (SAH)
             # and refitted on each commit of the geometry after.

@@ -40,9 +40,10 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from numba import carray, cfunc, njit, prange, types
+from numba import carray, njit, prange, types
 
 from embree_rt.compiled import pointers
+from embree_rt.compiled.callbacks import on_first_use
 from embree_rt.compiled.work_split import chunk_scratch, chunk_span, threads_for
 from embree_rt.embree.kernels import (
     FEATURE_FLAG_ALL,
@@ -106,9 +107,10 @@ CHUNK = 64  # rays per parallel iteration
 _FILTER_SIGNATURE = types.void(types.uintp)
 
 
-@cfunc(_FILTER_SIGNATURE, nopython=True, cache=True)
-def _record_and_reject(address):
-    """Argument filter: record each candidate hit in the context's buffers, then reject it."""
+@on_first_use(_FILTER_SIGNATURE, nopython=True, cache=True)
+def record_and_reject(address):
+    """Argument filter: record each candidate hit in the context's buffers, then reject it
+    (``prepare_scratch`` takes its ``address``)."""
     args = carray(pointers.words64(address), 6)
     n = np.int64(args[FILTER_N] & 0xFFFFFFFF)
     valid = carray(pointers.ints(args[FILTER_VALID]), n)
@@ -159,9 +161,6 @@ def _record_and_reject(address):
         u_buffer[slot] = hit[HITN_U * n + lane]
         v_buffer[slot] = hit[HITN_V * n + lane]
         cos_buffer[slot] = abs(gx * dx + gy * dy + gz * dz) / norms if norms > 0 else 0.0
-
-
-FILTER_ADDRESS = _record_and_reject.address
 
 
 @njit(inline="always")
@@ -317,5 +316,5 @@ def all_hits(
     hits = HitBuffers(*(array[:n] for array in out))
     if n:
         numba.set_num_threads(threads_for(n, threads))
-        _all_hits(scene, FILTER_ADDRESS, rays, hits)
+        _all_hits(scene, record_and_reject.address, rays, hits)
     return hits

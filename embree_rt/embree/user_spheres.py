@@ -1,5 +1,6 @@
 """Analytic spheres as Embree user geometry, with bounds / intersect / occluded callbacks that
-numba compiles to machine code (``@cfunc``): Embree calls them with no Python and no GIL.
+numba compiles to machine code (``@cfunc``, on the first BVH of user spheres:
+``compiled.callbacks``): Embree calls them with no Python and no GIL.
 
 On this machine they trace 1.3–1.9× faster than Embree's own ``SPHERE_POINT`` primitive
 (README, "Traversal alone"), because Embree's point spheres pay for features (ray masks,
@@ -44,9 +45,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import carray, cfunc, njit, types
+from numba import carray, njit, types
 
 from embree_rt.compiled import pointers
+from embree_rt.compiled.callbacks import on_first_use
 from embree_rt.embree.kernels import (
     HIT_GEOM_ID,
     HIT_INST_ID,
@@ -65,8 +67,8 @@ from embree_rt.embree.kernels import (
 _CALLBACK = types.void(types.uintp)
 
 
-@cfunc(_CALLBACK, nopython=True, cache=True)
-def _bounds(address):
+@on_first_use(_CALLBACK, nopython=True, cache=True)
+def sphere_bounds(address):
     args = carray(pointers.words64(address), 3)
     prim = args[1] & 0xFFFFFFFF
     sphere = carray(pointers.floats(carray(pointers.words64(args[0]), 2)[0] + 16 * prim), 4)
@@ -165,8 +167,8 @@ def _unpack(address):
     )
 
 
-@cfunc(_CALLBACK, nopython=True, cache=True)
-def _intersect(address):
+@on_first_use(_CALLBACK, nopython=True, cache=True)
+def sphere_intersect(address):
     args, n, user, slot, valid, cx, cy, cz, r = _unpack(address)
     geom_id = args[5] >> 32
     context = carray(pointers.words32(args[3]), 2)
@@ -201,8 +203,8 @@ def _intersect(address):
         words[HIT_INST_PRIM_ID * n + lane] = context[1]
 
 
-@cfunc(_CALLBACK, nopython=True, cache=True)
-def _occluded(address):
+@on_first_use(_CALLBACK, nopython=True, cache=True)
+def sphere_occluded(address):
     args, n, _, _, valid, cx, cy, cz, r = _unpack(address)
     floats = carray(pointers.floats(args[4]), 12 * n)
     for lane in range(n):
@@ -211,8 +213,3 @@ def _occluded(address):
         t = _nearest_root(floats, n, lane, cx, cy, cz, r, False)
         if not math.isnan(t):
             floats[RAY_TFAR * n + lane] = -np.inf
-
-
-BOUNDS_CALLBACK = _bounds.address
-INTERSECT_CALLBACK = _intersect.address
-OCCLUDED_CALLBACK = _occluded.address

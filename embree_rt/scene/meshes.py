@@ -22,12 +22,11 @@ from embree_rt.scene.gltf_materials import (
     metallic_roughness_material,
 )
 from embree_rt.scene.mesh_companions import candidate_paths
+from embree_rt.scene.mesh_formats import MESH_SUFFIXES
 from embree_rt.scene.obj import check_obj_files
 from embree_rt.scene.paths import unreadable_problem
 from embree_rt.scene.ply import with_strips
 from embree_rt.textures import DEFAULT_SAMPLER, Sampler, texels_from_image
-
-MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
 
 def mesh_parts(

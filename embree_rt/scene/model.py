@@ -381,7 +381,7 @@ class Scene:
     def stage_particles(self, floor: bool = True) -> None:
         """Camera, lights and floor framed on the spheres and curves (a box, bonds), as a mesh
         file's are."""
-        from embree_rt.scene.model_file import stage_spheres
+        from embree_rt.scene.staging import stage_spheres
 
         centers, radii = self.sphere_centers, self.sphere_radii
         if self.curves:
@@ -402,7 +402,7 @@ class Scene:
         return scene
 
     def _stage(self, staging, floor: bool) -> None:
-        """Camera, lights and floor from a ``model_file.Staging``: its first view the camera
+        """Camera, lights and floor from a ``staging.Staging``: its first view the camera
         rule accepts (``camera_problem``), a render as wide as the file camera's aspect."""
         from embree_rt.scene.errors import warn_input
 

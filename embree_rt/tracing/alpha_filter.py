@@ -20,9 +20,10 @@ geometry the ray and hit are in the mesh's own space). Its per-geometry data is 
 from __future__ import annotations
 
 import numpy as np
-from numba import carray, cfunc, njit, types
+from numba import carray, njit, types
 
 from embree_rt.compiled import pointers
+from embree_rt.compiled.callbacks import on_first_use
 from embree_rt.embree import GeometryFilter
 from embree_rt.embree.kernels import RAY_DIR
 from embree_rt.embree.multihit import (
@@ -167,12 +168,12 @@ def _filter(address, shadow):
 _SIGNATURE = types.void(types.uintp)
 
 
-@cfunc(_SIGNATURE, nopython=True, cache=True)
+@on_first_use(_SIGNATURE, nopython=True, cache=True)
 def _intersect_filter(address):
     _filter(address, False)
 
 
-@cfunc(_SIGNATURE, nopython=True, cache=True)
+@on_first_use(_SIGNATURE, nopython=True, cache=True)
 def _occluded_filter(address):
     _filter(address, True)
 

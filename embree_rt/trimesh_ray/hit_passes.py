@@ -1354,6 +1354,11 @@ def crossing_parity(
         with parallel_region:
             numba.set_num_threads(threads_for(n, bvh.threads))
             _crossing_parity(
-                bvh.committed_scene(), multihit.FILTER_ADDRESS, origins, directions, screen, parity
+                bvh.committed_scene(),
+                multihit.record_and_reject.address,
+                origins,
+                directions,
+                screen,
+                parity,
             )
     return parity

@@ -52,9 +52,10 @@ from typing import NamedTuple
 import numba
 import numpy as np
 import trimesh
-from numba import carray, cfunc, njit, prange
+from numba import carray, njit, prange
 from trimesh import caching
 
+from embree_rt.compiled.callbacks import on_first_use
 from embree_rt.compiled.pointers import doubles, floats, words64
 from embree_rt.compiled.work_split import chunk_count, chunk_span, parallel_region, threads_for
 from embree_rt.embree import BVH, point_query
@@ -180,7 +181,7 @@ def closest_on_triangle(px, py, pz, t):
 
 
 # error_model="numpy": no Python exception can leave a callback Embree calls
-@cfunc(point_query.CALLBACK_SIGNATURE, nopython=True, cache=True, error_model="numpy")
+@on_first_use(point_query.CALLBACK_SIGNATURE, nopython=True, cache=True, error_model="numpy")
 def _visit(address):
     """Embree's point query callback: the candidate's float64 closest point, kept when within
     the tie tolerance of the best so far; a new best prunes the kept ones and shrinks the

@@ -60,7 +60,7 @@ def served_scene(path: Path) -> tuple[Scene, dict]:
     ``[[particles]]`` or ``[[meshes]]`` entry beside that camera, lights and floor."""
     from embree_rt.scene import load_scene
     from embree_rt.scene.loader import read_document
-    from embree_rt.scene.meshes import MESH_SUFFIXES
+    from embree_rt.scene.mesh_formats import MESH_SUFFIXES
     from embree_rt.scene.particles.read import is_particle_file
     from embree_rt.scene.writer import look_document
 
