@@ -60,6 +60,18 @@ class HemisphereFrames(NamedTuple):
     normal: np.ndarray
 
 
+class HemisphereQuery(NamedTuple):
+    """Ambient occlusion's n = k * samples rays, one occlusion batch: ray r from the point
+    ``points[:, r // samples]`` ((3, k) float32) along ``local[:, r]`` ((3, n) float32 unit)
+    turned by that point's ``frames`` into ``t x + b y + n z``, normalised in float32; each
+    blocked by what lies within ``distance`` (float, inf: any)."""
+
+    points: np.ndarray
+    frames: HemisphereFrames
+    local: np.ndarray
+    distance: float
+
+
 def orthonormal_frames(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two (3, k) float32 unit tangents ``t``, ``b`` with (t, b, n) right-handed and
     orthonormal for the (3, k) float32 unit ``normal`` columns (Duff et al. 2017's branchless
@@ -115,11 +127,12 @@ def open_shares(
     """(k,) float32 open share of the hemisphere over each of the k ``points`` (3, k) float32
     (already off their surfaces) about the unit ``normal`` (3, k) float32 (facing the side the
     point is seen from), ``ao`` an ``AmbientOcclusion`` with samples > 0: its rays in one
-    occlusion batch through ``occluded_hemispheres(points, frames, local, distance)`` (the
-    tracer's, ``Tracer.occluded_hemispheres`` -> (k * samples,) bool), the directions of
+    occlusion batch through ``occluded_hemispheres(HemisphereQuery)`` (the tracer's,
+    ``Tracer.occluded_hemispheres`` -> (k * samples,) bool), the directions of
     ``cosine_local_directions`` at the (k,) int64 camera ``sample_index``, ``seed`` and
     ``bounce`` (0: camera rays' hits) about the ``HemisphereFrames`` of ``orthonormal_frames``."""
     samples = ao.samples
     local = cosine_local_directions(sample_index, samples, seed, bounce)
     frames = HemisphereFrames(*orthonormal_frames(normal), normal)
-    return open_share(occluded_hemispheres(points, frames, local, float(ao.distance)), samples)
+    rays = HemisphereQuery(points, frames, local, float(ao.distance))
+    return open_share(occluded_hemispheres(rays), samples)

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from embree_rt.ambient_occlusion import HemisphereFrames
+from embree_rt.ambient_occlusion import HemisphereQuery
 from embree_rt.closing import Closing
 from embree_rt.compiled.camera_rays import CameraRays
 from embree_rt.embree import BVH, spheres_in_spatial_order
@@ -611,20 +611,11 @@ class SceneGeometry(Closing):
         (3, n) float32 at ``rows`` (k,) int and ``target`` (3,): ``segments.occluded_toward``."""
         return segments.occluded_toward(self.bvh, points, rows, target, self.labels.plane_y)
 
-    def occluded_hemispheres(
-        self,
-        points: np.ndarray,
-        frames: HemisphereFrames,
-        local: np.ndarray,
-        distance: float,
-    ) -> np.ndarray:
-        """(n,) bool: whether any surface, floor included, lies within ``distance`` (inf: any)
-        on each of ambient occlusion's n rays, made inside the query from the ``points`` (3, k)
-        float32, their ``frames`` and the rays' ``local`` directions (3, n) float32:
-        ``hemisphere.occluded_hemispheres``."""
-        return hemisphere.occluded_hemispheres(
-            self.bvh, points, frames, local, distance, self.labels.plane_y
-        )
+    def occluded_hemispheres(self, rays: HemisphereQuery) -> np.ndarray:
+        """(n,) bool: whether any surface, floor included, lies within ``rays.distance`` (inf:
+        any) on each of ambient occlusion's n ``rays`` (``HemisphereQuery``), made inside the
+        query: ``hemisphere.occluded_hemispheres``."""
+        return hemisphere.occluded_hemispheres(self.bvh, rays, self.labels.plane_y)
 
     def toward_lights(
         self,

@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from embree_rt import shading
-from embree_rt.ambient_occlusion import HemisphereFrames
+from embree_rt.ambient_occlusion import HemisphereQuery
 from embree_rt.compiled.camera_rays import CameraRays, sample_rays
 from embree_rt.geometry import SurfaceHits
 
@@ -63,18 +63,11 @@ class Tracer(Protocol):
         the ``points`` (3, n) float32 at ``rows`` (k,) int64 to ``target`` (3,)."""
         ...
 
-    def occluded_hemispheres(
-        self,
-        points: np.ndarray,
-        frames: HemisphereFrames,
-        local: np.ndarray,
-        distance: float,
-    ) -> np.ndarray:
-        """(n,) bool: whether any surface, the floor included, lies within ``distance`` (inf:
-        any) on each of n = k * samples rays, one batch of ambient occlusion's: ray r from
-        ``points[:, r // samples]`` ((3, k) float32) along ``local[:, r]`` ((3, n) float32
-        unit) turned by that point's ``frames`` (``HemisphereFrames``) into ``t x + b y +
-        n z``, normalised in float32. A tracer that cannot answer them (bricks) raises
+    def occluded_hemispheres(self, rays: HemisphereQuery) -> np.ndarray:
+        """(n,) bool: whether any surface, the floor included, lies within ``rays.distance``
+        (inf: any) on each of ambient occlusion's n = k * samples ``rays``
+        (``HemisphereQuery``: their points, frames and local directions), each direction
+        formed in float32 as it is traced. A tracer that cannot answer them (bricks) raises
         ``NotImplementedError``."""
         ...
 

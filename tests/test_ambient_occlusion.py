@@ -20,6 +20,7 @@ from embree_rt import Camera, PointLight, Scene, render
 from embree_rt.ambient_occlusion import (
     AmbientOcclusion,
     HemisphereFrames,
+    HemisphereQuery,
     cosine_local_directions,
     open_shares,
     orthonormal_frames,
@@ -108,7 +109,7 @@ def test_the_query_answers_what_embree_answers_for_the_rays_numpy_forms(distance
         expected |= (t > 0) & (t <= np.float32(distance))
         local = cosine_local_directions(index, samples, seed=5)
         frames = HemisphereFrames(*orthonormal_frames(normal), normal)
-        blocked = geometry.occluded_hemispheres(points, frames, local, distance)
+        blocked = geometry.occluded_hemispheres(HemisphereQuery(points, frames, local, distance))
     np.testing.assert_array_equal(blocked, expected)
     assert 0.05 < blocked.mean() < 0.95  # both answers occur
 

@@ -22,7 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
-from embree_rt.ambient_occlusion import HemisphereFrames
+from embree_rt.ambient_occlusion import HemisphereQuery
 from embree_rt.bricks.brick import Brick, BrickHits, brick_sphere_mode
 from embree_rt.bricks.contents import scene_brick, without_objects
 from embree_rt.bricks.nearest import nearest_over_bricks
@@ -121,13 +121,7 @@ class BrickSet(RaysInNumPy, Closing):
         brick blocks the segment from each ``points[:, rows]`` ((3, n) float32) to ``target``."""
         return self.occluded_toward_each(points, [rows], np.reshape(target, (1, 3)))[0]
 
-    def occluded_hemispheres(
-        self,
-        points: np.ndarray,
-        frames: HemisphereFrames,
-        local: np.ndarray,
-        distance: float,
-    ) -> np.ndarray:
+    def occluded_hemispheres(self, rays: HemisphereQuery) -> np.ndarray:
         """Refused: ambient occlusion's occlusion rays are not routed over bricks (the command
         refuses ``--ao`` with bricks before anything is built)."""
         raise NotImplementedError(

@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.ambient_occlusion import HemisphereFrames
+from embree_rt.ambient_occlusion import HemisphereQuery
 from embree_rt.compiled.work_split import chunk_scratch, chunk_span
 from embree_rt.embree import BVH
 from embree_rt.embree.kernels import (
@@ -114,20 +114,16 @@ def occluded_hemispheres_parallel(query, rays, blocked):
 
 
 def occluded_hemispheres(
-    bvh: BVH,
-    points: np.ndarray,
-    frames: HemisphereFrames,
-    local: np.ndarray,
-    distance: float,
-    plane_y: float | None = None,
+    bvh: BVH, query: HemisphereQuery, plane_y: float | None = None
 ) -> np.ndarray:
     """(n,) bool: whether anything in ``bvh`` (with ``plane_y``, the ground plane y = plane_y
-    too) lies within ``distance`` (inf: any) on each of n = k * samples rays: ray r from
-    point ``points[:, r // samples]`` ((3, k) float32) along ``local[:, r]`` ((3, n) float32,
-    unit) turned into the world by that point's ``frames`` (``HemisphereFrames``) and
-    normalised in float32; traced in the BVH's packets, as ``BVH.occluded`` traces them
-    (single rays were no faster on a 1e6-sphere scene, measured on this project's machine,
-    and packets keep the answers those of ``BVH.occluded``)."""
+    too) lies within ``query.distance`` (inf: any) on each of the n = k * samples rays of
+    ``query`` (``HemisphereQuery``: ray r from point ``points[:, r // samples]`` ((3, k)
+    float32) along ``local[:, r]`` ((3, n) float32, unit) turned into the world by that point's
+    ``frames`` and normalised in float32); traced in the BVH's packets, as ``BVH.occluded``
+    traces them (single rays were no faster on a 1e6-sphere scene, measured on this project's
+    machine, and packets keep the answers those of ``BVH.occluded``)."""
+    points, frames, local, distance = query.points, query.frames, query.local, query.distance
     points = np.ascontiguousarray(points, np.float32)
     k = points.shape[1]
     local = np.ascontiguousarray(local, np.float32)
