@@ -11,9 +11,10 @@ The seed article's recursion ``color = local·(1−r) + r·trace(reflected)`` (a
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import CancelledError, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -164,6 +165,11 @@ class Integrator(Closing):
     ``tracer`` replaces the BVH: intersection and occlusion come from it (closed with the
     integrator), shading stays here; ``spheres`` is then unused.
 
+    ``cancelled`` is set when a render is abandoned (Ctrl-C, an error): its batches not yet
+    begun are dropped, and a tracer given the same event (bricks waiting on their workers)
+    stops its waits, so that the render ends now rather than once every batch has. It is
+    cleared as each render begins: one render at a time.
+
     The scene is first held to a scene file's limits (``Scene.check``): a
     value no file could hold, a light of intensity 1e39 say, raises the ``SceneError`` the file
     would (a ValueError) instead of putting NaN in float32 shading and the image."""
@@ -177,12 +183,14 @@ class Integrator(Closing):
         batch_size: int = DEFAULT_BATCH_SIZE,
         tracer: Tracer | None = None,
         movable: bool = False,
+        cancelled: threading.Event | None = None,
     ) -> None:
         scene.check()
         if batch_size < 1:
             raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
         self.scene = scene
         self.batch_size = int(batch_size)
+        self.cancelled = threading.Event() if cancelled is None else cancelled
         # Parallel over batches: each worker traces and shades its own batch, calling Embree
         # through single-threaded kernels, so NumPy shading and traversal fill every core.
         self.workers = worker_count(threads)
@@ -236,12 +244,15 @@ class Integrator(Closing):
         batches = batch_ranges(total, self.batch_size, spp, self.workers)
 
         def run(batch: tuple[int, int]) -> BatchWork:
+            if self.cancelled.is_set():  # begun as the render was being abandoned
+                raise CancelledError
             return self.trace_batch(frame, spp, seed, max_depth, *batch)
 
         began = time.perf_counter()
         # Workers run batches side by side (NumPy's large array operations and the Embree kernels
         # release the GIL); two more batches per worker are queued so that none waits for the
         # oldest batch to finish before starting the next.
+        self.cancelled.clear()
         pool = ThreadPoolExecutor(max_workers=self.workers)
         try:
             done = 0
@@ -257,6 +268,9 @@ class Integrator(Closing):
                 stats.render_s = time.perf_counter() - began
                 if progress is not None:
                     progress(done, total, stats)
+        except BaseException:
+            self.cancelled.set()
+            raise
         finally:
             # On Ctrl-C or an error, drop the batches not yet started instead of finishing them.
             pool.shutdown(wait=True, cancel_futures=True)

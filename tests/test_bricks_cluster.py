@@ -20,6 +20,7 @@ import subprocess
 import sys
 import threading
 import time
+from concurrent.futures import CancelledError
 from pathlib import Path
 
 import numpy as np
@@ -118,6 +119,48 @@ def test_a_worker_killed_mid_render_changes_no_pixel(cluster) -> None:  # noqa: 
         renderer.release()
     assert_same_image(renderer, image, rt.render(scene, **SMALL).image)
     client.wait_for_workers(2, timeout=TIMEOUT_S)
+
+
+def test_an_abandoned_render_ends_the_bricks_waits_and_the_next_render_is_whole(cluster) -> None:  # noqa: F811
+    _, client = cluster
+    scene = rt.random_field(20_000, seed=4)
+    settings = scene.render.with_overrides(**SMALL)
+    renderer = bounded(bc.PartitionedRenderer, scene, client, partition=2, batch_size=1024)
+
+    class AbandonedError(Exception):
+        pass
+
+    def abandon(state: rd.ClusterProgress) -> None:
+        if state.done:
+            raise AbandonedError
+
+    try:
+        with pytest.raises(AbandonedError):
+            bounded(renderer.render, settings, scene.camera, abandon)
+        # the integrator's event, shared with the bricks: a query now raises, waiting for none
+        assert renderer.bricks.cancelled is renderer.integrator.cancelled
+        assert renderer.bricks.cancelled.is_set()
+        with pytest.raises(CancelledError):
+            renderer.bricks.build()
+        image = bounded(renderer.render, settings, scene.camera)  # cleared as it begins
+    finally:
+        renderer.release()
+    assert_same_image(renderer, image, rt.render(scene, **SMALL).image)
+
+
+def test_waiting_for_workers_ends_once_cancelled_not_at_its_timeout() -> None:
+    cancelled = threading.Event()
+    with (
+        distributed.LocalCluster(n_workers=0, processes=False, dashboard_address=None) as local,
+        distributed.Client(local) as client,
+    ):
+        threading.Timer(0.5, cancelled.set).start()
+        began = time.monotonic()
+        with pytest.raises(CancelledError):
+            bc.live_workers(client, 60.0, cancelled)
+        assert time.monotonic() - began < 30  # not the 60 s timeout
+        with pytest.raises(rd.ClusterError, match=r"no workers .* after waiting 0\.5 s"):
+            bc.live_workers(client, 0.5)
 
 
 def test_bricks_too_big_for_the_workers_memory_limits_are_refused_up_front() -> None:

@@ -26,6 +26,7 @@ import os
 import threading
 import time
 from collections.abc import Sequence
+from concurrent.futures import CancelledError
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -196,7 +197,11 @@ class DaskBricks:
     ``direct_to_workers``, restored on ``close``): through the scheduler, every ray and hit
     would cross twice, and the scheduler would copy them all (a 1e7 field over 2 bricks took
     25% more CPU and 28% more time a render that way). The client must reach the workers, as
-    it must for Dask's direct gathers; a brick no worker answers is an error, not a loop."""
+    it must for Dask's direct gathers; a brick no worker answers is an error, not a loop.
+
+    Once ``cancelled`` is set (the render using the bricks abandoned: ``Integrator``'s event),
+    every query waiting on a worker raises ``CancelledError`` instead of waiting on: the
+    workers a Ctrl-C ended would otherwise be waited for up to ``no_workers_timeout_s``."""
 
     def __init__(
         self,
@@ -205,11 +210,13 @@ class DaskBricks:
         plan: BrickPlan,
         assignment: dict[int, str],
         no_workers_timeout_s: float = NO_WORKERS_TIMEOUT_S,
+        cancelled: threading.Event | None = None,
     ) -> None:
         self.client = client
         self.source = source
         self.plan = plan
         self.no_workers_timeout_s = no_workers_timeout_s
+        self.cancelled = threading.Event() if cancelled is None else cancelled
         self.moves = 0
         self._lock = threading.Lock()
         self.placed = {index: self._place(index, worker) for index, worker in assignment.items()}
@@ -274,6 +281,7 @@ class DaskBricks:
                 placed = self.placed[index]
             if placed.actor is not None:
                 return placed
+            self._raise_if_cancelled()
             try:
                 actor = placed.future.result(timeout=POLL_S)
             except (TimeoutError, distributed.TimeoutError):
@@ -304,6 +312,7 @@ class DaskBricks:
             placed, call = calls[job]
             unreachable = 0
             while True:
+                self._raise_if_cancelled()
                 try:
                     results[job] = call.result(timeout=POLL_S)
                     break
@@ -343,12 +352,20 @@ class DaskBricks:
         return True
 
     def _live_workers(self) -> dict[str, int]:
-        return live_workers(self.client, self.no_workers_timeout_s)
+        return live_workers(self.client, self.no_workers_timeout_s, self.cancelled)
+
+    def _raise_if_cancelled(self) -> None:
+        if self.cancelled.is_set():
+            raise CancelledError("the render using the bricks was abandoned")
 
 
-def live_workers(client: distributed.Client, timeout_s: float) -> dict[str, int]:
+def live_workers(
+    client: distributed.Client, timeout_s: float, cancelled: threading.Event | None = None
+) -> dict[str, int]:
     """The workers present (address: threads), waiting up to ``timeout_s`` while there are
-    none; then ``ClusterError``."""
+    none; then ``ClusterError``. Once ``cancelled`` is set, ``CancelledError`` instead of
+    waiting on."""
+    cancelled = threading.Event() if cancelled is None else cancelled
     deadline = time.perf_counter() + timeout_s
     while not (workers := client.nthreads()):
         if time.perf_counter() > deadline:
@@ -356,7 +373,8 @@ def live_workers(client: distributed.Client, timeout_s: float) -> dict[str, int]
                 f"{client.scheduler.address}: the cluster has no workers for the bricks after "
                 f"waiting {timeout_s:g} s"
             )
-        time.sleep(POLL_S)
+        if cancelled.wait(POLL_S):
+            raise CancelledError("the render using the bricks was abandoned")
     return workers
 
 
@@ -403,12 +421,20 @@ class PartitionedRenderer(FrameRenderer):
         }
         require_bricks_fit(plan, kind, assignment, limits)
         source = client.scatter(scene, broadcast=True, hash=False) if kind == "held" else scene
+        # set by the integrator when it abandons a render: the bricks' waits end with it
+        cancelled = threading.Event()
         try:
-            self.bricks = DaskBricks(client, source, plan, assignment, no_workers_timeout_s)
+            self.bricks = DaskBricks(
+                client, source, plan, assignment, no_workers_timeout_s, cancelled
+            )
             bounds = self.bricks.build()
             self.brick_set = BrickSet(self.scene, bounds, self.bricks)
             self.integrator = Integrator(
-                self.scene, threads=threads, batch_size=batch_size, tracer=self.brick_set
+                self.scene,
+                threads=threads,
+                batch_size=batch_size,
+                tracer=self.brick_set,
+                cancelled=cancelled,
             )
         except BaseException:
             self.release()

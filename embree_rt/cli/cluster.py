@@ -146,12 +146,16 @@ def tasks_or_bricks(distributed, job: Job, made, client):
 @contextmanager
 def quiet_dask() -> Iterator[None]:
     """Dask's own log lines off the command's stderr: workers starting and stopping, and the
-    errors its threads log as a signal ends the workers and the command (connections reset):
-    a failure that matters reaches the command as an exception of the client's calls."""
-    logger = logging.getLogger("distributed")
-    level = logger.level
-    logger.setLevel(logging.CRITICAL + 1)
+    errors its threads log as a signal ends the workers and the command (connections reset),
+    Tornado's among them (Dask's ``sync`` cancels the call a Ctrl-C cut from a callback on its
+    loop, which fails when the cut came before the call began, and Tornado logs that): a
+    failure that matters reaches the command as an exception of the client's calls."""
+    loggers = [logging.getLogger(name) for name in ("distributed", "tornado.application")]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL + 1)
     try:
         yield
     finally:
-        logger.setLevel(level)
+        for logger, level in zip(loggers, levels, strict=True):
+            logger.setLevel(level)
