@@ -231,8 +231,6 @@ def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path
     """trimesh (and SciPy's spatial modules behind it) take about a second to import: a scene of
     spheres loads, renders and saves without them, so ``embree-rt random`` starts that much
     sooner. Run in a fresh interpreter, as the command is."""
-    import subprocess
-    import sys
 
     script = (
         "import sys\n"
@@ -244,6 +242,16 @@ def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path
         "assert code == 0, code\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] == 'trimesh'))\n"
     )
+    assert printed_by(script) == "[]"
+    assert (tmp_path / "out.png").is_file() and (tmp_path / "three.png").is_file()
+
+
+def printed_by(script: str) -> str:
+    """What the Python ``script`` prints, run in a fresh interpreter from the checkout (as the
+    command runs), after checking it exits 0."""
+    import subprocess
+    import sys
+
     done = subprocess.run(
         [sys.executable, "-c", script],
         cwd=PACKAGE.parent,
@@ -252,8 +260,7 @@ def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path
         check=False,
     )
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "[]"
-    assert (tmp_path / "out.png").is_file() and (tmp_path / "three.png").is_file()
+    return done.stdout.strip()
 
 
 def test_a_particle_file_renders_without_trimesh_or_matplotlib(tmp_path: Path) -> None:
@@ -262,8 +269,6 @@ def test_a_particle_file_renders_without_trimesh_or_matplotlib(tmp_path: Path) -
     matplotlib: meshes and colormaps are for the paths that read meshes or colour by a
     property. (``scipy.linalg`` is numba's own: its first kernel checks for BLAS through it.)
     Run in a fresh interpreter, as the command is."""
-    import subprocess
-    import sys
 
     import gsd.hoomd
     import numpy as np
@@ -286,13 +291,5 @@ def test_a_particle_file_renders_without_trimesh_or_matplotlib(tmp_path: Path) -
         "heavy = ('trimesh', 'matplotlib', 'scipy.spatial', 'scipy.optimize', 'scipy.ndimage')\n"
         "print(sorted(m for m in sys.modules if m.startswith(heavy)))\n"
     )
-    done = subprocess.run(
-        [sys.executable, "-c", script],
-        cwd=PACKAGE.parent,
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "[]"
+    assert printed_by(script) == "[]"
     assert (tmp_path / "out.png").is_file()
