@@ -6,9 +6,7 @@ One server (on a free port, stopped with Ctrl-C at the end) serves every test in
 
 from __future__ import annotations
 
-import base64
 import http.client
-import io
 import json
 import subprocess
 import sys
@@ -21,7 +19,15 @@ from PIL import Image
 from embree_rt.scene import load_scene
 from embree_rt.web.messages import MAX_MESSAGE_BYTES, layout_2d
 from embree_rt.web.trace2d import INTERNAL, trace_layout
-from tests.web_harness import browser, running_server, screenshot, wait_until
+from tests.web_harness import (
+    browser,
+    canvas_image,
+    command_render,
+    psnr,
+    running_server,
+    screenshot,
+    wait_until,
+)
 
 SHOWCASE = Path(__file__).parent.parent / "scenes" / "showcase.toml"
 # Small enough that the preview converges and the full-size render finishes in seconds.
@@ -181,12 +187,6 @@ def _pass(page) -> str | None:
     return page.evaluate("document.getElementById('preview').dataset.pass || null")
 
 
-def _canvas_image(page) -> np.ndarray:
-    url = page.evaluate("document.getElementById('preview').toDataURL('image/png')")
-    data = base64.b64decode(url.split(",", 1)[1])
-    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"), np.float64)
-
-
 def _converged_after(
     page, frames: list, seen: int, kind: str, sent: bool = False, converge: bool = True
 ) -> dict:
@@ -213,11 +213,6 @@ def _converged_after(
     return frames[index - 1][1]
 
 
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = np.mean((a - b) ** 2)
-    return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
-
-
 def test_preview_converges_to_the_render_then_edits_restart_it(server, scene_file, page, tmp_path):
     received: list = []  # (sent?, message) in order, images left out
 
@@ -232,27 +227,8 @@ def test_preview_converges_to_the_render_then_edits_restart_it(server, scene_fil
     page.goto(server)
     wait_until(lambda: _pass(page) == "8/8", 60, "the preview to converge")
     width, height = page.evaluate("[preview.width, preview.height]")
-    shown = _canvas_image(page)
-    out = tmp_path / "render.png"
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "embree_rt",
-            "render",
-            str(scene_file),
-            "-o",
-            str(out),
-            "--width",
-            str(width),
-            "--height",
-            str(height),
-            "--quiet",
-        ],
-        check=True,
-        timeout=120,
-    )
-    rendered = np.asarray(Image.open(out).convert("RGB"), np.float64)
+    shown = canvas_image(page)
+    rendered = command_render(scene_file, width, height, tmp_path / "render.png")
     assert shown.shape == rendered.shape == (height, width, 3)
     quality = psnr(shown, rendered)
     print(f"preview {width}x{height} vs embree-rt render: PSNR {quality:.1f} dB")
@@ -266,7 +242,7 @@ def test_preview_converges_to_the_render_then_edits_restart_it(server, scene_fil
     page.mouse.click(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.93)
     dropped = _converged_after(page, received, seen, "dropped")
     assert dropped["placed"] and dropped["spheres"] == 7
-    assert psnr(_canvas_image(page), rendered) < 40  # the new sphere shows
+    assert psnr(canvas_image(page), rendered) < 40  # the new sphere shows
 
     # An orbit drag moves the camera.
     page.mouse.move(box["x"] + 100, box["y"] + 60)

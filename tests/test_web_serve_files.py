@@ -4,19 +4,23 @@ downloaded scene file names the particle file and renders the same scene."""
 
 from __future__ import annotations
 
-import base64
-import io
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from PIL import Image
 
 from embree_rt.scene import load_scene
 from embree_rt.scene.model import Scene
-from tests.web_harness import browser, running_server, wait_until
+from tests.web_harness import (
+    browser,
+    canvas_image,
+    command_render,
+    psnr,
+    running_server,
+    wait_until,
+)
 
 pytest.importorskip("MDAnalysis")
 VIEWPORT = {"width": 900, "height": 620}
@@ -34,17 +38,6 @@ def write_dump(path: Path) -> None:
         + "ITEM: ATOMS id type x y z\n"
         + rows
     )
-
-
-def canvas(page) -> np.ndarray:
-    url = page.evaluate("document.getElementById('preview').toDataURL('image/png')")
-    data = base64.b64decode(url.split(",", 1)[1])
-    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"), np.float64)
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = np.mean((a - b) ** 2)
-    return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
 
 
 def preview_against_render(path: Path, tmp_path: Path) -> Path | None:
@@ -67,32 +60,13 @@ def preview_against_render(path: Path, tmp_path: Path) -> Path | None:
                 f"{spp}/{spp}"
             )
         width, height = page.evaluate("[preview.width, preview.height]")
-        shown = canvas(page)
+        shown = canvas_image(page)
         with page.expect_download(timeout=10_000) as download:
             page.click("#download-scene")
         saved = tmp_path / "served.toml"
         download.value.save_as(saved)
         context.close()
-    out = tmp_path / "render.png"
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "embree_rt",
-            "render",
-            str(path),
-            "-o",
-            str(out),
-            "--width",
-            str(width),
-            "--height",
-            str(height),
-            "--quiet",
-        ],
-        check=True,
-        timeout=120,
-    )
-    rendered = np.asarray(Image.open(out).convert("RGB"), np.float64)
+    rendered = command_render(path, width, height, tmp_path / "render.png")
     assert shown.shape == rendered.shape == (height, width, 3)
     assert psnr(shown, rendered) >= 40  # the same scene: only the preview's sampling differs
     return saved

@@ -7,6 +7,7 @@ tests/test_web_browser.py``.
 
 from __future__ import annotations
 
+import base64
 import io
 import os
 import re
@@ -17,6 +18,9 @@ import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
+
+import numpy as np
+from PIL import Image
 
 CHROMIUM = "/usr/bin/chromium"
 START_TIMEOUT_S = 90  # a cold numba cache compiles every kernel before the server answers
@@ -100,3 +104,25 @@ def wait_until(condition, timeout: float, what: str, page=None):
             page.wait_for_timeout(20)
         else:
             time.sleep(0.02)
+
+
+def canvas_image(page) -> np.ndarray:
+    """(height, width, 3) float64 RGB of the page's preview canvas, as the browser drew it."""
+    url = page.evaluate("document.getElementById('preview').toDataURL('image/png')")
+    data = base64.b64decode(url.split(",", 1)[1])
+    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"), np.float64)
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """Peak signal-to-noise ratio in dB of two 8-bit-range images (inf where equal)."""
+    mse = np.mean((a - b) ** 2)
+    return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
+
+
+def command_render(path: Path, width: int, height: int, out: Path) -> np.ndarray:
+    """(height, width, 3) float64 RGB of ``embree-rt render path`` at ``width`` x ``height``,
+    run as a user runs it (a fresh process), written to ``out``."""
+    command = [sys.executable, "-m", "embree_rt", "render", str(path), "-o", str(out)]
+    command += ["--width", str(width), "--height", str(height), "--quiet"]
+    subprocess.run(command, check=True, timeout=120)
+    return np.asarray(Image.open(out).convert("RGB"), np.float64)
