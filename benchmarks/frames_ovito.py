@@ -43,6 +43,7 @@ from particles import (
     ovito_command,
     run,
     summary_parts,
+    turns,
 )
 
 STEP = 0.05  # each frame moves every particle by a normal step of this size, times the frame
@@ -95,13 +96,7 @@ def in_turns(
     sides: dict[str, Callable[[int], FramesRun]], repeats: int, frames: int, warm_up: bool = True
 ) -> dict:
     """One discarded run a side, then ``repeats`` turns; medians and per-turn ratios."""
-    for side in sides.values() if warm_up else ():
-        side(-1)
-    runs: dict[str, list[FramesRun]] = {name: [] for name in sides}
-    for turn in range(repeats):
-        for name, side in sides.items():
-            runs[name].append(side(turn))
-            print(f"  {name} turn {turn}: {runs[name][-1].seconds:.2f} s", file=sys.stderr)
+    runs = turns(sides, repeats, warm_up)
     out: dict = {}
     for name, done in runs.items():
         median = statistics.median(r.seconds for r in done)

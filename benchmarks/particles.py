@@ -56,7 +56,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 DENSITY = 0.8  # particles per unit volume: a Lennard-Jones liquid's, spheres of radius 0.5
 RADIUS = 0.5  # every particle's, in OVITO's scene and as embree_rt's --radius
@@ -300,16 +300,24 @@ def ovito_command(ovito_python: str, *args: object) -> list[str]:
     return [ovito_python, "-c", OVITO_SCRIPT, *(str(a) for a in args)]
 
 
-def in_turns(sides: dict[str, Callable[[int], Run]], repeats: int, warm_up: bool = True) -> dict:
-    """Each side run once, discarded, then ``repeats`` turns of every side in order: each
-    side's runs, medians and per-turn ratios to ``embree_rt`` (others' seconds / ours)."""
+def turns(sides: dict[str, Callable[[int], Any]], repeats: int, warm_up: bool = True) -> dict:
+    """Each side (called with its turn, -1 for the warm-up) run once and discarded unless not
+    ``warm_up``, then ``repeats`` turns of every side in order; each side's runs (objects with
+    ``seconds``) by name."""
     for side in sides.values() if warm_up else ():
         side(-1)
-    runs: dict[str, list[Run]] = {name: [] for name in sides}
+    runs: dict[str, list] = {name: [] for name in sides}
     for turn in range(repeats):
         for name, side in sides.items():
             runs[name].append(side(turn))
             print(f"  {name} turn {turn}: {runs[name][-1].seconds:.2f} s", file=sys.stderr)
+    return runs
+
+
+def in_turns(sides: dict[str, Callable[[int], Run]], repeats: int, warm_up: bool = True) -> dict:
+    """Each side run once, discarded, then ``repeats`` turns of every side in order: each
+    side's runs, medians and per-turn ratios to ``embree_rt`` (others' seconds / ours)."""
+    runs = turns(sides, repeats, warm_up)
     out: dict = {
         name: {
             "seconds": [round(r.seconds, 3) for r in done],
