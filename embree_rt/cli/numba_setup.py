@@ -4,8 +4,8 @@ for there is never asked.
 The first kernel a process loads, even from numba's disk cache, makes numba import its whole
 library of implementations, and one of them, ``numba.np.arraymath``, checks at its import
 whether a BLAS is there by importing ``scipy.linalg.cython_blas``: all of ``scipy.linalg``,
-and through SciPy's array-API layer ``numpy.f2py`` and ``numpy.testing``, a third of a
-second of a 1e6-particle render's fixed cost, only to decide whether ``np.correlate`` and
+and through SciPy's array-API layer ``numpy.f2py`` and ``numpy.testing`` (in CPU time about
+half of what importing NumPy and numba takes), only to decide whether ``np.correlate`` and
 ``np.convolve`` call ``np.dot``. ``import numba`` itself imports SciPy to check its version.
 No kernel of embree_rt calls ``np.correlate`` or ``np.convolve`` (``tests/test_imports.py``
 reads them all), so in the command's process numba is imported, and its implementations
