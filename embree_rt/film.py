@@ -30,7 +30,8 @@ GAMMA = 2.2
 # 1080p render of the 1e6-sphere field (docs/performance.md, "The output stage"): level 2 wrote
 # in 0.43x level 6's time a file 10% larger; 1 was no faster and larger still, 3 slower.
 # 8-bit PNGs are written by pypng, rows unfiltered, at this level: Pillow tries every PNG filter
-# on every row, which cost more than the compression (docs/performance.md, "The output stage").
+# on every row, which cost more than the compression (docs/performance.md, "The output stage";
+# benchmarks/png_writers.py).
 PNG_COMPRESS_LEVEL = 2
 # The compiled tone map runs spans of this many rows on Python threads, each taking the next
 # span as it comes free, below ``DISPLAY_SERIAL_CHANNELS`` on the calling thread alone. Not a
