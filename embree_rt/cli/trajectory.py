@@ -222,19 +222,26 @@ def render_video(
     args: argparse.Namespace, frames: range, staged: Scene, how: FrameRendering
 ) -> FrameCounts:
     """The frames of ``args.scene`` as one video at ``args.output`` (``video.VideoWriter``,
-    ``--fps``, ``--quality``), checked before any frame renders; an existing video is kept
-    unless ``--overwrite``."""
+    ``--fps``, ``--quality``), with the legend's JSON record beside it as an image has
+    (``film.legend_sidecar``), checked before any frame renders; an existing video or record
+    is kept unless ``--overwrite``."""
     from embree_rt.cli.checks import check_library, writing
     from embree_rt.cli.errors import UsageError
+    from embree_rt.film import Encoding, legend_sidecar
     from embree_rt.legend import draw_legend
+    from embree_rt.scene.paths import not_a_file_problem
     from embree_rt.scene.settings import apply_to_scene
     from embree_rt.video import VideoWriter, check_video
 
     path = Path(args.output)
     if args.bit_depth != 8:
         raise UsageError(f"--bit-depth: {path.suffix} frames are 8 bits a channel")
-    if path.exists() and not args.overwrite:
-        raise UsageError(f"-o: {path} exists (--overwrite to replace it)")
+    beside = legend_sidecar(path, Encoding(legend=staged.legend))
+    for target in [path, *(side for side, _ in beside)]:
+        if (problem := not_a_file_problem(target)) is not None:
+            raise UsageError(f"-o: {target}: {problem}")
+        if target.exists() and not args.overwrite:
+            raise UsageError(f"-o: {target} exists (--overwrite to replace it)")
     if not path.parent.is_dir():
         raise UsageError(f"-o: {path}: no directory {path.parent}")
     sized = copy.copy(staged)
@@ -248,7 +255,7 @@ def render_video(
     legend = staged.legend  # the first frame's, whose range colours every frame
 
     def make() -> FrameCounts:
-        with VideoWriter(path, args.fps, args.quality) as video:
+        with VideoWriter(path, args.fps, args.quality, beside) as video:
 
             def add(number: int, result) -> None:
                 pixels = result.to_srgb8()
