@@ -138,7 +138,7 @@ def prepared_frame(args: argparse.Namespace, number: int, staged: Scene | None) 
     """The scene of frame ``number`` of the particle file ``args.scene`` as the flags draw it,
     with the camera, lights and floor of ``staged`` (the first frame's) unless ``--follow``,
     and ``-D`` settings applied."""
-    from embree_rt.cli.particles import particle_scene
+    from embree_rt.cli.particles import frame_clear_of_legend, particle_scene
     from embree_rt.scene.settings import apply_to_scene
 
     frame_args = copy.copy(args)
@@ -149,6 +149,8 @@ def prepared_frame(args: argparse.Namespace, number: int, staged: Scene | None) 
     if not own_view:
         scene.camera, scene.lights, scene.floor = staged.camera, staged.lights, staged.floor
     apply_to_scene(scene, list(args.settings), str(args.scene))
+    if own_view and staged is not None:  # framed on its own, clear of the first's legend
+        frame_clear_of_legend(scene, staged.legend, args.settings)
     return scene
 
 
@@ -174,6 +176,14 @@ def render_trajectory(args: argparse.Namespace) -> None:
     first = copy.copy(args)
     first.frame = frames[0]
     staged = particle_scene(first)
+    if staged.legend is not None:  # framed clear of the legend at the frames' size
+        from embree_rt.cli.particles import frame_clear_of_legend
+        from embree_rt.scene.settings import apply_to_scene
+
+        sized = copy.copy(staged)
+        apply_to_scene(sized, list(args.settings), str(args.scene))
+        frame_clear_of_legend(sized, staged.legend, args.settings)
+        staged.camera = sized.camera
     if staged.legend is not None and staged.legend.is_bar and args.range is None:
         # One legend for every frame: each frame coloured on the range it shows, the first's.
         args = copy.copy(args)
@@ -285,7 +295,9 @@ def render_on_dask(
     from embree_rt.cli.job import where_of
 
     where = where_of(args)
-    view = Scene(camera=staged.camera, lights=staged.lights, floor=staged.floor)
+    view = Scene(
+        camera=staged.camera, lights=staged.lights, floor=staged.floor, legend=staged.legend
+    )
     on_worker = copy.copy(args)
     on_worker.scene = str(Path(args.scene).resolve())
     if args.topology is not None:
