@@ -133,3 +133,24 @@ def test_an_interrupted_video_leaves_its_record_as_it_was(tmp_path):
         video.add(np.zeros((8, 8, 3), np.uint8))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["v.gif", "v.legend.json"]
     assert record.read_text() == "new\n"
+
+
+@pytest.mark.parametrize("follow", [[], ["--follow"]])
+def test_a_trajectory_is_framed_clear_of_its_legend_as_a_still_is(tmp_path, follow):
+    """In a portrait image the framing moves clear of the legend's corner (the radiance with
+    --legend differs from that without, which only the camera can make), and a trajectory's
+    first frame, framed once or on its own, is the still of that frame (bitwise: the same code
+    renders the same scene on one machine)."""
+    dump = str(tmp_path / "d.lammpstrj")
+    write_heating_dump(tmp_path / "d.lammpstrj")
+    portrait = ["--color-by", "c_e", "--width", "64", "--height", "96", "--spp", "1", "--quiet"]
+    assert main(["render", dump, "-o", str(tmp_path / "key.npy"), "--legend", *portrait]) == 0
+    assert main(["render", dump, "-o", str(tmp_path / "plain.npy"), *portrait]) == 0
+    assert not np.array_equal(np.load(tmp_path / "key.npy"), np.load(tmp_path / "plain.npy"))
+    still = ["--frame", "0", "-o", str(tmp_path / "still.png"), "--legend"]
+    assert main(["render", dump, *still, *portrait]) == 0
+    frames = ["-o", str(tmp_path / "f_{frame}.png"), "--legend", *follow]
+    assert main(["render", dump, *frames, *portrait]) == 0
+    assert np.array_equal(
+        np.asarray(Image.open(tmp_path / "f_0.png")), np.asarray(Image.open(tmp_path / "still.png"))
+    )
