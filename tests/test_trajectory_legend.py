@@ -114,6 +114,12 @@ def test_a_videos_record_is_not_replaced_without_overwrite(tmp_path, capsys):
     assert main(["render", dump, "-o", str(tmp_path / "v.gif"), "--overwrite", *flags]) == 0
     assert json.loads(record.read_text())["legend"]["title"] == "c_e"
     assert (tmp_path / "v.gif").exists()
+    # a directory where the record goes is not replaced, --overwrite or not
+    (tmp_path / "w.legend.json").mkdir()
+    capsys.readouterr()
+    assert main(["render", dump, "-o", str(tmp_path / "w.gif"), "--overwrite", *flags]) == 2
+    assert "w.legend.json: is a directory" in capsys.readouterr().err
+    assert not (tmp_path / "w.gif").exists()
 
 
 def test_an_interrupted_video_leaves_its_record_as_it_was(tmp_path):
