@@ -74,10 +74,9 @@ def test_a_render_holds_no_more_at_depth_600_than_at_depth_6(renderer) -> None:
     peaks = {depth: peak_traced_bytes(renderer, depth) for depth in (6, 60, DEEPEST)}
     # Before samples were summed as added, the block kept every bounce's (3, 64) float32 and
     # (64,) int64 arrays: ~1.3 kB a bounce, 0.8 MB at depth 600 on this 8x8 image. With the
-    # type attribute cache filled first and ``integrator.HitRays`` no longer a NamedTuple
-    # (its ``_replace`` grew CPython's free list of 4-tuples by one a bounce), depth 600
-    # measured within -7..+4 kB of depth 6, numba's caches cold or warm; 32 kB is 55 bytes a
-    # bounce at depth 600, a twenty-fourth of that regression's.
+    # type attribute cache filled first (and ``integrator.HitRays`` a dataclass: see why
+    # there), depth 600 measured within -7..+4 kB of depth 6, numba's caches cold or warm;
+    # 32 kB is 55 bytes a bounce at depth 600, a twenty-fourth of that regression's.
     assert peaks[DEEPEST] <= peaks[6] + 32 * 1024, peaks
     assert peaks[60] <= peaks[6] + 32 * 1024, peaks
 
