@@ -572,14 +572,20 @@ def temp_path(target: Path) -> Path:
     return target.with_name(f".{target.name}.{secrets.token_hex(TEMP_TOKEN_HEX // 2)}.tmp")
 
 
-def write_atomically(files: list[tuple[Path, Callable[[BinaryIO], None]]]) -> None:
+def write_atomically(
+    files: list[tuple[Path, Callable[[BinaryIO], None]]],
+    written: list[tuple[Path, Path]] | None = None,
+) -> None:
     """Write each of ``files`` (target path, writer(binary handle)) all or nothing.
 
     Every file goes to a temp file in its target's directory; only once all are complete are
-    they renamed over their targets. On any failure, Ctrl-C included, the temp files are
-    removed and existing files at the targets are left as they were.
+    they renamed over their targets, and with them the files ``written`` (temp path, target
+    path) already complete under a temporary name (a video). On any failure, Ctrl-C included,
+    the temp files, those of ``written`` too, are removed and existing files at the targets
+    are left as they were.
     """
     temps: list[Path] = []
+    written = written or []
     try:
         for target, write in files:
             # A plain exclusive open(), not tempfile's: the umask then gives the image the usual
@@ -592,7 +598,9 @@ def write_atomically(files: list[tuple[Path, Callable[[BinaryIO], None]]]) -> No
                 write(handle)
         for temp, (target, _) in zip(temps, files, strict=True):
             os.replace(temp, target)
+        for temp, target in written:
+            os.replace(temp, target)
     except BaseException:
-        for temp in temps:
+        for temp in temps + [temp for temp, _ in written]:
             temp.unlink(missing_ok=True)
         raise

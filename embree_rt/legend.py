@@ -152,8 +152,22 @@ def legend_margin(image_height: int) -> int:
 def legend_room(legend: Legend, image_height: int) -> float:
     """The share of an image ``image_height`` tall that the legend and its margins take from
     its bottom (at most 0.9): what a framing keeps clear for it."""
-    room = legend_size(legend, image_height) + 2 * legend_margin(image_height)
-    return min(0.9, room / image_height)
+    return min(0.9, kept_rows(legend, image_height) / image_height)
+
+
+def kept_rows(legend: Legend, image_height: int) -> int:
+    """The rows the legend takes from the bottom of an image ``image_height`` tall with its
+    margins: one from the image's edge, one of clearance above it."""
+    return legend_size(legend, image_height) + 2 * legend_margin(image_height)
+
+
+def legend_box(legend: Legend, width: int, height: int) -> tuple[int, int]:
+    """(columns, rows): the box the legend and its margins take from the bottom-right corner
+    of an image ``width`` × ``height`` (the patch ``draw_legend`` draws there, one margin from
+    the image's edges and one of clearance from its top and left), at most the image."""
+    patch, _ = legend_patch(legend, legend_size(legend, height))
+    columns = patch.shape[1] + 2 * legend_margin(height)
+    return min(width, columns), min(height, kept_rows(legend, height))
 
 
 def legend_corner(shape: tuple[int, ...], patch_shape: tuple[int, ...]) -> tuple[int, int]:

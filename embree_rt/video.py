@@ -1,16 +1,21 @@
 """A sequence of frames as one video file: ``.mp4`` (H.264) and ``.webm`` (VP9) encoded by the
 ffmpeg that the imageio-ffmpeg wheel ships, ``.gif`` by Pillow. Written atomically: the frames
 go to a temporary file beside the target, renamed over it only once the video is complete, so
-an interrupted or failed run leaves no file (and an existing one as it was).
+an interrupted or failed run leaves no file (and an existing one as it was); files that go
+with the video (a legend's JSON record) are renamed with it, all or nothing.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
+from typing import BinaryIO
 
 import numpy as np
+
+from embree_rt.film import write_atomically
 
 VIDEO_SUFFIXES = (".mp4", ".webm", ".gif")
 DEFAULT_FPS = 24.0
@@ -51,13 +56,20 @@ def check_video(
 class VideoWriter:
     """``with VideoWriter(path, fps, quality) as video: video.add(pixels)`` for each (h, w, 3)
     uint8 sRGB frame, all of one size. The file appears at ``path`` when the block ends without
-    an error; otherwise nothing is left. ``quality`` 1..100 (None: ``DEFAULT_QUALITY``); a GIF
-    holds its frames (one byte a pixel, palette-quantised) until the end."""
+    an error, and with it the files ``beside`` it (target path, writer(binary handle), as
+    ``film.write_atomically`` takes them); otherwise none is left. ``quality`` 1..100 (None:
+    ``DEFAULT_QUALITY``); a GIF holds its frames (one byte a pixel, palette-quantised) until
+    the end."""
 
     def __init__(
-        self, path: str | os.PathLike, fps: float = DEFAULT_FPS, quality: int | None = None
+        self,
+        path: str | os.PathLike,
+        fps: float = DEFAULT_FPS,
+        quality: int | None = None,
+        beside: list[tuple[Path, Callable[[BinaryIO], None]]] | None = None,
     ) -> None:
         self.path = Path(path)
+        self.beside = list(beside or [])
         self.suffix = self.path.suffix.lower()
         self.fps = float(fps)
         self.quality = DEFAULT_QUALITY if quality is None else int(quality)
@@ -113,7 +125,7 @@ class VideoWriter:
                     loop=0,
                 )
             if kind is None and self.count:
-                os.replace(self.temp, self.path)
+                write_atomically(self.beside, written=[(self.temp, self.path)])
         finally:
             self.gif_frames = []
             self.temp.unlink(missing_ok=True)

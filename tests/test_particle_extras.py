@@ -19,6 +19,7 @@ from embree_rt.cli import main
 from embree_rt.particle_extras import EXTRA_OPTIONS, ParticleExtras, is_switch
 from embree_rt.scene.model import Scene
 from embree_rt.scene.particles.to_scene import extras_arguments
+from embree_rt.scene.views import clear_of_legend
 from embree_rt.scene.writer import look_document, plain_values
 
 SIZE = ["--width", "120", "--height", "90", "--spp", "1", "--quiet"]
@@ -65,9 +66,12 @@ def test_scene_file_keys_render_what_the_flags_render(tmp_path, keys, suffix):
     write_chain(tmp_path / "chain.gsd")
     assert main(["render", str(tmp_path / "chain.gsd"), "-o", str(tmp_path / "flags.png"),
                  *flags_of(keys), *SIZE]) == 0  # fmt: skip
-    # The camera, lights and floor the command frames these particles with, drawn as asked.
+    # The camera, lights and floor the command frames these particles with, drawn as asked:
+    # with a legend, the framing moved clear of its corner at the image's size.
     extras = ParticleExtras(**keys)
     framed = Scene.from_particles(tmp_path / "chain.gsd", **extras_arguments(extras))
+    framed.render.width, framed.render.height = int(SIZE[1]), int(SIZE[3])
+    framed.camera = clear_of_legend(framed, framed.legend)
     document = {**look_document(framed), "particles": [{"file": "chain.gsd", **keys}]}
     scene = tmp_path / f"s{suffix}"
     write = json.dumps if suffix == ".json" else tomli_w.dumps

@@ -181,6 +181,17 @@ def particle_scene(args: argparse.Namespace, stage: bool = True):
         raise InputError(f"{args.scene}: {error}") from None
 
 
+def frame_clear_of_legend(scene, legend, settings) -> None:
+    """A particle file's framed ``scene`` (its settings applied) with its camera moved so the
+    corner ``legend`` takes stays clear (``scene.views.clear_of_legend``); left as it is
+    without a legend, or where ``settings`` (``scene.settings.Setting``) place the camera."""
+    if legend is None or any(setting.key.split(".")[0] == "camera" for setting in settings):
+        return
+    from embree_rt.scene.views import clear_of_legend
+
+    scene.camera = clear_of_legend(scene, legend)
+
+
 def trajectory_range(path: str, text: str | None, count: int) -> range:
     """Frames ``A:B[:STEP]`` (B excluded; either end may be left out) or ``A`` of a file of
     ``count`` frames; ``ParticleFileError`` naming the file for a range past its end."""

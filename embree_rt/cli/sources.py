@@ -81,10 +81,11 @@ def make_scene(job: Job) -> MadeScene:
     if isinstance(source, RandomField):
         return generate_field(job, source, started)
     if isinstance(source, ParticleFile):
-        from embree_rt.cli.particles import particle_scene
+        from embree_rt.cli.particles import frame_clear_of_legend, particle_scene
 
         scene = particle_scene(source.flags)
         apply_to_scene(scene, settings, str(source.path))
+        frame_clear_of_legend(scene, scene.legend, settings)
         return MadeScene(scene, "load", time.perf_counter() - started, scene)
     raise TypeError(f"no scene is made from a {type(source).__name__}")
 
@@ -122,6 +123,10 @@ def staged(made: MadeScene, job: Job) -> MadeScene:
         scene.camera = standard_view(
             scene.camera, *bounds, staging.view, aspect, staging.orthographic, kept
         )
+        if not staging.orthographic:  # a perspective view moved clear of the legend's corner
+            from embree_rt.scene.views import clear_of_legend
+
+            scene.camera = clear_of_legend(scene, scene.legend)
     if staging.headlight:
         from embree_rt.scene.model import PointLight
 

@@ -218,7 +218,7 @@ def prepared_frame(args: argparse.Namespace, number: int, staged: Scene | None) 
     """The scene of frame ``number`` of the particle file ``args.scene`` as the flags draw it,
     with the camera, lights and floor of ``staged`` (the first frame's) unless ``--follow``,
     and ``-D`` settings applied."""
-    from embree_rt.cli.particles import particle_scene
+    from embree_rt.cli.particles import frame_clear_of_legend, particle_scene
     from embree_rt.scene.settings import apply_to_scene
 
     frame_args = copy.copy(args)
@@ -229,6 +229,8 @@ def prepared_frame(args: argparse.Namespace, number: int, staged: Scene | None) 
     if not own_view:
         scene.camera, scene.lights, scene.floor = staged.camera, staged.lights, staged.floor
     apply_to_scene(scene, list(args.settings), str(args.scene))
+    if own_view and staged is not None:  # framed on its own, clear of the first's legend
+        frame_clear_of_legend(scene, staged.legend, args.settings)
     return scene
 
 
@@ -254,6 +256,14 @@ def render_trajectory(args: argparse.Namespace) -> None:
     first = copy.copy(args)
     first.frame = frames[0]
     staged = particle_scene(first)
+    if staged.legend is not None:  # framed clear of the legend at the frames' size
+        from embree_rt.cli.particles import frame_clear_of_legend
+        from embree_rt.scene.settings import apply_to_scene
+
+        sized = copy.copy(staged)
+        apply_to_scene(sized, list(args.settings), str(args.scene))
+        frame_clear_of_legend(sized, staged.legend, args.settings)
+        staged.camera = sized.camera
     if staged.legend is not None and staged.legend.is_bar and args.range is None:
         # One legend for every frame: each frame coloured on the range it shows, the first's.
         args = copy.copy(args)
@@ -303,19 +313,26 @@ def render_video(
     args: argparse.Namespace, frames: range, staged: Scene, how: FrameRendering
 ) -> FrameCounts:
     """The frames of ``args.scene`` as one video at ``args.output`` (``video.VideoWriter``,
-    ``--fps``, ``--quality``), checked before any frame renders; an existing video is kept
-    unless ``--overwrite``."""
+    ``--fps``, ``--quality``), with the legend's JSON record beside it as an image has
+    (``film.legend_sidecar``), checked before any frame renders; an existing video or record
+    is kept unless ``--overwrite``."""
     from embree_rt.cli.checks import check_library, writing
     from embree_rt.cli.errors import UsageError
+    from embree_rt.film import Encoding, legend_sidecar
     from embree_rt.legend import draw_legend
+    from embree_rt.scene.paths import not_a_file_problem
     from embree_rt.scene.settings import apply_to_scene
     from embree_rt.video import VideoWriter, check_video
 
     path = Path(args.output)
     if args.bit_depth != 8:
         raise UsageError(f"--bit-depth: {path.suffix} frames are 8 bits a channel")
-    if path.exists() and not args.overwrite:
-        raise UsageError(f"-o: {path} exists (--overwrite to replace it)")
+    beside = legend_sidecar(path, Encoding(legend=staged.legend))
+    for target in [path, *(side for side, _ in beside)]:
+        if (problem := not_a_file_problem(target)) is not None:
+            raise UsageError(f"-o: {target}: {problem}")
+        if target.exists() and not args.overwrite:
+            raise UsageError(f"-o: {target} exists (--overwrite to replace it)")
     if not path.parent.is_dir():
         raise UsageError(f"-o: {path}: no directory {path.parent}")
     sized = copy.copy(staged)
@@ -329,7 +346,7 @@ def render_video(
     legend = staged.legend  # the first frame's, whose range colours every frame
 
     def make() -> FrameCounts:
-        with VideoWriter(path, args.fps, args.quality) as video:
+        with VideoWriter(path, args.fps, args.quality, beside) as video:
 
             def add(number: int, result) -> None:
                 pixels = result.to_srgb8()
@@ -359,7 +376,9 @@ def render_on_dask(
     from embree_rt.cli.job import where_of
 
     where = where_of(args)
-    view = Scene(camera=staged.camera, lights=staged.lights, floor=staged.floor)
+    view = Scene(
+        camera=staged.camera, lights=staged.lights, floor=staged.floor, legend=staged.legend
+    )
     on_worker = copy.copy(args)
     on_worker.scene = str(Path(args.scene).resolve())
     if args.topology is not None:

@@ -141,3 +141,81 @@ def stage_spheres(centers: np.ndarray, radii: np.ndarray) -> Staging:
         None,
         ["lights: the default rig of two"],
     )
+
+
+# The share of the image's half width and height a view moved beside a legend may fill at the
+# edges the legend leaves free: the framed ball's own margin (``framed_view``).
+FILL_BESIDE = 1.0 / 1.05
+
+
+def clear_of_corner(
+    view: View, low: np.ndarray, high: np.ndarray, aspect: float, corner: tuple[float, float]
+) -> View:
+    """``view`` (a pinhole looking at the box ``low``..``high``, (3,) float64 corners) moved so
+    that the box's outline in an image ``aspect`` = width / height wide keeps out of the
+    bottom-right ``corner`` (its share of the image's width, of its height): a legend's.
+
+    The outline is the bounding rectangle of the box's eight corners as projected (the box is
+    convex and in front of the camera, so whatever lies in it projects inside). A view whose
+    outline already keeps out is returned as it is. Else the camera keeps its direction and
+    field of view and is moved within its image plane (by a, b) and back along its view (to
+    a distance D from the point it then looks at, never nearer than before), so the outline
+    lies left of the corner or above it, within the image less ``1 - FILL_BESIDE`` of its half
+    width and height at the free edges: whichever of the two stands back least, then moves
+    least. With the corner's width or height the whole image (nothing left beside it), the
+    view is returned as it is.
+
+    In the camera's frame (right u, image up v, forward f, from ``camera.camera_frame``'s rule),
+    a corner at x, y, z from the old look-at point is at (x - a, y - b) across and z + D deep:
+    inside [u0, u1] across when u0 (z + D) <= x - a <= u1 (z + D) for every corner, linear in a
+    and D, so the least D for which some a fits is closed-form, and so is the range of a."""
+    position = np.asarray(view.position, np.float64)
+    look = np.asarray(view.look_at, np.float64)
+    back = position - look
+    distance = float(np.linalg.norm(back))
+    w = back / distance
+    u = np.cross(np.asarray(view.up, np.float64), w)
+    u /= np.linalg.norm(u)
+    v = np.cross(w, u)
+    tall = math.tan(math.radians(view.fov) / 2.0)
+    wide = tall * aspect
+    box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], np.float64)
+    relative = low + box * (high - low) - look
+    x, y, z = relative @ u, relative @ v, -(relative @ w)
+    legend_left = wide * (1.0 - 2.0 * corner[0])
+    legend_top = tall * (-1.0 + 2.0 * corner[1])
+    depth = z + distance
+    if np.all(x / depth <= legend_left) or np.all(y / depth >= legend_top):
+        return view
+    wide_in, tall_in = FILL_BESIDE * wide, FILL_BESIDE * tall
+    placements = []
+    for across, upward in (
+        ((-wide_in, legend_left), (-tall_in, tall_in)),  # left of the corner
+        ((-wide_in, wide_in), (legend_top, tall_in)),  # above it
+    ):
+        if not (across[0] < across[1] and upward[0] < upward[1]):
+            continue
+        stand = max(distance, least_distance(x, z, *across), least_distance(y, z, *upward))
+        shift = (nearest_shift(x, z + stand, *across), nearest_shift(y, z + stand, *upward))
+        placements.append((stand, abs(shift[0]) + abs(shift[1]), shift))
+    if not placements:
+        return view
+    stand, _, (a, b) = min(placements, key=lambda placement: placement[:2])
+    target = look + a * u + b * v
+    return view._replace(
+        position=as_point(target + stand * w),
+        look_at=as_point(target),
+    )
+
+
+def least_distance(x: np.ndarray, z: np.ndarray, low: float, high: float) -> float:
+    """The least D for which one shift a puts every (x - a) / (z + D) within [low, high]
+    (``low < high``), for points at x across and z deep (k,) float64 from a look-at point."""
+    return float((np.max(x - high * z) - np.min(x - low * z)) / (high - low))
+
+
+def nearest_shift(x: np.ndarray, depth: np.ndarray, low: float, high: float) -> float:
+    """The shift a nearest 0 that puts every (x - a) / depth within [low, high], for points
+    at x across and ``depth`` (k,) float64 deep (one exists: ``least_distance``)."""
+    least, most = float(np.max(x - high * depth)), float(np.min(x - low * depth))
+    return min(max(0.0, least), most)

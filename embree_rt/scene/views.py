@@ -16,7 +16,9 @@ import numpy as np
 
 from embree_rt.camera import Camera
 from embree_rt.choices import STANDARD_VIEWS
+from embree_rt.legend import Legend, legend_box
 from embree_rt.scene.model import Scene
+from embree_rt.scene.staging import View, clear_of_corner
 
 # The framed box fills this share of the image's height or width, whichever it reaches first.
 FILL = 1.0 / 1.08
@@ -131,3 +133,22 @@ def standard_view(
         projection="orthographic" if orthographic else "perspective",
         view_height=height,
     )
+
+
+def clear_of_legend(scene: Scene, legend: Legend | None) -> Camera:
+    """``scene``'s camera moved so that the bottom-right corner ``legend`` takes (the scene's,
+    or a trajectory's first frame's; ``legend.legend_box`` at the render's size) shows none of
+    the scene's bounds
+    (``staging.clear_of_corner``): a perspective camera looking at the centre of the bounds,
+    as the framed view and the perspective standard views do. The camera as it is without a
+    legend, without bounds, or when it is orthographic (an orthographic standard view keeps
+    the legend's rows clear itself: ``standard_view``'s ``kept_below``)."""
+    bounds = scene_bounds(scene)
+    camera = scene.camera
+    if legend is None or bounds is None or camera.projection != "perspective":
+        return camera
+    width, height = scene.render.width, scene.render.height
+    columns, rows = legend_box(legend, width, height)
+    view = View(camera.position, camera.look_at, camera.up, float(camera.fov), "")
+    moved = clear_of_corner(view, *bounds, width / height, (columns / width, rows / height))
+    return replace(camera, position=moved.position, look_at=moved.look_at)
