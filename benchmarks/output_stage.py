@@ -5,8 +5,9 @@ The random field of ``--count`` spheres (default 1e6) is rendered once at ``--wi
 
 - ``numpy``: the release before the compiled stage: ``display_values`` (NumPy's clamp,
   Reinhard, power 1/2.2) and ``quantize``, then Pillow at its default zlib level (6);
-- ``compiled``: ``film.save_image``: ``film.tonemap``'s compiled pass, then Pillow at
-  ``film.PNG_COMPRESS_LEVEL``;
+- ``compiled``: ``film.save_image``: ``film.tonemap``'s compiled pass, then the PNG writer
+  of ``film.write_pixels`` at ``film.PNG_COMPRESS_LEVEL`` (``benchmarks/png_writers.py``
+  compares the writers alone);
 
 each to its own file, the order alternating from turn to turn, and the tone map alone timed
 beside each. ``speedup`` is the median over turns of numpy / compiled, by wall time. Both files

@@ -3,8 +3,9 @@
 Display images (.png, .jpg/.jpeg, .tif/.tiff, .webp) hold the tone-mapped picture, 8 bits a
 channel through Pillow, or 16 (``Encoding.bit_depth``; .png and .tif/.tiff) for grading: Pillow
 holds no 16-bit RGB image (its 16-bit modes are single-channel), so 16-bit PNG goes through
-pypng and 16-bit TIFF through tifffile, both small pure-Python writers. Data images (.npy, .npz,
-.exr) hold the linear float32 radiance."""
+pypng and 16-bit TIFF through tifffile, both small pure-Python writers; 8-bit PNG goes through
+pypng too, for speed (``PNG_COMPRESS_LEVEL``). Data images (.npy, .npz, .exr) hold the linear
+float32 radiance."""
 
 from __future__ import annotations
 
@@ -28,6 +29,9 @@ GAMMA = 2.2
 # zlib level of 8-bit PNGs (Pillow's default is 6). Measured with Pillow 13 on zlib-ng 2.3 on a
 # 1080p render of the 1e6-sphere field (docs/performance.md, "The output stage"): level 2 wrote
 # in 0.43x level 6's time a file 10% larger; 1 was no faster and larger still, 3 slower.
+# 8-bit PNGs are written by pypng, rows unfiltered, at this level: Pillow tries every PNG filter
+# on every row, which cost more than the compression (docs/performance.md, "The output stage";
+# benchmarks/png_writers.py).
 PNG_COMPRESS_LEVEL = 2
 # The compiled tone map runs spans of this many rows on Python threads, each taking the next
 # span as it comes free, below ``DISPLAY_SERIAL_CHANNELS`` on the calling thread alone. Not a
@@ -401,28 +405,31 @@ def write_pixels(
 ) -> None:
     """Write (h, w, 3) (or with alpha (h, w, 4)) uint8 or uint16 display ``pixels`` as the
     display format of ``suffix``
-    (``PILLOW_FORMATS``) to ``handle``: uint8 through Pillow (``quality`` for JPEG and WebP),
-    uint16 as 16-bit RGB PNG (pypng) or TIFF (tifffile)."""
+    (``PILLOW_FORMATS``) to ``handle``: PNG through pypng (8-bit rows unfiltered at zlib level
+    ``PNG_COMPRESS_LEVEL``), other uint8 formats through Pillow (``quality`` for JPEG and
+    WebP), uint16 TIFF through tifffile."""
     height, width, channels = pixels.shape
     alpha = channels == 4
+    if suffix == ".png":
+        import png
+
+        depth = 16 if pixels.dtype == np.uint16 else 8
+        level = PNG_COMPRESS_LEVEL if depth == 8 else None
+        writer = png.Writer(
+            width, height, greyscale=False, alpha=alpha, bitdepth=depth, compression=level
+        )
+        writer.write(handle, pixels.reshape(height, width * channels))
+        return
     if pixels.dtype == np.uint16:
-        if suffix == ".png":
-            import png
+        import tifffile
 
-            writer = png.Writer(width, height, greyscale=False, alpha=alpha, bitdepth=16)
-            writer.write(handle, pixels.reshape(height, width * channels))
-        else:
-            import tifffile
-
-            extra = {"extrasamples": ["unassalpha"]} if alpha else {}
-            tifffile.imwrite(handle, pixels, photometric="rgb", **extra)
+        extra = {"extrasamples": ["unassalpha"]} if alpha else {}
+        tifffile.imwrite(handle, pixels, photometric="rgb", **extra)
         return
     from PIL import Image
 
     name = PILLOW_FORMATS[suffix]
     options = {"quality": quality or DEFAULT_QUALITY} if suffix in QUALITY_SUFFIXES else {}
-    if suffix == ".png":
-        options = {"compress_level": PNG_COMPRESS_LEVEL}
     Image.fromarray(pixels).save(handle, format=name, **options)
 
 

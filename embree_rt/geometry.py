@@ -299,14 +299,16 @@ class SceneGeometry(Closing):
         """Give the scene's spheres new ``centers`` (n, 3) and ``radii`` (n,) float, in the
         scene's order, n and materials as before, and refit the BVH (``BVH.move_spheres``; a
         ``movable`` geometry of analytic spheres). They stay in the order the first spheres
-        put them in, so the material tables stand."""
+        put them in, so the material tables stand: the BVH gathers them into it as it fills
+        its buffer (``order``)."""
         if self.sphere_geom_id < 0:
             raise ValueError("move_spheres: this geometry holds no analytic spheres to move")
         centers = np.asarray(centers, np.float32)
         radii = np.asarray(radii, np.float32)
-        if self.sphere_index is not None and len(centers) == len(self.sphere_index):
-            centers, radii = centers[self.sphere_index], radii[self.sphere_index]
-        self.bvh.move_spheres(self.sphere_geom_id, centers, radii)
+        order = self.sphere_index
+        if order is not None and len(centers) != len(order):
+            order = None  # (the BVH refuses the count, naming it)
+        self.bvh.move_spheres(self.sphere_geom_id, centers, radii, order=order)
 
     def scene_sphere(self, prim_id: np.ndarray) -> np.ndarray:
         """(k,) int32 the scene's index of each of the BVH's spheres ``prim_id`` (k,) int."""

@@ -270,18 +270,7 @@ def test_a_particle_file_renders_without_trimesh_or_matplotlib(tmp_path: Path) -
     property. (``scipy.linalg`` is numba's own: its first kernel checks for BLAS through it.)
     Run in a fresh interpreter, as the command is."""
 
-    import gsd.hoomd
-    import numpy as np
-
-    path = tmp_path / "two_types.gsd"
-    frame = gsd.hoomd.Frame()
-    frame.particles.N = 20
-    frame.particles.position = np.random.default_rng(1).uniform(-3, 3, (20, 3)).astype(np.float32)
-    frame.particles.types = ["A", "B"]
-    frame.particles.typeid = (np.arange(20) % 2).astype(np.uint32)
-    frame.configuration.box = [10.0, 10.0, 10.0, 0.0, 0.0, 0.0]
-    with gsd.hoomd.open(str(path), "w") as trajectory:
-        trajectory.append(frame)
+    path = two_types_gsd(tmp_path / "two_types.gsd")
     script = (
         "import sys\n"
         "import embree_rt.cli\n"
@@ -293,3 +282,107 @@ def test_a_particle_file_renders_without_trimesh_or_matplotlib(tmp_path: Path) -
     )
     assert printed_by(script) == "[]"
     assert (tmp_path / "out.png").is_file()
+
+
+def two_types_gsd(path: Path, count: int = 20) -> Path:
+    """A GSD file of one frame of ``count`` particles of two types at ``path``."""
+    import gsd.hoomd
+    import numpy as np
+
+    frame = gsd.hoomd.Frame()
+    frame.particles.N = count
+    frame.particles.position = (
+        np.random.default_rng(1).uniform(-3, 3, (count, 3)).astype(np.float32)
+    )
+    frame.particles.types = ["A", "B"]
+    frame.particles.typeid = (np.arange(count) % 2).astype(np.uint32)
+    frame.configuration.box = [10.0, 10.0, 10.0, 0.0, 0.0, 0.0]
+    with gsd.hoomd.open(str(path), "w") as trajectory:
+        trajectory.append(frame)
+    return path
+
+
+def test_the_commands_own_process_sets_numba_up_without_scipy(tmp_path: Path) -> None:
+    """The command's own process (``main()`` reading ``sys.argv``, as ``embree-rt`` runs)
+    renders a particle file without importing any of SciPy: numba is imported and its
+    implementations loaded while SciPy looks absent (``cli/numba_setup.py``), so its check for
+    a BLAS does not import ``scipy.linalg``. The image is byte for byte the one rendered by
+    ``main(argv)`` in a process whose numba did find SciPy's BLAS (the library's way, where it
+    must still import it). After the command SciPy imports again, and a kernel typing ``np.dot``
+    compiles and agrees with NumPy. Each in a fresh interpreter."""
+    path = two_types_gsd(tmp_path / "two_types.gsd")
+    flags = f"{str(path)!r}, '--width', '16', '--height', '9', '--spp', '2', '--quiet', '-o'"
+    own = (
+        "import sys\n"
+        "import embree_rt.cli\n"
+        f"sys.argv = ['embree-rt', 'render', {flags}, {str(tmp_path / 'own.png')!r}]\n"
+        "assert embree_rt.cli.main() == 0\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy'))\n"
+        "import numba\n"
+        "import numpy as np\n"
+        "x = np.arange(5.0)\n"
+        "dot = numba.njit(lambda a, b: np.dot(a, b))\n"
+        "print(dot(x, x) == 30.0, 'scipy.linalg' in sys.modules)\n"
+    )
+    assert printed_by(own).splitlines() == ["[]", "True True"]
+    library = (
+        "import sys\n"
+        "import embree_rt.cli\n"
+        f"assert embree_rt.cli.main(['render', {flags}, {str(tmp_path / 'library.png')!r}]) == 0\n"
+        "print('scipy.linalg' in sys.modules)\n"
+    )
+    assert printed_by(library) == "True"
+    assert (tmp_path / "own.png").read_bytes() == (tmp_path / "library.png").read_bytes()
+
+
+def test_the_commands_usage_errors_and_help_leave_scipy_importable() -> None:
+    """A parse that ends the command (``--version``, a usage error) imports no numba, and SciPy
+    imports afterwards in that process: it is hidden only while the parse runs."""
+    script = (
+        "import sys\n"
+        "import embree_rt.cli\n"
+        "codes = []\n"
+        "for argv in (['embree-rt', '--version'], ['embree-rt', 'render', '--no-such-flag']):\n"
+        "    sys.argv = argv\n"
+        "    codes.append(embree_rt.cli.main())\n"
+        "import scipy.linalg\n"
+        "print(codes, 'numba' in sys.modules)\n"
+    )
+    assert printed_by(script).splitlines()[-1] == "[0, 2] False"
+
+
+# What numba's check for a BLAS decides (numba.np.arraymath): how these two are compiled.
+DECIDED_BY_BLAS_CHECK = {"correlate", "convolve"}
+
+
+def test_no_kernel_calls_what_numbas_blas_check_decides() -> None:
+    """numba's check for a BLAS, which the command's own process skips (``cli/numba_setup.py``),
+    decides only whether ``np.correlate`` and ``np.convolve`` call ``np.dot``: no module of the
+    package that imports numba names either (read with ``ast``), so no kernel is compiled
+    differently in the command and in a library user's process."""
+    assert "embree_rt.compiled.film_sums" in module_files()
+    named = []
+    for name, path in module_files().items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        imports_numba = any(
+            (
+                isinstance(node, ast.Import)
+                and any(a.name.split(".")[0] == "numba" for a in node.names)
+            )
+            or (isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "numba")
+            for node in ast.walk(tree)
+        )
+        if not imports_numba:
+            continue
+        for node in ast.walk(tree):
+            words = (
+                {node.attr}
+                if isinstance(node, ast.Attribute)
+                else {node.id}
+                if isinstance(node, ast.Name)
+                else {alias.name for alias in node.names}
+                if isinstance(node, ast.ImportFrom)
+                else set()
+            )
+            named += [f"{name}: {word}" for word in words & DECIDED_BY_BLAS_CHECK]
+    assert not named, named

@@ -64,6 +64,35 @@ def test_refitted_bvh_answers_as_a_fresh_build_over_a_trajectory(kind: str) -> N
             np.testing.assert_array_equal(occluded, hits.hit)
 
 
+@pytest.mark.parametrize("kind", ["user", "point"])
+def test_spheres_moved_in_an_order_of_their_own_are_the_spheres_moved(kind: str) -> None:
+    # The caller holds each frame's spheres shuffled (row j is sphere shuffle[j]) and says
+    # where each sphere is (``order``): the BVH must answer as one built on the spheres in the
+    # order first given. User spheres are stored in a spatial order of their own, so ``order``
+    # is composed with it there; point spheres are stored as given.
+    centers, radii = moving_spheres(4)
+    origins, directions = camera_rays()
+    shuffle = np.random.default_rng(11).permutation(len(radii))
+    where = np.argsort(shuffle).astype(np.int32)  # the row of the shuffled arrays of sphere k
+    with BVH(movable=True) as moving:
+        geom_id = moving.add_spheres(centers[0], radii, kind)
+        moving.commit()
+        for frame in range(1, len(centers)):
+            mine = centers[frame][shuffle], radii[shuffle]
+            moving.move_spheres(geom_id, *mine, order=where)
+            hits = moving.intersect(Rays(origins, directions))
+            expected = fresh_hits(centers[frame], radii, kind, origins, directions)
+            for name in ("t", "prim_id", "geom_id", "normal"):
+                np.testing.assert_array_equal(getattr(hits, name), getattr(expected, name))
+            assert 0.05 < hits.hit.mean() < 0.95
+        outside = where.copy()
+        outside[3] = 400
+        with pytest.raises(ValueError, match="order: row 3 is 400"):
+            moving.move_spheres(geom_id, *mine, order=outside)
+        with pytest.raises(ValueError, match=r"order: expected shape \(400,\)"):
+            moving.move_spheres(geom_id, *mine, order=where[:-1])
+
+
 def test_exact_ties_go_to_the_lowest_index_in_any_tree() -> None:
     # every sphere twice (same centre, same radius): each hit is an exact tie of two spheres;
     # the stored order (and so the tree) differs with the order given, the winner must not

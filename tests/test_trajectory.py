@@ -15,6 +15,7 @@ render itself runs the same code on the same inputs.
 from __future__ import annotations
 
 import itertools
+import re
 import tracemalloc
 from pathlib import Path
 
@@ -23,7 +24,7 @@ import pytest
 
 import embree_rt as rt
 from embree_rt.cli import main
-from embree_rt.cli.trajectory import FrameRendering, render_frames
+from embree_rt.cli.trajectory import FrameRendering, StageSeconds, render_frames
 
 FRAMES = 5
 
@@ -92,6 +93,27 @@ def moving_scene(frame: int, count: int = 30, seed: int = 6) -> rt.Scene:
     scene.lights = [rt.PointLight(position=(3.0, -5.0, 8.0), intensity=60.0)]
     scene.render = scene.render.with_overrides(width=24, height=16, spp=1, max_depth=2)
     return scene
+
+
+def test_the_summary_line_gives_the_frames_after_the_first(tmp_path, capsys):
+    # Each stage's seconds are the mean over the frames after the first (whose time holds the
+    # first build and numba's loading): 5, then 1 and 2, is 1.5.
+    stage = StageSeconds()
+    for seconds in (5.0, 1.0, 2.0):
+        stage.add(seconds)
+    assert (stage.count, stage.mean()) == (3, 1.5)
+    write_moving_dump(tmp_path / "d.lammpstrj")
+    render_dump(tmp_path, "frames")
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    numbers = r"(\d+\.\d\d) s"
+    found = re.search(
+        rf"{numbers} a frame after the first \(a frame's BVH {numbers}, render {numbers}; "
+        rf"beside them, reading the next {numbers} and writing the last {numbers}\) -> ",
+        line,
+    )
+    assert found is not None, line
+    render_dump(tmp_path, "one", "--frames", "0:1", "--threads", "2")
+    assert "after the first" not in capsys.readouterr().err  # one frame: no steady state
 
 
 @pytest.mark.parametrize("refit", [True, False])

@@ -26,6 +26,7 @@ from embree_rt.cli.errors import (
     Terminated,
     interrupting_signals,
 )
+from embree_rt.cli.numba_setup import numba_loaded_without_scipy
 from embree_rt.cli.parser import SPHERE_CHOICES, build_parser
 from embree_rt.errors import InputError
 
@@ -79,7 +80,9 @@ def exit_code(argv: list[str] | None) -> int:
                 print(parser.format_help(), end="", file=sys.stderr)
                 return EXIT_BAD_INPUT
             try:
-                args = parser.parse_args(argv)
+                # the command's own process: numba set up without SciPy (numba_setup)
+                with numba_loaded_without_scipy(enabled=argv is None):
+                    args = parser.parse_args(argv)
             except SystemExit as exit_:
                 return int(exit_.code or 0)
             with one_line_warnings():

@@ -12,9 +12,10 @@ from __future__ import annotations
 import argparse
 import copy
 import sys
+import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -24,12 +25,83 @@ from embree_rt.video import DEFAULT_FPS, is_video
 
 
 @dataclass
+class StageSeconds:
+    """The wall seconds of one stage over the frames: how many frames passed it and the sum
+    over those after the first (whose time holds one-off costs: the first BVH build, numba's
+    loading), kept as two numbers so that memory stays flat however many frames there are."""
+
+    count: int = 0
+    after_first_s: float = 0.0
+
+    def add(self, seconds: float) -> None:
+        if self.count:
+            self.after_first_s += seconds
+        self.count += 1
+
+    def mean(self) -> float:
+        """Mean seconds a frame after the first (0.0 for fewer than two frames)."""
+        return self.after_first_s / (self.count - 1) if self.count > 1 else 0.0
+
+
+@dataclass
+class FrameStages:
+    """Wall seconds of each frame's stages: ``read`` its scene, ``bvh`` (its spheres moved in
+    the last frame's BVH, or a BVH built), ``render``, ``write`` (tone map, encode, file); and
+    ``written``, the seconds from one frame written to the next. Overlapped (as the command
+    line renders), a frame is read and written beside other frames' BVH and render, so the
+    stages of a frame add up to more than the time between two frames."""
+
+    read: StageSeconds = field(default_factory=StageSeconds)
+    bvh: StageSeconds = field(default_factory=StageSeconds)
+    render: StageSeconds = field(default_factory=StageSeconds)
+    write: StageSeconds = field(default_factory=StageSeconds)
+    written: StageSeconds = field(default_factory=StageSeconds)
+    last_written_at: float | None = None
+
+    def frame_written(self) -> None:
+        """Note that a frame was written now (``time.perf_counter``)."""
+        now = time.perf_counter()
+        last, self.last_written_at = self.last_written_at, now
+        self.written.add(0.0 if last is None else now - last)
+
+    def steady(self) -> str | None:
+        """The frames after the first as the summary line says them: the seconds between two
+        frames written, and each stage's mean; None for fewer than two frames written."""
+        if self.written.count < 2:
+            return None
+        return (
+            f"{self.written.mean():.2f} s a frame after the first (a frame's BVH "
+            f"{self.bvh.mean():.2f} s, render {self.render.mean():.2f} s; beside them, reading "
+            f"the next {self.read.mean():.2f} s and writing the last {self.write.mean():.2f} s)"
+        )
+
+
+def timed(stage: StageSeconds, call: Callable, then: Callable[[], None] | None = None) -> Callable:
+    """``call`` adding the wall seconds each call takes to ``stage`` (and calling ``then``
+    after a call that returned)."""
+
+    def run(*args):
+        began = time.perf_counter()
+        try:
+            done = call(*args)
+        finally:
+            stage.add(time.perf_counter() - began)
+        if then is not None:
+            then()
+        return done
+
+    return run
+
+
+@dataclass
 class FrameCounts:
     """How each rendered frame got its BVH: ``refitted`` (the spheres moved in the last
-    frame's BVH) or ``rebuilt`` (a BVH built for it)."""
+    frame's BVH) or ``rebuilt`` (a BVH built for it); and the seconds its stages took
+    (``stages``, on this machine; empty for frames rendered on Dask)."""
 
     refitted: int = 0
     rebuilt: int = 0
+    stages: FrameStages = field(default_factory=FrameStages)
 
 
 def same_particles(last: Scene, scene: Scene) -> bool:
@@ -82,11 +154,15 @@ def render_frames(
     from embree_rt.api import Renderer, require_memory
 
     counts = FrameCounts()
+    stages = counts.stages
+    read = timed(stages.read, read)
+    write = timed(stages.write, write, stages.frame_written)
     renderer: Renderer | None = None
     refit = how.refit and how.spheres == "analytic"
 
     def render(scene: Scene):
         nonlocal renderer
+        began = time.perf_counter()
         if renderer is not None and refit and same_particles(renderer.scene, scene):
             renderer.update_spheres(scene.sphere_centers, scene.sphere_radii)
             counts.refitted += 1
@@ -97,7 +173,11 @@ def render_frames(
             require_memory(scene, scene.render, spheres=how.spheres, threads=how.threads)
             renderer = Renderer(scene, spheres=how.spheres, threads=how.threads, movable=refit)
             counts.rebuilt += 1
-        return renderer.render(camera=scene.camera)
+        built = time.perf_counter()
+        stages.bvh.add(built - began)
+        result = renderer.render(camera=scene.camera)
+        stages.render.add(time.perf_counter() - built)
+        return result
 
     try:
         if not how.overlap:
@@ -210,10 +290,11 @@ def render_trajectory(args: argparse.Namespace) -> None:
 
             counts = render_frames(todo, lambda n: prepared_frame(args, n, staged), write, how)
     if not args.quiet:
+        steady = counts.stages.steady()
         print(
             f"embree-rt: {len(todo)} frames ({counts.refitted} refitted, {counts.rebuilt} "
-            f"rebuilt; {len(paths) - len(todo)} already on disk) of {args.scene} -> "
-            f"{args.output}",
+            f"rebuilt; {len(paths) - len(todo)} already on disk) of {args.scene}"
+            f"{'' if steady is None else ', ' + steady} -> {args.output}",
             file=sys.stderr,
         )
 

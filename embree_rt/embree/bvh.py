@@ -25,6 +25,7 @@ from embree_rt.embree import (
     world_normals,
 )
 from embree_rt.embree.validation import (
+    as_indices,
     as_points,
     as_positive,
     as_ray_bounds,
@@ -334,15 +335,25 @@ class BVH(Closing):
             self._point_spheres.add(geom_id)
         return geom_id
 
-    def move_spheres(self, geom_id: int, centers: np.ndarray, radii: np.ndarray) -> None:
+    def move_spheres(
+        self,
+        geom_id: int,
+        centers: np.ndarray,
+        radii: np.ndarray,
+        order: np.ndarray | None = None,
+    ) -> None:
         """Give the committed spheres of ``geom_id`` (``add_spheres``) new ``centers`` (n, 3) and
-        ``radii`` (n,), n as before, and refit the BVH to them: the buffer Embree reads is
-        rewritten in place (each sphere in the slot it was given) and the geometry and scene
-        committed again: Embree refits the geometry's tree (the bounds callback called for
-        every sphere) where it has a refit builder for user geometry; the Embree 4.4 embreex
-        ships rebuilds it (docs/performance.md, "Spheres moved between frames"), so what this
-        saves there is the set-up around the build. A ``movable`` BVH only; not while a query
-        runs.
+        ``radii`` (n,), n as before, and refit the BVH to them; with ``order`` (n,) int
+        (indices in [0, n)), sphere k as ``add_spheres`` was given them moves to
+        ``centers[order[k]]``, ``radii[order[k]]``: a caller that keeps its spheres in an
+        order of its own hands them over as they are, gathered in the one compiled pass that
+        fills the buffer (NumPy's row gathers of a million shuffled rows took 4x as long). The
+        buffer Embree reads is rewritten in place (each sphere in the slot it was given) and
+        the geometry and scene committed again: Embree refits the geometry's tree (the bounds
+        callback called for every sphere) where it has a refit builder for user geometry; the
+        Embree 4.4 embreex ships rebuilds it (docs/performance.md, "Spheres moved between
+        frames"), so what this saves there is the set-up around the build. A ``movable`` BVH
+        only; not while a query runs.
 
         Queries then answer as a BVH freshly built on the moved spheres does, bit for bit: the
         callbacks compute the same hit from the same sphere whatever the tree, and an exact tie
@@ -362,7 +373,15 @@ class BVH(Closing):
             raise ValueError(
                 f"centers: geometry {geom_id} holds {len(packed)} spheres, got {len(centers)}"
             )
-        reach = sphere_buffers.pack_spheres(centers, radii, self._sphere_orders[geom_id], packed)
+        kept = self._sphere_orders[geom_id]
+        if order is not None:
+            if np.shape(order) != (len(packed),):
+                raise ValueError(f"order: expected shape ({len(packed)},), got {np.shape(order)}")
+            order = as_indices(order, "order", len(packed))
+            order = (order[kept] if len(kept) else order).astype(np.int32)
+        reach = sphere_buffers.pack_spheres(
+            centers, radii, kept if order is None else order, packed
+        )
         self._sphere_reach[geom_id] = float(reach)
         self.coordinate_bound = max(self._bound_without_spheres, *self._sphere_reach.values())
         lib = self._lib
