@@ -14,9 +14,9 @@ from typing import NamedTuple
 
 import llvmlite.binding as llvm
 import numpy as np
-from numba import njit, prange, types
+from numba import njit, types
 
-from embree_rt.compiled.work_split import chunk_scratch, chunk_span
+from embree_rt.compiled.work_split import over_chunks
 from embree_rt.embree import library
 
 # RTCRayHit, in 4-byte words (Embree 4, RTC_MAX_INSTANCE_LEVEL_COUNT = 1): RTCRay is 48 bytes,
@@ -262,9 +262,41 @@ def occluded_chunk(words, first_ray, stop, query, rays, blocked):
             blocked[first + lane] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
 
 
-# The parallel drivers spread chunks over numba's threads (``chunks``); on one thread, a chunk
-# kernel called from Python over all the rays needs no threading layer at all, so several Python
-# threads may run it at once. ``query`` a ``Query``, ``rays`` a ``Rays``, ``hits`` a
+@njit(inline="always")
+def occluded_made(words, first, stop, query, make_ray, source, tfar, blocked):
+    """Rays first .. stop made inside the kernel through Embree's occlusion query, whether
+    each is blocked into ``blocked`` (n,) bool; ``query`` and ``words`` as ``occluded_chunk``'s.
+    ``make_ray(origins, directions, lane, source, r)`` writes ray r of ``source`` into lane
+    ``lane`` of a packet's (lanes, 3) float32 ``origins`` and ``directions`` (t in [0, ``tfar``],
+    float32), and returns True where it finds the ray blocked without Embree (the lane is then
+    filled again by the next ray). Inlined into a chunk kernel, which names its ``make_ray``."""
+    lanes = query.lanes
+    floats, b = packet_layout(words)
+    origins = np.empty((lanes, 3), np.float32)
+    directions = np.empty((lanes, 3), np.float32)
+    tnear = np.zeros(lanes, np.float32)
+    packet = Rays(origins, directions, tnear, np.full(lanes, tfar, np.float32))
+    order = np.empty(lanes, np.int64)  # which ray each filled lane is
+    r = first
+    while r < stop:
+        count = 0
+        while count < lanes and r < stop:
+            if make_ray(origins, directions, count, source, r):
+                blocked[r] = True
+            else:
+                order[count] = r
+                count += 1
+            r += 1
+        if count == 0:
+            continue
+        traced_packet(words, floats, b, query, OCCLUDED, packet, 0, count)
+        for lane in range(count):
+            blocked[order[lane]] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
+
+
+# The parallel drivers spread chunks over numba's threads (``work_split.over_chunks``); on one
+# thread, a chunk kernel called from Python over all the rays needs no threading layer at all, so
+# several Python threads may run it at once. ``query`` a ``Query``, ``rays`` a ``Rays``, ``hits`` a
 # ``NearestHits`` to fill, ``inst_prim`` an (n,) int32 array for the hits' instance-array copy
 # numbers, or None; ``blocked`` (n,) bool.
 
@@ -272,16 +304,10 @@ def occluded_chunk(words, first_ray, stop, query, rays, blocked):
 @njit(parallel=True, nogil=True, cache=True)
 def intersect(query, rays, hits, inst_prim):
     n = rays.origins.shape[0]
-    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
-    for c in prange(len(scratch)):
-        first, stop = chunk_span(c, CHUNK, n)
-        intersect_chunk(scratch[c], first, stop, query, rays, hits, inst_prim)
+    over_chunks(intersect_chunk, n, CHUNK, SCRATCH_WORDS, query, rays, hits, inst_prim)
 
 
 @njit(parallel=True, nogil=True, cache=True)
 def occluded(query, rays, blocked):
     n = rays.origins.shape[0]
-    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
-    for c in prange(len(scratch)):
-        first, stop = chunk_span(c, CHUNK, n)
-        occluded_chunk(scratch[c], first, stop, query, rays, blocked)
+    over_chunks(occluded_chunk, n, CHUNK, SCRATCH_WORDS, query, rays, blocked)

@@ -40,11 +40,11 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from numba import carray, njit, prange, types
+from numba import carray, njit, types
 
 from embree_rt.compiled import pointers
 from embree_rt.compiled.callbacks import on_first_use
-from embree_rt.compiled.work_split import chunk_scratch, chunk_span, threads_for
+from embree_rt.compiled.work_split import over_chunks, threads_for
 from embree_rt.embree.kernels import (
     FEATURE_FLAG_ALL,
     HIT_GEOM_ID,
@@ -244,7 +244,7 @@ def _sort_hits(count, t, prim, u, v, cos):
 # written inline in the loop body, numba's parallel lowering lost the stores into the scratch row
 # that Embree reads through its address (measured: every ray went out with zero fields).
 @njit(nogil=True, cache=True)
-def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
+def _all_hits_chunk(words, first, stop, scene, filter_address, rays, hits):
     origins, directions, tnear, tfar = rays
     t, prim, u, v, cos, count, more = hits
     tracer = prepare_scratch(scene, words, filter_address)
@@ -259,10 +259,7 @@ def _all_hits_chunk(scene, filter_address, words, first, stop, rays, hits):
 @njit(parallel=True, nogil=True, cache=True)
 def _all_hits(scene, filter_address, rays, hits):
     n = rays.origins.shape[0]
-    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
-    for c in prange(len(scratch)):
-        first, stop = chunk_span(c, CHUNK, n)
-        _all_hits_chunk(scene, filter_address, scratch[c], first, stop, rays, hits)
+    over_chunks(_all_hits_chunk, n, CHUNK, SCRATCH_WORDS, scene, filter_address, rays, hits)
 
 
 class HitBuffers(NamedTuple):

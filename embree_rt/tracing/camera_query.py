@@ -11,10 +11,10 @@ one array shading needs afterwards, and is traced at once while they are in cach
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from embree_rt.compiled.camera_rays import CameraRays, write_directions
-from embree_rt.compiled.work_split import chunk_scratch, chunk_span
+from embree_rt.compiled.work_split import over_chunks
 from embree_rt.embree import BVH
 from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, Rays, intersect_chunk
 from embree_rt.tracing.records import HitLabels, HitRecords, records_of
@@ -53,23 +53,20 @@ def intersect_camera_chunk(
 
 @njit(parallel=True, nogil=True, cache=True)
 def intersect_camera(query, camera, index, directions, origins, rays, hits, inst_prim):
-    n = index.shape[0]
-    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
-    for c in prange(len(scratch)):
-        first, stop = chunk_span(c, CHUNK, n)
-        intersect_camera_chunk(
-            scratch[c],
-            first,
-            stop,
-            query,
-            camera,
-            index,
-            directions,
-            origins,
-            rays,
-            hits,
-            inst_prim,
-        )
+    over_chunks(
+        intersect_camera_chunk,
+        index.shape[0],
+        CHUNK,
+        SCRATCH_WORDS,
+        query,
+        camera,
+        index,
+        directions,
+        origins,
+        rays,
+        hits,
+        inst_prim,
+    )
 
 
 def intersect_camera_records(

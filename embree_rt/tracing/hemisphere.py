@@ -15,20 +15,12 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from embree_rt.ambient_occlusion import HemisphereQuery
-from embree_rt.compiled.work_split import chunk_scratch, chunk_span
+from embree_rt.compiled.work_split import over_chunks
 from embree_rt.embree import BVH
-from embree_rt.embree.kernels import (
-    CHUNK,
-    OCCLUDED,
-    RAY_TFAR,
-    SCRATCH_WORDS,
-    Rays,
-    packet_layout,
-    traced_packet,
-)
+from embree_rt.embree.kernels import CHUNK, SCRATCH_WORDS, occluded_made
 
 
 class HemisphereRays(NamedTuple):
@@ -77,28 +69,7 @@ def _hemisphere_lane(origins, directions, lane, rays, r):
 def occluded_hemisphere_chunk(words, first, stop, query, rays, blocked):
     """Rays first .. stop of ``rays`` (``HemisphereRays``): whether each is blocked, into
     ``blocked`` (n,) bool; ``words`` a scratch row of ``kernels.SCRATCH_WORDS``."""
-    lanes = query.lanes
-    floats, b = packet_layout(words)
-    origins = np.empty((lanes, 3), np.float32)
-    directions = np.empty((lanes, 3), np.float32)
-    tfar = np.full(lanes, rays.distance, np.float32)
-    packet = Rays(origins, directions, np.zeros(lanes, np.float32), tfar)
-    order = np.empty(lanes, np.int64)  # which ray each filled lane is
-    r = first
-    while r < stop:
-        count = 0
-        while count < lanes and r < stop:
-            if _hemisphere_lane(origins, directions, count, rays, r):
-                blocked[r] = True
-            else:
-                order[count] = r
-                count += 1
-            r += 1
-        if count == 0:
-            continue
-        traced_packet(words, floats, b, query, OCCLUDED, packet, 0, count)
-        for lane in range(count):
-            blocked[order[lane]] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
+    occluded_made(words, first, stop, query, _hemisphere_lane, rays, rays.distance, blocked)
 
 
 # ``query`` a ``kernels.Query``, ``rays`` a ``HemisphereRays``, ``blocked`` (n,) bool out.
@@ -107,10 +78,7 @@ def occluded_hemisphere_chunk(words, first, stop, query, rays, blocked):
 @njit(parallel=True, nogil=True, cache=True, error_model="numpy")
 def occluded_hemispheres_parallel(query, rays, blocked):
     n = rays.local.shape[1]
-    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
-    for c in prange(len(scratch)):
-        first, stop = chunk_span(c, CHUNK, n)
-        occluded_hemisphere_chunk(scratch[c], first, stop, query, rays, blocked)
+    over_chunks(occluded_hemisphere_chunk, n, CHUNK, SCRATCH_WORDS, query, rays, blocked)
 
 
 def occluded_hemispheres(

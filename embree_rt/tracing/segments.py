@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from embree_rt.compiled.work_split import chunk_scratch, chunk_span
+from embree_rt.compiled.work_split import chunk_scratch, chunk_span, over_chunks
 from embree_rt.embree import BVH
 from embree_rt.embree.kernels import (
     CHUNK,
@@ -26,6 +26,7 @@ from embree_rt.embree.kernels import (
     RAY_TFAR,
     SCRATCH_WORDS,
     Rays,
+    occluded_made,
     packet_layout,
     traced_packet,
 )
@@ -61,35 +62,19 @@ def _segment_lane(origins, directions, lane, points, r, target, has_plane, plane
     return not math.isnan(crossing)
 
 
+@njit(inline="always")
+def _listed_segment_lane(origins, directions, lane, segments, k):
+    """``_segment_lane`` of segment ``k`` of ``segments`` (``Segments``)."""
+    points, rows, target, has_plane, plane_y = segments
+    return _segment_lane(origins, directions, lane, points, rows[k], target, has_plane, plane_y)
+
+
 @njit(nogil=True, cache=True)
 def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
     """Segments first_row .. stop: whether each is blocked, into ``blocked``; ``words`` a
     scratch row of ``kernels.SCRATCH_WORDS``."""
-    lanes = query.lanes
-    points, rows, target, has_plane, plane_y = segments
-    floats, b = packet_layout(words)
-    # One packet's rays at a time, as traced_packet takes them: (lanes, 3) origins, directions.
-    origins = np.empty((lanes, 3), np.float32)
-    directions = np.empty((lanes, 3), np.float32)
-    packet = Rays(origins, directions, np.zeros(lanes, np.float32), np.ones(lanes, np.float32))
-    order = np.empty(lanes, np.int64)  # which segment each filled lane is
-    k = first_row
-    while k < stop:
-        count = 0
-        while count < lanes and k < stop:
-            if _segment_lane(
-                origins, directions, count, points, rows[k], target, has_plane, plane_y
-            ):
-                blocked[k] = True
-            else:
-                order[count] = k
-                count += 1
-            k += 1
-        if count == 0:
-            continue
-        traced_packet(words, floats, b, query, OCCLUDED, packet, 0, count)
-        for lane in range(count):
-            blocked[order[lane]] = floats[b + RAY_TFAR * lanes + lane] == -np.inf
+    one = np.float32(1.0)
+    occluded_made(words, first_row, stop, query, _listed_segment_lane, segments, one, blocked)
 
 
 # ``query`` a ``kernels.Query``, ``segments`` a ``Segments``, ``blocked`` (k,) bool out.
@@ -98,10 +83,7 @@ def occluded_toward_chunk(words, first_row, stop, query, segments, blocked):
 @njit(parallel=True, nogil=True, cache=True)
 def occluded_segments(query, segments, blocked):
     n = segments.rows.shape[0]
-    scratch = chunk_scratch(n, CHUNK, SCRATCH_WORDS)
-    for c in prange(len(scratch)):
-        first, stop = chunk_span(c, CHUNK, n)
-        occluded_toward_chunk(scratch[c], first, stop, query, segments, blocked)
+    over_chunks(occluded_toward_chunk, n, CHUNK, SCRATCH_WORDS, query, segments, blocked)
 
 
 class LightSegments(NamedTuple):

@@ -24,6 +24,7 @@ from embree_rt.compiled.work_split import (
     chunk_count,
     chunk_scratch,
     chunk_span,
+    over_chunks,
     parallel_region,
     threads_for,
 )
@@ -1300,7 +1301,7 @@ class Parity(NamedTuple):
 # The filter's address is an argument, not a global: a global would be compiled in as a constant
 # and cached, and the filter lies at another address in the next process.
 @njit(nogil=True, cache=True)
-def _parity_chunk(scene, filter_address, words, first, stop, origins, directions, screen, parity):
+def _parity_chunk(words, first, stop, scene, filter_address, origins, directions, screen, parity):
     tracer = multihit.prepare_scratch(scene, words, filter_address)
     hits = np.empty((4, screen.capacity), np.float32)
     prims = np.empty(screen.capacity, np.int32)
@@ -1319,13 +1320,18 @@ def _parity_chunk(scene, filter_address, words, first, stop, origins, directions
 
 @njit(parallel=True, nogil=True, cache=True)
 def _crossing_parity(scene, filter_address, origins, directions, screen, parity):
-    n = origins.shape[0]
-    scratch = chunk_scratch(n, multihit.CHUNK, multihit.SCRATCH_WORDS)
-    for c in prange(len(scratch)):
-        first, stop = chunk_span(c, multihit.CHUNK, n)
-        _parity_chunk(
-            scene, filter_address, scratch[c], first, stop, origins, directions, screen, parity
-        )
+    over_chunks(
+        _parity_chunk,
+        origins.shape[0],
+        multihit.CHUNK,
+        multihit.SCRATCH_WORDS,
+        scene,
+        filter_address,
+        origins,
+        directions,
+        screen,
+        parity,
+    )
 
 
 def crossing_parity(

@@ -77,6 +77,24 @@ def coded_table(names, codes: np.ndarray) -> Labels:
     return Labels(distinct, gathered(smallest_codes(lookup, len(distinct)), codes))
 
 
+class LabelValues:
+    """An attribute read and set as (n,) str labels (or None) and held as the ``Labels`` in
+    the field named ``field`` of the same object: ``ParticleFrame.elements`` and ``types``."""
+
+    def __init__(self, field: str, doc: str) -> None:
+        self.field = field
+        self.__doc__ = doc
+
+    def __get__(self, owner: object, kind: type | None = None):
+        if owner is None:
+            return self
+        labels = getattr(owner, self.field)
+        return None if labels is None else labels.values()
+
+    def __set__(self, owner: object, values) -> None:
+        setattr(owner, self.field, None if values is None else coded(values))
+
+
 @dataclass
 class ParticleFrame:
     """The particles of one frame.
@@ -109,23 +127,8 @@ class ParticleFrame:
     def __len__(self) -> int:
         return len(self.positions)
 
-    @property
-    def elements(self) -> np.ndarray | None:
-        """(n,) str chemical symbols, or None."""
-        return None if self.element_labels is None else self.element_labels.values()
-
-    @elements.setter
-    def elements(self, values) -> None:
-        self.element_labels = None if values is None else coded(values)
-
-    @property
-    def types(self) -> np.ndarray | None:
-        """(n,) str particle types, or None."""
-        return None if self.type_labels is None else self.type_labels.values()
-
-    @types.setter
-    def types(self, values) -> None:
-        self.type_labels = None if values is None else coded(values)
+    elements = LabelValues("element_labels", "(n,) str chemical symbols, or None.")
+    types = LabelValues("type_labels", "(n,) str particle types, or None.")
 
     def labels(self) -> tuple[str, np.ndarray]:
         """What names each particle's kind: ("element", elements) where the file names
