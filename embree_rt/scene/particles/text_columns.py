@@ -252,6 +252,18 @@ def _is_separator(byte: np.uint8) -> bool:
 
 
 @njit(inline="always")
+def _digits(data: np.ndarray, at: int, limit: int, value: int, count: int) -> tuple[int, int, int]:
+    """The decimal digits from byte ``at`` (up to ``limit``) appended to the integer ``value``
+    of ``count`` digits: the new integer (wrapping past 19 digits, which the caller counts),
+    the new digit count and the byte after the digits."""
+    while at < limit and 48 <= _byte(data, at) <= 57:
+        value = value * 10 + (_byte(data, at) - 48)
+        count += 1
+        at += 1
+    return value, count, at
+
+
+@njit(inline="always")
 def scan_number(
     data: np.ndarray, start: int, limit: int, powers: np.ndarray
 ) -> tuple[float, bool, int]:
@@ -264,20 +276,12 @@ def scan_number(
     if _byte(data, at) == 45 or _byte(data, at) == 43:  # - +
         negative = _byte(data, at) == 45
         at += 1
-    mantissa = 0
-    digits = 0
+    mantissa, digits, at = _digits(data, at, limit, 0, 0)
     exponent = 0
-    while at < limit and 48 <= _byte(data, at) <= 57:
-        mantissa = mantissa * 10 + (_byte(data, at) - 48)
-        digits += 1
-        at += 1
     if at < limit and _byte(data, at) == 46:  # .
-        at += 1
-        while at < limit and 48 <= _byte(data, at) <= 57:
-            mantissa = mantissa * 10 + (_byte(data, at) - 48)
-            exponent -= 1
-            digits += 1
-            at += 1
+        whole = digits
+        mantissa, digits, at = _digits(data, at + 1, limit, mantissa, digits)
+        exponent = whole - digits
     exact = 0 < digits <= 18
     if at < limit and (_byte(data, at) == 101 or _byte(data, at) == 69):  # e E
         at += 1
@@ -285,12 +289,7 @@ def scan_number(
         if at < limit and (_byte(data, at) == 45 or _byte(data, at) == 43):
             exponent_negative = _byte(data, at) == 45
             at += 1
-        written = 0
-        exponent_digits = 0
-        while at < limit and 48 <= _byte(data, at) <= 57:
-            written = written * 10 + (_byte(data, at) - 48)
-            exponent_digits += 1
-            at += 1
+        written, exponent_digits, at = _digits(data, at, limit, 0, 0)
         exact = exact and 0 < exponent_digits <= 4
         exponent += -written if exponent_negative else written
     if at < limit and not _is_separator(_byte(data, at)):
