@@ -424,51 +424,74 @@ def parse_rows(
     ``-1 - slots[j]``). Blank lines are counted in ``blank`` (then ``first_row`` may be wrong,
     and rows past ``total`` are not written); a chunk's first line of the wrong field count is
     left in ``problems[c]`` as (its byte offset, fields found)."""
-    width = len(slots)
     for c in prange(len(bounds) - 1):
-        row = first_row[c]
-        at = bounds[c]
-        end = bounds[c + 1]
-        slow_count = 0
-        blank_count = 0
-        while at < end:
-            line = at
-            field = 0
-            while at < end and _byte(data, at) != NEWLINE:
-                if _is_space(_byte(data, at)):
-                    at += 1
-                    continue
-                if field >= width or row >= total:
-                    field += 1
-                    while at < end and not _is_separator(_byte(data, at)):
-                        at += 1
-                    continue
-                slot = slots[field]
-                if slot >= 0:
-                    value, exact, at = scan_number(data, at, end, powers)
-                    if not exact:
-                        value = np.nan
-                        slow_count += 1
-                    flat[slot + row * strides[field]] = value
-                else:
-                    at = enter_name(data, at, end, names, -1 - slot, c, row)
-                field += 1
-            at += 1
-            if field == 0 or row >= total:
-                blank_count += 1
-                continue
-            if field != width:
-                problems[c, 0] = line
-                problems[c, 1] = field
-                break
-            row += 1
-        slow[c] = slow_count
-        blank[c] = blank_count
+        parse_chunk(
+            data, bounds, first_row, total, slots, strides, powers, flat, names, slow, blank,
+            problems, c,
+        )  # fmt: skip
 
 
-# Not inlined: a prange body's stores through a named tuple's arrays are lost (numba issue
-# 7135); a called function's are not.
+# A function of its own rather than the prange body: a prange body's stores through a named
+# tuple's arrays are lost (numba issue 7135), a called function's are not.
 @njit(cache=True, nogil=True)
+def parse_chunk(
+    data: np.ndarray,
+    bounds: np.ndarray,
+    first_row: np.ndarray,
+    total: int,
+    slots: np.ndarray,
+    strides: np.ndarray,
+    powers: np.ndarray,
+    flat: np.ndarray,
+    names: NameTables,
+    slow: np.ndarray,
+    blank: np.ndarray,
+    problems: np.ndarray,
+    c: int,
+) -> None:
+    """``parse_rows``' work on chunk ``c``."""
+    width = len(slots)
+    row = first_row[c]
+    at = bounds[c]
+    end = bounds[c + 1]
+    slow_count = 0
+    blank_count = 0
+    while at < end:
+        line = at
+        field = 0
+        while at < end and _byte(data, at) != NEWLINE:
+            if _is_space(_byte(data, at)):
+                at += 1
+                continue
+            if field >= width or row >= total:
+                field += 1
+                while at < end and not _is_separator(_byte(data, at)):
+                    at += 1
+                continue
+            slot = slots[field]
+            if slot >= 0:
+                value, exact, at = scan_number(data, at, end, powers)
+                if not exact:
+                    value = np.nan
+                    slow_count += 1
+                flat[slot + row * strides[field]] = value
+            else:
+                at = enter_name(data, at, end, names, -1 - slot, c, row)
+            field += 1
+        at += 1
+        if field == 0 or row >= total:
+            blank_count += 1
+            continue
+        if field != width:
+            problems[c, 0] = line
+            problems[c, 1] = field
+            break
+        row += 1
+    slow[c] = slow_count
+    blank[c] = blank_count
+
+
+@njit(inline="always")
 def enter_name(
     data: np.ndarray, start: int, end: int, names: NameTables, field: int, chunk: int, row: int
 ) -> int:
