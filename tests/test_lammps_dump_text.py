@@ -116,6 +116,10 @@ def test_fast_path_and_cast_both_taken_and_exact():
         "nan",
         "-inf",
         "2.2250738585072011e-308",
+        "12345678",  # eight digits read at once
+        "99999999.99999999",
+        "0.000000001",
+        "-1234567890123456e-7",
     ]
     columns, _, slow = parse_columns(as_bytes(" ".join(fields)), 1, np.zeros(len(fields), bool))
     parsed = np.array([column[0] for column in columns])
@@ -209,6 +213,19 @@ def test_a_field_that_is_no_number_refused_with_its_offset():
     problem = caught.value.problem
     assert (problem.kind, problem.text, problem.field) == ("number", "x4", 1)
     assert problem.offset == text.index("x4")
+
+
+@pytest.mark.parametrize("position", range(9))
+@pytest.mark.parametrize("byte", ["/", ":"])
+def test_the_bytes_beside_the_digits_end_an_eight_digit_run(position, byte):
+    """``/`` and ``:`` stand just below and above the digits in ASCII: at any place of an
+    eight-digit run they make the field no number, as ``float()`` finds it."""
+    text = "1234567890"[:position] + byte + "12345678"
+    with pytest.raises(ValueError):
+        float(text)
+    with pytest.raises(ColumnsError) as caught:
+        parse_columns(as_bytes(f"1 {text}\n"), 1, np.zeros(2, bool))
+    assert (caught.value.problem.kind, caught.value.problem.text) == ("number", text)
 
 
 def write_dump(path: Path, rows: list[str], columns: str) -> None:
