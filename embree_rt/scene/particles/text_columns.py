@@ -217,10 +217,7 @@ def _cast_slow(
     """Fill the numbers that missed the fast path with NumPy's cast of their text, in
     batches; raises ``ColumnsError`` at the first text that is not a number."""
     first_slow = np.concatenate(([0], np.cumsum(slow)[:-1])).astype(np.int64)
-    starts = np.empty(int(slow.sum()), np.int64)
-    ends = np.empty_like(starts)
-    rows = np.empty_like(starts)
-    fields = np.empty_like(starts)
+    starts, ends, rows, fields = (mapped_empty(int(slow.sum()), np.int64) for _ in range(4))
     slow_fields(
         data, bounds, first_row, slots, POWERS_OF_TEN, slow, first_slow, starts, ends, rows, fields
     )
