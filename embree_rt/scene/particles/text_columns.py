@@ -459,104 +459,104 @@ def parse_rows(
     ``-1 - slots[j]``). Blank lines are counted in ``blank`` (then ``first_row`` may be wrong,
     and rows past ``total`` are not written); a chunk's first line of the wrong field count is
     left in ``problems[c]`` as (its byte offset, fields found)."""
-    for c in prange(len(bounds) - 1):
-        slow[c], blank[c], problems[c, 0], problems[c, 1] = parse_chunk(
-            data, names, flat, slots, strides, powers, bounds[c], bounds[c + 1], first_row[c],
-            total, c,
-        )  # fmt: skip
-
-
-# A function of its own rather than the prange body: a prange body's stores through a named
-# tuple's arrays are lost (numba issue 7135), a called function's are not.
-@njit(cache=True, nogil=True)
-def parse_chunk(
-    data: np.ndarray,
-    names: NameTables,
-    flat: np.ndarray,
-    slots: np.ndarray,
-    strides: np.ndarray,
-    powers: np.ndarray,
-    at: int,
-    end: int,
-    row: int,
-    total: int,
-    chunk: int,
-) -> tuple[int, int, int, int]:
-    """``parse_rows``' work on chunk ``chunk``, bytes ``at`` to ``end`` of ``data``, its first
-    row ``row``: how many numbers missed the fast path, how many lines were blank, and the
-    byte offset and field count of its first line of the wrong field count (-1, -1: none)."""
     width = len(slots)
-    slow_count = 0
-    blank_count = 0
-    while at < end:
-        line = at
-        field = 0
-        while at < end and _byte(data, at) != NEWLINE:
-            if _is_space(_byte(data, at)):
-                at += 1
-                continue
-            if field >= width or row >= total:
-                field += 1
-                while at < end and not _is_separator(_byte(data, at)):
+    # The tables' arrays are taken out of ``names`` here: a prange body's stores through a
+    # named tuple's arrays are lost (numba issue 7135). A function of its own for the chunk's
+    # rows, called from the body, made the parse 1.5x slower, and a call a row to a function
+    # that takes ``names`` cost 70 ns a row.
+    codes, first, length, size, table_at, name_slots, slot_at, full = names
+    for c in prange(len(bounds) - 1):
+        row = first_row[c]
+        at = bounds[c]
+        end = bounds[c + 1]
+        slow_count = 0
+        blank_count = 0
+        while at < end:
+            line = at
+            field = 0
+            while at < end and _byte(data, at) != NEWLINE:
+                if _is_space(_byte(data, at)):
                     at += 1
+                    continue
+                if field >= width or row >= total:
+                    field += 1
+                    while at < end and not _is_separator(_byte(data, at)):
+                        at += 1
+                    continue
+                slot = slots[field]
+                if slot >= 0:
+                    value, exact, at = scan_number(data, at, end, powers)
+                    if not exact:
+                        value = np.nan
+                        slow_count += 1
+                    flat[slot + row * strides[field]] = value
+                else:
+                    at, entry = enter_name(
+                        data, at, end, -1 - slot, c, first, length, size, table_at, name_slots,
+                        slot_at,
+                    )  # fmt: skip
+                    if entry < 0:
+                        full[c] = True
+                    else:
+                        codes[-1 - slot, row] = entry
+                field += 1
+            at += 1
+            if field == 0 or row >= total:
+                blank_count += 1
                 continue
-            slot = slots[field]
-            if slot >= 0:
-                value, exact, at = scan_number(data, at, end, powers)
-                if not exact:
-                    value = np.nan
-                    slow_count += 1
-                flat[slot + row * strides[field]] = value
-            else:
-                at = enter_name(data, at, end, names, -1 - slot, chunk, row)
-            field += 1
-        at += 1
-        if field == 0 or row >= total:
-            blank_count += 1
-            continue
-        if field != width:
-            return slow_count, blank_count, line, field
-        row += 1
-    return slow_count, blank_count, -1, -1
+            if field != width:
+                problems[c, 0] = line
+                problems[c, 1] = field
+                break
+            row += 1
+        slow[c] = slow_count
+        blank[c] = blank_count
 
 
 @njit(inline="always")
 def enter_name(
-    data: np.ndarray, start: int, end: int, names: NameTables, field: int, chunk: int, row: int
-) -> int:
-    """Row ``row``'s text field ``field`` (from byte ``start`` to a separator or ``end``) looked
-    up in chunk ``chunk``'s table, entered there if new, and its entry written as the row's
-    code (or the chunk marked ``full`` where the table has no room); returns the byte after
-    the field."""
+    data: np.ndarray,
+    start: int,
+    end: int,
+    field: int,
+    chunk: int,
+    first: np.ndarray,
+    length: np.ndarray,
+    size: np.ndarray,
+    table_at: np.ndarray,
+    name_slots: np.ndarray,
+    slot_at: np.ndarray,
+) -> tuple[int, int]:
+    """The text field ``field`` from byte ``start`` (to a separator or ``end``) looked up in
+    chunk ``chunk``'s table (``NameTables``' arrays of those names, ``name_slots`` its
+    ``slots``), entered there if new: the byte after the field and its entry (-1 where the
+    table has no room)."""
     at = start
     hashed = FNV_OFFSET
     while at < end and not _is_separator(_byte(data, at)):
         hashed = (hashed ^ np.uint64(_byte(data, at))) * FNV_PRIME
         at += 1
-    length = at - start
-    base = names.table_at[chunk]
-    slot_base = names.slot_at[chunk]
-    mask = names.slot_at[chunk + 1] - slot_base - 1
+    span = at - start
+    base = table_at[chunk]
+    slot_base = slot_at[chunk]
+    mask = slot_at[chunk + 1] - slot_base - 1
     slot = np.int64(hashed & np.uint64(mask))
     while True:
-        entry = names.slots[field, slot_base + slot] - 1
+        entry = name_slots[field, slot_base + slot] - 1
         if entry < 0:
-            entry = names.size[field, chunk]
-            if entry == names.table_at[chunk + 1] - base:
-                names.full[chunk] = True
-                return at
-            names.first[field, base + entry] = start
-            names.length[field, base + entry] = length
-            names.slots[field, slot_base + slot] = entry + 1
-            names.size[field, chunk] = entry + 1
-            break
-        if names.length[field, base + entry] == length and _same_bytes(
-            data, names.first[field, base + entry], start, length
+            entry = size[field, chunk]
+            if entry == table_at[chunk + 1] - base:
+                return at, -1
+            first[field, base + entry] = start
+            length[field, base + entry] = span
+            name_slots[field, slot_base + slot] = entry + 1
+            size[field, chunk] = entry + 1
+            return at, entry
+        if length[field, base + entry] == span and _same_bytes(
+            data, first[field, base + entry], start, span
         ):
-            break
+            return at, entry
         slot = (slot + 1) & mask
-    names.codes[field, row] = entry
-    return at
 
 
 @njit(inline="always")
