@@ -1,7 +1,8 @@
 """The LAMMPS dump's parser (``text_columns``): every number equal bit for bit to CPython's
 ``float()`` of its text (and to ``np.loadtxt``'s) in every notation LAMMPS and OVITO write,
-fields split by any whitespace, rows split across chunks anywhere, text columns as written,
-and bad rows refused with the line that holds them.
+fields split by any whitespace, rows split across chunks anywhere, text columns as written
+(the ``Labels`` that ``np.unique`` makes of their texts), and bad rows refused with the line
+that holds them.
 
 Bitwise equality holds on every x86-64 ISA: a number is either one IEEE-754 multiply or divide
 of two exactly represented doubles (correctly rounded by SSE2, AVX2 and AVX-512 alike, and no
@@ -20,6 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from embree_rt.scene.particles import ParticleFileError, read_particles, text_columns
+from embree_rt.scene.particles.frame import coded
 from embree_rt.scene.particles.text_columns import ColumnsError, parse_columns
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -114,6 +116,10 @@ def test_fast_path_and_cast_both_taken_and_exact():
         "nan",
         "-inf",
         "2.2250738585072011e-308",
+        "12345678",  # eight digits read at once
+        "99999999.99999999",
+        "0.000000001",
+        "-1234567890123456e-7",
     ]
     columns, _, slow = parse_columns(as_bytes(" ".join(fields)), 1, np.zeros(len(fields), bool))
     parsed = np.array([column[0] for column in columns])
@@ -126,8 +132,60 @@ def test_text_columns_as_written_and_blank_lines_skipped():
     text = "\n  1 C 0.5  \n\n \t \n2 Fe -1.25e+01\n3   Ow 3\n\n"
     columns = parse_columns(as_bytes(text), 3, np.array([False, True, False])).columns
     assert columns[0].tolist() == [1.0, 2.0, 3.0]
-    assert columns[1].tolist() == ["C", "Fe", "Ow"]
+    assert columns[1].values().tolist() == ["C", "Fe", "Ow"]
     assert columns[2].tolist() == [0.5, -12.5, 3.0]
+
+
+# Names as LAMMPS types, elements and type labels are written, and one in UTF-8 (two bytes,
+# each read as the code point it is, as Latin-1 does).
+NAMES = st.sampled_from(["1", "2", "3", "10", "C", "Fe", "Ow", "CA_ring", "type_7", "é"])
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    names=st.lists(st.one_of(NAMES, st.text("ABCxyz012_", min_size=1, max_size=12)), min_size=1),
+    chunk_bytes=st.sampled_from([1, 13, 1 << 18]),
+    per_chunk=st.sampled_from([1, 2, 256]),
+)
+def test_text_columns_equal_np_unique_of_their_texts(names, chunk_bytes, per_chunk):
+    """Each chunk's tables (as small as one name, so that rows are parsed again with tables as
+    long as their chunks, and hashed into two slots, so that names collide) merged: the same
+    ``Labels`` (sorted names, codes, both dtypes) as ``np.unique`` of the texts gives."""
+    text = "".join(f"{row} {name}\t{row / 7!r} {name}\n" for row, name in enumerate(names))
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(text_columns, "MIN_CHUNK_BYTES", chunk_bytes)
+        patch.setattr(text_columns, "NAMES_PER_CHUNK", per_chunk)
+        columns = parse_columns(as_bytes(text), len(names), np.array([False, True, False, True]))
+    as_read = [name.encode().decode("latin-1") for name in names]
+    expected = coded(as_read)
+    for labels in (columns.columns[1], columns.columns[3]):
+        assert labels.values().tolist() == as_read
+        assert labels.names.dtype == expected.names.dtype
+        assert labels.names.tolist() == expected.names.tolist()
+        assert labels.codes.dtype == expected.codes.dtype
+        assert np.array_equal(labels.codes, expected.codes)
+    assert columns.columns[0].tolist() == list(range(len(names)))
+
+
+@pytest.mark.parametrize(
+    ("distinct", "per_chunk", "dtype"), [(600, 256, np.uint16), (70000, 256, np.uint32)]
+)
+def test_many_names_widen_the_codes(distinct, per_chunk, dtype):
+    """600 names, each chunk's few enough for its one-byte table, merge into two-byte codes;
+    70,000 in one chunk outgrow the table and take the parse round again."""
+    names = [f"t{row}" for row in range(distinct)]
+    text = "".join(f"{name} {row}\n" for row, name in enumerate(names))
+    tables = []
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(text_columns, "MIN_CHUNK_BYTES", 1 << 10 if distinct < 1000 else 1 << 30)
+        patch.setattr(text_columns, "NAMES_PER_CHUNK", per_chunk)
+        made = text_columns.name_tables
+        patch.setattr(text_columns, "name_tables", lambda *a: tables.append(a) or made(*a))
+        labels = parse_columns(as_bytes(text), distinct, np.array([True, False])).columns[0]
+    assert len(tables) == (1 if distinct < 1000 else 2)
+    assert labels.codes.dtype == dtype
+    assert labels.values().tolist() == names
+    assert labels.names.tolist() == sorted(names)
 
 
 @pytest.mark.parametrize(
@@ -155,6 +213,19 @@ def test_a_field_that_is_no_number_refused_with_its_offset():
     problem = caught.value.problem
     assert (problem.kind, problem.text, problem.field) == ("number", "x4", 1)
     assert problem.offset == text.index("x4")
+
+
+@pytest.mark.parametrize("position", range(9))
+@pytest.mark.parametrize("byte", ["/", ":"])
+def test_the_bytes_beside_the_digits_end_an_eight_digit_run(position, byte):
+    """``/`` and ``:`` stand just below and above the digits in ASCII: at any place of an
+    eight-digit run they make the field no number, as ``float()`` finds it."""
+    text = "1234567890"[:position] + byte + "12345678"
+    with pytest.raises(ValueError):
+        float(text)
+    with pytest.raises(ColumnsError) as caught:
+        parse_columns(as_bytes(f"1 {text}\n"), 1, np.zeros(2, bool))
+    assert (caught.value.problem.kind, caught.value.problem.text) == ("number", text)
 
 
 def write_dump(path: Path, rows: list[str], columns: str) -> None:

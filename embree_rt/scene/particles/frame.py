@@ -27,10 +27,14 @@ class Labels(NamedTuple):
         return code_counts(self.codes, len(self.names))
 
 
+def code_dtype(count: int) -> np.dtype:
+    """The smallest unsigned dtype that holds ``count`` distinct codes."""
+    return np.dtype(np.uint8 if count <= 1 << 8 else np.uint16 if count <= 1 << 16 else np.uint32)
+
+
 def smallest_codes(codes: np.ndarray, count: int) -> np.ndarray:
     """``codes`` (n,) in the smallest unsigned dtype that holds ``count`` distinct codes."""
-    dtype = np.uint8 if count <= 1 << 8 else np.uint16 if count <= 1 << 16 else np.uint32
-    return codes.astype(dtype, copy=False)
+    return codes.astype(code_dtype(count), copy=False)
 
 
 def coded(values) -> Labels:

@@ -95,9 +95,9 @@ def read_dump_frame(
     position_names = {name for triple in POSITION_COLUMNS for name in triple}
     for name, values in table.items():
         if name == "element":
-            frame.elements = values
+            frame.element_labels = values
         elif name == "type":
-            frame.types = values
+            frame.type_labels = values
         elif name == "radius":
             frame.radii = values
         elif name == "diameter":
@@ -148,7 +148,7 @@ def _rows(
     count: int,
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """The ``count`` rows of ``columns`` in ``body`` ((m,) uint8, from byte ``body_start`` of
-    the file's ``data``), column by column: (n,) float64, or (n,) str for ``element`` and
+    the file's ``data``), column by column: (n,) float64, or ``Labels`` for ``element`` and
     ``type`` (types kept as written, "1", "2", ...); and the columns ``triple`` as one (n, 3)
     float64 array, parsed into it."""
     if not columns:

@@ -1,5 +1,6 @@
 """Rows of whitespace-separated fields parsed into columns on all cores (numba): numbers as
-float64 equal bit for bit to Python's ``float()`` of their text, text fields as ``str``.
+float64 equal bit for bit to Python's ``float()`` of their text, text fields as ``Labels``
+(the distinct texts and a code a row).
 
 The body is split into line-aligned chunks, one numba task each: a first pass counts each
 chunk's rows, a second parses them into their rows. A number is parsed exactly where one IEEE
@@ -9,14 +10,23 @@ numba compiles it without fast-math); any other text (17 significant digits, ``1
 ``nan``, a typo) is handed to NumPy's bytes-to-float64 cast, which is CPython's correctly
 rounded ``float()``, and refused where that refuses it. The text is read in place (a memory
 map of the file), so a frame needs its columns' memory and no copy of its text.
+
+A text field (a type, an element) is entered in its chunk's table of names as the parse meets
+it (an open-addressing hash of its bytes), and the row keeps the name's one-byte code in that
+table; the tables are then merged into the sorted names and each row's code recoded in place.
+So 1e7 types take 10 MB where their strings and ``np.unique``'s sort took some 500 MB of fresh
+pages. A chunk that meets more than 256 names is parsed again with a table as long as its rows.
 """
 
 from __future__ import annotations
 
+import mmap
 from typing import NamedTuple
 
 import numpy as np
 from numba import get_num_threads, njit, prange
+
+from embree_rt.scene.particles.frame import Labels, code_dtype
 
 # Exact powers of ten: 10^22 is the largest that a float64 holds exactly.
 POWERS_OF_TEN = np.array([10.0**k for k in range(23)])
@@ -26,6 +36,11 @@ CHUNKS_PER_THREAD = 4
 MIN_CHUNK_BYTES = 1 << 18
 # Fields that miss the fast path are cast by NumPy this many at a time (bounded memory).
 SLOW_BATCH = 1 << 20
+# Names a chunk's table holds while its rows' codes take one byte each.
+NAMES_PER_CHUNK = 256
+# FNV-1a, 64 bits: the hash of a text field's bytes.
+FNV_OFFSET = np.uint64(14695981039346656037)
+FNV_PRIME = np.uint64(1099511628211)
 
 NEWLINE = 10
 
@@ -51,10 +66,66 @@ class ColumnsError(ValueError):
         self.problem = problem
 
 
+class NameTables(NamedTuple):
+    """Each text field's names in each chunk's table, and each row's code in its chunk's table.
+
+    ``codes`` (text fields, n) uint8 (or uint32 where a table outgrows ``NAMES_PER_CHUNK``):
+    row r's text of field k is entry ``codes[k, r]`` of its chunk's table of field k. Chunk c's
+    table is entries ``table_at[c]`` to ``table_at[c + 1]`` ((chunks + 1,) int64) of ``first``
+    (text fields, entries) int64, the byte offset of each name's first occurrence, and
+    ``length`` (same shape) int64, its length; ``size`` (text fields, chunks) int64 how many
+    entries each table fills. ``slots`` (text fields, slot entries) int64 hashes the names,
+    chunk c's from ``slot_at[c]`` to ``slot_at[c + 1]`` (a power of two, at least twice its
+    table): a name's entry + 1, or 0. ``full`` (chunks,) bool: the chunk met a name its table
+    had no room for (its rows' codes are then wrong)."""
+
+    codes: np.ndarray
+    first: np.ndarray
+    length: np.ndarray
+    size: np.ndarray
+    table_at: np.ndarray
+    slots: np.ndarray
+    slot_at: np.ndarray
+    full: np.ndarray
+
+
+def mapped_empty(shape: int | tuple[int, ...], dtype: np.typing.DTypeLike) -> np.ndarray:
+    """An uninitialised array of ``shape`` and ``dtype`` in an anonymous memory map of its own
+    (unmapped when the last array over it goes), for the parse's outputs. NumPy asks the kernel
+    to back any array of 4 MB or more with transparent huge pages, and where THP's ``defrag``
+    is ``madvise`` (the kernel's default) each 2 MB page's first write then waits for the
+    kernel to compact memory: a 1e7-row dump's 330 MB of columns cost 2-4 s of system time
+    that way, 0.7 s in 4 kB pages."""
+    dtype = np.dtype(dtype)
+    count = int(np.prod(shape))
+    pages = mmap.mmap(-1, max(1, count * dtype.itemsize))
+    return np.frombuffer(pages, dtype, count).reshape(shape)
+
+
+def name_tables(text_count: int, count: int, capacity: np.ndarray) -> NameTables:
+    """Empty ``NameTables`` for ``text_count`` text fields of ``count`` rows, chunk c's table
+    ``capacity[c]`` ((chunks,) int64) names long."""
+    table_at = np.concatenate(([0], np.cumsum(capacity))).astype(np.int64)
+    hash_sizes = [1 << max(1, int(2 * size - 1).bit_length()) for size in capacity]
+    slot_at = np.concatenate(([0], np.cumsum(hash_sizes))).astype(np.int64)
+    wide = capacity.max(initial=0) > NAMES_PER_CHUNK
+    return NameTables(
+        codes=mapped_empty((text_count, count), np.uint32 if wide else np.uint8),
+        first=np.empty((text_count, table_at[-1]), np.int64),
+        length=np.empty((text_count, table_at[-1]), np.int64),
+        size=np.zeros((text_count, len(capacity)), np.int64),
+        table_at=table_at,
+        slots=np.zeros((text_count, slot_at[-1]), np.int64),
+        slot_at=slot_at,
+        full=np.zeros(len(capacity), np.bool_),
+    )
+
+
 class ParsedRows(NamedTuple):
-    """``columns`` one (n,) array a field (float64, or str for text fields); ``block`` the
-    fields asked for together as one (n, k) C-contiguous float64 array (whose columns those
-    fields' entries view); ``slow`` how many numbers missed the fast path."""
+    """``columns`` one entry a field: (n,) float64, or ``Labels`` for a text field (its texts
+    as written, each byte a code point); ``block`` the fields asked for together as one (n, k)
+    C-contiguous float64 array (whose columns those fields' entries view); ``slow`` how many
+    numbers missed the fast path."""
 
     columns: list[np.ndarray]
     block: np.ndarray
@@ -65,10 +136,10 @@ def parse_columns(
     data: np.ndarray, count: int, is_text: np.ndarray, together: tuple[int, ...] = ()
 ) -> ParsedRows:
     """The ``count`` rows of ``data`` ((m,) uint8, lines of whitespace-separated fields, blank
-    lines ignored), field by field: float64, or str where ``is_text`` ((width,) bool) says so;
-    the numeric fields ``together`` (indexes) written row by row into one (count, k) block, as
-    positions are wanted, so that no copy of them is made. Raises ``ColumnsError`` naming the
-    first problem's byte offset in ``data``."""
+    lines ignored), field by field: float64, or ``Labels`` where ``is_text`` ((width,) bool)
+    says so; the numeric fields ``together`` (indexes) written row by row into one (count, k)
+    block, as positions are wanted, so that no copy of them is made. Raises ``ColumnsError``
+    naming the first problem's byte offset in ``data``."""
     width = len(is_text)
     numeric = [j for j in range(width) if not is_text[j] and j not in together]
     # Field j's number in row r goes to flat[slots[j] + r * strides[j]]: the block first,
@@ -81,35 +152,40 @@ def parse_columns(
         slots[j] = (len(together) + k) * count
     slots[is_text] = -1 - np.arange(int(is_text.sum()))
     bounds = chunk_bounds(data, _chunk_count(len(data)))
-    flat = np.empty((len(together) + len(numeric)) * count, np.float64)
+    flat = mapped_empty((len(together) + len(numeric)) * count, np.float64)
     text_count = int(is_text.sum())
-    text_start = np.empty((text_count, count), np.int64)
-    text_length = np.empty((text_count, count), np.int32)
     chunks = len(bounds) - 1
     slow = np.zeros(chunks, np.int64)
     blank = np.zeros(chunks, np.int64)
     problems = np.full((chunks, 2), -1, np.int64)
     # Rows are first taken as lines (one vectorised pass); a chunk that meets a blank line
-    # sends the parse round again with the rows counted exactly.
+    # sends the parse round again with the rows counted exactly, and one whose names outgrow
+    # its table, with tables as long as their chunks' rows.
     rows = count_lines(data, bounds)
-    for exact in (False, True):
-        if exact:
-            rows = count_rows(data, bounds)
+    exact = False
+    capacity = np.full(chunks, NAMES_PER_CHUNK, np.int64)
+    while True:
         if int(rows.sum()) != count:
             if exact:
                 raise ColumnsError(ColumnsProblem("rows", len(data), int(rows.sum()), count))
+            rows, exact = count_rows(data, bounds), True
             continue
         first_row = np.concatenate(([0], np.cumsum(rows)[:-1])).astype(np.int64)
+        names = name_tables(text_count, count, capacity)
         parse_rows(
-            data, bounds, first_row, count, slots, strides, POWERS_OF_TEN, flat, text_start,
-            text_length, slow, blank, problems,
+            data, bounds, first_row, count, slots, strides, POWERS_OF_TEN, flat, names, slow,
+            blank, problems,
         )  # fmt: skip
-        if not blank.any():
+        if blank.any() and not exact:
+            rows, exact = count_rows(data, bounds), True
+            continue
+        bad = np.flatnonzero(problems[:, 0] >= 0)
+        if len(bad):
+            offset, fields = problems[bad[0]]
+            raise ColumnsError(ColumnsProblem("fields", int(offset), int(fields), width))
+        if not names.full.any():
             break
-    bad = np.flatnonzero(problems[:, 0] >= 0)
-    if len(bad):
-        offset, fields = problems[bad[0]]
-        raise ColumnsError(ColumnsProblem("fields", int(offset), int(fields), width))
+        capacity = np.maximum(rows, 1)
     slow_total = int(slow.sum())
     if slow_total:
         _cast_slow(data, bounds, first_row, slots, strides, slow, flat)
@@ -117,8 +193,7 @@ def parse_columns(
     columns = []
     for j in range(width):
         if is_text[j]:
-            k = -1 - slots[j]
-            columns.append(_texts(data, text_start[k], text_length[k]))
+            columns.append(_labels(data, names, -1 - slots[j], first_row, rows))
         elif j in together:
             columns.append(block[:, together.index(j)])
         else:
@@ -142,10 +217,7 @@ def _cast_slow(
     """Fill the numbers that missed the fast path with NumPy's cast of their text, in
     batches; raises ``ColumnsError`` at the first text that is not a number."""
     first_slow = np.concatenate(([0], np.cumsum(slow)[:-1])).astype(np.int64)
-    starts = np.empty(int(slow.sum()), np.int64)
-    ends = np.empty_like(starts)
-    rows = np.empty_like(starts)
-    fields = np.empty_like(starts)
+    starts, ends, rows, fields = (mapped_empty(int(slow.sum()), np.int64) for _ in range(4))
     slow_fields(
         data, bounds, first_row, slots, POWERS_OF_TEN, slow, first_slow, starts, ends, rows, fields
     )
@@ -168,6 +240,27 @@ def _cast_slow(
                     ) from None
             raise
         flat[slots[fields[part]] + rows[part] * strides[fields[part]]] = values
+
+
+def _labels(
+    data: np.ndarray, names: NameTables, field: int, first_row: np.ndarray, rows: np.ndarray
+) -> Labels:
+    """Text field ``field``'s ``Labels``: its chunks' tables merged into the sorted names
+    (``np.unique`` of their texts) and each row's code recoded to them, in place where the
+    codes' dtype stays."""
+    size = names.size[field]
+    entries = np.concatenate(
+        [np.arange(at, at + filled) for at, filled in zip(names.table_at[:-1], size, strict=True)]
+    ).astype(np.int64)
+    texts = _texts(data, names.first[field, entries], names.length[field, entries])
+    distinct, inverse = np.unique(texts, return_inverse=True)
+    merged = np.zeros(names.table_at[-1], np.int64)
+    merged[entries] = inverse.reshape(-1)
+    codes = names.codes[field]
+    dtype = code_dtype(len(distinct))
+    out = codes if codes.dtype == dtype else mapped_empty(len(codes), dtype)
+    recode(codes, first_row, rows, names.table_at, merged, out)
+    return Labels(distinct, out)
 
 
 def _texts(data: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -252,6 +345,56 @@ def _is_separator(byte: np.uint8) -> bool:
 
 
 @njit(inline="always")
+def _eight_bytes(data: np.ndarray, at: int) -> np.uint64:
+    """Bytes ``at`` to ``at + 8`` of ``data`` as one little-endian uint64 (LLVM merges the
+    eight loads into one)."""
+    word = np.uint64(0)
+    for k in range(8):
+        word |= np.uint64(_byte(data, at + k)) << np.uint64(8 * k)
+    return word
+
+
+@njit(inline="always")
+def _all_digits(word: np.uint64) -> bool:
+    """Whether each byte of ``word`` is an ASCII digit: its high nibble 3, and adding 6
+    carries no byte past 9 into the next nibble."""
+    high = np.uint64(0xF0F0F0F0F0F0F0F0)
+    return (word & high) == np.uint64(0x3030303030303030) and (
+        (word + np.uint64(0x0606060606060606)) & high
+    ) == np.uint64(0x3030303030303030)
+
+
+@njit(inline="always")
+def _eight_digits(word: np.uint64) -> np.uint64:
+    """The integer the eight ASCII digits of ``word`` write (its first byte the most
+    significant digit): pairs, then fours, then the eight, each one multiply."""
+    word = ((word & np.uint64(0x0F0F0F0F0F0F0F0F)) * np.uint64(2561)) >> np.uint64(8)
+    word = ((word & np.uint64(0x00FF00FF00FF00FF)) * np.uint64(6553601)) >> np.uint64(16)
+    return ((word & np.uint64(0x0000FFFF0000FFFF)) * np.uint64(42949672960001)) >> np.uint64(32)
+
+
+@njit(inline="always")
+def _digits(data: np.ndarray, at: int, limit: int, value: int, count: int) -> tuple[int, int, int]:
+    """The decimal digits from byte ``at`` (up to ``limit``) appended to the integer ``value``
+    of ``count`` digits: the new integer (wrapping past 19 digits, which the caller counts),
+    the new digit count and the byte after the digits. Eight digits at a time while eight
+    bytes are digits (SWAR, as fast_float does: three multiplies rather than eight dependent
+    multiply-adds), then one at a time."""
+    while at + 8 <= limit:
+        word = _eight_bytes(data, at)
+        if not _all_digits(word):
+            break
+        value = value * 100000000 + np.int64(_eight_digits(word))
+        count += 8
+        at += 8
+    while at < limit and 48 <= _byte(data, at) <= 57:
+        value = value * 10 + (_byte(data, at) - 48)
+        count += 1
+        at += 1
+    return value, count, at
+
+
+@njit(inline="always")
 def scan_number(
     data: np.ndarray, start: int, limit: int, powers: np.ndarray
 ) -> tuple[float, bool, int]:
@@ -264,20 +407,12 @@ def scan_number(
     if _byte(data, at) == 45 or _byte(data, at) == 43:  # - +
         negative = _byte(data, at) == 45
         at += 1
-    mantissa = 0
-    digits = 0
+    mantissa, digits, at = _digits(data, at, limit, 0, 0)
     exponent = 0
-    while at < limit and 48 <= _byte(data, at) <= 57:
-        mantissa = mantissa * 10 + (_byte(data, at) - 48)
-        digits += 1
-        at += 1
     if at < limit and _byte(data, at) == 46:  # .
-        at += 1
-        while at < limit and 48 <= _byte(data, at) <= 57:
-            mantissa = mantissa * 10 + (_byte(data, at) - 48)
-            exponent -= 1
-            digits += 1
-            at += 1
+        whole = digits
+        mantissa, digits, at = _digits(data, at + 1, limit, mantissa, digits)
+        exponent = whole - digits
     exact = 0 < digits <= 18
     if at < limit and (_byte(data, at) == 101 or _byte(data, at) == 69):  # e E
         at += 1
@@ -285,12 +420,7 @@ def scan_number(
         if at < limit and (_byte(data, at) == 45 or _byte(data, at) == 43):
             exponent_negative = _byte(data, at) == 45
             at += 1
-        written = 0
-        exponent_digits = 0
-        while at < limit and 48 <= _byte(data, at) <= 57:
-            written = written * 10 + (_byte(data, at) - 48)
-            exponent_digits += 1
-            at += 1
+        written, exponent_digits, at = _digits(data, at, limit, 0, 0)
         exact = exact and 0 < exponent_digits <= 4
         exponent += -written if exponent_negative else written
     if at < limit and not _is_separator(_byte(data, at)):
@@ -318,20 +448,23 @@ def parse_rows(
     strides: np.ndarray,
     powers: np.ndarray,
     flat: np.ndarray,
-    text_start: np.ndarray,
-    text_length: np.ndarray,
+    names: NameTables,
     slow: np.ndarray,
     blank: np.ndarray,
     problems: np.ndarray,
 ) -> None:
     """Each chunk's rows, from row ``first_row[c]`` on (``total`` rows in all), into ``flat``
     (float64: field j of row r at ``slots[j] + r * strides[j]``; NaN where a number missed
-    the fast path, counted in ``slow``) and ``text_start``/``text_length`` ((text fields, n)
-    int64/int32, where each text field lies in ``data``; field j's is row ``-1 - slots[j]``).
-    Blank lines are counted in ``blank`` (then ``first_row`` may be wrong, and rows past
-    ``total`` are not written); a chunk's first line of the wrong field count is left in
-    ``problems[c]`` as (its byte offset, fields found)."""
+    the fast path, counted in ``slow``) and ``names`` (text field j is ``names``' field
+    ``-1 - slots[j]``). Blank lines are counted in ``blank`` (then ``first_row`` may be wrong,
+    and rows past ``total`` are not written); a chunk's first line of the wrong field count is
+    left in ``problems[c]`` as (its byte offset, fields found)."""
     width = len(slots)
+    # The tables' arrays are taken out of ``names`` here: a prange body's stores through a
+    # named tuple's arrays are lost (numba issue 7135). A function of its own for the chunk's
+    # rows, called from the body, made the parse 1.5x slower, and a call a row to a function
+    # that takes ``names`` cost 70 ns a row.
+    codes, first, length, size, table_at, name_slots, slot_at, full = names
     for c in prange(len(bounds) - 1):
         row = first_row[c]
         at = bounds[c]
@@ -358,11 +491,14 @@ def parse_rows(
                         slow_count += 1
                     flat[slot + row * strides[field]] = value
                 else:
-                    start = at
-                    while at < end and not _is_separator(_byte(data, at)):
-                        at += 1
-                    text_start[-1 - slot, row] = start
-                    text_length[-1 - slot, row] = at - start
+                    at, entry = enter_name(
+                        data, at, end, -1 - slot, c, first, length, size, table_at, name_slots,
+                        slot_at,
+                    )  # fmt: skip
+                    if entry < 0:
+                        full[c] = True
+                    else:
+                        codes[-1 - slot, row] = entry
                 field += 1
             at += 1
             if field == 0 or row >= total:
@@ -375,6 +511,79 @@ def parse_rows(
             row += 1
         slow[c] = slow_count
         blank[c] = blank_count
+
+
+@njit(inline="always")
+def enter_name(
+    data: np.ndarray,
+    start: int,
+    end: int,
+    field: int,
+    chunk: int,
+    first: np.ndarray,
+    length: np.ndarray,
+    size: np.ndarray,
+    table_at: np.ndarray,
+    name_slots: np.ndarray,
+    slot_at: np.ndarray,
+) -> tuple[int, int]:
+    """The text field ``field`` from byte ``start`` (to a separator or ``end``) looked up in
+    chunk ``chunk``'s table (``NameTables``' arrays of those names, ``name_slots`` its
+    ``slots``), entered there if new: the byte after the field and its entry (-1 where the
+    table has no room)."""
+    at = start
+    hashed = FNV_OFFSET
+    while at < end and not _is_separator(_byte(data, at)):
+        hashed = (hashed ^ np.uint64(_byte(data, at))) * FNV_PRIME
+        at += 1
+    span = at - start
+    base = table_at[chunk]
+    slot_base = slot_at[chunk]
+    mask = slot_at[chunk + 1] - slot_base - 1
+    slot = np.int64(hashed & np.uint64(mask))
+    while True:
+        entry = name_slots[field, slot_base + slot] - 1
+        if entry < 0:
+            entry = size[field, chunk]
+            if entry == table_at[chunk + 1] - base:
+                return at, -1
+            first[field, base + entry] = start
+            length[field, base + entry] = span
+            name_slots[field, slot_base + slot] = entry + 1
+            size[field, chunk] = entry + 1
+            return at, entry
+        if length[field, base + entry] == span and _same_bytes(
+            data, first[field, base + entry], start, span
+        ):
+            return at, entry
+        slot = (slot + 1) & mask
+
+
+@njit(inline="always")
+def _same_bytes(data: np.ndarray, first: int, second: int, length: int) -> bool:
+    """Whether the ``length`` bytes at ``first`` and at ``second`` are the same."""
+    for k in range(length):  # noqa: SIM110 (numba compiles no all() of a generator)
+        if _byte(data, first + k) != _byte(data, second + k):
+            return False
+    return True
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def recode(
+    codes: np.ndarray,
+    first_row: np.ndarray,
+    rows: np.ndarray,
+    table_at: np.ndarray,
+    merged: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """``out[r] = merged[table_at[c] + codes[r]]`` for chunk c's rows (``rows[c]`` from
+    ``first_row[c]``): (n,) codes into each chunk's table turned into codes into the merged
+    names (``out`` may be ``codes``)."""
+    for c in prange(len(rows)):
+        base = table_at[c]
+        for r in range(first_row[c], first_row[c] + rows[c]):
+            out[r] = merged[base + codes[r]]
 
 
 @njit(parallel=True, cache=True, nogil=True)
