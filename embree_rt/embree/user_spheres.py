@@ -24,6 +24,9 @@ The user pointer is the address of two 64-bit words: the BVH's (n, 4) float32 bu
 stored sphere among the spheres given, which the intersect callback reports as the primID: the
 storage order never shows outside the callbacks.
 
+Each sphere's box is the tightest float32 box strictly outside it, so Embree's float32 box test
+culls no ray the float64 test below would hit (a ray along a face that grazes the sphere).
+
 The quadratic is the numerically robust form of Ray Tracing Gems, chapter 7, evaluated in
 float64: the discriminant comes from the ray's perpendicular offset from the centre (no
 cancellation of |o − c|² against r² far from small spheres), the near root is c/q and the far
@@ -67,19 +70,40 @@ from embree_rt.embree.kernels import (
 _CALLBACK = types.void(types.uintp)
 
 
+@njit(inline="always")
+def _below(center, r):
+    """The largest float32 strictly below ``center - r``: the float64 difference of the two
+    float32 numbers is exact (unless r is below 2^-29 of the centre, a sphere float32 cannot
+    place)."""
+    exact = np.float64(center) - np.float64(r)
+    low = np.float32(exact)
+    return np.nextafter(low, np.float32(-np.inf)) if np.float64(low) >= exact else low
+
+
+@njit(inline="always")
+def _above(center, r):
+    """The smallest float32 strictly above ``center + r`` (see ``_below``)."""
+    exact = np.float64(center) + np.float64(r)
+    high = np.float32(exact)
+    return np.nextafter(high, np.float32(np.inf)) if np.float64(high) <= exact else high
+
+
 @on_first_use(_CALLBACK, nopython=True, cache=True)
 def sphere_bounds(address):
     args = carray(pointers.words64(address), 3)
     prim = args[1] & 0xFFFFFFFF
     sphere = carray(pointers.floats(carray(pointers.words64(args[0]), 2)[0] + 16 * prim), 4)
     box = carray(pointers.floats(args[2]), 8)
+    # Strictly outside the sphere: rounded to nearest, a face could fall inside the sphere or
+    # touch it where a ray along the face grazes it, and Embree's box test would cull a ray
+    # the float64 test hits.
     r = sphere[3]
-    box[0] = sphere[0] - r
-    box[1] = sphere[1] - r
-    box[2] = sphere[2] - r
-    box[4] = sphere[0] + r
-    box[5] = sphere[1] + r
-    box[6] = sphere[2] + r
+    box[0] = _below(sphere[0], r)
+    box[1] = _below(sphere[1], r)
+    box[2] = _below(sphere[2], r)
+    box[4] = _above(sphere[0], r)
+    box[5] = _above(sphere[1], r)
+    box[6] = _above(sphere[2], r)
 
 
 @njit(inline="always")
