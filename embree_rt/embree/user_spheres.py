@@ -19,10 +19,11 @@ The callbacks receive one pointer to an Embree argument struct (Embree 4,
 - ``RTCRayQueryContext`` starts with instID[0], then instPrimID[0] (this Embree is built with
   one instance level and instance arrays).
 
-The user pointer is the address of two 64-bit words: the BVH's (n, 4) float32 buffer of
-(x, y, z, radius), stored in spatial order (``spatial_order``), and the (n,) int32 index of each
-stored sphere among the spheres given, which the intersect callback reports as the primID: the
-storage order never shows outside the callbacks.
+The user pointer is the address of three 64-bit words: the BVH's (n, 4) float32 buffer of
+(x, y, z, radius), stored in spatial order (``spatial_order``), the (n,) int32 index of each
+stored sphere among the spheres given, which the intersect callback reports as the primID (the
+storage order never shows outside the callbacks), and the address of the (n,) uint32 tie key of
+each sphere given (indexed by primID), or 0 when each sphere's key is its primID.
 
 Each sphere's box is the tightest float32 box strictly outside it, so Embree's float32 box test
 culls no ray the float64 test below would hit (a ray along a face that grazes the sphere).
@@ -35,10 +36,13 @@ nearest hit with t as recorded (rounded to float32) held to tfar; a ray that sta
 sphere gets the exit point.
 
 Ties: where two spheres are hit at one float32 distance, the hit goes to the lower (instance
-id, geometry id, primitive id), compared as unsigned 32-bit words, whichever the traversal
-meets first: the nearest hit is then the least (float32 t, ids) over the spheres the ray
-meets, a function of the spheres alone, not of the tree (a refitted BVH and a fresh one give
-the same bits). A tie with a triangle or an instance is Embree's own rule, the later hit.
+id, geometry id, tie key, primitive id), compared as unsigned 32-bit words, whichever the
+traversal meets first: the nearest hit is then the least (float32 t, ids) over the spheres the
+ray meets, a function of the spheres alone, not of the tree (a refitted BVH and a fresh one give
+the same bits). The tie key lets a caller that hands the spheres over in an order of its own
+(a scene's spheres in Morton order, whose ranks change as they move) break ties by an index
+that stays with each sphere; it is read only in a tie. A tie with a triangle or an instance is
+Embree's own rule, the later hit.
 
 The normal written is o + t·d − c, outward (unnormalised), and u = v = 0.
 """
@@ -152,10 +156,21 @@ def _nearest_root(floats, n, lane, cx, cy, cz, r, rounded):
 
 
 @njit(inline="always")
-def _loses_tie(words, n, lane, inst_id, geom_id, prim_id):
+def _tie_key(keys, prim_id):
+    """Sphere ``prim_id``'s tie key: word ``prim_id`` of the uint32 keys at address ``keys``,
+    or ``prim_id`` itself when ``keys`` is 0."""
+    if keys == 0:
+        return prim_id
+    return np.uint32(carray(pointers.words32(keys + 4 * np.uint64(prim_id)), 1)[0])
+
+
+@njit(inline="always")
+def _loses_tie(words, n, lane, inst_id, geom_id, prim_id, keys):
     """Whether a hit of (``inst_id``, ``geom_id``, ``prim_id``) at the distance of the hit lane
-    ``lane`` holds already loses to it: only a lower triple, compared as unsigned words, takes
-    a tie from a recorded hit (none recorded: nothing to lose to)."""
+    ``lane`` holds already loses to it: only a lower (instance, geometry, tie key, primitive),
+    compared as unsigned words, takes a tie from a recorded hit (none recorded: nothing to lose
+    to). A held hit of the same instance and geometry is a sphere of the same set, whose key
+    ``keys`` (``_tie_key``) gives."""
     held_geom = words[HIT_GEOM_ID * n + lane]
     if held_geom == INVALID_ID:
         return False
@@ -164,19 +179,24 @@ def _loses_tie(words, n, lane, inst_id, geom_id, prim_id):
         return inst_id > held_inst
     if geom_id != held_geom:
         return geom_id > held_geom
-    return prim_id >= words[HIT_PRIM_ID * n + lane]
+    held_prim = np.uint32(words[HIT_PRIM_ID * n + lane])
+    key = _tie_key(keys, prim_id)
+    held_key = _tie_key(keys, held_prim)
+    if key != held_key:
+        return key > held_key
+    return prim_id >= held_prim
 
 
 @njit(inline="always")
 def _unpack(address):
     """The fields of an RTCIntersect/OccludedFunctionNArguments both callbacks read: the 64-bit
-    words, the lane count N, the user data's two words, the stored sphere's slot, the valid
+    words, the lane count N, the user data's three words, the stored sphere's slot, the valid
     mask (N,) and the sphere as float64."""
     args = carray(pointers.words64(address), 6)
     n = args[5] & 0xFFFFFFFF
     slot = args[2] & 0xFFFFFFFF
     valid = carray(pointers.ints(args[0]), n)
-    user = carray(pointers.words64(args[1]), 2)
+    user = carray(pointers.words64(args[1]), 3)
     sphere = carray(pointers.floats(user[0] + 16 * slot), 4)
     return (
         args,
@@ -208,7 +228,7 @@ def sphere_intersect(address):
         # cache line
         prim_id = np.uint32(carray(pointers.ints(user[1] + 4 * slot), 1)[0])
         if np.float32(t) == floats[RAY_TFAR * n + lane] and _loses_tie(
-            words, n, lane, np.uint32(context[0]), np.uint32(geom_id), prim_id
+            words, n, lane, np.uint32(context[0]), np.uint32(geom_id), prim_id, user[2]
         ):
             continue
         floats[RAY_TFAR * n + lane] = t
