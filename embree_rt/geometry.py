@@ -293,7 +293,12 @@ class SceneGeometry(Closing):
             )
             if not in_order:
                 self.sphere_index, self._sphere_labels = order, labels
-        self.sphere_geom_id = self.bvh.add_spheres(centers, radii, kind=kind)
+        # Ties between spheres go by the scene's own index, not by the Morton rank the BVH
+        # reports: the ranks of moved spheres differ from a fresh build's, and a refitted BVH
+        # must answer as a fresh one does.
+        self.sphere_geom_id = self.bvh.add_spheres(
+            centers, radii, kind=kind, tie_keys=self.sphere_index
+        )
 
     def move_spheres(self, centers: np.ndarray, radii: np.ndarray) -> None:
         """Give the scene's spheres new ``centers`` (n, 3) and ``radii`` (n,) float, in the

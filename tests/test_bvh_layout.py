@@ -244,7 +244,8 @@ def test_occluded_sets_tfar_to_minus_infinity_and_nothing_else(scene, width):
 
 def test_bounds_callback_reports_each_spheres_box():
     """rtcGetSceneBounds of user spheres only is the union of what the bounds callback wrote:
-    centre -/+ radius in float32 (one IEEE subtraction, the same on every ISA)."""
+    the tightest float32 box strictly outside centre -/+ radius (exact in float64, and float32
+    rounding is the same on every ISA)."""
     rng = np.random.default_rng(60)
     centers = rng.uniform(-100, 100, (37, 3)).astype(np.float32)
     radii = rng.uniform(0.1, 5, 37).astype(np.float32)
@@ -253,5 +254,37 @@ def test_bounds_callback_reports_each_spheres_box():
         bvh.commit()
         box = _aligned(8, np.float32)
         _function("rtcGetSceneBounds", 2)(bvh._live_scene(), box.ctypes.data)
-    np.testing.assert_array_equal(box[:3], (centers - radii[:, None]).min(axis=0))
-    np.testing.assert_array_equal(box[4:7], (centers + radii[:, None]).max(axis=0))
+    exact = centers.astype(np.float64), radii.astype(np.float64)[:, None]
+    low, high = (exact[0] - exact[1]).min(axis=0), (exact[0] + exact[1]).max(axis=0)
+    assert np.all(box[:3] < low) and np.all(np.nextafter(box[:3], np.float32(np.inf)) >= low)
+    assert np.all(box[4:7] > high) and np.all(np.nextafter(box[4:7], np.float32(-np.inf)) <= high)
+
+
+def test_each_spheres_box_is_the_tightest_float32_box_strictly_outside_it():
+    """Sphere by sphere (a BVH of one each): every face is the float32 next to centre -/+
+    radius on the outside, computed exactly in float64, for spheres whose faces rounded to
+    nearest would land inside, outside or exactly on the sphere."""
+    rng = np.random.default_rng(61)
+    centers = rng.uniform(-1e3, 1e3, (48, 3)).astype(np.float32)
+    centers[:16] = rng.uniform(-1, 1, (16, 3)).astype(np.float32)
+    radii = rng.uniform(1e-3, 50, 48).astype(np.float32)
+    radii[8:16] = 0.5  # centres near 0: sums exact in float32, faces on the sphere itself
+    bounds = _function("rtcGetSceneBounds", 2)
+    lows, highs = [], []
+    for k in range(len(centers)):
+        with BVH() as bvh:
+            bvh.add_spheres(centers[k : k + 1], radii[k : k + 1], kind="user")
+            bvh.commit()
+            box = _aligned(8, np.float32)
+            bounds(bvh._live_scene(), box.ctypes.data)
+        lows.append(box[:3].copy())
+        highs.append(box[4:7].copy())
+    low, high = np.array(lows), np.array(highs)
+    exact_low = centers.astype(np.float64) - radii.astype(np.float64)[:, None]
+    exact_high = centers.astype(np.float64) + radii.astype(np.float64)[:, None]
+    assert np.all(low < exact_low) and np.all(high > exact_high)
+    assert np.all(np.nextafter(low, np.float32(np.inf)) >= exact_low)
+    assert np.all(np.nextafter(high, np.float32(-np.inf)) <= exact_high)
+    nearest = (centers - radii[:, None], centers + radii[:, None])
+    assert np.any(nearest[0] > exact_low) and np.any(nearest[1] < exact_high), "some inside"
+    assert np.any(nearest[0] == exact_low), "some faces on the sphere"

@@ -4,8 +4,9 @@ tree.
 
 Why bitwise: the user-geometry callbacks compute a hit from the sphere's own float32 data and
 the ray alone (the same float64 arithmetic whatever tree called them), and of several spheres
-met at one float32 distance the lowest ids take the hit (``user_spheres``), so the nearest hit
-is the least (t, ids) over the spheres a ray meets: a function of the spheres, not the tree.
+met at one float32 distance the lowest ids take the hit (``user_spheres``; a scene's spheres by
+their index in the scene, whatever Morton rank the BVH holds them at), so the nearest hit is the
+least (t, ids) over the spheres a ray meets: a function of the spheres, not the tree.
 Embree's point spheres compute their own hits the same way in any tree of the same ISA.
 """
 
@@ -17,6 +18,7 @@ import pytest
 import embree_rt as rt
 from embree_rt.embree import Rays
 from embree_rt.embree.bvh import BVH
+from embree_rt.geometry import SceneGeometry
 
 SIZE = {"width": 48, "height": 32, "spp": 1, "max_depth": 3, "seed": 2}
 
@@ -110,6 +112,85 @@ def test_exact_ties_go_to_the_lowest_index_in_any_tree() -> None:
         position = np.argsort(order)  # where each sphere went
         # the winner is the one of the two twins given the lower index after shuffling
         assert np.all(position[winners] < position[twins])
+
+
+def test_tie_keys_decide_exact_ties_whatever_order_the_spheres_come_in() -> None:
+    # every sphere twice, shuffled, each keyed by its index before shuffling: every tie goes
+    # to the twin with the lower key (the first copy), whichever index it was given
+    centers, radii = moving_spheres(1, count=200)
+    origins, directions = camera_rays()
+    doubled_centers = np.concatenate([centers[0], centers[0]])
+    doubled_radii = np.concatenate([radii, radii])
+    for permutation_seed in range(3):
+        order = np.random.default_rng(permutation_seed).permutation(len(doubled_radii))
+        with BVH() as bvh:
+            bvh.add_spheres(doubled_centers[order], doubled_radii[order], tie_keys=order)
+            bvh.commit()
+            hits = bvh.intersect(Rays(origins, directions))
+        assert hits.hit.mean() > 0.05
+        assert np.all(order[hits.prim_id[hits.hit]] < 200)
+
+
+def test_tie_keys_are_checked() -> None:
+    centers, radii = moving_spheres(1, count=10)
+    with BVH() as bvh:
+        with pytest.raises(ValueError, match=r"tie_keys: expected shape \(10,\)"):
+            bvh.add_spheres(centers[0], radii, tie_keys=np.arange(9))
+        with pytest.raises(ValueError, match="tie_keys: row 4 is -1"):
+            bvh.add_spheres(centers[0], radii, tie_keys=np.where(np.arange(10) == 4, -1, 0))
+        with pytest.raises(ValueError, match="tie_keys: only user spheres"):
+            bvh.add_spheres(centers[0], radii, kind="point", tie_keys=np.arange(10))
+
+
+def tangent_pairs_scene(flip: bool, count: int = 40):
+    """Pairs of spheres a ray enters at one point, exact in float32: sphere A (r = |s|) 2
+    steps along the slope s from the ray's origin, sphere B (r = 2|s|) 3 steps along, both
+    entered one step along (t = 1, direction s), so each ray's hit is an exact tie. With
+    ``flip`` every pair lies the other way (-s), which swaps A's and B's Morton order. Pair i
+    in its own plane z = 60 i; A is sphere 2i and B 2i + 1 for even i, the other way round for
+    odd i. Returns the scene, origins and directions (count, 3) float32."""
+    slopes = [(3.0, 4.0, 0.0), (-4.0, 3.0, 0.0), (2.0, 3.0, 6.0), (6.0, -2.0, -3.0)]
+    centers, radii, origins, directions = [], [], [], []
+    for i in range(count):
+        slope = np.array(slopes[i % 4]) * (-1.0 if flip else 1.0)
+        origin = np.array([i - 9.0, 5.0 - i, 60.0 * i])
+        pair = [
+            (origin + 2 * slope, np.linalg.norm(slope)),
+            (origin + 3 * slope, 2 * np.linalg.norm(slope)),
+        ]
+        if i % 2:
+            pair.reverse()
+        centers += [pair[0][0], pair[1][0]]
+        radii += [pair[0][1], pair[1][1]]
+        origins.append(origin)
+        directions.append(slope)
+    scene = rt.Scene()
+    scene.add_spheres(np.array(centers), np.array(radii), "matte")
+    return scene, np.float32(origins), np.float32(directions)
+
+
+def test_a_refitted_scene_breaks_exact_ties_as_a_fresh_build_does() -> None:
+    # The scene's spheres reach the BVH in Morton order; a refitted BVH keeps frame 0's, a
+    # fresh one takes the moved spheres'. Ties must go by the scene's own index in both.
+    before, _, _ = tangent_pairs_scene(flip=False)
+    after, origins, directions = tangent_pairs_scene(flip=True)
+    with (
+        SceneGeometry(before, movable=True) as moving,
+        SceneGeometry(after) as fresh,
+    ):
+        rank_before = np.argsort(moving.sphere_index)  # each scene sphere's Morton rank
+        rank_after = np.argsort(fresh.sphere_index)
+        swapped = (rank_before[0::2] < rank_before[1::2]) != (rank_after[0::2] < rank_after[1::2])
+        assert swapped.sum() >= 10, "the case swaps the Morton order of many pairs"
+        moving.move_spheres(after.sphere_centers, after.sphere_radii)
+        refitted = moving.bvh.intersect(Rays(origins, directions))
+        expected = fresh.bvh.intersect(Rays(origins, directions))
+        np.testing.assert_array_equal(refitted.t, np.ones(len(origins), np.float32))
+        np.testing.assert_array_equal(expected.t, refitted.t)
+        np.testing.assert_array_equal(refitted.normal, expected.normal)
+        winner = moving.scene_sphere(refitted.prim_id)
+        np.testing.assert_array_equal(winner, fresh.scene_sphere(expected.prim_id))
+        np.testing.assert_array_equal(winner, 2 * np.arange(len(origins)))  # the lower index
 
 
 def test_move_spheres_refuses_what_it_cannot_do() -> None:

@@ -6,9 +6,9 @@ Why bitwise on every ISA: each image is compared with one made on the same machi
 hit is computed by the user-geometry callback from that sphere's float32 data and the ray alone,
 in the same float64 arithmetic whatever tree called it, so the nearest hit is the least t over the
 spheres a ray meets: a function of the spheres, not of the tree (refitted or built anew, with the
-spheres in either order). Only two distinct spheres met at exactly one float32 distance could go
-either way (the tie rule takes the lower id, and a rebuild orders the spheres anew); the random
-trajectories here have no such ties. Overlap changes only which thread reads and writes: the
+spheres in either order). Two distinct spheres met at exactly one float32 distance go to the
+lower index in the scene, however a rebuild orders the spheres (``tests/test_refit.py`` builds
+such ties). Overlap changes only which thread reads and writes: the
 render itself runs the same code on the same inputs.
 """
 

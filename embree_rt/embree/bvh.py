@@ -185,9 +185,9 @@ class BVH(Closing):
         # Each sphere set by geometry id: its (n, 4) float32 (x, y, z, r) as stored and the
         # (n,) int32 slot where sphere i is stored (empty: sphere i is in slot i).
         self._sphere_buffers: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        # The user-geometry spheres' user data (two addresses) and storage order, kept alive
-        # here for as long as Embree may call the callbacks.
-        self._sphere_user_data: list[tuple[np.ndarray, np.ndarray]] = []
+        # The user-geometry spheres' user data (three addresses), storage order and tie keys
+        # (or None), kept alive here for as long as Embree may call the callbacks.
+        self._sphere_user_data: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []
         # Each sphere set by geometry id: the (n,) int32 sphere stored in each slot (empty: the
         # given order) and how far from the origin it reaches; what ``move_spheres`` rewrites.
         self._sphere_orders: dict[int, np.ndarray] = {}
@@ -266,19 +266,38 @@ class BVH(Closing):
             np.ctypeslib.as_array(target).reshape(count, width)[:] = rows
         return pointer
 
-    def add_spheres(self, centers: np.ndarray, radii: np.ndarray, kind: str = "user") -> int:
+    def add_spheres(
+        self,
+        centers: np.ndarray,
+        radii: np.ndarray,
+        kind: str = "user",
+        tie_keys: np.ndarray | None = None,
+    ) -> int:
         """Add analytic spheres: ``centers`` (n, 3), ``radii`` (n,) positive. Returns geom id.
 
         ``kind="user"`` (default) enters them as user geometry with compiled callbacks
         (``user_spheres``); ``kind="point"`` as Embree's own ``SPHERE_POINT`` primitive, kept
         for comparison. Both report the nearest crossing in [tnear, tfar] (the exit point for a
         ray that starts inside) with an outward, unnormalised normal.
+
+        ``tie_keys`` (n,) integers in [0, 2^32), user spheres only: of two of these spheres hit
+        at one float32 distance, the one with the lower key takes the hit (the lower index
+        given where the keys are equal); without them the lower index given. A caller that
+        hands its spheres over in an order of its own passes each one's own index, so ties go
+        the same way whatever order it chose. They stay with the sphere given through
+        ``move_spheres``.
         """
         if kind not in SPHERE_KINDS:
             raise ValueError(f"kind: expected one of {SPHERE_KINDS}, got {kind!r}")
         centers = as_points(centers, "centers")
         radii = as_positive(radii, "radii", len(centers))
         count = len(centers)
+        if tie_keys is not None:
+            if kind != "user":
+                raise ValueError(f"tie_keys: only user spheres break ties by key, not {kind!r}")
+            if np.shape(tie_keys) != (count,):
+                raise ValueError(f"tie_keys: expected shape ({count},), got {np.shape(tie_keys)}")
+            tie_keys = as_indices(tie_keys, "tie_keys", 1 << 32).astype(np.uint32)
         if kind == "point":
             geometry = self._new_geometry("SPHERE_POINT")
             pointer = self._new_buffer(
@@ -311,8 +330,9 @@ class BVH(Closing):
             else:
                 order_kept = order
             # Embree reads these through the user pointer for as long as the BVH lives.
-            user_data = np.array([packed.ctypes.data, order.ctypes.data], np.uint64)
-            self._sphere_user_data.append((user_data, order))
+            keys = 0 if tie_keys is None else tie_keys.ctypes.data
+            user_data = np.array([packed.ctypes.data, order.ctypes.data, keys], np.uint64)
+            self._sphere_user_data.append((user_data, order, tie_keys))
             lib = self._lib
             lib.rtcSetGeometryUserPrimitiveCount(geometry, count)
             lib.rtcSetGeometryUserData(geometry, user_data.ctypes.data)
@@ -358,7 +378,8 @@ class BVH(Closing):
         Queries then answer as a BVH freshly built on the moved spheres does, bit for bit: the
         callbacks compute the same hit from the same sphere whatever the tree, and an exact tie
         (two spheres at one float32 distance) goes the same way in any tree
-        (``user_spheres``). A tree refitted over large motion answers more slowly: rebuild it
+        (``user_spheres``), by the tie keys ``add_spheres`` was given, which stay with each
+        sphere given. A tree refitted over large motion answers more slowly: rebuild it
         (a new BVH) when its rays trace 1.2x slower than a fresh tree's
         (docs/performance.md)."""
         if not self.movable:

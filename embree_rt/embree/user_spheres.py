@@ -19,10 +19,14 @@ The callbacks receive one pointer to an Embree argument struct (Embree 4,
 - ``RTCRayQueryContext`` starts with instID[0], then instPrimID[0] (this Embree is built with
   one instance level and instance arrays).
 
-The user pointer is the address of two 64-bit words: the BVH's (n, 4) float32 buffer of
-(x, y, z, radius), stored in spatial order (``spatial_order``), and the (n,) int32 index of each
-stored sphere among the spheres given, which the intersect callback reports as the primID: the
-storage order never shows outside the callbacks.
+The user pointer is the address of three 64-bit words: the BVH's (n, 4) float32 buffer of
+(x, y, z, radius), stored in spatial order (``spatial_order``), the (n,) int32 index of each
+stored sphere among the spheres given, which the intersect callback reports as the primID (the
+storage order never shows outside the callbacks), and the address of the (n,) uint32 tie key of
+each sphere given (indexed by primID), or 0 when each sphere's key is its primID.
+
+Each sphere's box is the tightest float32 box strictly outside it, so Embree's float32 box test
+culls no ray the float64 test below would hit (a ray along a face that grazes the sphere).
 
 The quadratic is the numerically robust form of Ray Tracing Gems, chapter 7, evaluated in
 float64: the discriminant comes from the ray's perpendicular offset from the centre (no
@@ -32,10 +36,13 @@ nearest hit with t as recorded (rounded to float32) held to tfar; a ray that sta
 sphere gets the exit point.
 
 Ties: where two spheres are hit at one float32 distance, the hit goes to the lower (instance
-id, geometry id, primitive id), compared as unsigned 32-bit words, whichever the traversal
-meets first: the nearest hit is then the least (float32 t, ids) over the spheres the ray
-meets, a function of the spheres alone, not of the tree (a refitted BVH and a fresh one give
-the same bits). A tie with a triangle or an instance is Embree's own rule, the later hit.
+id, geometry id, tie key, primitive id), compared as unsigned 32-bit words, whichever the
+traversal meets first: the nearest hit is then the least (float32 t, ids) over the spheres the
+ray meets, a function of the spheres alone, not of the tree (a refitted BVH and a fresh one give
+the same bits). The tie key lets a caller that hands the spheres over in an order of its own
+(a scene's spheres in Morton order, whose ranks change as they move) break ties by an index
+that stays with each sphere; it is read only in a tie. A tie with a triangle or an instance is
+Embree's own rule, the later hit.
 
 The normal written is o + t·d − c, outward (unnormalised), and u = v = 0.
 """
@@ -67,19 +74,40 @@ from embree_rt.embree.kernels import (
 _CALLBACK = types.void(types.uintp)
 
 
+@njit(inline="always")
+def _below(center, r):
+    """The largest float32 strictly below ``center - r``: the float64 difference of the two
+    float32 numbers is exact (unless r is below 2^-29 of the centre, a sphere float32 cannot
+    place)."""
+    exact = np.float64(center) - np.float64(r)
+    low = np.float32(exact)
+    return np.nextafter(low, np.float32(-np.inf)) if np.float64(low) >= exact else low
+
+
+@njit(inline="always")
+def _above(center, r):
+    """The smallest float32 strictly above ``center + r`` (see ``_below``)."""
+    exact = np.float64(center) + np.float64(r)
+    high = np.float32(exact)
+    return np.nextafter(high, np.float32(np.inf)) if np.float64(high) <= exact else high
+
+
 @on_first_use(_CALLBACK, nopython=True, cache=True)
 def sphere_bounds(address):
     args = carray(pointers.words64(address), 3)
     prim = args[1] & 0xFFFFFFFF
     sphere = carray(pointers.floats(carray(pointers.words64(args[0]), 2)[0] + 16 * prim), 4)
     box = carray(pointers.floats(args[2]), 8)
+    # Strictly outside the sphere: rounded to nearest, a face could fall inside the sphere or
+    # touch it where a ray along the face grazes it, and Embree's box test would cull a ray
+    # the float64 test hits.
     r = sphere[3]
-    box[0] = sphere[0] - r
-    box[1] = sphere[1] - r
-    box[2] = sphere[2] - r
-    box[4] = sphere[0] + r
-    box[5] = sphere[1] + r
-    box[6] = sphere[2] + r
+    box[0] = _below(sphere[0], r)
+    box[1] = _below(sphere[1], r)
+    box[2] = _below(sphere[2], r)
+    box[4] = _above(sphere[0], r)
+    box[5] = _above(sphere[1], r)
+    box[6] = _above(sphere[2], r)
 
 
 @njit(inline="always")
@@ -128,10 +156,21 @@ def _nearest_root(floats, n, lane, cx, cy, cz, r, rounded):
 
 
 @njit(inline="always")
-def _loses_tie(words, n, lane, inst_id, geom_id, prim_id):
+def _tie_key(keys, prim_id):
+    """Sphere ``prim_id``'s tie key: word ``prim_id`` of the uint32 keys at address ``keys``,
+    or ``prim_id`` itself when ``keys`` is 0."""
+    if keys == 0:
+        return prim_id
+    return np.uint32(carray(pointers.words32(keys + 4 * np.uint64(prim_id)), 1)[0])
+
+
+@njit(inline="always")
+def _loses_tie(words, n, lane, inst_id, geom_id, prim_id, keys):
     """Whether a hit of (``inst_id``, ``geom_id``, ``prim_id``) at the distance of the hit lane
-    ``lane`` holds already loses to it: only a lower triple, compared as unsigned words, takes
-    a tie from a recorded hit (none recorded: nothing to lose to)."""
+    ``lane`` holds already loses to it: only a lower (instance, geometry, tie key, primitive),
+    compared as unsigned words, takes a tie from a recorded hit (none recorded: nothing to lose
+    to). A held hit of the same instance and geometry is a sphere of the same set, whose key
+    ``keys`` (``_tie_key``) gives."""
     held_geom = words[HIT_GEOM_ID * n + lane]
     if held_geom == INVALID_ID:
         return False
@@ -140,19 +179,24 @@ def _loses_tie(words, n, lane, inst_id, geom_id, prim_id):
         return inst_id > held_inst
     if geom_id != held_geom:
         return geom_id > held_geom
-    return prim_id >= words[HIT_PRIM_ID * n + lane]
+    held_prim = np.uint32(words[HIT_PRIM_ID * n + lane])
+    key = _tie_key(keys, prim_id)
+    held_key = _tie_key(keys, held_prim)
+    if key != held_key:
+        return key > held_key
+    return prim_id >= held_prim
 
 
 @njit(inline="always")
 def _unpack(address):
     """The fields of an RTCIntersect/OccludedFunctionNArguments both callbacks read: the 64-bit
-    words, the lane count N, the user data's two words, the stored sphere's slot, the valid
+    words, the lane count N, the user data's three words, the stored sphere's slot, the valid
     mask (N,) and the sphere as float64."""
     args = carray(pointers.words64(address), 6)
     n = args[5] & 0xFFFFFFFF
     slot = args[2] & 0xFFFFFFFF
     valid = carray(pointers.ints(args[0]), n)
-    user = carray(pointers.words64(args[1]), 2)
+    user = carray(pointers.words64(args[1]), 3)
     sphere = carray(pointers.floats(user[0] + 16 * slot), 4)
     return (
         args,
@@ -184,7 +228,7 @@ def sphere_intersect(address):
         # cache line
         prim_id = np.uint32(carray(pointers.ints(user[1] + 4 * slot), 1)[0])
         if np.float32(t) == floats[RAY_TFAR * n + lane] and _loses_tie(
-            words, n, lane, np.uint32(context[0]), np.uint32(geom_id), prim_id
+            words, n, lane, np.uint32(context[0]), np.uint32(geom_id), prim_id, user[2]
         ):
             continue
         floats[RAY_TFAR * n + lane] = t
