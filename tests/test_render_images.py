@@ -221,9 +221,9 @@ def test_spheres_beyond_the_user_geometry_limit_go_in_as_point_spheres(monkeypat
     kinds = []
     add_spheres = BVH.add_spheres
 
-    def recording_add_spheres(self, centers, radii, kind="user"):
+    def recording_add_spheres(self, centers, radii, kind="user", **options):
         kinds.append(kind)
-        return add_spheres(self, centers, radii, kind=kind)
+        return add_spheres(self, centers, radii, kind=kind, **options)
 
     monkeypatch.setattr(BVH, "add_spheres", recording_add_spheres)
     scene = random_field(20, seed=3)
