@@ -49,15 +49,22 @@ def timed(function) -> float:
     return time.perf_counter() - began
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def field_render(description: str) -> tuple[argparse.Namespace, np.ndarray]:
+    """The command line (``--count``, ``--width``, ``--height``, ``--turns``) and the (h, w, 3)
+    float32 linear image of the random field it names, 1 spp, seed 0: the image the output
+    benchmarks write."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--count", type=int, default=1_000_000)
     parser.add_argument("--width", type=int, default=1920)
     parser.add_argument("--height", type=int, default=1080)
     parser.add_argument("--turns", type=int, default=7)
     args = parser.parse_args()
     scene = random_field(args.count, seed=0)
-    image = render(scene, width=args.width, height=args.height, spp=1, seed=0).image
+    return args, render(scene, width=args.width, height=args.height, spp=1, seed=0).image
+
+
+def main() -> None:
+    args, image = field_render(__doc__.splitlines()[0])
     with tempfile.TemporaryDirectory() as directory:
         paths = {"numpy": Path(directory, "numpy.png"), "compiled": Path(directory, "compiled.png")}
         writers = {

@@ -18,7 +18,6 @@ Prints one JSON object on stdout.
 
 from __future__ import annotations
 
-import argparse
 import io
 import json
 import statistics
@@ -26,10 +25,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from output_stage import field_render
 from PIL import Image
 
-from embree_rt import film, render
-from embree_rt.scene import random_field
+from embree_rt import film
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -69,14 +68,7 @@ def measured(pixels: np.ndarray, turns: int) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--count", type=int, default=1_000_000)
-    parser.add_argument("--width", type=int, default=1920)
-    parser.add_argument("--height", type=int, default=1080)
-    parser.add_argument("--turns", type=int, default=7)
-    args = parser.parse_args()
-    scene = random_field(args.count, seed=0)
-    image = render(scene, width=args.width, height=args.height, spp=1, seed=0).image
+    args, image = field_render(__doc__.splitlines()[0])
     images = {"random_field": film.tonemap(image)}
     for path in sorted(ROOT.glob("docs/*.png")):
         with Image.open(path) as picture:

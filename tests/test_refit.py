@@ -95,13 +95,18 @@ def test_spheres_moved_in_an_order_of_their_own_are_the_spheres_moved(kind: str)
             moving.move_spheres(geom_id, *mine, order=where[:-1])
 
 
+def twin_spheres(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(2 count, 3) centres and (2 count,) radii: ``count`` spheres of the first frame, then
+    each again (sphere i + count is sphere i's twin: every hit on one is an exact tie)."""
+    centers, radii = moving_spheres(1, count=count)
+    return np.concatenate([centers[0], centers[0]]), np.concatenate([radii, radii])
+
+
 def test_exact_ties_go_to_the_lowest_index_in_any_tree() -> None:
     # every sphere twice (same centre, same radius): each hit is an exact tie of two spheres;
     # the stored order (and so the tree) differs with the order given, the winner must not
-    centers, radii = moving_spheres(1, count=200)
+    doubled_centers, doubled_radii = twin_spheres(200)
     origins, directions = camera_rays()
-    doubled_centers = np.concatenate([centers[0], centers[0]])
-    doubled_radii = np.concatenate([radii, radii])
     for permutation_seed in range(3):
         order = np.random.default_rng(permutation_seed).permutation(len(doubled_radii))
         hits = fresh_hits(doubled_centers[order], doubled_radii[order], "user", origins, directions)
@@ -117,10 +122,8 @@ def test_exact_ties_go_to_the_lowest_index_in_any_tree() -> None:
 def test_tie_keys_decide_exact_ties_whatever_order_the_spheres_come_in() -> None:
     # every sphere twice, shuffled, each keyed by its index before shuffling: every tie goes
     # to the twin with the lower key (the first copy), whichever index it was given
-    centers, radii = moving_spheres(1, count=200)
+    doubled_centers, doubled_radii = twin_spheres(200)
     origins, directions = camera_rays()
-    doubled_centers = np.concatenate([centers[0], centers[0]])
-    doubled_radii = np.concatenate([radii, radii])
     for permutation_seed in range(3):
         order = np.random.default_rng(permutation_seed).permutation(len(doubled_radii))
         with BVH() as bvh:
