@@ -246,15 +246,18 @@ def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path
     assert (tmp_path / "out.png").is_file() and (tmp_path / "three.png").is_file()
 
 
-def printed_by(script: str) -> str:
+def printed_by(script: str, cwd: Path | None = None) -> str:
     """What the Python ``script`` prints, run in a fresh interpreter from the checkout (as the
-    command runs), after checking it exits 0."""
+    command runs; from ``cwd`` with the checkout first on its path, when given), after checking
+    it exits 0."""
     import subprocess
     import sys
 
+    if cwd is not None:
+        script = f"import sys\nsys.path.insert(0, {str(PACKAGE.parent)!r})\n{script}"
     done = subprocess.run(
         [sys.executable, "-c", script],
-        cwd=PACKAGE.parent,
+        cwd=PACKAGE.parent if cwd is None else cwd,
         capture_output=True,
         text=True,
         check=False,
@@ -349,6 +352,35 @@ def test_the_commands_usage_errors_and_help_leave_scipy_importable() -> None:
         "print(codes, 'numba' in sys.modules)\n"
     )
     assert printed_by(script).splitlines()[-1] == "[0, 2] False"
+
+
+def test_the_commands_own_process_imports_pyyaml_only_for_a_numba_config_file(
+    tmp_path: Path,
+) -> None:
+    """numba imports PyYAML only to read ``.numba_config.yaml`` from the working directory: the
+    command's own process, run where there is none, never imports it (``cli/numba_setup.py``),
+    and run where there is one, numba still reads it (its colour scheme, a setting that changes
+    no kernel, is the file's); PyYAML imports afterwards either way. Each in a fresh
+    interpreter."""
+    script = (
+        "import sys\n"
+        "import embree_rt.cli\n"
+        "sys.argv = ['embree-rt', 'random', '--count', '20', '--width', '8', '--height', '4',\n"
+        "            '--spp', '1', '--quiet', '-o', 'field.png']\n"
+        "assert embree_rt.cli.main() == 0\n"
+        "from numba.core import config\n"
+        "print('yaml' in sys.modules, config.COLOR_SCHEME)\n"
+        "import yaml\n"
+        "print(yaml.safe_load('a: 1'))\n"
+    )
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    assert printed_by(script, cwd=plain).splitlines() == ["False no_color", "{'a': 1}"]
+    configured = tmp_path / "configured"
+    configured.mkdir()
+    (configured / ".numba_config.yaml").write_text("color_scheme: dark_bg\n", encoding="utf-8")
+    assert printed_by(script, cwd=configured).splitlines() == ["True dark_bg", "{'a': 1}"]
+    assert (plain / "field.png").read_bytes() == (configured / "field.png").read_bytes()
 
 
 # What numba's check for a BLAS decides (numba.np.arraymath): how these two are compiled.
