@@ -384,6 +384,32 @@ def test_the_commands_own_process_imports_pyyaml_only_for_a_numba_config_file(
     assert (plain / "field.png").read_bytes() == (configured / "field.png").read_bytes()
 
 
+def test_the_commands_own_process_asks_openblas_for_no_threads() -> None:
+    """The command's own process asks NumPy's OpenBLAS for no threads of its own before NumPy
+    is imported (``cli.blas_without_threads``): the process then has one thread after
+    ``import numpy``, as Linux lists them (OpenBLAS starts one for each further core). A thread
+    count the user set (``OMP_NUM_THREADS=2``) stands: two threads on a machine of two cores or
+    more, ``OPENBLAS_NUM_THREADS`` left unset. Each in a fresh interpreter."""
+    import os
+
+    def threads_after_numpy(chosen: str | None) -> str:
+        script = (
+            "import glob, os, sys\n"
+            "for name in ('OPENBLAS_NUM_THREADS', 'GOTO_NUM_THREADS', 'OMP_NUM_THREADS'):\n"
+            "    os.environ.pop(name, None)\n"
+            + (f"os.environ['OMP_NUM_THREADS'] = {chosen!r}\n" if chosen else "")
+            + "import embree_rt.cli\n"
+            "sys.argv = ['embree-rt', '--version']\n"
+            "assert embree_rt.cli.main() == 0\n"
+            "import numpy\n"
+            "print(os.environ.get('OPENBLAS_NUM_THREADS'), len(glob.glob('/proc/self/task/*')))\n"
+        )
+        return printed_by(script).splitlines()[-1]
+
+    assert threads_after_numpy(None) == "1 1"
+    assert threads_after_numpy("2") == f"None {min(2, os.cpu_count() or 1)}"
+
+
 # What numba's check for a BLAS decides (numba.np.arraymath): how these two are compiled.
 DECIDED_BY_BLAS_CHECK = {"correlate", "convolve"}
 
