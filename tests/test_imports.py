@@ -230,8 +230,9 @@ def test_the_architecture_document_names_each_module_in_its_layer() -> None:
 def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path) -> None:
     """trimesh (and SciPy's spatial modules behind it) take about a second to import: a scene of
     spheres loads, renders and saves without them, so ``embree-rt random`` starts that much
-    sooner. Nor does it import Pillow (~12 ms), which decodes textures and draws legends, and
-    its PNG is pypng's. Run in a fresh interpreter, as the command is."""
+    sooner. Nor does it import Pillow (~12 ms), which decodes textures and draws legends (its
+    PNG is pypng's), or the glTF reader (~12 ms). Run in a fresh interpreter, as the command
+    is."""
 
     script = (
         "import sys\n"
@@ -241,7 +242,8 @@ def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path
         "code = code or embree_rt.cli.main(['render', 'scenes/three_spheres.toml', '--width', '16',"
         f" '--height', '9', '--spp', '1', '--quiet', '-o', {str(tmp_path / 'three.png')!r}])\n"
         "assert code == 0, code\n"
-        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('trimesh', 'PIL')))\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('trimesh', 'PIL')\n"
+        "             or m.startswith('embree_rt.scene.gltf')))\n"
     )
     assert printed_by(script) == "[]"
     assert (tmp_path / "out.png").is_file() and (tmp_path / "three.png").is_file()
