@@ -15,7 +15,6 @@ import numpy as np
 
 from embree_rt.columns import scatter
 from embree_rt.materials import HitMaterials
-from embree_rt.scene.gltf_materials import LOOKS_KEY, metallic_roughness_parameters
 from embree_rt.scene.model import MeshObject
 from embree_rt.textures import DEFAULT_SAMPLER, sample_texture
 
@@ -222,6 +221,8 @@ def textured_parameters(looks, blend) -> TexturedParameters:
     metallic-roughness texture (B metallic, G roughness, times the factors) or transmission
     texture (R, times the factor) varies them: the material mapping's own rule
     (``metallic_roughness_parameters``), per hit."""
+    from embree_rt.scene.gltf_materials import metallic_roughness_parameters
+
     material = looks.material
     slot = looks.metallic_roughness
     if slot is not None:
@@ -347,6 +348,9 @@ def mesh_hit_filter(mesh: trimesh.Trimesh) -> GeometryFilter | None:
     other mesh, so that they trace at no extra cost: glass (a refracted ray must leave through
     the back of the surface) and closed surfaces (``is_closed``: their backs face inward, seen
     from outside only through a hole that is not there) are never one-sided."""
+    # Here, not at the top: the glTF reader (~40 kB of source, ~12 ms to import) is for meshes.
+    from embree_rt.scene.gltf_materials import LOOKS_KEY
+
     looks = mesh.metadata.get(LOOKS_KEY)
     if looks is None:
         return None

@@ -12,9 +12,12 @@ texel the point falls in. There are no mipmaps: a minified texture is sampled as
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from PIL import Image
+
+if TYPE_CHECKING:  # the caller decodes with Pillow; importing it costs every command ~12 ms
+    from PIL import Image
 
 # glTF sampler wrap modes and filters (OpenGL's codes).
 REPEAT = 10497

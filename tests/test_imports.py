@@ -230,7 +230,9 @@ def test_the_architecture_document_names_each_module_in_its_layer() -> None:
 def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path) -> None:
     """trimesh (and SciPy's spatial modules behind it) take about a second to import: a scene of
     spheres loads, renders and saves without them, so ``embree-rt random`` starts that much
-    sooner. Run in a fresh interpreter, as the command is."""
+    sooner. Nor does it import Pillow (~12 ms), which decodes textures and draws legends (its
+    PNG is pypng's), or the glTF reader (~12 ms). Run in a fresh interpreter, as the command
+    is."""
 
     script = (
         "import sys\n"
@@ -240,21 +242,25 @@ def test_a_scene_without_meshes_renders_without_importing_trimesh(tmp_path: Path
         "code = code or embree_rt.cli.main(['render', 'scenes/three_spheres.toml', '--width', '16',"
         f" '--height', '9', '--spp', '1', '--quiet', '-o', {str(tmp_path / 'three.png')!r}])\n"
         "assert code == 0, code\n"
-        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'trimesh'))\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('trimesh', 'PIL')\n"
+        "             or m.startswith('embree_rt.scene.gltf')))\n"
     )
     assert printed_by(script) == "[]"
     assert (tmp_path / "out.png").is_file() and (tmp_path / "three.png").is_file()
 
 
-def printed_by(script: str) -> str:
+def printed_by(script: str, cwd: Path | None = None) -> str:
     """What the Python ``script`` prints, run in a fresh interpreter from the checkout (as the
-    command runs), after checking it exits 0."""
+    command runs; from ``cwd`` with the checkout first on its path, when given), after checking
+    it exits 0."""
     import subprocess
     import sys
 
+    if cwd is not None:
+        script = f"import sys\nsys.path.insert(0, {str(PACKAGE.parent)!r})\n{script}"
     done = subprocess.run(
         [sys.executable, "-c", script],
-        cwd=PACKAGE.parent,
+        cwd=PACKAGE.parent if cwd is None else cwd,
         capture_output=True,
         text=True,
         check=False,
@@ -349,6 +355,61 @@ def test_the_commands_usage_errors_and_help_leave_scipy_importable() -> None:
         "print(codes, 'numba' in sys.modules)\n"
     )
     assert printed_by(script).splitlines()[-1] == "[0, 2] False"
+
+
+def test_the_commands_own_process_imports_pyyaml_only_for_a_numba_config_file(
+    tmp_path: Path,
+) -> None:
+    """numba imports PyYAML only to read ``.numba_config.yaml`` from the working directory: the
+    command's own process, run where there is none, never imports it (``cli/numba_setup.py``),
+    and run where there is one, numba still reads it (its colour scheme, a setting that changes
+    no kernel, is the file's); PyYAML imports afterwards either way. Each in a fresh
+    interpreter."""
+    script = (
+        "import sys\n"
+        "import embree_rt.cli\n"
+        "sys.argv = ['embree-rt', 'random', '--count', '20', '--width', '8', '--height', '4',\n"
+        "            '--spp', '1', '--quiet', '-o', 'field.png']\n"
+        "assert embree_rt.cli.main() == 0\n"
+        "from numba.core import config\n"
+        "print('yaml' in sys.modules, config.COLOR_SCHEME)\n"
+        "import yaml\n"
+        "print(yaml.safe_load('a: 1'))\n"
+    )
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    assert printed_by(script, cwd=plain).splitlines() == ["False no_color", "{'a': 1}"]
+    configured = tmp_path / "configured"
+    configured.mkdir()
+    (configured / ".numba_config.yaml").write_text("color_scheme: dark_bg\n", encoding="utf-8")
+    assert printed_by(script, cwd=configured).splitlines() == ["True dark_bg", "{'a': 1}"]
+    assert (plain / "field.png").read_bytes() == (configured / "field.png").read_bytes()
+
+
+def test_the_commands_own_process_asks_openblas_for_no_threads() -> None:
+    """The command's own process asks NumPy's OpenBLAS for no threads of its own before NumPy
+    is imported (``cli.blas_without_threads``): the process then has one thread after
+    ``import numpy``, as Linux lists them (OpenBLAS starts one for each further core). A thread
+    count the user set (``OMP_NUM_THREADS=2``) stands: two threads on a machine of two cores or
+    more, ``OPENBLAS_NUM_THREADS`` left unset. Each in a fresh interpreter."""
+    import os
+
+    def threads_after_numpy(chosen: str | None) -> str:
+        script = (
+            "import glob, os, sys\n"
+            "for name in ('OPENBLAS_NUM_THREADS', 'GOTO_NUM_THREADS', 'OMP_NUM_THREADS'):\n"
+            "    os.environ.pop(name, None)\n"
+            + (f"os.environ['OMP_NUM_THREADS'] = {chosen!r}\n" if chosen else "")
+            + "import embree_rt.cli\n"
+            "sys.argv = ['embree-rt', '--version']\n"
+            "assert embree_rt.cli.main() == 0\n"
+            "import numpy\n"
+            "print(os.environ.get('OPENBLAS_NUM_THREADS'), len(glob.glob('/proc/self/task/*')))\n"
+        )
+        return printed_by(script).splitlines()[-1]
+
+    assert threads_after_numpy(None) == "1 1"
+    assert threads_after_numpy("2") == f"None {min(2, os.cpu_count() or 1)}"
 
 
 # What numba's check for a BLAS decides (numba.np.arraymath): how these two are compiled.

@@ -6,7 +6,7 @@ import ctypes
 import threading
 import weakref
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba
 import numpy as np
@@ -18,7 +18,6 @@ from embree_rt.embree import (
     instance_arrays,
     kernels,
     library,
-    multihit,
     spatial_order,
     sphere_buffers,
     user_spheres,
@@ -34,6 +33,9 @@ from embree_rt.embree.validation import (
     as_triangle_indices,
 )
 from embree_rt.transforms import affine_array_problem
+
+if TYPE_CHECKING:  # imported by ``all_hits``: most BVHs never ask for every hit
+    from embree_rt.embree import multihit
 
 
 @dataclass
@@ -735,6 +737,8 @@ class BVH(Closing):
         """Up to ``capacity`` nearest hits of each of the ``rays``, each primitive once (a
         ``filters=True`` BVH of one geometry, no instances): see ``multihit.all_hits`` for what
         it returns."""
+        from embree_rt.embree import multihit
+
         rays = self.query_rays(rays)
         self._require_filters()
         with parallel_region:
