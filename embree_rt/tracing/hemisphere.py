@@ -131,39 +131,42 @@ def _runs_far(origins, directions, q, probe):
 def occluded_hemisphere_chunk(words, first, stop, query, rays, probe, blocked):
     """Rays first .. stop of ``rays`` (``HemisphereRays``): whether each is blocked, into
     ``blocked`` (n,) bool; those that run far inside the box probed first (``Probe``);
-    ``words`` a scratch row of ``kernels.SCRATCH_WORDS``."""
-    m = stop - first
-    origins = np.empty((m, 3), np.float32)
-    directions = np.empty((m, 3), np.float32)
-    probed = np.empty(m, np.int64)
-    whole = np.empty(m, np.int64)
+    ``words`` a scratch row of ``kernels.SCRATCH_WORDS``. Taken ``CHUNK`` rays at a time
+    (a one-thread query is one chunk of the whole batch): each group's probes and then its
+    whole rays, while the nodes they share are still in the cache, in arrays of one group."""
+    size = min(stop - first, CHUNK)
+    origins = np.empty((size, 3), np.float32)
+    directions = np.empty((size, 3), np.float32)
+    probed = np.empty(size, np.int64)
+    whole = np.empty(size, np.int64)
+    answers = np.empty(size, np.bool_)
     probes = probe.length < rays.distance
-    probed_count = 0
-    whole_count = 0
-    for q in range(m):
-        if _hemisphere_lane(origins, directions, q, rays, first + q):
-            blocked[first + q] = True
-        elif probes and _runs_far(origins, directions, q, probe):
-            probed[probed_count] = q
-            probed_count += 1
-        else:
-            whole[whole_count] = q
-            whole_count += 1
-    answers = np.zeros(m, np.bool_)
-    if probed_count:
-        some = ChunkRays(origins, directions, probed)
-        occluded_made(words, 0, probed_count, query, _chunk_lane, some, probe.length, answers)
-        for p in range(probed_count):
-            if answers[p]:
-                blocked[first + probed[p]] = True
-            else:  # open over the probe: asked again in full
-                whole[whole_count] = probed[p]
+    for start in range(first, stop, CHUNK):
+        probed_count = 0
+        whole_count = 0
+        for q in range(min(stop - start, CHUNK)):
+            if _hemisphere_lane(origins, directions, q, rays, start + q):
+                blocked[start + q] = True
+            elif probes and _runs_far(origins, directions, q, probe):
+                probed[probed_count] = q
+                probed_count += 1
+            else:
+                whole[whole_count] = q
                 whole_count += 1
-    if whole_count:
-        some = ChunkRays(origins, directions, whole)
-        occluded_made(words, 0, whole_count, query, _chunk_lane, some, rays.distance, answers)
-        for p in range(whole_count):
-            blocked[first + whole[p]] = answers[p]
+        if probed_count:
+            some = ChunkRays(origins, directions, probed)
+            occluded_made(words, 0, probed_count, query, _chunk_lane, some, probe.length, answers)
+            for p in range(probed_count):
+                if answers[p]:
+                    blocked[start + probed[p]] = True
+                else:  # open over the probe: asked again in full
+                    whole[whole_count] = probed[p]
+                    whole_count += 1
+        if whole_count:
+            some = ChunkRays(origins, directions, whole)
+            occluded_made(words, 0, whole_count, query, _chunk_lane, some, rays.distance, answers)
+            for p in range(whole_count):
+                blocked[start + whole[p]] = answers[p]
 
 
 # ``query`` a ``kernels.Query``, ``rays`` a ``HemisphereRays``, ``probe`` a ``Probe``,
