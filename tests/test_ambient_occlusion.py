@@ -27,6 +27,7 @@ from embree_rt.ambient_occlusion import (
 )
 from embree_rt.embree import Rays
 from embree_rt.geometry import SceneGeometry
+from embree_rt.tracing import hemisphere
 
 
 def shares(scene: Scene, points, normals, samples: int, distance: float = math.inf) -> np.ndarray:
@@ -112,6 +113,61 @@ def test_the_query_answers_what_embree_answers_for_the_rays_numpy_forms(distance
         blocked = geometry.occluded_hemispheres(HemisphereQuery(points, frames, local, distance))
     np.testing.assert_array_equal(blocked, expected)
     assert 0.05 < blocked.mean() < 0.95  # both answers occur
+
+
+@pytest.mark.parametrize("distance", [math.inf, 9.0])
+def test_rays_probed_first_in_a_dense_packing_get_embree_s_answers(distance) -> None:
+    """A cube of overlapping spheres (the particle benchmark's density, 0.8 a unit volume,
+    radius 0.5), points on and inside its faces: the rays that run far inside the box are
+    first asked over a probe (``hemisphere.scene_probe``) and again in full when it is open.
+    Their answers are ``BVH.occluded``'s for the whole rays: bitwise on every ISA, as above
+    (the rays are the same float32 rays; a probe is one of them with a shorter tfar). The
+    test checks each path is taken: rays the probe blocks, rays the probe leaves open that
+    the whole ray finds blocked, rays too short or too near the box's side to be probed."""
+    rng = np.random.default_rng(11)
+    side = (4000 / 0.8) ** (1 / 3)
+    scene = Scene(camera=Camera(position=(0.0, 0.0, 3 * side), look_at=(0.0, 0.0, 0.0)))
+    scene.add_spheres(rng.uniform(-side / 2, side / 2, (4000, 3)), np.full(4000, 0.5), "matte")
+    scene.floor = None
+    k, samples = 2000, 12
+    points = rng.uniform(-side / 2, side / 2, (3, k)).astype(np.float32)
+    points[2, : k // 2] = side / 2 + 0.5  # half on the face toward the camera
+    normal = rng.normal(size=(3, k)).astype(np.float32)
+    normal /= np.sqrt(np.sum(normal * normal, axis=0))
+    index = rng.integers(0, 1 << 40, k)
+    with SceneGeometry(scene, threads=2) as geometry:
+        origins, directions = numpy_hemisphere_rays(points, normal, index, samples, seed=2)
+        expected = geometry.bvh.occluded(Rays(origins.T, directions.T, 0.0, np.float32(distance)))
+        probe = hemisphere.scene_probe(*geometry.bvh.bounds())
+        by_probe = geometry.bvh.occluded(Rays(origins.T, directions.T, 0.0, probe.length))
+        reach = origins + probe.reach * directions
+        inside = (reach > probe.lower[:, None]) & (reach < probe.upper[:, None])
+        probed = inside.all(axis=0)
+        local = cosine_local_directions(index, samples, seed=2)
+        frames = HemisphereFrames(*orthonormal_frames(normal), normal)
+        blocked = geometry.occluded_hemispheres(HemisphereQuery(points, frames, local, distance))
+    np.testing.assert_array_equal(blocked, expected)
+    assert probe.length < distance
+    assert (probed & by_probe).sum() > 1000
+    assert (probed & ~by_probe & expected).sum() > 10
+    assert (~probed & expected).sum() > 100 and (~probed & ~expected).sum() > 1000
+
+
+def test_the_probe_is_a_share_of_the_box_diagonal_and_none_for_an_empty_box() -> None:
+    """``BVH.bounds`` holds every sphere (Embree's box of their boxes); the probe is
+    ``PROBE_SHARE`` of its diagonal; an empty BVH's box (lower > upper) gives no probe."""
+    scene = Scene()
+    scene.add_spheres([[0.0, 0.0, 0.0], [3.0, 4.0, 12.0]], [1.0, 0.5], "matte")
+    with SceneGeometry(scene, threads=1) as geometry:
+        lower, upper = geometry.bvh.bounds()
+    assert np.all(lower <= [-1.0, -1.0, -1.0]) and np.all(upper >= [3.5, 4.5, 12.5])
+    assert np.all(lower > [-1.001, -1.001, -1.001]) and np.all(upper < [3.501, 4.501, 12.501])
+    probe = hemisphere.scene_probe(lower, upper)
+    diagonal = math.dist(lower.tolist(), upper.tolist())
+    assert probe.length == pytest.approx(diagonal * hemisphere.PROBE_SHARE, rel=1e-6)
+    assert probe.reach == pytest.approx(probe.length * hemisphere.PROBED_REACH, rel=1e-6)
+    empty = hemisphere.scene_probe(np.full(3, np.inf, np.float32), np.full(3, -np.inf, np.float32))
+    assert empty.length == np.inf
 
 
 def test_an_open_plane_has_ambient_occlusion_one() -> None:

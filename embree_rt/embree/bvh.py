@@ -663,6 +663,18 @@ class BVH(Closing):
         self._ready_to_query()
         return kernels.Query(self._live_scene(), kernels.query_arguments(coherent), self.lanes)
 
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The committed BVH's world-space box as Embree holds it: ``lower``, ``upper`` (3,)
+        float32 each (lower > upper when the BVH holds nothing)."""
+        self._ready_to_query()
+        # RTCBounds: lower x, y, z, pad, upper x, y, z, pad, aligned to 16 bytes
+        row = np.zeros(12, np.float32)
+        start = (-row.ctypes.data % 16) // 4
+        box = row[start : start + 8]
+        self._lib.rtcGetSceneBounds(self._live_scene(), box.ctypes.data)
+        self._device.check("rtcGetSceneBounds")
+        return box[0:3].copy(), box[4:7].copy()
+
     def kernel_hits(self, hits: Hits) -> tuple[kernels.NearestHits, np.ndarray | None]:
         """The kernels' view of ``hits``' arrays (``kernels.intersect``'s ``hits``), and where
         they write instance-array copy numbers (None when this BVH has no instance array)."""

@@ -95,6 +95,7 @@ def _declare(lib: ctypes.CDLL) -> None:
         "rtcNewScene": (p, [p]),
         "rtcReleaseScene": (None, [p]),
         "rtcCommitScene": (None, [p]),
+        "rtcGetSceneBounds": (None, [p, p]),
         "rtcSetSceneBuildQuality": (None, [p, i]),
         "rtcSetSceneFlags": (None, [p, i]),
         "rtcSetGeometryBuildQuality": (None, [p, i]),
